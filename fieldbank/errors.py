@@ -1,0 +1,86 @@
+"""Exceptions raised by fieldbank.
+
+The whole tree, rooted in built-ins so callers may catch either::
+
+    FieldbankError(Exception)
+    ├── ParameterError(FieldbankError, ValueError)    a parameter outside its allowed range
+    ├── UnreachableError(FieldbankError, ValueError)  a hand position the arm cannot reach
+    ├── MapError(FieldbankError, ValueError)          a force/stiffness map that is malformed
+    ├── ValidationError(FieldbankError, ValueError)   input with one or more located problems
+    ├── StorageError(FieldbankError, RuntimeError)    the database or the array store failed
+    │   └── IntegrityError(StorageError)              a stored reference or checksum is wrong
+    ├── FitError(FieldbankError, RuntimeError)        a fit that cannot run or was refused
+    ├── InterventionError(FieldbankError, ValueError) an intervention plan that is invalid
+    └── HapticError(FieldbankError, RuntimeError)     the renderer or the robot link failed
+
+Messages say what was expected, what arrived, and where (parameter, file, row, dataset).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class FieldbankError(Exception):
+    """Root of every error fieldbank raises on purpose."""
+
+
+class ParameterError(FieldbankError, ValueError):
+    """A model parameter is missing, not finite, or outside its allowed range."""
+
+
+class UnreachableError(FieldbankError, ValueError):
+    """A hand position lies outside the arm's reachable workspace."""
+
+
+class MapError(FieldbankError, ValueError):
+    """A map's arrays or metadata are inconsistent."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One located problem found while validating input.
+
+    Attributes
+    ----------
+    location : str
+        Where: ``file.csv:row 12``, ``file.h5:/maps/0/positions``, ``parameter km_n_per_m[2]``.
+    reason : str
+        What is wrong, saying what was expected and what arrived.
+    """
+
+    location: str
+    reason: str
+
+    def __str__(self) -> str:
+        return f"{self.location}: {self.reason}"
+
+
+class ValidationError(FieldbankError, ValueError):
+    """Input with one or more problems; ``problems`` lists every one, located."""
+
+    def __init__(self, problems: list[Problem] | tuple[Problem, ...], header: str = "") -> None:
+        self.problems = tuple(problems)
+        lines = [header] if header else []
+        lines += [str(p) for p in self.problems]
+        super().__init__("\n".join(lines))
+
+
+class StorageError(FieldbankError, RuntimeError):
+    """The database or the array store failed or refused an operation."""
+
+
+class IntegrityError(StorageError):
+    """A stored reference, checksum or array does not match what was recorded."""
+
+
+class FitError(FieldbankError, RuntimeError):
+    """A fit that cannot run (no data, wrong patient, inconsistent units) or failed."""
+
+
+class InterventionError(FieldbankError, ValueError):
+    """An intervention or plan with an invalid part."""
+
+
+class HapticError(FieldbankError, RuntimeError):
+    """The haptic renderer or the robot link failed."""
