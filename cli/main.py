@@ -9,7 +9,6 @@ messages and progress go to stderr.
 from __future__ import annotations
 
 import importlib
-import sys
 
 import click
 
@@ -46,4 +45,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    main()

@@ -78,7 +78,8 @@ def forward_dynamics(
         tau = tau + np.einsum("nji,nj->ni", arm.jacobian(qa), f)
     if muscles:
         tau = tau + arm.joint_torque(qa, qd)
-    return np.linalg.solve(inertia(arm, qa), tau[..., None])[..., 0]
+    qdd = np.asarray(np.linalg.solve(inertia(arm, qa), tau[..., None])[..., 0], dtype=float)
+    return qdd
 
 
 def kinetic_energy(arm: Arm, q: ArrayLike, qdot: ArrayLike) -> FloatArray:

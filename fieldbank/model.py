@@ -105,6 +105,7 @@ class Arm:
     w: float
     mirror: bool
     _pot_total: FloatArray  # ∫_{-∞}^{∞} of the smoothing correction per muscle (unit Km)
+    _jl_products: FloatArray  # (6, 3): J_λ[:,0]², J_λ[:,0]·J_λ[:,1], J_λ[:,1]²
 
     @classmethod
     def from_params(cls, p: ArmParams) -> Arm:
@@ -147,6 +148,9 @@ class Arm:
         arrays["ldot_max"] = ldot_max
         pot_total = _smoothing_integral(np.full(6, np.inf), excursion, w)
         arrays["_pot_total"] = pot_total
+        arrays["_jl_products"] = np.stack(
+            [jl[:, 0] * jl[:, 0], jl[:, 0] * jl[:, 1], jl[:, 1] * jl[:, 1]], axis=1
+        )
         for a in arrays.values():
             a.setflags(write=False)
         return cls(
@@ -171,7 +175,7 @@ class Arm:
     def _out_mat(self, k: FloatArray) -> FloatArray:
         if not self.mirror:
             return k
-        m = np.array([[-1.0, 1.0], [1.0, -1.0]])  # diag(-1,1) K diag(-1,1)
+        m = np.array([[1.0, -1.0], [-1.0, 1.0]])  # diag(-1,1) K diag(-1,1)
         return k * m
 
     # --- kinematics (model frame, right arm) ------------------------------------------------
@@ -363,48 +367,58 @@ class Arm:
             if self.mirror:
                 vm[:, 0] *= -1.0
         q = self._ik_model(xm)
-        jac = self.jacobian(q)
-        det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
-        jinv = np.empty_like(jac)
-        jinv[:, 0, 0] = jac[:, 1, 1] / det
-        jinv[:, 0, 1] = -jac[:, 0, 1] / det
-        jinv[:, 1, 0] = -jac[:, 1, 0] / det
-        jinv[:, 1, 1] = jac[:, 0, 0] / det
-        qdot = np.einsum("nij,nj->ni", jinv, vm)
-        lam = self.muscle_lengths(q)
-        ldot = qdot @ self.jl.T
+        l1, l2 = self.l1, self.l2
+        q1, q12 = q[:, 0], q[:, 0] + q[:, 1]
+        s1, c1, s12, c12 = np.sin(q1), np.cos(q1), np.sin(q12), np.cos(q12)
+        # J = [[a, b], [c, d]] and its inverse, component-wise over N (2×2 einsums are slow)
+        b = -l2 * s12
+        a = -l1 * s1 + b
+        d = l2 * c12
+        c = l1 * c1 + d
+        det = a * d - b * c
+        ia, ib, ic, id_ = d / det, -b / det, -c / det, a / det
+        vx, vy = vm[:, 0], vm[:, 1]
+        qd1 = ia * vx + ib * vy
+        qd2 = ic * vx + id_ * vy
+        jl = self.jl
+        lam = self.lam_rest + (q - self.q_rest) @ jl.T
+        ldot = np.outer(qd1, jl[:, 0]) + np.outer(qd2, jl[:, 1])
         psi, dpsi = self.passive_forces(lam)
         phi, dphi_l, dphi_ld = self.reflex_forces(lam, ldot)
         f = psi + phi
-        tau = -f @ self.jl
-        force = np.einsum("nji,nj->ni", jinv, tau)  # J⁻ᵀ τ
+        tau = -f @ jl
+        t1, t2 = tau[:, 0], tau[:, 1]
+        # F = J⁻ᵀ τ
+        fx = ia * t1 + ic * t2
+        fy = ib * t1 + id_ * t2
+        force = np.stack([fx, fy], axis=1)
         if not derivatives:
             empty = np.empty((0, 2, 2))
             return self._out_vec(force), empty, empty
-        jl = self.jl
-        a_mat = np.einsum("ki,nk,kj->nij", jl, dpsi + dphi_l, jl)  # J_λᵀ diag(f_λ) J_λ
-        b_mat = np.einsum("ki,nk,kj->nij", jl, dphi_ld, jl)  # J_λᵀ diag(f_λ̇) J_λ
-        # ∂J/∂q_k
-        q1, q12 = q[:, 0], q[:, 0] + q[:, 1]
-        s1, c1, s12, c12 = np.sin(q1), np.cos(q1), np.sin(q12), np.cos(q12)
-        dj = np.empty((n, 2, 2, 2))  # [n, k, i, j] = ∂J_ij/∂q_k
-        dj[:, 0, 0, 0] = -self.l1 * c1 - self.l2 * c12
-        dj[:, 0, 0, 1] = -self.l2 * c12
-        dj[:, 0, 1, 0] = -self.l1 * s1 - self.l2 * s12
-        dj[:, 0, 1, 1] = -self.l2 * s12
-        dj[:, 1, 0, 0] = -self.l2 * c12
-        dj[:, 1, 0, 1] = -self.l2 * c12
-        dj[:, 1, 1, 0] = -self.l2 * s12
-        dj[:, 1, 1, 1] = -self.l2 * s12
-        # ∂q̇/∂q_k = -J⁻¹ (∂J/∂q_k) q̇  → matrix Q[:, :, k]
-        djq = np.einsum("nkij,nj->nik", dj, qdot)
-        qmat = -np.einsum("nij,njk->nik", jinv, djq)
-        dtau_dq = -a_mat - np.einsum("nij,njk->nik", b_mat, qmat)
-        gmat = np.einsum("nkji,nj->nik", dj, force)  # column k = (∂J/∂q_k)ᵀ F
-        inner = dtau_dq - gmat
-        jinv_t = np.transpose(jinv, (0, 2, 1))
-        stiff = -np.einsum("nij,njk,nkl->nil", jinv_t, inner, jinv)
-        damp = np.einsum("nij,njk,nkl->nil", jinv_t, b_mat, jinv)
+        # J_λᵀ diag(g) J_λ as (g @ P) with P the products of J_λ's columns
+        prod = self._jl_products
+        a00, a01, a11 = ((dpsi + dphi_l) @ prod).T
+        b00, b01, b11 = (dphi_ld @ prod).T
+        # ∂J/∂q1 = [[-c, -d], [a, b]], ∂J/∂q2 = [[-d, -d], [b, b]]
+        # (∂J/∂q_k) q̇ and then Q = -J⁻¹ [(∂J/∂q1) q̇, (∂J/∂q2) q̇]
+        u1x, u1y = -c * qd1 - d * qd2, a * qd1 + b * qd2
+        u2x, u2y = -d * (qd1 + qd2), b * (qd1 + qd2)
+        q11 = -(ia * u1x + ib * u1y)
+        q21 = -(ic * u1x + id_ * u1y)
+        q12_ = -(ia * u2x + ib * u2y)
+        q22 = -(ic * u2x + id_ * u2y)
+        # ∂τ/∂q = -A - B Q ; G column k = (∂J/∂q_k)ᵀ F ; inner = ∂τ/∂q - G
+        g11 = -c * fx + a * fy
+        g21 = -d * fx + b * fy
+        g12 = -d * fx + b * fy
+        g22 = -d * fx + b * fy
+        m11 = -a00 - (b00 * q11 + b01 * q21) - g11
+        m12 = -a01 - (b00 * q12_ + b01 * q22) - g12
+        m21 = -a01 - (b01 * q11 + b11 * q21) - g21
+        m22 = -a11 - (b01 * q12_ + b11 * q22) - g22
+        # K = -J⁻ᵀ M J⁻¹ ; B = J⁻ᵀ Bm J⁻¹  (J⁻ᵀ = [[ia, ic], [ib, id]])
+        stiff = -_sandwich(ia, ib, ic, id_, m11, m12, m21, m22)
+        damp = _sandwich(ia, ib, ic, id_, b00, b01, b01, b11)
         return self._out_vec(force), self._out_mat(stiff), self._out_mat(damp)
 
     def potential(self, x: ArrayLike) -> FloatArray:
@@ -422,6 +436,22 @@ class Arm:
     def rest_position(self) -> FloatArray:
         """Hand position at the rest posture, shape (2,), m, shoulder frame."""
         return self.fk(self.q_rest)[0]
+
+
+def _sandwich(ia: FloatArray, ib: FloatArray, ic: FloatArray, id_: FloatArray,
+              m11: FloatArray, m12: FloatArray, m21: FloatArray, m22: FloatArray) -> FloatArray:
+    """J⁻ᵀ M J⁻¹ for J⁻¹ = [[ia, ib], [ic, id]], component-wise, shape (N, 2, 2)."""
+    # R = M J⁻¹
+    r11 = m11 * ia + m12 * ic
+    r12 = m11 * ib + m12 * id_
+    r21 = m21 * ia + m22 * ic
+    r22 = m21 * ib + m22 * id_
+    out = np.empty((ia.shape[0], 2, 2))
+    out[:, 0, 0] = ia * r11 + ic * r21
+    out[:, 0, 1] = ia * r12 + ic * r22
+    out[:, 1, 0] = ib * r11 + id_ * r21
+    out[:, 1, 1] = ib * r12 + id_ * r22
+    return out
 
 
 def _smoothing_integral(d: FloatArray, ell: FloatArray, w: float) -> FloatArray:

@@ -80,7 +80,8 @@ DEFAULT_BETA = 0.1
 #: Width of the smoothed ramp at rest length (see fieldbank.model); assumption.
 DEFAULT_PASSIVE_SMOOTHING_M = 0.002
 #: Seed: λ̇_max from the endpoint running a 35 cm diameter circle at 2 Hz; the centre posture
-#: (45°, 90°) is an assumption (BRIEF §3).
+#: (45°, 90°) is an assumption (BRIEF §3). For other body sizes the diameter scales with height
+#: (35 cm at 1.75 m) so the circle stays inside a smaller arm's workspace (assumption).
 DEFAULT_CIRCLE_DIAMETER_M = 0.35
 DEFAULT_CIRCLE_FREQUENCY_HZ = 2.0
 DEFAULT_CIRCLE_CENTRE_DEG = (45.0, 90.0)
@@ -99,7 +100,9 @@ class Interval:
     def contains(self, value: float) -> bool:
         if not math.isfinite(value):
             return False
-        if self.low is not None and (value < self.low or (value == self.low and not self.low_closed)):
+        if self.low is not None and (
+            value < self.low or (value == self.low and not self.low_closed)
+        ):
             return False
         return not (
             self.high is not None
@@ -335,7 +338,7 @@ class ArmParams:
             "alpha_n": (DEFAULT_ALPHA_N,) * 6,
             "beta": (DEFAULT_BETA,) * 6,
             "passive_smoothing_m": DEFAULT_PASSIVE_SMOOTHING_M,
-            "circle_diameter_m": DEFAULT_CIRCLE_DIAMETER_M,
+            "circle_diameter_m": DEFAULT_CIRCLE_DIAMETER_M * h / DEFAULT_HEIGHT_M,
             "circle_frequency_hz": DEFAULT_CIRCLE_FREQUENCY_HZ,
             "circle_centre_rad": tuple(math.radians(a) for a in DEFAULT_CIRCLE_CENTRE_DEG),
         }
@@ -418,7 +421,7 @@ class ArmParams:
     def with_group(self, group: str, **values: float) -> ArmParams:
         """Copy with per-group values set, e.g. ``with_group('ef', km_n_per_m=6000)``."""
         i = group_index(group)
-        changes: dict[str, tuple[float, ...]] = {}
+        changes: dict[str, Any] = {}
         for name, value in values.items():
             if name not in _SIX:
                 raise ParameterError(
