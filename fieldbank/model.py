@@ -225,7 +225,7 @@ class Arm:
             raise ParameterError(f"branch must be 'flexed' or 'extended'; got {branch!r}.")
         l1, l2 = self.l1, self.l2
         r2 = np.einsum("ij,ij->i", xm, xm)
-        cos2 = (r2 - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+        q, cos2 = _ik_flexed(xm, l1, l2)
         s_lim = math.cos(SINGULAR_ELBOW_RAD)
         bad = (cos2 > s_lim) | (cos2 < -s_lim)
         if np.any(bad):
@@ -238,12 +238,10 @@ class Arm:
                 f"{len(bad)} positions) is {math.sqrt(r2[i]):.4f} m from the shoulder; this arm "
                 f"reaches {r_in:.4f}-{r_out:.4f} m."
             )
-        q2 = np.arccos(cos2)
         if branch == "extended":
-            q2 = -q2
-        q1 = np.arctan2(xm[:, 1], xm[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
-        q1 = (q1 + np.pi) % (2 * np.pi) - np.pi
-        q = np.stack([q1, q2], axis=1)
+            q2 = -q[:, 1]
+            q1 = np.arctan2(xm[:, 1], xm[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+            q = np.stack([(q1 + np.pi) % (2 * np.pi) - np.pi, q2], axis=1)
         if check_range:
             self.check_range(q, xm)
         return q
@@ -270,13 +268,9 @@ class Arm:
 
     def reachable(self, x: ArrayLike) -> NDArray[np.bool_]:
         """Mask of positions the arm reaches within its range of motion (flexed branch)."""
-        xm = self._in(x)
-        l1, l2 = self.l1, self.l2
-        cos2 = (np.einsum("ij,ij->i", xm, xm) - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+        q, cos2 = _ik_flexed(self._in(x), self.l1, self.l2)
         ok = np.abs(cos2) <= math.cos(SINGULAR_ELBOW_RAD)
-        q2 = np.arccos(np.clip(cos2, -1, 1))
-        q1 = np.arctan2(xm[:, 1], xm[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
-        q1 = (q1 + np.pi) % (2 * np.pi) - np.pi
+        q1, q2 = q[:, 0], q[:, 1]
         p = self.params
         ok &= (q1 >= p.shoulder_range_rad[0]) & (q1 <= p.shoulder_range_rad[1])
         ok &= (q2 >= p.elbow_range_rad[0]) & (q2 <= p.elbow_range_rad[1])
@@ -438,6 +432,16 @@ class Arm:
         return self.fk(self.q_rest)[0]
 
 
+def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatArray]:
+    """Flexed-branch joint angles (N, 2) for model-frame positions, and cos q2 (N,) (unclipped,
+    so |cos q2| > 1 marks an unreachable position)."""
+    cos2 = (np.einsum("ij,ij->i", xm, xm) - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+    q2 = np.arccos(np.clip(cos2, -1.0, 1.0))
+    q1 = np.arctan2(xm[:, 1], xm[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+    q1 = (q1 + np.pi) % (2 * np.pi) - np.pi
+    return np.stack([q1, q2], axis=1), cos2
+
+
 def _sandwich(ia: FloatArray, ib: FloatArray, ic: FloatArray, id_: FloatArray,
               m11: FloatArray, m12: FloatArray, m21: FloatArray, m22: FloatArray) -> FloatArray:
     """J⁻ᵀ M J⁻¹ for J⁻¹ = [[ia, ib], [ic, id]], component-wise, shape (N, 2, 2)."""
@@ -486,16 +490,14 @@ def _circle_ldot_max(p: ArmParams, jl: FloatArray, samples: int = 1440) -> Float
     th = np.linspace(0.0, 2.0 * math.pi, samples, endpoint=False)
     x = np.stack([cx + rad * np.cos(th), cy + rad * np.sin(th)], axis=1)
     xd = np.stack([-rad * om * np.sin(th), rad * om * np.cos(th)], axis=1)
-    r2 = (x**2).sum(axis=1)
-    cos2 = (r2 - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+    q, cos2 = _ik_flexed(x, l1, l2)
     if np.any(np.abs(cos2) >= math.cos(SINGULAR_ELBOW_RAD)):
         raise ParameterError(
             f"The λ̇_max circle (diameter {p.circle_diameter_m:g} m around the hand at posture "
             f"{np.degrees(p.circle_centre_rad).round(1).tolist()}°) leaves the reachable "
             "workspace; change circle_diameter_m or circle_centre_rad."
         )
-    q2 = np.arccos(cos2)
-    q1 = np.arctan2(x[:, 1], x[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+    q1, q2 = q[:, 0], q[:, 1]
     s1, c1 = np.sin(q1), np.cos(q1)
     s12, c12 = np.sin(q1 + q2), np.cos(q1 + q2)
     j11, j12 = -l1 * s1 - l2 * s12, -l2 * s12
