@@ -36,7 +36,7 @@ from interventions.catalogue import (
 from interventions.defaults import value
 from interventions.plan import Plan, params_sha256
 
-_NUM = r"([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)"
+_NUM = r"([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)"
 _LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 
@@ -246,8 +246,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             if total_units is None:
                 raise click.UsageError("--optimize needs --total-units N.")
             gs = None if opt_groups is None else [g.strip() for g in opt_groups.split(",")]
-            kw = {} if weeks is None else {"weeks_since": weeks}
-            inverse = optimise_botulinum(before, total_units, gs, conditions=cond, **kw)
+            inverse = optimise_botulinum(
+                before, total_units, gs, conditions=cond,
+                weeks_since=value("botulinum.weeks_since") if weeks is None else weeks)
             doc["inverse"] = inverse.to_dict()
             if plan is None:
                 plan = inverse.plan

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 
@@ -232,11 +232,11 @@ class Botulinum(Intervention):
 
     @property
     def doses(self) -> dict[str, float]:
-        """Units per group, U."""
-        return dict(self.units)  # type: ignore[arg-type]
+        """Units per group, U (after construction ``units`` is always sorted pairs)."""
+        return dict(cast("tuple[tuple[str, float], ...]", self.units))
 
     def targets(self) -> tuple[str, ...]:
-        return tuple(g for g, _ in self.units)  # type: ignore[misc]
+        return tuple(self.doses)
 
     def effect(self, weeks: float | None = None) -> dict[str, float]:
         """Fractional force drop e per injected group at ``weeks`` (default weeks_since)."""

@@ -59,7 +59,9 @@ def time_shape(
     return np.asarray(out, dtype=float)
 
 
-def dose_effect(units: ArrayLike, emax: float, ed50_units: float, hill: float) -> NDArray[np.float64]:
+def dose_effect(
+    units: ArrayLike, emax: float, ed50_units: float, hill: float
+) -> NDArray[np.float64]:
     """Peak effect of a dose (Emax curve), same shape as ``units``, in [0, emax)."""
     d = np.maximum(np.asarray(units, dtype=float), 0.0)
     dh = d**hill
