@@ -104,3 +104,13 @@ def test_from_dict_refuses_a_kind_mismatch() -> None:
         Tenotomy.from_dict({"kind": "casting", "group": "ef"})
     with pytest.raises(InterventionError, match="expected a JSON object"):
         Intervention.from_dict([1, 2])  # type: ignore[arg-type]
+
+
+def test_docs_list_every_default_with_its_value_and_source() -> None:
+    from interventions.defaults import DEFAULTS
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "interventions.md").read_text()
+    for name, d in DEFAULTS.items():
+        row = f"| `{name}` | {d.value:.6g} | {d.unit} | {d.source} |"
+        assert row in text, f"docs/interventions.md is out of date for {name}"
+        assert d.source.strip()
