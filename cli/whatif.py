@@ -2,7 +2,9 @@
 
 The model comes from ``--params FILE`` (an ArmParams JSON document), ``--severity
 GROUP=LEVEL`` (a synthetic arm on the severity scale) or, once the database layer is present,
-a stored patient's latest model (:func:`load_patient_model`). The plan comes from ``--plan
+a stored patient's latest fitted model (:func:`load_patient_model`, ``--db URL``).
+``--save`` stores the after model (origin 'intervention', its parent the model before) and
+the plan with its lineage (:func:`save_result`). The plan comes from ``--plan
 FILE`` and/or the intervention options, applied in this order: plan file steps, lengthening,
 tenotomy, serial casting, rhizotomy, baclofen, botulinum.
 
@@ -127,39 +129,72 @@ def build_plan(plan_file: str | None, botox: tuple[str, ...], weeks: float | Non
     return Plan(tuple(steps), label) if steps else None
 
 
-def load_patient_model(patient_code: str) -> tuple[ArmParams, str]:
-    """The latest stored model of a patient (needs the database layer).
-
-    The storage layer is expected to offer ``latest_model(patient_code) -> (ArmParams,
-    model_id)``; until it is part of this build the command says so and stops.
-    """
+def _open_database(db_url: str | None) -> Any:
     try:
-        from fieldbank import storage  # type: ignore[attr-defined]
+        from fieldbank.storage import Database
     except ImportError:
         raise FieldbankError(
-            f"Reading patient {patient_code!r} needs the fieldbank database, which is not part "
-            "of this build; give the model with --params FILE or --severity GROUP=LEVEL."
+            "This needs the fieldbank database, which is not part of this build; give the model "
+            "with --params FILE or --severity GROUP=LEVEL, and keep results with --out DIR."
         ) from None
-    params, model_id = storage.latest_model(patient_code)  # pragma: no cover - future wiring
-    return params, f"patient {patient_code}, model {model_id}"  # pragma: no cover
+    return Database.open(db_url)
 
 
-def _source_model(patient: str | None, params_file: str | None,
-                  severity: tuple[str, ...]) -> tuple[ArmParams, str]:
+def load_patient_model(patient_code: str, db_url: str | None) -> tuple[ArmParams, str, int]:
+    """The patient's latest fitted model (else latest synthetic one) from the database.
+
+    Returns the parameters, a description and the stored model id.
+    """
+    with _open_database(db_url) as db:
+        db.get_patient(patient_code)  # a clear error for an unknown patient
+        models = db.list_models(patient_code)
+    for origin in ("fitted", "synthetic"):
+        found = [m for m in models if m.origin == origin]
+        if found:
+            m = max(found, key=lambda r: r.id)
+            return m.params, f"patient {patient_code}, {origin} model {m.id}", int(m.id)
+    raise FieldbankError(
+        f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
+        "first, or give the model with --params FILE.")
+
+
+def save_result(db_url: str | None, patient_code: str | None, base_model_id: int | None,
+                before: ArmParams, after: ArmParams, source: str, plan: Plan,
+                lineage_doc: dict[str, Any]) -> dict[str, int]:
+    """Store the after model (origin 'intervention', parent = the before model) and the plan.
+
+    A before model that is not in the database yet (--params, --severity) is stored first as
+    a synthetic model, so the lineage always has both ends.
+    """
+    label = plan.label or "; ".join(s.describe() for s in plan.steps)
+    with _open_database(db_url) as db:
+        if base_model_id is None:
+            base_model_id = int(db.add_model(before, "synthetic", source,
+                                             patient_code=patient_code).id)
+        child = db.add_model(after, "intervention", label, patient_code=patient_code,
+                             parent_id=base_model_id)
+        rec = db.add_plan(base_model_id, int(child.id), lineage_doc, label=label,
+                          patient_code=patient_code)
+    return {"base_model_id": base_model_id, "result_model_id": int(child.id),
+            "plan_id": int(rec.id)}
+
+
+def _source_model(patient: str | None, params_file: str | None, severity: tuple[str, ...],
+                  db_url: str | None) -> tuple[ArmParams, str, int | None]:
     given = sum(bool(x) for x in (patient, params_file, severity))
     if given != 1:
         raise click.UsageError(
             "Give exactly one model: PATIENT, --params FILE or --severity GROUP=LEVEL.")
     if params_file:
-        return ArmParams.from_file(params_file), f"parameters {params_file}"
+        return ArmParams.from_file(params_file), f"parameters {params_file}", None
     if severity:
         from fieldbank.severity import parse_severity_options, synthesize
 
         sev = parse_severity_options(list(severity))
         return synthesize(sev), "synthetic arm (" + ", ".join(
-            f"{g} {lvl}" for g, lvl in sev.items()) + ")"
+            f"{g} {lvl}" for g, lvl in sev.items()) + ")", None
     assert patient is not None
-    return load_patient_model(patient)
+    return load_patient_model(patient, db_url)
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -208,14 +243,17 @@ def _write_atomic(path: Path, text: str) -> None:
               help="Write before/after/difference fields to this PNG or SVG.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="Write plan.json, after.json and lineage.json into this directory.")
-@click.option("--save", is_flag=True, help="Store plan and after model in the database.")
+@click.option("--save", is_flag=True,
+              help="Store the after model and the plan, with lineage, in the database.")
+@click.option("--db", "db_url", default=None, metavar="URL",
+              help="Database URL for PATIENT and --save (default: the configured database).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON document on stdout.")
 def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ...],
            plan_file: str | None, botox: tuple[str, ...], weeks: float | None,
            lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
            rhizotomy: str | None, baclofen: str | None, timecourse: bool, optimize: bool,
            total_units: float | None, opt_groups: str | None, plot_path: str | None,
-           out_dir: str | None, save: bool, as_json: bool) -> None:
+           out_dir: str | None, save: bool, db_url: str | None, as_json: bool) -> None:
     """Apply clinical interventions to a model and compare the fields before and after.
 
     Results are model predictions, not treatment advice.
@@ -226,11 +264,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     from interventions.metrics import Conditions, compare
 
     try:
-        if save:
-            raise FieldbankError(
-                "--save needs the fieldbank database, which is not part of this build; use "
-                "--out DIR to keep the plan, the after model and their lineage as files.")
-        before, source = _source_model(patient, params_file, severity)
+        before, source, base_model_id = _source_model(patient, params_file, severity, db_url)
         plan = build_plan(plan_file, botox, weeks, lengthen, tenotomy, cast, rhizotomy,
                           baclofen)
         if plan is None and not optimize:
@@ -274,6 +308,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             _write_atomic(d / "after.json", after.to_json() + "\n")
             _write_atomic(d / "lineage.json", json.dumps(lineage.to_dict(), indent=2) + "\n")
             doc["out"] = str(d)
+        if save:
+            doc["saved"] = save_result(db_url, patient, base_model_id, before, after, source,
+                                       plan, lineage.to_dict())
     except FieldbankError as exc:
         raise click.ClickException(str(exc)) from None
     if as_json:
@@ -284,6 +321,10 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             click.echo(f"plot written to {plot_path}", err=True)
         if out_dir:
             click.echo(f"plan, after model and lineage written to {out_dir}", err=True)
+        if save:
+            ids = doc["saved"]
+            click.echo(f"stored: after model {ids['result_model_id']} (parent "
+                       f"{ids['base_model_id']}), plan {ids['plan_id']}", err=True)
 
 
 def _finite(obj: Any) -> Any:
