@@ -38,27 +38,31 @@ def render_text(source: str, plan: Plan, c: Comparison, course: TimeCourse | Non
           f"({inverse.evaluations} evaluations)")
         w(f"  {inverse.notice}")
     w("")
-    w(f"{'Severity (passive stiffness)':<30}{'before':>14}{'after':>14}")
+    w(f"  {'Severity (passive Km)':<28}{'before':>14}{'after':>14}")
     for g, b, a in c.severity_rows():
         w(f"  {g:<28}{b.level:>14}{a.level:>14}   score {b.score:.2f} → {a.score:.2f}")
     w("")
     n = c.before.conditions.grid_m.shape[0]
     w(f"Field change on {n} grid points (moving: {c.before.conditions.velocities[-1].shape[0]} "
       "directions)")
-    w(f"  {'speed m/s':>9} {'RMS |F| before→after N':>24} {'RMS |ΔF| N':>11} {'max |ΔF| N':>11}"
-      f"  {'at (x, y) m':>16} {'area ×':>8} {'Δθ':>6} {'shape before→after':>19}")
+    w(f"  {'speed':>6} {'RMS |F| N':>19} {'RMS |ΔF|':>9} {'max |ΔF|':>9} {'at (x, y) m':>17}"
+      f" {'area ×':>7} {'Δθ':>6} {'shape ratio':>15}")
+    w(f"  {'m/s':>6} {'before → after':>19} {'N':>9} {'N':>9} {'':>17} {'median':>7}"
+      f" {'mean':>6} {'before → after':>15}")
     for f in c.fields:
-        at = f"({f.diff_max_at_m[0]:+.3f}, {f.diff_max_at_m[1]:+.3f})"
-        w(f"  {f.speed_m_per_s:9.2f} {f.force_rms_before_n:11.2f} → {f.force_rms_after_n:<10.2f}"
-          f" {f.diff_rms_n:11.2f} {f.diff_max_n:11.2f}  {at:>16} {f.area_ratio_median:8.3f}"
-          f" {f.orientation_change_deg_mean:5.1f}° {f.shape_ratio_before_median:8.1f} → "
-          f"{f.shape_ratio_after_median:<8.1f}")
+        at = (f"({f.diff_max_at_m[0]:+.3f}, {f.diff_max_at_m[1]:+.3f})" if f.diff_max_n > 0
+              else "-")
+        w(f"  {f.speed_m_per_s:6.2f} {f.force_rms_before_n:8.2f} → {f.force_rms_after_n:<8.2f}"
+          f" {f.diff_rms_n:9.2f} {f.diff_max_n:9.2f} {at:>17} {f.area_ratio_median:7.3f}"
+          f" {f.orientation_change_deg_mean:5.1f}° {f.shape_ratio_before_median:6.1f} → "
+          f"{f.shape_ratio_after_median:<6.1f}")
     p = c.potential
+    where = (f" at ({p.max_at_m[0]:+.3f}, {p.max_at_m[1]:+.3f}) m" if p.max_abs_j > 0 else "")
     w(f"  potential energy ΔU: mean {p.mean_j:+.3f} J, RMS {p.rms_j:.3f} J, "
-      f"largest {p.max_abs_j:.3f} J at ({p.max_at_m[0]:+.3f}, {p.max_at_m[1]:+.3f}) m")
+      f"largest {p.max_abs_j:.3f} J{where}")
     w("")
-    w(f"{'Probing motion':<16}{'peak force N':>26}{'direction at peak':>22}"
-      f"{'mean direction':>20}")
+    w(f"  {'Probing motion':<14}{'peak force N':>26}{'direction at peak':>21}"
+      f"{'mean direction':>19}")
     for name, b, a in c.probe_rows():
         w(f"  {name:<14}{b.peak_force_n:9.2f} → {a.peak_force_n:<8.2f}"
           f"{_pct(b.peak_force_n, a.peak_force_n):>8}   {_deg(b.peak_direction_rad)} → "
@@ -66,8 +70,8 @@ def render_text(source: str, plan: Plan, c: Comparison, course: TimeCourse | Non
           f"{_deg(a.mean_direction_rad)}")
     w("")
     speed = c.before.stretches[0].speed_deg_s
-    w(f"{f'Fast joint stretch ({speed:.0f}°/s)':<26}{'peak resisting torque N·m':>30}"
-      f"{'reflex part N·m':>22}")
+    w(f"  {f'Fast stretch ({speed:.0f}°/s)':<24}{'peak resisting torque N·m':>27}"
+      f"{'reflex part N·m':>20}")
     for name, b, a in c.stretch_rows():
         w(f"  {name:<24}{b.peak_torque_n_m:9.2f} → {a.peak_torque_n_m:<8.2f}"
           f"{_pct(b.peak_torque_n_m, a.peak_torque_n_m):>8}"
