@@ -124,7 +124,7 @@ class Intervention:
         if not isinstance(data, Mapping):
             raise InterventionError(f"expected a JSON object; got {type(data).__name__}.")
         kind = data.get("kind")
-        if kind not in KINDS:
+        if not isinstance(kind, str) or kind not in KINDS:
             raise InterventionError(
                 f"unknown intervention kind {kind!r} (known: {', '.join(KINDS)})."
             )

@@ -104,6 +104,10 @@ def test_from_dict_refuses_a_kind_mismatch() -> None:
         Tenotomy.from_dict({"kind": "casting", "group": "ef"})
     with pytest.raises(InterventionError, match="expected a JSON object"):
         Intervention.from_dict([1, 2])  # type: ignore[arg-type]
+    with pytest.raises(InterventionError, match="unknown intervention kind"):
+        Intervention.from_dict({"kind": ["botulinum"]})
+    with pytest.raises(InterventionError, match="'delta_m' must be a finite number; got '1cm'"):
+        Intervention.from_dict({"kind": "lengthening", "group": "ef", "delta_m": "1cm"})
 
 
 def test_docs_list_every_default_with_its_value_and_source() -> None:
