@@ -21,7 +21,8 @@ Muscle model (seed eqs. 2-5)
 ----------------------------
 λ = λ_rest + J_λ (q - q_rest); λ̇ = J_λ q̇; joint torque from the muscles τ = -J_λᵀ (Ψ + Φ).
 
-Passive force: ψ = Km · s_w(d) · exp(-(d/ℓ)²), d = λ - λ_rest, ℓ the excursion over the range
+Passive force: ψ = Km · s_w(d) · exp(-(d/ℓ)²), d = λ - λ_rest - δ (δ the group's slack
+offset, 0 unless an intervention lengthened or shortened it), ℓ the excursion over the range
 of motion. The seed's one-sided ramp max(0, d) is replaced by its logistic smoothing
 s_w(d) = w·ln(1 + e^{d/w}), whose slope is the logistic function of steepness 1/w: tension stays
 ≥ 0, force and stiffness stay continuous (the haptic loop never sees a step), and for |d| ≫ w
@@ -81,6 +82,8 @@ class Arm:
         Muscle-length Jacobian J_λ (λ̇ = J_λ q̇).
     lam_rest, lam_min, lam_max, excursion : ndarray, shape (6,), m
         λ_rest, λ_min, λ_max over the range of motion, ℓ = λ_max - λ_min.
+    lam_slack : ndarray, shape (6,), m
+        Length where the passive force starts, λ_rest + slack offset.
     ldot_max : ndarray, shape (6,), m/s
         Largest lengthening rate on the seed's fast circle.
     km, alpha, beta : ndarray, shape (6,)
@@ -95,6 +98,7 @@ class Arm:
     q_rest: FloatArray
     jl: FloatArray
     lam_rest: FloatArray
+    lam_slack: FloatArray
     lam_min: FloatArray
     lam_max: FloatArray
     excursion: FloatArray
@@ -137,6 +141,7 @@ class Arm:
             "q_rest": q_rest,
             "jl": jl,
             "lam_rest": lam_rest,
+            "lam_slack": lam_rest + np.array(p.slack_offset_m),
             "lam_min": lam_min,
             "lam_max": lam_max,
             "excursion": excursion,
@@ -288,7 +293,7 @@ class Arm:
 
     def passive_forces(self, lam: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Ψ and ∂Ψ/∂λ, each (N, 6): N and N/m."""
-        d = lam - self.lam_rest
+        d = lam - self.lam_slack
         z = d / self.w
         sp = self.w * np.logaddexp(0.0, z)
         sig = expit(z)
@@ -421,7 +426,7 @@ class Arm:
         The postural field is its negative gradient: F = -∇U.
         """
         q = self._ik_model(self._in(x))
-        d = self.muscle_lengths(q) - self.lam_rest
+        d = self.muscle_lengths(q) - self.lam_slack
         ell = self.excursion
         ramp = np.where(d > 0, 0.5 * ell * ell * (-np.expm1(-((d / ell) ** 2))), 0.0)
         corr = _smoothing_integral(d, ell, self.w)

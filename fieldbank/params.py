@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import MISSING, asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -145,10 +145,11 @@ BOUNDS: dict[str, Interval] = {
     "circle_diameter_m": Interval(0.01, 1.0, "m", low_closed=False),
     "circle_frequency_hz": Interval(0.0, 20.0, "Hz", low_closed=False),
     "circle_centre_rad": Interval(-_PI, _PI, "rad"),
+    "slack_offset_m": Interval(-0.05, 0.10, "m"),
 }
 
 _SIX = ("moment_arm_shoulder_m", "moment_arm_elbow_m", "rest_length_m", "km_n_per_m", "alpha_n",
-        "beta")
+        "beta", "slack_offset_m")
 _PAIRS = ("q_rest_rad", "shoulder_range_rad", "elbow_range_rad", "circle_centre_rad")
 
 
@@ -224,6 +225,10 @@ class ArmParams:
         Width w of the smoothed ramp replacing max(0, λ - λ_rest) in eq. 5, m.
     circle_diameter_m, circle_frequency_hz, circle_centre_rad
         The fast circle from which λ̇_max is measured (seed: 35 cm, 2 Hz).
+    slack_offset_m : tuple of 6 float
+        Extra length each group takes up before its passive force starts, m (default 0): the
+        passive force of eq. 5 acts on λ - λ_rest - offset. A tendon lengthening or serial
+        casting adds to it; a contracture is negative. The reflex terms keep λ_rest.
     """
 
     side: str
@@ -250,6 +255,7 @@ class ArmParams:
     circle_diameter_m: float
     circle_frequency_hz: float
     circle_centre_rad: tuple[float, float]
+    slack_offset_m: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         # Validation only; conversions live in the named constructors.
@@ -368,7 +374,9 @@ class ArmParams:
             )
         names = [f.name for f in fields(cls)]
         body = {k: v for k, v in data.items() if k not in ("schema", "version")}
-        missing = [n for n in names if n not in body]
+        # Fields added after version 1 documents were written carry defaults and may be absent.
+        optional = {f.name for f in fields(cls) if f.default is not MISSING}
+        missing = [n for n in names if n not in body and n not in optional]
         unknown = sorted(set(body) - set(names))
         if missing or unknown:
             parts = []

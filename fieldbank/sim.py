@@ -148,6 +148,7 @@ def _make_tick(arm: Arm, st: SimState, dt: float, cfg: CouplingConfig) -> TickFn
             float(arm.beta[i]),
             1.0 / float(arm.ldot_max[i]),
             float(arm.lam_rest[i] / arm.lam_max[i]),
+            float(arm.lam_slack[i] - arm.lam_rest[i]),
         )
         for i in range(6)
     )
@@ -177,13 +178,14 @@ def _make_tick(arm: Arm, st: SimState, dt: float, cfg: CouplingConfig) -> TickFn
         t2 = j12 * fx + j22 * fy
         dq1 = q1 - qr1
         dq2 = q2 - qr2
-        for a, b, km, iell, off, alpha, beta, ilm, k in muscles:
+        for a, b, km, iell, off, alpha, beta, ilm, k, slack in muscles:
             d = a * dq1 + b * dq2
-            z = d / w
+            ds = d - slack
+            z = ds / w
             if z > 35.0:
-                f = km * d * exp(-(d * iell) ** 2)
+                f = km * ds * exp(-(ds * iell) ** 2)
             elif z > -35.0:
-                f = km * w * log1p(exp(z)) * exp(-(d * iell) ** 2)
+                f = km * w * log1p(exp(z)) * exp(-(ds * iell) ** 2)
             else:
                 f = 0.0
             if beta > 0.0:

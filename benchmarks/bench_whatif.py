@@ -1,0 +1,71 @@
+"""Speed of the what-if module against its targets (issue: what-if).
+
+* all before/after metrics for one plan (``interventions.metrics.compare``): target ≤ 50 ms;
+* a 24-week botulinum time course (weeks 0..24, 25 evaluations): target ≤ 0.5 s.
+
+Baseline in the same process: one plain model field evaluation on the same grid
+(``Arm.field`` at every standard condition), the floor any metric must pay.
+
+Run: python benchmarks/bench_whatif.py
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from fieldbank.model import Arm
+from fieldbank.severity import synthesize
+from interventions.catalogue import Botulinum, Lengthening
+from interventions.course import time_course
+from interventions.inverse import optimise_botulinum
+from interventions.metrics import Conditions, compare
+from interventions.plan import Plan
+
+
+def timeit(fn: Callable[[], object], repeat: int) -> tuple[float, float]:
+    fn()  # warm-up
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), max(times)
+
+
+def main() -> None:
+    before = synthesize({"elbow": "severe", "shoulder": "mild"})
+    plan = Plan.of(Lengthening(group="bf", delta_m=0.01), Botulinum({"ef": 200.0, "ee": 100.0}))
+    after = plan.apply(before)
+    arm = Arm.from_params(before)
+    cond = Conditions.standard(arm)
+
+    def fields_only() -> None:
+        for k in range(len(cond.velocities)):
+            x, v = cond.points(k)
+            arm.field(x, v)
+
+    base, _ = timeit(fields_only, 50)
+    one, one_max = timeit(lambda: compare(before, after), 30)
+    course, course_max = timeit(lambda: time_course(before, plan), 5)
+    inv, _ = timeit(lambda: optimise_botulinum(before, 300.0, groups=("ef", "ee", "sf")), 3)
+    n = cond.grid_m.shape[0]
+    pts = sum(v.shape[0] for v in cond.velocities) * n
+    print(f"standard conditions: {n} grid points, {pts} field evaluations per model")
+    print(f"baseline  one model's fields (Arm.field)      {base * 1e3:8.2f} ms")
+    print(f"compare   all before/after metrics, one plan  {one * 1e3:8.2f} ms median, "
+          f"{one_max * 1e3:.2f} ms max  (target <= 50 ms; {one / base:.1f}x baseline)  "
+          f"{'OK' if one <= 0.050 else 'OVER'}")
+    print(f"course    24-week time course (25 weeks)      {course:8.3f} s  median, "
+          f"{course_max:.3f} s max  (target <= 0.5 s; {course / one:.1f}x one compare)  "
+          f"{'OK' if course <= 0.5 else 'OVER'}")
+    print(f"inverse   3-group dose split (COBYLA)         {inv:8.3f} s  median (no target)")
+
+
+if __name__ == "__main__":
+    main()

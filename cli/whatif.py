@@ -1,0 +1,342 @@
+"""``fieldbank whatif``: apply an intervention plan to a model and compare before with after.
+
+The model comes from ``--params FILE`` (an ArmParams JSON document), ``--severity
+GROUP=LEVEL`` (a synthetic arm on the severity scale) or, once the database layer is present,
+a stored patient's latest fitted model (:func:`load_patient_model`, ``--db URL``).
+``--save`` stores the after model (origin 'intervention', its parent the model before) and
+the plan with its lineage (:func:`save_result`). The plan comes from ``--plan
+FILE`` and/or the intervention options, applied in this order: plan file steps, lengthening,
+tenotomy, serial casting, rhizotomy, baclofen, botulinum.
+
+Human-readable tables go to stdout, or one JSON document with ``--json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import click
+
+from fieldbank.errors import FieldbankError, InterventionError
+from fieldbank.params import GROUPS, ArmParams
+from interventions.catalogue import (
+    Baclofen,
+    Botulinum,
+    Intervention,
+    Lengthening,
+    Rhizotomy,
+    SerialCasting,
+    Tenotomy,
+)
+from interventions.defaults import value
+from interventions.plan import Plan, params_sha256
+
+_NUM = r"([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)"
+_LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def _split_items(items: tuple[str, ...]) -> list[str]:
+    return [p.strip() for item in items for p in item.split(",") if p.strip()]
+
+
+def parse_units(items: tuple[str, ...]) -> dict[str, float]:
+    """``('ef=200U', 'ee=100')`` → {'ef': 200.0, 'ee': 100.0}."""
+    out: dict[str, float] = {}
+    for part in _split_items(items):
+        m = re.fullmatch(rf"(\w+)\s*=\s*{_NUM}\s*(?:U|u|units?)?", part)
+        if not m:
+            raise InterventionError(
+                f"--botox {part!r}: expected GROUP=DOSE in units, e.g. ef=200U "
+                f"(groups: {', '.join(GROUPS)}).")
+        if m.group(1) in out:
+            raise InterventionError(f"--botox: muscle group {m.group(1)!r} given twice.")
+        out[m.group(1)] = float(m.group(2))
+    return out
+
+
+def parse_length(text: str, option: str) -> float:
+    """'1cm', '10 mm', '0.01m', '0.01' (m) → metres."""
+    m = re.fullmatch(rf"{_NUM}\s*(m|cm|mm)?", text.strip())
+    if not m:
+        raise InterventionError(
+            f"{option} {text!r}: expected a length such as 1cm, 10mm or 0.01m.")
+    return float(m.group(1)) * _LENGTH_UNITS[m.group(2) or "m"]
+
+
+def parse_group_lengths(items: tuple[str, ...], option: str,
+                        default_m: float | None = None) -> list[tuple[str, float]]:
+    out = []
+    for part in _split_items(items):
+        if "=" in part:
+            g, length = part.split("=", 1)
+            out.append((g.strip(), parse_length(length, option)))
+        elif default_m is not None:
+            out.append((part, default_m))
+        else:
+            raise InterventionError(f"{option} {part!r}: expected GROUP=LENGTH, e.g. bf=1cm.")
+    return out
+
+
+def parse_reflex(text: str, option: str) -> tuple[tuple[str, ...], float | None]:
+    """'all', 'ef,ee', 'all:0.4' → (groups, factor or None)."""
+    groups_text, _, factor_text = text.partition(":")
+    groups = GROUPS if groups_text.strip() in ("", "all") else tuple(
+        g.strip() for g in groups_text.split(",") if g.strip())
+    factor = None
+    if factor_text:
+        try:
+            factor = float(factor_text)
+        except ValueError:
+            raise InterventionError(
+                f"{option} {text!r}: the factor after ':' must be a number.") from None
+    return groups, factor
+
+
+def build_plan(plan_file: str | None, botox: tuple[str, ...], weeks: float | None,
+               lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
+               rhizotomy: str | None, baclofen: str | None) -> Plan | None:
+    steps: list[Intervention] = []
+    label = ""
+    if plan_file:
+        plan = Plan.from_file(plan_file)
+        steps.extend(plan.steps)
+        label = plan.label
+    for g, d in parse_group_lengths(lengthen, "--lengthen"):
+        steps.append(Lengthening(group=g, delta_m=d))
+    for g in _split_items(tenotomy):
+        steps.append(Tenotomy(group=g))
+    for g, d in parse_group_lengths(cast, "--cast", default_m=value("casting.delta_m")):
+        steps.append(SerialCasting(group=g, delta_m=d))
+    for text, cls in ((rhizotomy, Rhizotomy), (baclofen, Baclofen)):
+        if text is not None:
+            groups, factor = parse_reflex(text, f"--{cls.kind}")
+            steps.append(cls(groups=groups) if factor is None else cls(groups=groups,
+                                                                      factor=factor))
+    if botox:
+        kw: dict[str, Any] = {} if weeks is None else {"weeks_since": weeks}
+        steps.append(Botulinum(parse_units(botox), **kw))
+    elif weeks is not None and not any(isinstance(s, Botulinum) for s in steps):
+        raise InterventionError("--weeks needs a botulinum injection (--botox or --plan).")
+    elif weeks is not None:
+        steps = list(Plan(tuple(steps)).at_week(weeks).steps)
+    return Plan(tuple(steps), label) if steps else None
+
+
+def _open_database(db_url: str | None) -> Any:
+    try:
+        from fieldbank.storage import Database
+    except ImportError:
+        raise FieldbankError(
+            "This needs the fieldbank database, which is not part of this build; give the model "
+            "with --params FILE or --severity GROUP=LEVEL, and keep results with --out DIR."
+        ) from None
+    return Database.open(db_url)
+
+
+def load_patient_model(patient_code: str, db_url: str | None) -> tuple[ArmParams, str, int]:
+    """The patient's latest fitted model (else latest synthetic one) from the database.
+
+    Returns the parameters, a description and the stored model id.
+    """
+    with _open_database(db_url) as db:
+        db.get_patient(patient_code)  # a clear error for an unknown patient
+        models = db.list_models(patient_code)
+    for origin in ("fitted", "synthetic"):
+        found = [m for m in models if m.origin == origin]
+        if found:
+            m = max(found, key=lambda r: r.id)
+            return m.params, f"patient {patient_code}, {origin} model {m.id}", int(m.id)
+    raise FieldbankError(
+        f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
+        "first, or give the model with --params FILE.")
+
+
+def save_result(db_url: str | None, patient_code: str | None, base_model_id: int | None,
+                before: ArmParams, after: ArmParams, source: str, plan: Plan,
+                lineage_doc: dict[str, Any]) -> dict[str, int]:
+    """Store the after model (origin 'intervention', parent = the before model) and the plan.
+
+    A before model that is not in the database yet (--params, --severity) is stored first as
+    a synthetic model, so the lineage always has both ends.
+    """
+    label = plan.label or "; ".join(s.describe() for s in plan.steps)
+    with _open_database(db_url) as db:
+        if base_model_id is None:
+            base_model_id = int(db.add_model(before, "synthetic", source,
+                                             patient_code=patient_code).id)
+        child = db.add_model(after, "intervention", label, patient_code=patient_code,
+                             parent_id=base_model_id)
+        rec = db.add_plan(base_model_id, int(child.id), lineage_doc, label=label,
+                          patient_code=patient_code)
+    return {"base_model_id": base_model_id, "result_model_id": int(child.id),
+            "plan_id": int(rec.id)}
+
+
+def _source_model(patient: str | None, params_file: str | None, severity: tuple[str, ...],
+                  db_url: str | None) -> tuple[ArmParams, str, int | None]:
+    given = sum(bool(x) for x in (patient, params_file, severity))
+    if given != 1:
+        raise click.UsageError(
+            "Give exactly one model: PATIENT, --params FILE or --severity GROUP=LEVEL.")
+    if params_file:
+        return ArmParams.from_file(params_file), f"parameters {params_file}", None
+    if severity:
+        from fieldbank.severity import parse_severity_options, synthesize
+
+        sev = parse_severity_options(list(severity))
+        return synthesize(sev), "synthetic arm (" + ", ".join(
+            f"{g} {lvl}" for g, lvl in sev.items()) + ")", None
+    assert patient is not None
+    return load_patient_model(patient, db_url)
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@click.command("whatif")
+@click.argument("patient", required=False)
+@click.option("--params", "params_file", type=click.Path(dir_okay=False),
+              help="Model to start from: an ArmParams JSON file.")
+@click.option("--severity", multiple=True, metavar="GROUP=LEVEL",
+              help="Start from a synthetic arm, e.g. elbow=severe (repeatable).")
+@click.option("--plan", "plan_file", type=click.Path(dir_okay=False),
+              help="Intervention plan JSON file (steps applied first).")
+@click.option("--botox", multiple=True, metavar="GROUP=UNITS",
+              help="Botulinum toxin A, e.g. ef=200U,ee=100U (one injection session).")
+@click.option("--weeks", type=float, default=None,
+              help=f"Weeks since the injection (default {value('botulinum.weeks_since'):g}, "
+                   "the peak).")
+@click.option("--lengthen", multiple=True, metavar="GROUP=LENGTH",
+              help="Lengthening surgery, e.g. bf=1cm.")
+@click.option("--tenotomy", multiple=True, metavar="GROUP", help="Tenotomy / release.")
+@click.option("--cast", multiple=True, metavar="GROUP[=LENGTH]",
+              help=f"Serial casting (default +{value('casting.delta_m') * 1000:g} mm).")
+@click.option("--rhizotomy", metavar="GROUPS[:FACTOR]",
+              help="Selective dorsal rhizotomy: 'all' or e.g. ef,ee:0.4 (β × factor).")
+@click.option("--baclofen", metavar="GROUPS[:FACTOR]",
+              help="Intrathecal baclofen: 'all' or e.g. ef,ee:0.5 (β × factor).")
+@click.option("--timecourse", is_flag=True, help="Also show the metrics week by week (0-24).")
+@click.option("--optimize", is_flag=True,
+              help="Search the botulinum split closest to unimpaired (model result).")
+@click.option("--total-units", type=float, default=None, help="Dose limit for --optimize, U.")
+@click.option("--groups", "opt_groups", default=None, metavar="G1,G2",
+              help="Groups --optimize may inject (default all six).")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              help="Write before/after/difference fields to this PNG or SVG.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False),
+              help="Write plan.json, after.json and lineage.json into this directory.")
+@click.option("--save", is_flag=True,
+              help="Store the after model and the plan, with lineage, in the database.")
+@click.option("--db", "db_url", default=None, metavar="URL",
+              help="Database URL for PATIENT and --save (default: the configured database).")
+@click.option("--json", "as_json", is_flag=True, help="One JSON document on stdout.")
+def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ...],
+           plan_file: str | None, botox: tuple[str, ...], weeks: float | None,
+           lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
+           rhizotomy: str | None, baclofen: str | None, timecourse: bool, optimize: bool,
+           total_units: float | None, opt_groups: str | None, plot_path: str | None,
+           out_dir: str | None, save: bool, db_url: str | None, as_json: bool) -> None:
+    """Apply clinical interventions to a model and compare the fields before and after.
+
+    Results are model predictions, not treatment advice.
+    """
+    from cli.whatif_report import render_text
+    from interventions.course import time_course
+    from interventions.inverse import optimise_botulinum
+    from interventions.metrics import Conditions, compare
+
+    try:
+        before, source, base_model_id = _source_model(patient, params_file, severity, db_url)
+        plan = build_plan(plan_file, botox, weeks, lengthen, tenotomy, cast, rhizotomy,
+                          baclofen)
+        if plan is None and not optimize:
+            raise click.UsageError(
+                "No intervention given: use --botox, --lengthen, --tenotomy, --cast, "
+                "--rhizotomy, --baclofen, --plan or --optimize.")
+        from fieldbank.model import Arm
+
+        cond = Conditions.standard(Arm.from_params(before))
+        doc: dict[str, Any] = {"model": {"source": source, "sha256": params_sha256(before)}}
+        inverse = None
+        if optimize:
+            if total_units is None:
+                raise click.UsageError("--optimize needs --total-units N.")
+            gs = None if opt_groups is None else [g.strip() for g in opt_groups.split(",")]
+            inverse = optimise_botulinum(
+                before, total_units, gs, conditions=cond,
+                weeks_since=value("botulinum.weeks_since") if weeks is None else weeks)
+            doc["inverse"] = inverse.to_dict()
+            if plan is None:
+                plan = inverse.plan
+        assert plan is not None
+        after, lineage = plan.derive(before)
+        comparison = compare(before, after, cond)
+        doc["plan"] = plan.to_dict()
+        doc["plan_steps"] = plan.describe()
+        doc["lineage"] = lineage.to_dict()
+        doc["comparison"] = comparison.to_dict()
+        course = None
+        if timecourse:
+            course = time_course(before, plan, conditions=cond)
+            doc["timecourse"] = course.to_dict()
+        if plot_path:
+            from interventions.plot import plot_comparison
+
+            plot_comparison(before, after, plot_path, title=source)
+            doc["plot"] = plot_path
+        if out_dir:
+            d = Path(out_dir)
+            _write_atomic(d / "plan.json", plan.to_json() + "\n")
+            _write_atomic(d / "after.json", after.to_json() + "\n")
+            _write_atomic(d / "lineage.json", json.dumps(lineage.to_dict(), indent=2) + "\n")
+            doc["out"] = str(d)
+        if save:
+            doc["saved"] = save_result(db_url, patient, base_model_id, before, after, source,
+                                       plan, lineage.to_dict())
+    except FieldbankError as exc:
+        raise click.ClickException(str(exc)) from None
+    if as_json:
+        click.echo(json.dumps(_finite(doc), indent=2))
+    else:
+        click.echo(render_text(source, plan, comparison, course, inverse))
+        if plot_path:
+            click.echo(f"plot written to {plot_path}", err=True)
+        if out_dir:
+            click.echo(f"plan, after model and lineage written to {out_dir}", err=True)
+        if save:
+            ids = doc["saved"]
+            click.echo(f"stored: after model {ids['result_model_id']} (parent "
+                       f"{ids['base_model_id']}), plan {ids['plan_id']}", err=True)
+
+
+def _finite(obj: Any) -> Any:
+    """JSON has no NaN/inf: write them as null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(whatif())

@@ -1,0 +1,460 @@
+"""The intervention catalogue (BRIEF §7): each clinical act as a frozen, validated value.
+
+Every intervention is a frozen dataclass with
+
+* ``kind`` - its tag in plan documents ('botulinum', 'lengthening', 'tenotomy', 'rhizotomy',
+  'baclofen', 'casting');
+* ``apply(params) -> ArmParams`` - a new parameter set; the input is never changed;
+* ``to_dict()`` / ``from_dict()`` - the JSON form, tagged with ``kind``;
+* ``targets()`` - the muscle groups it acts on;
+* ``EFFECTS`` - the documented direction of the change per parameter of a target group
+  ('down', 'up'); every other parameter stays as it was. The contract tests check this.
+
+Mapping onto model parameters (defaults and sources in :mod:`interventions.defaults`):
+
+==============  =================================================================================
+botulinum       α and β of each injected group × (1 - e), e = E_peak(dose) · s(weeks since)
+lengthening     slack offset of the group + Δ (passive onset moves by Δ); α × a force-length
+                factor exp(-(Δ / (c · L_f))²)
+tenotomy        Km and α of the group × residual fraction (default 0: force capacity 0)
+rhizotomy       β of the chosen groups (default all) × factor
+baclofen        β of the chosen groups (default all) × factor
+casting         slack offset of the group + Δ, Km × factor
+==============  =================================================================================
+
+Bad values raise :class:`fieldbank.errors.InterventionError` naming the intervention, the field
+and the reason; a plan adds the step number.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar, cast
+
+import numpy as np
+
+from fieldbank.errors import InterventionError, ParameterError
+from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
+from interventions.defaults import value
+from interventions.timecourse import dose_effect, shape_exponent, time_shape
+
+
+def _known_groups() -> str:
+    return ", ".join(GROUPS)
+
+
+def _check_number(
+    problems: list[str], name: str, v: Any, lo: float | None, hi: float | None,
+    lo_open: bool = False, unit: str = "",
+) -> None:
+    u = f" {unit}" if unit else ""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        problems.append(f"'{name}' must be a finite number; got {v!r}")
+        return
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        rel = ">" if lo_open else ">="
+        problems.append(f"'{name}' must be {rel} {lo:g}{u}; got {v:g}")
+    if hi is not None and v > hi:
+        problems.append(f"'{name}' must be <= {hi:g}{u}; got {v:g}")
+
+
+def _check_group(problems: list[str], name: str, g: Any) -> None:
+    if not isinstance(g, str) or g not in GROUP_INDEX:
+        problems.append(f"unknown muscle group {g!r} in '{name}' (known: {_known_groups()})")
+
+
+def _raise(kind: str, problems: list[str]) -> None:
+    if problems:
+        raise InterventionError(f"{kind}: " + "; ".join(problems) + ".")
+
+
+def _scaled(params: ArmParams, name: str, factors: Mapping[str, float]) -> tuple[float, ...]:
+    row = np.array(getattr(params, name), dtype=float)
+    for g, f in factors.items():
+        row[GROUP_INDEX[g]] *= f
+    return tuple(row.tolist())
+
+
+def _shifted(params: ArmParams, name: str, deltas: Mapping[str, float]) -> tuple[float, ...]:
+    row = np.array(getattr(params, name), dtype=float)
+    for g, d in deltas.items():
+        row[GROUP_INDEX[g]] += d
+    return tuple(row.tolist())
+
+
+def _replace(kind: str, params: ArmParams, **changes: Any) -> ArmParams:
+    try:
+        return params.replace(**changes)
+    except ParameterError as exc:
+        raise InterventionError(f"{kind}: the resulting model is invalid: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Intervention:
+    """Base of the catalogue: JSON form and the common contract."""
+
+    kind: ClassVar[str] = ""
+    EFFECTS: ClassVar[dict[str, str]] = {}
+
+    def apply(self, params: ArmParams) -> ArmParams:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def targets(self) -> tuple[str, ...]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def describe(self) -> str:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"kind": self.kind}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "units":
+                v = dict(v)
+            elif isinstance(v, tuple):
+                v = list(v)
+            d[f.name] = v
+        return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Intervention:
+        """Build from the JSON form; unknown keys and a wrong ``kind`` are refused."""
+        if not isinstance(data, Mapping):
+            raise InterventionError(f"expected a JSON object; got {type(data).__name__}.")
+        kind = data.get("kind")
+        if not isinstance(kind, str) or kind not in KINDS:
+            raise InterventionError(
+                f"unknown intervention kind {kind!r} (known: {', '.join(KINDS)})."
+            )
+        sub = KINDS[kind]
+        if cls is not Intervention and sub is not cls:
+            raise InterventionError(f"expected kind {cls.kind!r}; got {kind!r}.")
+        names = {f.name for f in fields(sub)}
+        body = {k: v for k, v in data.items() if k != "kind"}
+        unknown = sorted(set(body) - names)
+        if unknown:
+            raise InterventionError(
+                f"{kind}: unknown field(s) {', '.join(map(repr, unknown))} "
+                f"(known: {', '.join(sorted(names))})."
+            )
+        for k, v in list(body.items()):
+            if isinstance(v, list):
+                body[k] = tuple(v)
+        try:
+            return sub(**body)
+        except TypeError as exc:  # a missing required field
+            raise InterventionError(f"{kind}: {exc}.") from None
+
+
+# --- botulinum toxin A -----------------------------------------------------------------------
+@dataclass(frozen=True)
+class Botulinum(Intervention):
+    """Botulinum toxin A into one or more groups.
+
+    Parameters
+    ----------
+    units : mapping group -> dose, U
+        Units injected into each muscle group (e.g. ``{'ef': 200}``); stored as sorted pairs.
+    weeks_since : float, weeks
+        Time from the injection to the moment the model describes.
+    emax, ed50_units, hill : float
+        Emax dose → peak-effect curve (assumption).
+    peak_week, wearoff_week, wearoff_fraction : float
+        Time course (see :mod:`interventions.timecourse`).
+    scale_beta : bool
+        Scale β as well as α (BRIEF §7 maps the toxin onto both).
+    """
+
+    kind: ClassVar[str] = "botulinum"
+    EFFECTS: ClassVar[dict[str, str]] = {"alpha_n": "down", "beta": "down"}
+
+    units: tuple[tuple[str, float], ...] | Mapping[str, float] = ()
+    weeks_since: float = value("botulinum.weeks_since")
+    emax: float = value("botulinum.emax")
+    ed50_units: float = value("botulinum.ed50_units")
+    hill: float = value("botulinum.hill")
+    peak_week: float = value("botulinum.peak_week")
+    wearoff_week: float = value("botulinum.wearoff_week")
+    wearoff_fraction: float = value("botulinum.wearoff_fraction")
+    scale_beta: bool = True
+
+    def __post_init__(self) -> None:
+        problems: list[str] = []
+        raw = self.units
+        pairs: list[tuple[str, float]] = []
+        if isinstance(raw, Mapping):
+            items = list(raw.items())
+        elif isinstance(raw, (tuple, list)) and all(
+            isinstance(p, (tuple, list)) and len(p) == 2 for p in raw
+        ):
+            items = [(p[0], p[1]) for p in raw]
+        else:
+            items = []
+            problems.append(f"'units' must map muscle groups to doses in U; got {raw!r}")
+        if not items and not problems:
+            problems.append("'units' names no muscle group; inject at least one")
+        seen: set[str] = set()
+        max_units = value("botulinum.max_units_per_group")
+        for g, u in items:
+            _check_group(problems, "units", g)
+            if g in seen:
+                problems.append(f"muscle group {g!r} appears twice in 'units'")
+            seen.add(g)
+            _check_number(problems, f"units[{g}]", u, 0.0, max_units, unit="U")
+            if isinstance(g, str) and g in GROUP_INDEX and isinstance(u, (int, float)):
+                pairs.append((g, float(u)))
+        _check_number(problems, "weeks_since", self.weeks_since, 0.0,
+                      value("botulinum.max_weeks"), unit="weeks")
+        _check_number(problems, "emax", self.emax, 0.0, 0.99)
+        _check_number(problems, "ed50_units", self.ed50_units, 0.0, None, lo_open=True, unit="U")
+        _check_number(problems, "hill", self.hill, 0.1, 10.0)
+        _check_number(problems, "peak_week", self.peak_week, 0.0, None, lo_open=True,
+                      unit="weeks")
+        _check_number(problems, "wearoff_week", self.wearoff_week, 0.0, None, lo_open=True,
+                      unit="weeks")
+        _check_number(problems, "wearoff_fraction", self.wearoff_fraction, 0.0, 1.0,
+                      lo_open=True)
+        if not isinstance(self.scale_beta, bool):
+            problems.append(f"'scale_beta' must be true or false; got {self.scale_beta!r}")
+        if not problems:
+            try:
+                shape_exponent(self.peak_week, self.wearoff_week, self.wearoff_fraction)
+            except InterventionError as exc:
+                problems.append(str(exc).split(": ", 1)[-1].rstrip("."))
+        _raise(self.kind, problems)
+        pairs.sort(key=lambda p: GROUP_INDEX[p[0]])
+        object.__setattr__(self, "units", tuple(pairs))
+        for name in ("weeks_since", "emax", "ed50_units", "hill", "peak_week", "wearoff_week",
+                     "wearoff_fraction"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    @property
+    def doses(self) -> dict[str, float]:
+        """Units per group, U (after construction ``units`` is always sorted pairs)."""
+        return dict(cast("tuple[tuple[str, float], ...]", self.units))
+
+    def targets(self) -> tuple[str, ...]:
+        return tuple(self.doses)
+
+    def effect(self, weeks: float | None = None) -> dict[str, float]:
+        """Fractional force drop e per injected group at ``weeks`` (default weeks_since)."""
+        t = self.weeks_since if weeks is None else weeks
+        s = float(time_shape(t, self.peak_week, self.wearoff_week, self.wearoff_fraction))
+        return {
+            g: float(dose_effect(u, self.emax, self.ed50_units, self.hill)) * s
+            for g, u in self.doses.items()
+        }
+
+    def at_week(self, weeks: float) -> Botulinum:
+        """The same injection seen ``weeks`` after it was given."""
+        return _copy(self, weeks_since=float(weeks))
+
+    def apply(self, params: ArmParams) -> ArmParams:
+        keep = {g: 1.0 - e for g, e in self.effect().items()}
+        changes: dict[str, Any] = {"alpha_n": _scaled(params, "alpha_n", keep)}
+        if self.scale_beta:
+            changes["beta"] = _scaled(params, "beta", keep)
+        return _replace(self.kind, params, **changes)
+
+    def describe(self) -> str:
+        doses = ", ".join(f"{g} {u:g} U" for g, u in self.doses.items())
+        return f"botulinum toxin A ({doses}), {self.weeks_since:g} weeks after injection"
+
+
+# --- lengthening -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Lengthening(Intervention):
+    """Tendon or muscle lengthening surgery of one group by ``delta_m``.
+
+    The passive onset moves by Δ (slack offset + Δ). The reflex force capacity α drops by the
+    force-length factor exp(-(Δ / (c · L_f))²) unless ``alpha_factor`` is given.
+    """
+
+    kind: ClassVar[str] = "lengthening"
+    EFFECTS: ClassVar[dict[str, str]] = {"slack_offset_m": "up", "alpha_n": "down"}
+
+    group: str = ""
+    delta_m: float = 0.0
+    alpha_factor: float | None = None
+    fibre_length_m: float = value("lengthening.fibre_length_m")
+    width_factor: float = value("lengthening.width_factor")
+
+    def __post_init__(self) -> None:
+        problems: list[str] = []
+        _check_group(problems, "group", self.group)
+        _check_number(problems, "delta_m", self.delta_m, 0.0, value("lengthening.max_delta_m"),
+                      lo_open=True, unit="m")
+        if self.alpha_factor is not None:
+            _check_number(problems, "alpha_factor", self.alpha_factor, 0.0, 1.0)
+        _check_number(problems, "fibre_length_m", self.fibre_length_m, 0.0, 0.5, lo_open=True,
+                      unit="m")
+        _check_number(problems, "width_factor", self.width_factor, 0.0, 10.0, lo_open=True)
+        _raise(self.kind, problems)
+
+    def targets(self) -> tuple[str, ...]:
+        return (self.group,)
+
+    def force_factor(self) -> float:
+        """Multiplier on α: the given ``alpha_factor`` or the force-length default."""
+        if self.alpha_factor is not None:
+            return float(self.alpha_factor)
+        return math.exp(-((self.delta_m / (self.width_factor * self.fibre_length_m)) ** 2))
+
+    def apply(self, params: ArmParams) -> ArmParams:
+        return _replace(
+            self.kind, params,
+            slack_offset_m=_shifted(params, "slack_offset_m", {self.group: self.delta_m}),
+            alpha_n=_scaled(params, "alpha_n", {self.group: self.force_factor()}),
+        )
+
+    def describe(self) -> str:
+        return (f"lengthening of {self.group} by {self.delta_m * 100:g} cm "
+                f"(α × {self.force_factor():.3g})")
+
+
+# --- tenotomy --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Tenotomy(Intervention):
+    """Tenotomy or release of one group: Km and α × residual fraction (default 0)."""
+
+    kind: ClassVar[str] = "tenotomy"
+    EFFECTS: ClassVar[dict[str, str]] = {"km_n_per_m": "down", "alpha_n": "down"}
+
+    group: str = ""
+    residual_fraction: float = value("tenotomy.residual_fraction")
+
+    def __post_init__(self) -> None:
+        problems: list[str] = []
+        _check_group(problems, "group", self.group)
+        _check_number(problems, "residual_fraction", self.residual_fraction, 0.0, 1.0)
+        if not problems and self.residual_fraction >= 1.0:
+            problems.append("'residual_fraction' must be < 1 (1 would change nothing)")
+        _raise(self.kind, problems)
+
+    def targets(self) -> tuple[str, ...]:
+        return (self.group,)
+
+    def apply(self, params: ArmParams) -> ArmParams:
+        f = {self.group: float(self.residual_fraction)}
+        return _replace(self.kind, params, km_n_per_m=_scaled(params, "km_n_per_m", f),
+                        alpha_n=_scaled(params, "alpha_n", f))
+
+    def describe(self) -> str:
+        return f"tenotomy / release of {self.group} (Km, α × {self.residual_fraction:g})"
+
+
+# --- reflex reduction --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _ReflexReduction(Intervention):
+    """β of the chosen groups (default: all six) × ``factor``."""
+
+    EFFECTS: ClassVar[dict[str, str]] = {"beta": "down"}
+
+    groups: tuple[str, ...] = GROUPS
+    factor: float = 0.5
+
+    def __post_init__(self) -> None:
+        problems: list[str] = []
+        groups = self.groups
+        if isinstance(groups, str):
+            groups = (groups,)
+        if not isinstance(groups, (tuple, list)) or not groups:
+            problems.append(f"'groups' must list at least one muscle group; got {groups!r}")
+            groups = ()
+        for g in groups:
+            _check_group(problems, "groups", g)
+        if len(set(groups)) != len(groups):
+            problems.append("'groups' names a muscle group twice")
+        _check_number(problems, "factor", self.factor, 0.0, 1.0)
+        if not problems and self.factor >= 1.0:
+            problems.append("'factor' must be < 1 (1 would change nothing)")
+        _raise(self.kind, problems)
+        object.__setattr__(self, "groups",
+                           tuple(sorted(groups, key=lambda g: GROUP_INDEX[g])))
+        object.__setattr__(self, "factor", float(self.factor))
+
+    def targets(self) -> tuple[str, ...]:
+        return tuple(self.groups)
+
+    def apply(self, params: ArmParams) -> ArmParams:
+        return _replace(self.kind, params,
+                        beta=_scaled(params, "beta", dict.fromkeys(self.groups, self.factor)))
+
+    def describe(self) -> str:
+        which = "all groups" if tuple(self.groups) == GROUPS else ", ".join(self.groups)
+        return f"{self.kind} (β × {self.factor:g} in {which})"
+
+
+@dataclass(frozen=True)
+class Rhizotomy(_ReflexReduction):
+    """Selective dorsal rhizotomy: stretch-reflex gain β × factor (assumption 0.5)."""
+
+    kind: ClassVar[str] = "rhizotomy"
+    factor: float = value("rhizotomy.beta_factor")
+
+
+@dataclass(frozen=True)
+class Baclofen(_ReflexReduction):
+    """Intrathecal baclofen: stretch-reflex gain β × factor (assumption 0.6)."""
+
+    kind: ClassVar[str] = "baclofen"
+    factor: float = value("baclofen.beta_factor")
+
+
+# --- serial casting --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SerialCasting(Intervention):
+    """Serial casting / sustained stretch of one group: slack + Δ, Km × factor."""
+
+    kind: ClassVar[str] = "casting"
+    EFFECTS: ClassVar[dict[str, str]] = {"slack_offset_m": "up", "km_n_per_m": "down"}
+
+    group: str = ""
+    delta_m: float = value("casting.delta_m")
+    km_factor: float = value("casting.km_factor")
+
+    def __post_init__(self) -> None:
+        problems: list[str] = []
+        _check_group(problems, "group", self.group)
+        _check_number(problems, "delta_m", self.delta_m, 0.0, 0.02, lo_open=True, unit="m")
+        _check_number(problems, "km_factor", self.km_factor, 0.0, 1.0, lo_open=True)
+        _raise(self.kind, problems)
+
+    def targets(self) -> tuple[str, ...]:
+        return (self.group,)
+
+    def apply(self, params: ArmParams) -> ArmParams:
+        return _replace(
+            self.kind, params,
+            slack_offset_m=_shifted(params, "slack_offset_m", {self.group: self.delta_m}),
+            km_n_per_m=_scaled(params, "km_n_per_m", {self.group: self.km_factor}),
+        )
+
+    def describe(self) -> str:
+        return (f"serial casting of {self.group} (+{self.delta_m * 1000:g} mm slack, "
+                f"Km × {self.km_factor:g})")
+
+
+KINDS: dict[str, type[Intervention]] = {
+    c.kind: c for c in (Botulinum, Lengthening, Tenotomy, Rhizotomy, Baclofen, SerialCasting)
+}
+
+
+def _copy(obj: Intervention, **changes: Any) -> Any:
+    d = obj.to_dict()
+    d.update(changes)
+    return Intervention.from_dict(d)
+
+
+__all__ = [
+    "KINDS",
+    "Baclofen",
+    "Botulinum",
+    "Intervention",
+    "Lengthening",
+    "Rhizotomy",
+    "SerialCasting",
+    "Tenotomy",
+]

@@ -1,0 +1,99 @@
+"""Metrics week by week after a botulinum injection (BRIEF §7 time course).
+
+:func:`time_course` evaluates the before model once and the plan's after model at each week
+(:meth:`interventions.plan.Plan.at_week`: weeks after the most recent injection), on the same
+standard conditions, and collects the headline figures per week.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fieldbank.errors import InterventionError
+from fieldbank.model import Arm, FloatArray
+from fieldbank.params import ArmParams
+from interventions.catalogue import Botulinum
+from interventions.metrics import Comparison, Conditions, compare_evaluations, evaluate_model
+from interventions.plan import Plan
+
+DEFAULT_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(25))
+
+
+@dataclass(frozen=True, eq=False)
+class TimeCourse:
+    """Headline metrics per week.
+
+    Attributes
+    ----------
+    weeks : ndarray, shape (W,)
+    effect : dict group -> ndarray (W,)
+        Botulinum effect e (fractional drop of α, β) per injected group, compounded over
+        the plan's injections.
+    moving_diff_rms_n : ndarray (W,)
+        RMS force change at the first moving speed, N.
+    probe_peak_n : dict probe -> ndarray (W,)
+        Peak force along each probing motion, N.
+    stretch_peak_n_m : dict stretch -> ndarray (W,)
+        Peak resisting torque of each fast joint stretch, N·m.
+    comparisons : tuple of Comparison
+    """
+
+    weeks: FloatArray
+    effect: dict[str, FloatArray]
+    moving_diff_rms_n: FloatArray
+    probe_peak_n: dict[str, FloatArray]
+    stretch_peak_n_m: dict[str, FloatArray]
+    comparisons: tuple[Comparison, ...]
+
+    def peak_week(self, group: str) -> float:
+        """Week of the largest effect in ``group``."""
+        return float(self.weeks[int(np.argmax(self.effect[group]))])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "weeks": self.weeks.tolist(),
+            "effect": {g: e.tolist() for g, e in self.effect.items()},
+            "moving_diff_rms_n": self.moving_diff_rms_n.tolist(),
+            "probe_peak_n": {k: v.tolist() for k, v in self.probe_peak_n.items()},
+            "stretch_peak_n_m": {k: v.tolist() for k, v in self.stretch_peak_n_m.items()},
+        }
+
+
+def time_course(params: ArmParams, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
+                conditions: Conditions | None = None) -> TimeCourse:
+    """Metrics of ``plan`` applied to ``params`` at each of ``weeks`` after the injection."""
+    w = np.asarray(weeks, dtype=float).reshape(-1)
+    if not any(isinstance(s, Botulinum) for s in plan.steps):
+        raise InterventionError("time course: the plan has no botulinum step to follow.")
+    if w.size == 0 or np.any(w < 0) or np.any(~np.isfinite(w)):
+        raise InterventionError("time course: weeks must be finite, >= 0, and not empty.")
+    cond = conditions if conditions is not None else Conditions.standard(Arm.from_params(params))
+    before = evaluate_model(params, cond)
+    groups = sorted({g for s in plan.steps if isinstance(s, Botulinum) for g in s.targets()})
+    effect = {g: np.zeros(w.size) for g in groups}
+    comps = []
+    for i, week in enumerate(w):
+        p_week = plan.at_week(float(week))
+        keep = dict.fromkeys(groups, 1.0)
+        for s in p_week.steps:
+            if isinstance(s, Botulinum):
+                for g, e in s.effect().items():
+                    keep[g] *= 1.0 - e
+        for g in groups:
+            effect[g][i] = 1.0 - keep[g]
+        comps.append(compare_evaluations(before, evaluate_model(p_week.apply(params), cond)))
+    return TimeCourse(
+        weeks=w,
+        effect=effect,
+        moving_diff_rms_n=np.array([c.fields[min(1, len(c.fields) - 1)].diff_rms_n
+                                    for c in comps]),
+        probe_peak_n={n: np.array([c.probe_rows()[k][2].peak_force_n for c in comps])
+                      for k, (n, _, _) in enumerate(comps[0].probe_rows())},
+        stretch_peak_n_m={n: np.array([c.stretch_rows()[k][2].peak_torque_n_m for c in comps])
+                          for k, (n, _, _) in enumerate(comps[0].stretch_rows())},
+        comparisons=tuple(comps),
+    )

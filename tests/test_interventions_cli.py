@@ -1,0 +1,111 @@
+"""The ``fieldbank whatif`` command end to end (click's runner, real library underneath)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from cli.whatif import parse_length, parse_units, whatif
+from fieldbank.params import ArmParams
+from interventions.plan import Plan, params_sha256
+
+
+def run(*args: str) -> tuple[int, str, str]:
+    r = CliRunner().invoke(whatif, list(args))
+    return r.exit_code, r.stdout, r.stderr
+
+
+def test_table_shows_before_and_after() -> None:
+    code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=200U", "--weeks", "5")
+    assert code == 0, out
+    assert "botulinum toxin A (ef 200 U), 5 weeks after injection" in out
+    assert "elbow extension" in out and "Probing motion" in out and "Severity" in out
+    line = next(x for x in out.splitlines() if x.strip().startswith("elbow extension"))
+    before, after = (float(v) for v in line.split()[2:5:2])
+    assert after < before
+
+
+def test_json_output_is_complete_and_parsable() -> None:
+    code, out, _ = run("--severity", "elbow=severe", "--lengthen", "bf=1cm", "--tenotomy", "ee",
+                       "--json")
+    assert code == 0
+    doc = json.loads(out)
+    kinds = [s["kind"] for s in doc["plan"]["steps"]]
+    assert kinds == ["lengthening", "tenotomy"]
+    assert doc["plan"]["steps"][0]["delta_m"] == 0.01
+    c = doc["comparison"]
+    assert set(c) >= {"fields", "potential_change", "severity", "probes", "stretches"}
+    assert c["fields"][0]["diff_rms_n"] > 0
+    assert doc["lineage"]["parent_sha256"] == doc["model"]["sha256"]
+
+
+def test_params_file_plan_file_and_out_dir(tmp_path: Path) -> None:
+    p = ArmParams.from_anthropometry(80.0, 1.8)
+    pf = tmp_path / "arm.json"
+    pf.write_text(p.to_json())
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps({"label": "test", "steps": [
+        {"kind": "casting", "group": "ef"}, {"kind": "botulinum", "units": {"ee": 50}}]}))
+    out = tmp_path / "out"
+    code, stdout, _ = run("--params", str(pf), "--plan", str(plan), "--rhizotomy", "ef,ee:0.4",
+                          "--out", str(out))
+    assert code == 0, stdout
+    after = ArmParams.from_file(out / "after.json")
+    lineage = json.loads((out / "lineage.json").read_text())
+    saved = Plan.from_file(out / "plan.json")
+    assert [s.kind for s in saved.steps] == ["casting", "botulinum", "rhizotomy"]
+    assert saved.apply(p) == after
+    assert lineage["parent_sha256"] == params_sha256(p)
+    assert lineage["child_sha256"] == params_sha256(after)
+
+
+def test_timecourse_and_optimize() -> None:
+    code, out, _ = run("--severity", "elbow=severe", "--optimize", "--total-units", "200",
+                       "--groups", "ef,ee", "--timecourse", "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert sum(doc["inverse"]["units"].values()) <= 200
+    assert "not a treatment recommendation" in doc["inverse"]["notice"]
+    assert len(doc["timecourse"]["weeks"]) == 25
+
+
+def test_plot_is_written(tmp_path: Path) -> None:
+    png = tmp_path / "f.png"
+    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=100", "--plot", str(png))
+    assert code == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=100", "--plot",
+                       str(tmp_path / "f.jpg"))
+    assert code == 1 and ".png or .svg" in err
+
+
+def test_bad_input_is_refused_with_a_clear_message(tmp_path: Path) -> None:
+    code, _, err = run("--severity", "elbow=severe", "--botox", "xx=100")
+    assert code == 1 and "unknown muscle group 'xx'" in err
+    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=lots")
+    assert code == 1 and "--botox 'ef=lots'" in err
+    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=100", "--weeks", "99")
+    assert code == 1 and "'weeks_since'" in err
+    code, _, err = run("--severity", "elbow=severe", "--lengthen", "bf=1inch")
+    assert code == 1 and "--lengthen" in err
+    code, _, err = run("--severity", "elbow=severe")
+    assert code == 2 and "No intervention given" in err
+    code, _, err = run("--botox", "ef=100")
+    assert code == 2 and "Give exactly one model" in err
+    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=100", "--save")
+    assert code == 1 and "--out DIR" in err
+    code, _, err = run("P001", "--botox", "ef=100")
+    assert code == 1 and "database" in err
+    out = tmp_path / "never"
+    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=-4", "--out", str(out))
+    assert code == 1 and not out.exists()
+
+
+def test_option_parsers() -> None:
+    assert parse_units(("ef=200U,ee=50", "bf=10 units")) == {"ef": 200.0, "ee": 50.0,
+                                                              "bf": 10.0}
+    assert parse_length("1cm", "--x") == 0.01
+    assert parse_length("5 mm", "--x") == 0.005
+    assert parse_length("0.02", "--x") == 0.02
