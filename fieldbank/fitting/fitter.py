@@ -15,6 +15,7 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -298,13 +299,14 @@ class ArmFitter:
 def _severity(params: ArmParams) -> dict[str, Any] | None:
     """Severity per joint group from :mod:`fieldbank.severity`, when that module exists."""
     try:
-        from fieldbank import severity  # type: ignore[attr-defined]
+        severity: Any = importlib.import_module("fieldbank.severity")
     except ImportError:
         return None
     result = severity.classify(params)
     out: dict[str, Any] = {}
     for group, gs in result.items():
-        raw = dataclasses.asdict(gs) if dataclasses.is_dataclass(gs) else gs
+        raw = (dataclasses.asdict(gs) if dataclasses.is_dataclass(gs) and not isinstance(gs, type)
+               else gs)
         out[group] = ({k: (float(v) if isinstance(v, (int, float, np.floating))
                            and not isinstance(v, bool) else v) for k, v in raw.items()}
                       if isinstance(raw, dict) else raw)

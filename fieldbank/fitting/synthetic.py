@@ -17,9 +17,11 @@ SD is stored in the map.
 
 from __future__ import annotations
 
+import importlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
@@ -54,11 +56,11 @@ def impaired_params(group: str, level: str, base: ArmParams | None = None) -> Ar
         raise ParameterError(f"unknown joint group {group!r}; known: {', '.join(JOINT_GROUPS)}.")
     base = base or ArmParams.from_anthropometry()
     try:
-        from fieldbank import severity  # type: ignore[attr-defined]
+        severity: Any = importlib.import_module("fieldbank.severity")
     except ImportError:
         severity = None
     if severity is not None:
-        return severity.synthesize({group: level}, base)  # type: ignore[no-any-return]
+        return cast(ArmParams, severity.synthesize({group: level}, base))
     f = level_factor(level)
     p = base
     for g in JOINT_GROUPS[group]:
@@ -75,8 +77,8 @@ def impaired_params(group: str, level: str, base: ArmParams | None = None) -> Ar
 def scattered_positions(arm: Arm, n: int, rng: np.random.Generator) -> FloatArray:
     """``n`` hand positions (n, 2), m, from postures drawn uniformly in the comfortable box."""
     q = np.column_stack([
-        rng.uniform(*np.radians(SHOULDER_DEG), size=n),
-        rng.uniform(*np.radians(ELBOW_DEG), size=n),
+        rng.uniform(math.radians(SHOULDER_DEG[0]), math.radians(SHOULDER_DEG[1]), size=n),
+        rng.uniform(math.radians(ELBOW_DEG[0]), math.radians(ELBOW_DEG[1]), size=n),
     ])
     return arm.fk(q)
 
