@@ -106,3 +106,18 @@ def test_fitting_the_rest_posture() -> None:
     assert np.allclose(fit.params_.q_rest_rad, truth.q_rest_rad, atol=np.radians(3.0))
     assert fit.params_.km_n_per_m[2] == pytest.approx(truth.km_n_per_m[2], rel=0.15)
     assert "q_rest_shoulder" in fit.uncertainty_
+
+
+@pytest.mark.parametrize("group", list(JOINT_GROUPS))
+def test_fitted_model_gets_the_synthesized_severity(group: str) -> None:
+    # Runs where the severity scale (fieldbank.severity) is installed; the fitter skips only
+    # the severity field without it.
+    pytest.importorskip("fieldbank.severity")
+    truth = impaired_params(group, "moderate", BASE)
+    patient = synthetic_patient(truth, seed=1, n_stiffness=N_STIFFNESS)
+    fit = ArmFitter(seed=0).fit(patient.maps, BASE)
+    assert fit.severity_ is not None
+    assert fit.severity_[group]["level"] == "moderate"
+    for other in JOINT_GROUPS:
+        if other != group:
+            assert fit.severity_[other]["level"] == "unimpaired"

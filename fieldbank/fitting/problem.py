@@ -121,9 +121,8 @@ class FitProblem:
         n_pts = 0
         jl = arm.jl
         for m in maps:
-            xm = m.positions_m * mirror
             vm = np.asarray(m.velocity_m_per_s) * mirror
-            q = arm._ik_model(xm)
+            q = arm.ik(m.positions_m)
             jac = arm.jacobian(q)
             jinv = np.linalg.inv(jac)
             qdot = jinv @ vm
