@@ -33,9 +33,13 @@ DEFAULT_ALGORITHM = "mlsl+lbfgs"
 #: Default evaluation budgets: the global stage of nlopt, the polish, and dual annealing.
 DEFAULT_GLOBAL_EVALS = 600
 POLISH_EVALS = 400
+#: Restarts of a global run that a failed local search aborted.
+MAX_RESTARTS = 3
 DEFAULT_ANNEALING_EVALS = 200_000
 
 Progress = Callable[[int, float], None]
+_RESULT_NAMES = {1: "success", 2: "stopval reached", 3: "ftol reached", 4: "xtol reached",
+                 5: "maxeval reached", 6: "maxtime reached"}
 
 
 @dataclass(frozen=True)
@@ -92,11 +96,12 @@ def _nlopt_run(
         opt.set_xtol_rel(1e-9)
     try:
         opt.optimize(np.clip(x0, lo, hi))
-        return str(opt.last_optimize_result())
+        code = int(opt.last_optimize_result())
+        return _RESULT_NAMES.get(code, f"nlopt result {code}")
     except nlopt.RoundoffLimited:
         return "roundoff limited (best point kept)"
     except (ValueError, RuntimeError, nlopt.exception) as exc:  # nlopt failure codes
-        return f"stopped: {exc}"
+        return f"stopped: {exc or 'nlopt failure'} (best point kept)"
 
 
 def run_nlopt(
@@ -129,12 +134,29 @@ def run_nlopt(
         return cost
 
     evals = DEFAULT_GLOBAL_EVALS if max_evals is None else max_evals
-    reason = _nlopt_run(glob, loc if glob == nlopt.G_MLSL_LDS else None, f, x0, lo, hi,
-                        evals, seed)
+    # A local search can fail on a kink of the cost (the reflex's max(0, ·) and clip); nlopt
+    # then aborts the whole global run. Restart it on the remaining budget, from the best point
+    # so far, with the next seed (deterministic), at most MAX_RESTARTS times.
+    reasons = []
+    for attempt in range(MAX_RESTARTS + 1):
+        budget = evals - tracker.n
+        if budget < 10:
+            break
+        start_x = x0 if tracker.best_x is None else tracker.best_x
+        reason = _nlopt_run(glob, loc if glob == nlopt.G_MLSL_LDS else None, f, start_x, lo, hi,
+                            budget, seed + attempt)
+        reasons.append(reason)
+        if not reason.startswith("stopped"):
+            break
+    reason = " / ".join(reasons)
     if tracker.best_x is None:
         raise FitError(f"{name}: the global search evaluated no point ({reason}).")
     polish = loc if needs_grad or loc == nlopt.LN_BOBYQA else nlopt.LN_BOBYQA
     reason2 = _nlopt_run(polish, None, f, tracker.best_x, lo, hi, POLISH_EVALS, seed)
+    if reason2.startswith("stopped") and polish != nlopt.LN_BOBYQA:
+        # a gradient polish stopped on a kink: finish without gradients
+        reason2 += "; then bobyqa: " + _nlopt_run(nlopt.LN_BOBYQA, None, f, tracker.best_x, lo,
+                                                  hi, POLISH_EVALS, seed)
     best = problem.project(problem.full_from_nonlinear(tracker.best_x))
     return SearchResult(best.theta, best.cost, problem.n_evals - start,
                         f"global: {reason}; polish: {reason2}")
@@ -146,11 +168,13 @@ def run_dual_annealing(
     max_evals: int | None,
     progress: Progress | None = None,
     target_cost: float | None = None,
+    maxiter: int = 1000,
 ) -> SearchResult:
     """scipy's dual annealing over every fitted parameter (the seed's method), same cost.
 
     ``target_cost``: stop as soon as the cost reaches it (used by the benchmark to time how
-    long the baseline needs to match another fit).
+    long the baseline needs to match another fit). ``maxiter``: annealing iterations (scipy's
+    default 1000).
     """
     s = problem.space
     idx = np.flatnonzero(s.fitted)
@@ -172,6 +196,7 @@ def run_dual_annealing(
         bounds=list(zip(s.lower[idx], s.upper[idx], strict=True)),
         seed=np.random.default_rng(seed),
         maxfun=DEFAULT_ANNEALING_EVALS if max_evals is None else max_evals,
+        maxiter=maxiter,
         x0=np.clip(s.base[idx], s.lower[idx], s.upper[idx]),
         callback=cb,
     )
