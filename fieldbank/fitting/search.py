@@ -1,7 +1,10 @@
 """Optimisers: nlopt global search then local polish, and scipy's dual annealing baseline.
 
 nlopt algorithms run on the variable-projected cost (:meth:`FitProblem.projected_cost_grad`):
-the search space is β (and q_rest) only, with Km and α solved inside. ``dual_annealing`` is the
+the search space is β (and q_rest) only, with Km and α solved inside. The pipeline: the global
+search, a local polish from its best point, one-dimensional grid scans of each coordinate
+(:func:`_coordinate_sweeps`: the reflex's flat regions hide improvements from local searches),
+and a last polish when a scan improved the point. ``dual_annealing`` is the
 seed's method and runs, as the seed did, over the full parameter vector with the same cost
 (:meth:`FitProblem.cost`) and bounds; it is kept as the baseline to compare against.
 
@@ -35,6 +38,9 @@ DEFAULT_GLOBAL_EVALS = 600
 POLISH_EVALS = 400
 #: Restarts of a global run that a failed local search aborted.
 MAX_RESTARTS = 3
+#: Coordinate scans after the polish: grid points per parameter and passes over all of them.
+SWEEP_POINTS = 41
+SWEEP_PASSES = 2
 DEFAULT_ANNEALING_EVALS = 200_000
 
 Progress = Callable[[int, float], None]
@@ -152,14 +158,68 @@ def run_nlopt(
     if tracker.best_x is None:
         raise FitError(f"{name}: the global search evaluated no point ({reason}).")
     polish = loc if needs_grad or loc == nlopt.LN_BOBYQA else nlopt.LN_BOBYQA
-    reason2 = _nlopt_run(polish, None, f, tracker.best_x, lo, hi, POLISH_EVALS, seed)
-    if reason2.startswith("stopped") and polish != nlopt.LN_BOBYQA:
-        # a gradient polish stopped on a kink: finish without gradients
-        reason2 += "; then bobyqa: " + _nlopt_run(nlopt.LN_BOBYQA, None, f, tracker.best_x, lo,
-                                                  hi, POLISH_EVALS, seed)
+    reason2 = _polish(polish, f, tracker, lo, hi, seed)
+    improved = _coordinate_sweeps(problem, f, tracker, lo, hi)
+    reason3 = "none"
+    if improved:
+        reason3 = _polish(polish, f, tracker, lo, hi, seed)
     best = problem.project(problem.full_from_nonlinear(tracker.best_x))
     return SearchResult(best.theta, best.cost, problem.n_evals - start,
-                        f"global: {reason}; polish: {reason2}")
+                        f"global: {reason}; polish: {reason2}; sweeps improved {improved} "
+                        f"time(s), polish: {reason3}")
+
+
+def _polish(
+    algorithm: int,
+    f: Callable[[FloatArray, FloatArray], float],
+    tracker: _Tracker,
+    lo: FloatArray,
+    hi: FloatArray,
+    seed: int,
+) -> str:
+    """Local search from the best point; after a gradient search stopped on a kink of the
+    cost, finish without gradients (BOBYQA)."""
+    assert tracker.best_x is not None
+    reason = _nlopt_run(algorithm, None, f, tracker.best_x, lo, hi, POLISH_EVALS, seed)
+    if reason.startswith("stopped") and algorithm != nlopt.LN_BOBYQA:
+        reason += "; then bobyqa: " + _nlopt_run(nlopt.LN_BOBYQA, None, f, tracker.best_x, lo,
+                                                 hi, POLISH_EVALS, seed)
+    return reason
+
+
+def _coordinate_sweeps(
+    problem: FitProblem,
+    f: Callable[[FloatArray, FloatArray], float],
+    tracker: _Tracker,
+    lo: FloatArray,
+    hi: FloatArray,
+) -> int:
+    """One-dimensional grid scans of each nonlinear parameter from the best point.
+
+    The reflex φ = max(0, ·) is exactly zero over whole ranges of β where it never fires at a
+    measured point; there the cost is flat and a local search cannot see that a larger β
+    would make it fire and fit better. A scan over a grid of each coordinate (others fixed,
+    Km and α re-solved) finds such steps for a few hundred cheap evaluations. Returns how many
+    scans improved the best point.
+    """
+    assert tracker.best_x is not None
+    improved = 0
+    empty = np.empty(0)
+    for _ in range(SWEEP_PASSES):
+        changed = False
+        for k in range(tracker.best_x.size):
+            base_x = tracker.best_x.copy()
+            base_cost = tracker.best_cost
+            for v in np.linspace(lo[k], hi[k], SWEEP_POINTS):
+                x = base_x.copy()
+                x[k] = v
+                f(x, empty)
+            if tracker.best_cost < base_cost - 1e-9 * max(1.0, abs(base_cost)):
+                improved += 1
+                changed = True
+        if not changed:
+            break
+    return improved
 
 
 def run_dual_annealing(
