@@ -48,12 +48,21 @@ def main() -> None:
     print(f"maps: {len(patient.maps)} ({', '.join(f'{m.kind} n={m.n}' for m in patient.maps)}),"
           f" {n_values} measured values, 18 parameters")
 
+    # The race is over minimising the cost, so ours runs without the final step that holds
+    # unidentified parameters at unimpaired values (that step trades cost for robustness; its
+    # time is printed below).
     ArmFitter(algorithm=args.algorithm, seed=args.seed).fit(patient.maps, base)  # warm-up
     t0 = time.perf_counter()
-    ours = ArmFitter(algorithm=args.algorithm, seed=args.seed).fit(patient.maps, base)
+    ours = ArmFitter(algorithm=args.algorithm, seed=args.seed,
+                     hold_unidentified=False).fit(patient.maps, base)
     t_ours = time.perf_counter() - t0
     print(f"ours     {args.algorithm:>14}: {t_ours:8.3f} s  cost {ours.cost_:12.4f}  "
           f"evals {ours.n_evals_:8d}")
+    t0 = time.perf_counter()
+    full = ArmFitter(algorithm=args.algorithm, seed=args.seed).fit(patient.maps, base)
+    t_full = time.perf_counter() - t0
+    print(f"ours with unidentified held at unimpaired: {t_full:.3f} s  cost {full.cost_:.4f}  "
+          f"evals {full.n_evals_}  held {len(full.held_)}  test {full.hold_test_}")
 
     arm = Arm.from_params(base)
     space = ParamSpace.build(base)
@@ -92,9 +101,9 @@ def main() -> None:
     print(f"baseline dual_annealing on the projected cost: {t_da2:8.3f} s  cost {best[0]:.4f}  "
           f"evals {problem2.n_evals}  {'reached' if reached2 else 'did NOT reach'} our cost; "
           f"ratio {t_da2 / t_ours:.1f}x")
-    held = ours.score(patient.held_out)
-    km_err = np.abs(np.array(ours.params_.km_n_per_m) / np.array(truth.km_n_per_m) - 1)
-    print(f"ours: held-out R² {np.round(held, 3).tolist()}, Km error per group "
+    held = full.score(patient.held_out)
+    km_err = np.abs(np.array(full.params_.km_n_per_m) / np.array(truth.km_n_per_m) - 1)
+    print(f"ours (full fit): held-out R² {np.round(held, 3).tolist()}, Km error per group "
           f"{np.round(100 * km_err, 1).tolist()} %")
 
 

@@ -121,3 +121,24 @@ def test_fitted_model_gets_the_synthesized_severity(group: str) -> None:
     for other in JOINT_GROUPS:
         if other != group:
             assert fit.severity_[other]["level"] == "unimpaired"
+
+
+def test_unidentified_parameters_are_held_at_unimpaired_unless_rejected() -> None:
+    truth = impaired_params("elbow", "severe", BASE)
+    patient = synthetic_patient(truth, seed=2)
+    free = ArmFitter(seed=0, hold_unidentified=False).fit(patient.maps, BASE)
+    held = ArmFitter(seed=0).fit(patient.maps, BASE)
+    assert free.held_ == [] and free.hold_test_ is None
+    assert held.held_, "this design leaves some reflex parameters open"
+    test = held.hold_test_
+    assert test is not None and test["accepted"] and test["delta_chi2"] <= test["threshold"]
+    unimpaired = {"alpha": 100.0, "beta": 0.1, "km": 600.0}
+    for name in held.held_:
+        k = held.space_.names.index(name)
+        assert held.theta_[k] == pytest.approx(unimpaired[name.split("_")[0]])
+    # the held parameters stay reported as not identified, with the test in the reason
+    reasons = {u.name: u.reason for u in held.unidentified_}
+    assert all("held at the unimpaired value" in reasons[n] for n in held.held_)
+    # holding costs little data fit and does not spoil the identified Km
+    assert held.chi2_ - free.chi2_ == pytest.approx(test["delta_chi2"], abs=1e-6)
+    assert held.params_.km_n_per_m[2] == pytest.approx(truth.km_n_per_m[2], rel=0.15)

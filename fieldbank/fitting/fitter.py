@@ -29,6 +29,7 @@ from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.search import (
     ALGORITHMS,
     DEFAULT_ALGORITHM,
+    HOLD_EVALS,
     Progress,
     run_dual_annealing,
     run_nlopt,
@@ -45,8 +46,11 @@ SI_VALUE_UNIT = {"postural": ("n",), "stiffness": ("n/m", "n m^-1", "n·m^-1")}
 #: Metadata keys naming the patient a map belongs to.
 PATIENT_KEYS = ("patient", "patient_code")
 
-_RESULTS = ("params_", "cost_", "residuals_", "r2_", "uncertainty_", "unidentified_",
-            "n_evals_", "time_s_", "algorithm_", "seed_", "maps_", "severity_")
+#: Significance level of the test that may keep unidentified parameters at unimpaired values.
+HOLD_TEST_LEVEL = 0.95
+
+_RESULTS = ("held_", "hold_test_", "params_", "cost_", "residuals_", "r2_", "uncertainty_",
+            "unidentified_", "n_evals_", "time_s_", "algorithm_", "seed_", "maps_", "severity_")
 
 
 def _unit(value: str) -> str:
@@ -140,6 +144,11 @@ class ArmFitter:
         Evaluation budget of the global stage (nlopt) or of dual annealing.
     progress : callable(n_evals, best_cost), optional
         Called every few dozen evaluations.
+    hold_unidentified : bool
+        After the fit, hold the parameters the maps do not identify at their unimpaired
+        (prior) values and refit the others, unless the maps reject that: a likelihood-ratio
+        test, Δχ² of the data above the χ² quantile :data:`HOLD_TEST_LEVEL` with one degree of
+        freedom per held parameter. This keeps noise from setting what the data leave open.
     """
 
     def __init__(
@@ -151,6 +160,7 @@ class ArmFitter:
         prior_weight: float = DEFAULT_PRIOR_WEIGHT,
         max_evals: int | None = None,
         progress: Progress | None = None,
+        hold_unidentified: bool = True,
     ) -> None:
         self.algorithm = algorithm
         self.seed = seed
@@ -159,6 +169,7 @@ class ArmFitter:
         self.prior_weight = prior_weight
         self.max_evals = max_evals
         self.progress = progress
+        self.hold_unidentified = hold_unidentified
 
     def __getattr__(self, name: str) -> Any:
         if name in _RESULTS or name in ("status_", "problem_", "space_", "base_", "covariance_"):
@@ -207,7 +218,24 @@ class ArmFitter:
         else:
             res = run_nlopt(problem, self.algorithm, seed, self.max_evals, self.progress)
         theta = res.theta
+        n_evals = res.n_evals
+        stop_reason = res.stop_reason
         ident = identify(problem, theta)
+        self.held_: list[str] = []
+        self.hold_test_: dict[str, Any] | None = None
+        if self.hold_unidentified and ident.unidentified:
+            held = _hold_unidentified(problem, theta, ident.unidentified, self.algorithm, seed)
+            n_evals += held.n_evals
+            self.hold_test_ = held.test
+            flagged = tuple(dataclasses.replace(u, reason=u.reason + held.note(u.name))
+                            for u in ident.unidentified)
+            if held.accepted:
+                theta = held.theta
+                self.held_ = list(held.names)
+                stop_reason += f"; unidentified held at unimpaired: {held.stop_reason}"
+                ident = identify(problem, theta)  # uncertainty at the final point
+            # what the full fit could not identify stays reported, held or not
+            ident = dataclasses.replace(ident, unidentified=flagged)
         yhat = problem.predict(theta)
         self.time_s_ = time.perf_counter() - t0
         self.base_ = base
@@ -234,8 +262,8 @@ class ArmFitter:
         self.residual_variance_ = ident.residual_variance
         self.at_bounds_ = [n for k, n in enumerate(space.names) if space.fitted[k] and (
             theta[k] <= space.lower[k] + 1e-9 or theta[k] >= space.upper[k] - 1e-9)]
-        self.n_evals_ = res.n_evals
-        self.stop_reason_ = res.stop_reason
+        self.n_evals_ = n_evals
+        self.stop_reason_ = stop_reason
         self.algorithm_ = self.algorithm
         self.seed_ = seed
         self.severity_ = _severity(self.params_)
@@ -283,6 +311,8 @@ class ArmFitter:
             "uncertainty": self.uncertainty_,
             "posterior_to_prior_sd": self.relative_sd_,
             "at_bounds": self.at_bounds_,
+            "held_at_unimpaired": self.held_,
+            "hold_test": self.hold_test_,
             "unidentified": [u.to_dict() for u in self.unidentified_],
             "maps": [
                 {"index": k, "kind": m.kind, "n": m.n, "velocity_m_per_s": list(
@@ -311,3 +341,50 @@ def _severity(params: ArmParams) -> dict[str, Any] | None:
                            and not isinstance(v, bool) else v) for k, v in raw.items()}
                       if isinstance(raw, dict) else raw)
     return out
+
+
+@dataclasses.dataclass(frozen=True)
+class _Hold:
+    accepted: bool
+    theta: FloatArray
+    names: tuple[str, ...]
+    n_evals: int
+    stop_reason: str
+    test: dict[str, Any]
+
+    def note(self, name: str) -> str:
+        if name not in self.names:
+            return ""
+        t = self.test
+        if self.accepted:
+            return (f"; held at the unimpaired value (the maps do not reject it: Δχ² "
+                    f"{t['delta_chi2']:.3g} <= {t['threshold']:.3g})")
+        return (f"; the maps reject holding the unidentified parameters at unimpaired values "
+                f"(Δχ² {t['delta_chi2']:.3g} > {t['threshold']:.3g}), so the fitted value is "
+                "kept")
+
+
+def _hold_unidentified(problem: FitProblem, theta: FloatArray,
+                       unidentified: Sequence[Unidentified], algorithm: str, seed: int) -> _Hold:
+    """Refit with the unidentified parameters at their prior means; test against the fit."""
+    from scipy.stats import chi2
+
+    space = problem.space
+    names = tuple(u.name for u in unidentified)
+    idx = [space.names.index(n) for n in names]
+    fitted = space.fitted.copy()
+    fitted[idx] = False
+    base = theta.copy()
+    base[idx] = space.prior_mean[idx]
+    reduced_space = dataclasses.replace(space, fitted=fitted, base=base)
+    reduced = dataclasses.replace(problem, space=reduced_space, n_evals=0, _xkm_cache=None)
+    name = algorithm if algorithm in ALGORITHMS and algorithm != "dual_annealing" \
+        else DEFAULT_ALGORITHM
+    res = run_nlopt(reduced, name, seed, HOLD_EVALS)
+    r_full = problem.residuals(theta)
+    r_held = problem.residuals(res.theta)
+    delta = float(r_held @ r_held - r_full @ r_full)
+    threshold = float(chi2.ppf(HOLD_TEST_LEVEL, len(idx)))
+    test = {"held": list(names), "delta_chi2": delta, "threshold": threshold,
+            "level": HOLD_TEST_LEVEL, "accepted": delta <= threshold}
+    return _Hold(delta <= threshold, res.theta, names, reduced.n_evals, res.stop_reason, test)

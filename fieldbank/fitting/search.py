@@ -36,6 +36,8 @@ DEFAULT_ALGORITHM = "mlsl+lbfgs"
 #: Default evaluation budgets: the global stage of nlopt, the polish, and dual annealing.
 DEFAULT_GLOBAL_EVALS = 600
 POLISH_EVALS = 400
+#: Global-stage budget of the refit with unidentified parameters held (see ArmFitter).
+HOLD_EVALS = 100
 #: Restarts of a global run that a failed local search aborted.
 MAX_RESTARTS = 3
 #: Coordinate scans after the polish: grid points per parameter and passes over all of them.
