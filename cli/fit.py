@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -170,25 +169,24 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
         _emit_json(row)
         return
     p = row["params"]
-    out = sys.stdout
     click.echo(f"model {row['id']} ({row.get('origin', '')}) patient {row.get('patient')}: "
-               f"{row.get('label', '')}", file=out)
-    click.echo("  group        Km N/m    alpha N    beta", file=out)
+               f"{row.get('label', '')}")
+    click.echo("  group        Km N/m    alpha N    beta")
     from fieldbank.params import GROUPS
 
     for i, g in enumerate(GROUPS):
         click.echo(f"  {g:<6} {p.km_n_per_m[i]:>12.1f} {p.alpha_n[i]:>10.1f} "
-                   f"{p.beta[i]:>7.3f}", file=out)
+                   f"{p.beta[i]:>7.3f}")
     q = [math.degrees(v) for v in p.q_rest_rad]
-    click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°", file=out)
+    click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
     lineage = row.get("lineage") or []
     if lineage:
         click.echo("  lineage: " + " <- ".join(
-            f"{a['id']} ({a.get('origin', '')})" for a in lineage), file=out)
+            f"{a['id']} ({a.get('origin', '')})" for a in lineage))
     fit_report = row.get("fit")
     if fit_report:
         click.echo(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, cost "
                    f"{fit_report.get('cost'):.4g}, status {fit_report.get('status')}, maps "
-                   f"{fit_report.get('map_ids')}", file=out)
+                   f"{fit_report.get('map_ids')}")
         for u in fit_report.get("unidentified", []):
-            click.echo(f"    not identified: {u['name']}: {u['reason']}", file=out)
+            click.echo(f"    not identified: {u['name']}: {u['reason']}")

@@ -49,8 +49,10 @@ PATIENT_KEYS = ("patient", "patient_code")
 #: Significance level of the test that may keep unidentified parameters at unimpaired values.
 HOLD_TEST_LEVEL = 0.95
 
-_RESULTS = ("held_", "hold_test_", "params_", "cost_", "residuals_", "r2_", "uncertainty_",
-            "unidentified_", "n_evals_", "time_s_", "algorithm_", "seed_", "maps_", "severity_")
+_RESULTS = ("held_", "hold_test_", "params_", "theta_", "cost_", "chi2_", "residuals_", "r2_",
+            "uncertainty_", "relative_sd_", "residual_variance_", "unidentified_", "status_",
+            "at_bounds_", "n_evals_", "stop_reason_", "time_s_", "algorithm_", "seed_", "maps_",
+            "severity_", "problem_", "space_", "base_")
 
 
 def _unit(value: str) -> str:
@@ -172,7 +174,7 @@ class ArmFitter:
         self.hold_unidentified = hold_unidentified
 
     def __getattr__(self, name: str) -> Any:
-        if name in _RESULTS or name in ("status_", "problem_", "space_", "base_", "covariance_"):
+        if name in _RESULTS:
             raise FitError(f"ArmFitter has no result {name!r} yet: call fit(maps, base) first.")
         raise AttributeError(name)
 
