@@ -1,0 +1,192 @@
+"""``fieldbank fit PATIENT`` and ``fieldbank models list|show``.
+
+Thin: the commands open a :class:`fieldbank.fitting.records.FitStore`, call
+:func:`fieldbank.fitting.records.fit_patient` or the store, and print. The store comes from
+``ctx.obj['fit_store']`` when the caller provides one (a factory ``db_url -> FitStore``),
+else from :func:`fieldbank.fitting.dbstore.open_fit_store` on the field database.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import click
+
+from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
+from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient
+from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
+
+StoreFactory = Callable[[str | None], FitStore]
+
+
+def _store(ctx: click.Context, db_url: str | None) -> FitStore:
+    factory: StoreFactory | None = None
+    if isinstance(ctx.obj, Mapping):
+        factory = ctx.obj.get("fit_store")
+    if factory is None:
+        from fieldbank.fitting.dbstore import open_fit_store
+
+        factory = open_fit_store
+    return factory(db_url)
+
+
+def _db_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    return click.option("--db", "db_url", default=None, metavar="URL",
+                        help="Database URL; default: $FIELDBANK_DB or the embedded SQLite file.")(f)
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, Mapping):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if hasattr(x, "to_dict"):
+        return _jsonable(x.to_dict())
+    return x
+
+
+def _emit_json(data: Any) -> None:
+    click.echo(json.dumps(_jsonable(data), indent=2, default=str))
+
+
+def _summary(out: FitOutcome) -> str:
+    f = out.fitter
+    lines = [
+        f"fit {out.saved.fit_id} -> model {out.saved.model_id} for patient "
+        f"{out.record.patient!r}" + (f", session {out.record.session!r}" if out.record.session
+                                     else ""),
+        f"  {f.algorithm_} seed {f.seed_}: cost {f.cost_:.4g}, {f.n_evals_} evaluations, "
+        f"{f.time_s_:.2f} s; status: {f.status_}",
+        "  maps: " + ", ".join(
+            f"{m.metadata.get('map_id', k)} {m.kind} n={m.n} R²={r2:.3f}"
+            for k, (m, r2) in enumerate(zip(f.maps_, f.r2_, strict=True))),
+        "  parameter        value        sd",
+    ]
+    for name, sd in f.uncertainty_.items():
+        k = f.space_.names.index(name)
+        lines.append(f"  {name:<14} {f.theta_[k]:>10.4g} {sd:>9.3g}")
+    if f.unidentified_:
+        lines.append("  not identified by these maps:")
+        lines += [f"    {u.name}: {u.reason}" for u in f.unidentified_]
+    if f.severity_:
+        lines.append("  severity: " + ", ".join(
+            f"{g}: {v.get('level', v) if isinstance(v, Mapping) else v}"
+            for g, v in f.severity_.items()))
+    return "\n".join(lines)
+
+
+@click.command("fit")
+@click.argument("patient")
+@click.option("--session", default=None, help="Fit the maps of this session only.")
+@click.option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
+              show_default=True, help="nlopt global+local, or the dual annealing baseline.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@click.option("--fit", "fit_kinds", default="km,alpha,beta", show_default=True,
+              help=f"Comma-separated parameter kinds to fit ({', '.join(FIT_KINDS)}).")
+@click.option("--prior-weight", type=float, default=DEFAULT_PRIOR_WEIGHT, show_default=True)
+@click.option("--max-evals", type=click.IntRange(min=10), default=None)
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Write measured against fitted fields to this .png or .svg.")
+@click.option("--json", "as_json", is_flag=True, help="Print the fit report as JSON.")
+@_db_option
+@click.pass_context
+def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, seed: int,
+        fit_kinds: str, prior_weight: float, max_evals: int | None, plot_path: str | None,
+        as_json: bool, db_url: str | None) -> None:
+    """Fit PATIENT's arm model to the patient's measured maps and store it."""
+    kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
+
+    def progress(n: int, best: float) -> None:
+        click.echo(f"  {n} evaluations, best cost {best:.6g}", err=True)
+
+    fitter = ArmFitter(algorithm=algorithm, seed=seed, fit=kinds, prior_weight=prior_weight,
+                       max_evals=max_evals, progress=progress)
+    store = _store(ctx, db_url)
+    out = fit_patient(store, patient, session, fitter,
+                      progress=lambda msg: click.echo(msg, err=True))
+    if plot_path:
+        from fieldbank.fitting.plot import plot_fit
+
+        f = out.fitter
+        path = plot_fit(f.maps_, f.predict(f.maps_), plot_path, f.r2_,
+                        title=f"patient {patient}: measured (black) and fitted (red)")
+        click.echo(f"plot written to {path}", err=True)
+    if as_json:
+        report = dict(out.record.report)
+        report["fit_id"] = out.saved.fit_id
+        report["model_id"] = out.saved.model_id
+        _emit_json(report)
+    else:
+        click.echo(_summary(out))
+    if out.fitter.unidentified_:
+        click.echo(f"warning: {len(out.fitter.unidentified_)} parameter(s) are not identified "
+                   "by these maps and stay near the unimpaired prior (see 'unidentified').",
+                   err=True)
+
+
+@click.group("models")
+def models() -> None:
+    """Stored arm models (fitted, synthetic, after interventions)."""
+
+
+@models.command("list")
+@click.option("--patient", default=None, help="Only this patient's models.")
+@click.option("--json", "as_json", is_flag=True)
+@_db_option
+@click.pass_context
+def models_list(ctx: click.Context, patient: str | None, as_json: bool,
+                db_url: str | None) -> None:
+    """List models with their origin and parent."""
+    rows = list(_store(ctx, db_url).list_models(patient))
+    if as_json:
+        _emit_json(rows)
+        return
+    if not rows:
+        click.echo("no models", err=True)
+        return
+    click.echo(f"{'id':>5}  {'patient':<12} {'origin':<13} {'parent':>6}  label")
+    for r in rows:
+        parent = "" if r.get("parent_id") is None else str(r["parent_id"])
+        click.echo(f"{r['id']!s:>5}  {r.get('patient') or '-':<12} {r.get('origin', ''):<13} "
+                   f"{parent:>6}  {r.get('label', '')}")
+
+
+@models.command("show")
+@click.argument("model_id")
+@click.option("--json", "as_json", is_flag=True)
+@_db_option
+@click.pass_context
+def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | None) -> None:
+    """Show a model's parameters, lineage and the fit that produced it."""
+    key: int | str = int(model_id) if model_id.isdigit() else model_id
+    row = dict(_store(ctx, db_url).get_model(key))
+    if as_json:
+        _emit_json(row)
+        return
+    p = row["params"]
+    click.echo(f"model {row['id']} ({row.get('origin', '')}) patient {row.get('patient')}: "
+               f"{row.get('label', '')}")
+    click.echo("  group        Km N/m    alpha N    beta")
+    from fieldbank.params import GROUPS
+
+    for i, g in enumerate(GROUPS):
+        click.echo(f"  {g:<6} {p.km_n_per_m[i]:>12.1f} {p.alpha_n[i]:>10.1f} "
+                   f"{p.beta[i]:>7.3f}")
+    q = [math.degrees(v) for v in p.q_rest_rad]
+    click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
+    lineage = row.get("lineage") or []
+    if lineage:
+        click.echo("  lineage: " + " <- ".join(
+            f"{a['id']} ({a.get('origin', '')})" for a in lineage))
+    fit_report = row.get("fit")
+    if fit_report:
+        click.echo(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, cost "
+                   f"{fit_report.get('cost'):.4g}, status {fit_report.get('status')}, maps "
+                   f"{fit_report.get('map_ids')}")
+        for u in fit_report.get("unidentified", []):
+            click.echo(f"    not identified: {u['name']}: {u['reason']}")

@@ -1,0 +1,16 @@
+"""Fitting a patient's arm model to measured postural and stiffness maps (BRIEF §6).
+
+* :class:`ArmFitter` - the estimator: options in the constructor, ``fit(maps, base)``, results
+  with a trailing underscore, ``report()``;
+* :mod:`.space` - fitted parameters, bounds and prior in one table;
+* :mod:`.problem` - the precomputed, variable-projected cost;
+* :mod:`.search` - nlopt global + local, and scipy's dual annealing baseline;
+* :mod:`.identify` - uncertainty and what the maps do not identify;
+* :mod:`.synthetic` - synthetic patients for tests and benchmarks;
+* :mod:`.plot` - measured against fitted fields.
+"""
+
+from fieldbank.fitting.fitter import ArmFitter, validate_maps
+from fieldbank.fitting.search import ALGORITHMS, DEFAULT_ALGORITHM
+
+__all__ = ["ALGORITHMS", "DEFAULT_ALGORITHM", "ArmFitter", "validate_maps"]

@@ -1,0 +1,75 @@
+"""The :class:`~fieldbank.fitting.records.FitStore` on the field database.
+
+An adapter over :class:`fieldbank.storage.Database` (imported when a store is opened), using
+its ``get_patient``, ``list_maps``, ``get_maps``, ``add_model``, ``add_fit``, ``list_models``,
+``get_model``, ``model_lineage`` and ``list_fits``. The fitted model is stored with origin
+'fitted' and the fit (report, algorithm, seed, evaluations, time, cost, map ids) refers to it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from fieldbank.errors import FitError
+from fieldbank.fitting.records import FitSubmission, PatientMap, SavedFit
+from fieldbank.params import ArmParams
+
+
+def _row(m: Any) -> dict[str, Any]:
+    return {"id": m.id, "patient": m.patient_code, "origin": m.origin, "label": m.label,
+            "parent_id": m.parent_id, "created_at": m.created_at}
+
+
+class DatabaseFitStore:
+    """FitStore over a ``fieldbank.storage.Database``."""
+
+    def __init__(self, db: Any) -> None:
+        self.db = db
+
+    def patient_params(self, patient: str) -> ArmParams:
+        params: ArmParams = self.db.get_patient(patient).arm_params()
+        return params
+
+    def maps_for(self, patient: str, session: str | None = None) -> Sequence[PatientMap]:
+        self.db.get_patient(patient)  # unknown patient -> the storage layer's clear error
+        stored = list(self.db.list_maps(patient_code=patient, session_label=session))
+        if not stored:
+            return []
+        arrays = self.db.get_maps([s.id for s in stored])
+        return [PatientMap(s.id, s.patient_code, s.session_label, m)
+                for s, m in zip(stored, arrays, strict=True)]
+
+    def add_fit(self, record: FitSubmission) -> SavedFit:
+        label = (f"fit of {len(record.map_ids)} maps"
+                 + (f", session {record.session}" if record.session else "")
+                 + f" ({record.algorithm}, seed {record.seed})")
+        model = self.db.add_model(record.params, "fitted", label, patient_code=record.patient)
+        report = dict(record.report)
+        fit = self.db.add_fit(record.patient, model.id, record.algorithm, record.seed,
+                              int(report["n_evals"]), float(report["time_s"]),
+                              float(report["cost"]), report, list(record.map_ids))
+        return SavedFit(fit.id, model.id)
+
+    def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]:
+        return [_row(m) for m in self.db.list_models(patient_code=patient)]
+
+    def get_model(self, model_id: int | str) -> Mapping[str, Any]:
+        m = self.db.get_model(int(model_id))
+        row = _row(m)
+        row["params"] = m.params
+        row["lineage"] = [_row(a) for a in self.db.model_lineage(m.id)[1:]]
+        fits = [f for f in self.db.list_fits(m.patient_code) if f.model_id == m.id] \
+            if m.patient_code else []
+        row["fit"] = dict(fits[-1].result) if fits else None
+        return row
+
+
+def open_fit_store(db_url: str | None) -> DatabaseFitStore:
+    """Open the field database (``db_url`` or the default) as a FitStore."""
+    try:
+        from fieldbank.storage import Database
+    except ImportError as exc:
+        raise FitError(f"the field database is not available in this installation ({exc}).") \
+            from None
+    return DatabaseFitStore(Database.open(db_url))

@@ -1,0 +1,392 @@
+"""Estimator-style fitting of a patient's arm model to measured maps.
+
+``ArmFitter(...)`` only stores options; :meth:`ArmFitter.fit` validates the maps, runs the
+search and sets the results (trailing underscore). Asking for a result before ``fit`` raises
+:class:`~fieldbank.errors.FitError`.
+
+Example::
+
+    fitter = ArmFitter(algorithm="mlsl+lbfgs", seed=1).fit(maps, base)
+    fitter.params_        # the fitted ArmParams
+    fitter.unidentified_  # what the maps leave open, with reasons
+    fitter.report()       # JSON-able summary
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from fieldbank.errors import FitError
+from fieldbank.fitting.identify import Unidentified, identify
+from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.search import (
+    ALGORITHMS,
+    DEFAULT_ALGORITHM,
+    HOLD_EVALS,
+    Progress,
+    run_dual_annealing,
+    run_nlopt,
+)
+from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
+from fieldbank.maps import FRAMES, FieldMap
+from fieldbank.model import Arm, FloatArray
+from fieldbank.params import ArmParams
+
+#: Metadata keys that may state a map's value unit, and the unit each kind must have.
+UNIT_KEYS = ("unit", "units", "value_unit", "values_unit", "force_unit", "stiffness_unit")
+POSITION_UNIT_KEYS = ("position_unit", "positions_unit")
+SI_VALUE_UNIT = {"postural": ("n",), "stiffness": ("n/m", "n m^-1", "n·m^-1")}
+#: Metadata keys naming the patient a map belongs to.
+PATIENT_KEYS = ("patient", "patient_code")
+
+#: Significance level of the test that may keep unidentified parameters at unimpaired values.
+HOLD_TEST_LEVEL = 0.95
+
+_RESULTS = ("held_", "hold_test_", "params_", "theta_", "cost_", "chi2_", "residuals_", "r2_",
+            "uncertainty_", "relative_sd_", "residual_variance_", "unidentified_", "status_",
+            "at_bounds_", "n_evals_", "stop_reason_", "time_s_", "algorithm_", "seed_", "maps_",
+            "severity_", "problem_", "space_", "base_")
+
+
+def _unit(value: str) -> str:
+    return value.strip().lower().replace(" ", "")
+
+
+def validate_maps(
+    maps: Sequence[FieldMap], arm: Arm, patient: str | None = None
+) -> list[FieldMap]:
+    """Check maps for a fit and return them in the arm-on-handle convention.
+
+    Raises
+    ------
+    FitError
+        No maps; not a FieldMap; an unknown frame; a unit other than SI; maps of different
+        patients (or not of ``patient``); a position the arm cannot reach.
+    """
+    if maps is None or len(maps) == 0:
+        raise FitError("no maps to fit: give at least one postural or stiffness map.")
+    out: list[FieldMap] = []
+    owners: dict[str, int] = {}
+    for k, m in enumerate(maps):
+        label = f"map {k}" + (f" ({m.source})" if getattr(m, "source", "") else "")
+        if not isinstance(m, FieldMap):
+            raise FitError(f"{label}: expected a FieldMap, got {type(m).__name__}.")
+        if m.frame not in FRAMES:
+            raise FitError(f"{label}: frame {m.frame!r} is not one the fitter knows "
+                           f"({', '.join(FRAMES)}); convert it first.")
+        for key in UNIT_KEYS:
+            if key in m.metadata and _unit(m.metadata[key]) not in SI_VALUE_UNIT[m.kind]:
+                raise FitError(
+                    f"{label}: inconsistent units: metadata {key!r} says {m.metadata[key]!r}, "
+                    f"but {m.kind} values must be in {('N' if m.kind == 'postural' else 'N/m')}; "
+                    "convert the map to SI before fitting."
+                )
+        for key in POSITION_UNIT_KEYS:
+            if key in m.metadata and _unit(m.metadata[key]) != "m":
+                raise FitError(
+                    f"{label}: inconsistent units: metadata {key!r} says {m.metadata[key]!r}, "
+                    "but positions must be in m; convert the map to SI before fitting."
+                )
+        for key in PATIENT_KEYS:
+            if key in m.metadata:
+                owners.setdefault(str(m.metadata[key]), k)
+        mask = arm.reachable(m.positions_m)
+        if not np.all(mask):
+            i = int(np.argmin(mask))
+            x, y = m.positions_m[i]
+            raise FitError(
+                f"{label}: position index {i} ({x:.4f}, {y:.4f}) m is outside what this arm "
+                f"reaches within its range of motion ({int((~mask).sum())} of {m.n} positions);"
+                " check the frame, the units and the patient's segment lengths."
+            )
+        out.append(m.as_arm_on_handle())
+    if len(owners) > 1:
+        desc = ", ".join(f"map {k} of {p!r}" for p, k in owners.items())
+        raise FitError(f"maps of different patients cannot be fitted together: {desc}.")
+    if patient is not None and owners and patient not in owners:
+        other, k = next(iter(owners.items()))
+        raise FitError(f"map {k} belongs to patient {other!r}, not to {patient!r}.")
+    return out
+
+
+def _r2(y: FloatArray, yhat: FloatArray) -> float:
+    """Coefficient of determination over all entries, each component about its own mean."""
+    n = y.shape[0]
+    y2 = y.reshape(n, -1)
+    yh = yhat.reshape(n, -1)
+    ss_res = float(((y2 - yh) ** 2).sum())
+    ss_tot = float(((y2 - y2.mean(axis=0)) ** 2).sum())
+    return 1.0 - ss_res / ss_tot if ss_tot > 0 else (1.0 if ss_res == 0 else -math.inf)
+
+
+class ArmFitter:
+    """Fit per-muscle Km, α, β (optionally q_rest) to a patient's measured maps.
+
+    Parameters
+    ----------
+    algorithm : str
+        'mlsl+lbfgs' (default), 'crs2+bobyqa', 'direct+lbfgs' (nlopt global search, then
+        local polish) or 'dual_annealing' (scipy; the seed's method, the baseline).
+    seed : int
+        Makes the fit reproducible.
+    fit : sequence of str
+        Parameter kinds to fit: any of 'km', 'alpha', 'beta', 'q_rest'.
+    bounds : mapping, optional
+        Overrides, kind or name -> (low, high) in SI units, e.g. ``{'km': (100, 20000)}``.
+    prior_weight : float
+        Scale of the weak prior toward unimpaired (see :mod:`fieldbank.fitting.space`).
+    max_evals : int, optional
+        Evaluation budget of the global stage (nlopt) or of dual annealing.
+    progress : callable(n_evals, best_cost), optional
+        Called every few dozen evaluations.
+    hold_unidentified : bool
+        After the fit, hold the parameters the maps do not identify at their unimpaired
+        (prior) values and refit the others, unless the maps reject that: a likelihood-ratio
+        test, Δχ² of the data above the χ² quantile :data:`HOLD_TEST_LEVEL` with one degree of
+        freedom per held parameter. This keeps noise from setting what the data leave open.
+    """
+
+    def __init__(
+        self,
+        algorithm: str = DEFAULT_ALGORITHM,
+        seed: int = 0,
+        fit: Sequence[str] = ("km", "alpha", "beta"),
+        bounds: Mapping[str, tuple[float, float]] | None = None,
+        prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+        max_evals: int | None = None,
+        progress: Progress | None = None,
+        hold_unidentified: bool = True,
+    ) -> None:
+        self.algorithm = algorithm
+        self.seed = seed
+        self.fit_kinds = tuple(fit)
+        self.bounds = dict(bounds) if bounds is not None else None
+        self.prior_weight = prior_weight
+        self.max_evals = max_evals
+        self.progress = progress
+        self.hold_unidentified = hold_unidentified
+
+    def __getattr__(self, name: str) -> Any:
+        if name in _RESULTS:
+            raise FitError(f"ArmFitter has no result {name!r} yet: call fit(maps, base) first.")
+        raise AttributeError(name)
+
+    def _check_options(self) -> None:
+        if self.algorithm not in ALGORITHMS:
+            raise FitError(f"unknown algorithm {self.algorithm!r}; choose one of "
+                           f"{', '.join(ALGORITHMS)}.")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
+                or self.seed < 0:
+            raise FitError(f"seed must be a non-negative integer; got {self.seed!r}.")
+        if self.max_evals is not None and (not isinstance(self.max_evals, int)
+                                           or self.max_evals < 10):
+            raise FitError(f"max_evals must be an integer >= 10; got {self.max_evals!r}.")
+        unknown = sorted(set(self.fit_kinds) - set(FIT_KINDS))
+        if unknown:
+            raise FitError(f"cannot fit {', '.join(unknown)}; choose from {', '.join(FIT_KINDS)}.")
+
+    def fit(self, maps: Sequence[FieldMap], base: ArmParams,
+            patient: str | None = None) -> ArmFitter:
+        """Fit ``base``'s Km, α, β (and q_rest) to ``maps``; returns self.
+
+        Parameters
+        ----------
+        maps : sequence of FieldMap
+            The patient's measured maps (shoulder frame, SI units; handle-on-arm maps are
+            converted).
+        base : ArmParams
+            The patient's arm: segments, moment arms, rest lengths, and the start values.
+        patient : str, optional
+            When given, maps whose metadata name another patient are refused.
+        """
+        self._check_options()
+        if not isinstance(base, ArmParams):
+            raise FitError(f"base must be ArmParams; got {type(base).__name__}.")
+        t0 = time.perf_counter()
+        arm = Arm.from_params(base)
+        used = validate_maps(maps, arm, patient)
+        space = ParamSpace.build(base, self.fit_kinds, self.bounds, self.prior_weight)
+        problem = FitProblem.from_maps(used, arm, space)
+        seed = int(self.seed)
+        if self.algorithm == "dual_annealing":
+            res = run_dual_annealing(problem, seed, self.max_evals, self.progress)
+        else:
+            res = run_nlopt(problem, self.algorithm, seed, self.max_evals, self.progress)
+        theta = res.theta
+        n_evals = res.n_evals
+        stop_reason = res.stop_reason
+        ident = identify(problem, theta)
+        self.held_: list[str] = []
+        self.hold_test_: dict[str, Any] | None = None
+        if self.hold_unidentified and ident.unidentified:
+            held = _hold_unidentified(problem, theta, ident.unidentified, self.algorithm, seed)
+            n_evals += held.n_evals
+            self.hold_test_ = held.test
+            flagged = tuple(dataclasses.replace(u, reason=u.reason + held.note(u.name))
+                            for u in ident.unidentified)
+            if held.accepted:
+                theta = held.theta
+                self.held_ = list(held.names)
+                stop_reason += f"; unidentified held at unimpaired: {held.stop_reason}"
+                ident = identify(problem, theta)  # uncertainty at the final point
+            # what the full fit could not identify stays reported, held or not
+            ident = dataclasses.replace(ident, unidentified=flagged)
+        yhat = problem.predict(theta)
+        self.time_s_ = time.perf_counter() - t0
+        self.base_ = base
+        self.space_ = space
+        self.problem_ = problem
+        self.theta_ = theta
+        self.params_ = space.to_params(theta, base)
+        self.cost_ = float(problem.cost(theta))
+        self.chi2_ = float(np.sum(problem.residuals(theta) ** 2))
+        self.maps_ = used
+        self.residuals_: list[FloatArray] = []
+        self.r2_: list[float] = []
+        for m, rows in zip(used, problem.map_rows, strict=True):
+            y = problem.y[rows].reshape(m.values.shape)
+            fitted = yhat[rows].reshape(m.values.shape)
+            self.residuals_.append(y - fitted)
+            self.r2_.append(_r2(y, fitted))
+        self.uncertainty_ = {n: float(ident.sd[k]) for k, n in enumerate(space.names)
+                             if space.fitted[k]}
+        self.relative_sd_ = {n: float(ident.relative_sd[k]) for k, n in enumerate(space.names)
+                             if space.fitted[k]}
+        self.unidentified_: tuple[Unidentified, ...] = ident.unidentified
+        self.status_ = "under-determined" if ident.unidentified else "identified"
+        self.residual_variance_ = ident.residual_variance
+        self.at_bounds_ = [n for k, n in enumerate(space.names) if space.fitted[k] and (
+            theta[k] <= space.lower[k] + 1e-9 or theta[k] >= space.upper[k] - 1e-9)]
+        self.n_evals_ = n_evals
+        self.stop_reason_ = stop_reason
+        self.algorithm_ = self.algorithm
+        self.seed_ = seed
+        self.severity_ = _severity(self.params_)
+        return self
+
+    # --- using a fit --------------------------------------------------------------------------
+    def predict(self, maps: Sequence[FieldMap]) -> list[FieldMap]:
+        """The fitted model's maps at the positions and velocities of ``maps``."""
+        arm = Arm.from_params(self.params_)
+        used = validate_maps(maps, arm)
+        space = ParamSpace.build(self.params_, self.fit_kinds, self.bounds, self.prior_weight)
+        problem = FitProblem.from_maps(used, arm, space)
+        yhat = problem.predict(self.theta_)
+        out = []
+        for m, rows in zip(used, problem.map_rows, strict=True):
+            out.append(FieldMap(kind=m.kind, positions_m=m.positions_m,
+                                values=yhat[rows].reshape(m.values.shape),
+                                velocity_m_per_s=m.velocity_m_per_s,
+                                source="fieldbank fitted model"))
+        return out
+
+    def score(self, maps: Sequence[FieldMap]) -> list[float]:
+        """R² of the fitted model on each of ``maps`` (e.g. held-out positions)."""
+        pred = self.predict(maps)
+        return [_r2(m.as_arm_on_handle().values, p.values)
+                for m, p in zip(maps, pred, strict=True)]
+
+    def report(self) -> dict[str, Any]:
+        """A JSON-able summary of the fit."""
+        space = self.space_
+        params = {n: float(self.theta_[k]) for k, n in enumerate(space.names)}
+        return {
+            "status": self.status_,
+            "algorithm": self.algorithm_,
+            "seed": self.seed_,
+            "fitted": list(self.fit_kinds),
+            "prior_weight": self.prior_weight,
+            "cost": self.cost_,
+            "chi2": self.chi2_,
+            "residual_variance": self.residual_variance_,
+            "n_evals": self.n_evals_,
+            "time_s": self.time_s_,
+            "stop_reason": self.stop_reason_,
+            "parameters": params,
+            "uncertainty": self.uncertainty_,
+            "posterior_to_prior_sd": self.relative_sd_,
+            "at_bounds": self.at_bounds_,
+            "held_at_unimpaired": self.held_,
+            "hold_test": self.hold_test_,
+            "unidentified": [u.to_dict() for u in self.unidentified_],
+            "maps": [
+                {"index": k, "kind": m.kind, "n": m.n, "velocity_m_per_s": list(
+                    m.velocity_m_per_s), "source": m.source, "metadata": dict(m.metadata),
+                 "r2": self.r2_[k],
+                 "rms_residual": float(np.sqrt(np.mean(self.residuals_[k] ** 2)))}
+                for k, m in enumerate(self.maps_)
+            ],
+            "severity": self.severity_,
+            "params": self.params_.to_dict(),
+        }
+
+
+def _severity(params: ArmParams) -> dict[str, Any] | None:
+    """Severity per joint group from :mod:`fieldbank.severity`, when that module exists."""
+    try:
+        severity: Any = importlib.import_module("fieldbank.severity")
+    except ImportError:
+        return None
+    result = severity.classify(params)
+    out: dict[str, Any] = {}
+    for group, gs in result.items():
+        raw = (dataclasses.asdict(gs) if dataclasses.is_dataclass(gs) and not isinstance(gs, type)
+               else gs)
+        out[group] = ({k: (float(v) if isinstance(v, (int, float, np.floating))
+                           and not isinstance(v, bool) else v) for k, v in raw.items()}
+                      if isinstance(raw, dict) else raw)
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class _Hold:
+    accepted: bool
+    theta: FloatArray
+    names: tuple[str, ...]
+    n_evals: int
+    stop_reason: str
+    test: dict[str, Any]
+
+    def note(self, name: str) -> str:
+        if name not in self.names:
+            return ""
+        t = self.test
+        if self.accepted:
+            return (f"; held at the unimpaired value (the maps do not reject it: Δχ² "
+                    f"{t['delta_chi2']:.3g} <= {t['threshold']:.3g})")
+        return (f"; the maps reject holding the unidentified parameters at unimpaired values "
+                f"(Δχ² {t['delta_chi2']:.3g} > {t['threshold']:.3g}), so the fitted value is "
+                "kept")
+
+
+def _hold_unidentified(problem: FitProblem, theta: FloatArray,
+                       unidentified: Sequence[Unidentified], algorithm: str, seed: int) -> _Hold:
+    """Refit with the unidentified parameters at their prior means; test against the fit."""
+    from scipy.stats import chi2
+
+    space = problem.space
+    names = tuple(u.name for u in unidentified)
+    idx = [space.names.index(n) for n in names]
+    fitted = space.fitted.copy()
+    fitted[idx] = False
+    base = theta.copy()
+    base[idx] = space.prior_mean[idx]
+    reduced_space = dataclasses.replace(space, fitted=fitted, base=base)
+    reduced = dataclasses.replace(problem, space=reduced_space, n_evals=0, _xkm_cache=None)
+    name = algorithm if algorithm in ALGORITHMS and algorithm != "dual_annealing" \
+        else DEFAULT_ALGORITHM
+    res = run_nlopt(reduced, name, seed, HOLD_EVALS)
+    r_full = problem.residuals(theta)
+    r_held = problem.residuals(res.theta)
+    delta = float(r_held @ r_held - r_full @ r_full)
+    threshold = float(chi2.ppf(HOLD_TEST_LEVEL, len(idx)))
+    test = {"held": list(names), "delta_chi2": delta, "threshold": threshold,
+            "level": HOLD_TEST_LEVEL, "accepted": delta <= threshold}
+    return _Hold(delta <= threshold, res.theta, names, reduced.n_evals, res.stop_reason, test)

@@ -1,0 +1,384 @@
+"""The fit's cost, with everything that does not depend on the parameters computed once.
+
+Design
+------
+Only Km, α, β (and optionally q_rest) change during a fit; the measured positions and
+velocities do not. So the inverse kinematics, the endpoint Jacobian J and J⁻¹, the joint
+velocities q̇ = J⁻¹v, J_λq and λ̇ = J_λq̇ are computed once per measured point
+(:meth:`FitProblem.from_maps`).
+
+Every measured value is then a fixed linear combination of three per-muscle quantities at its
+point, the muscle tension f_i and its derivatives f_λ,i = ∂f_i/∂λ_i and f_λ̇,i = ∂f_i/∂λ̇_i
+(the model's ``Arm.field``)::
+
+    F  = Σ_i A_i f_i                                  A_i = -J⁻ᵀ J_λ,iᵀ
+    K  = Σ_i f_λ,i M1_i + f_λ̇,i M2_i + f_i M3_i        M1_i = J⁻ᵀ J_λ,iᵀ J_λ,i J⁻¹,
+                                                      M2_i = J⁻ᵀ J_λ,iᵀ J_λ,i Q J⁻¹,
+                                                      M3_i = J⁻ᵀ G(A_i) J⁻¹
+
+with Q = -J⁻¹(∂J/∂q_k)q̇ and G(F)[:, k] = (∂J/∂q_k)ᵀF. The tension is linear in Km and in α:
+f_i = Km_i·P_i(λ) + α_i·R_i(λ, λ̇; β_i), so the predicted values are ``X(β, q_rest) @ [Km; α]``
+with a design matrix X of 12 columns. The cost is the whitened χ² of all measured values plus
+the prior (see :mod:`fieldbank.fitting.space`).
+
+Variable projection: for given β and q_rest the best Km and α solve a small bounded linear
+least-squares problem (12 unknowns), so the global search runs over β (and q_rest) only. The
+gradient of the projected cost follows from the envelope theorem, -2 rᵀ W (∂X/∂φ) θ_lin; ∂X/∂φ
+comes from central differences of X alone (no extra solves; column i depends only on β_i).
+
+Noise: each value is whitened by its map's sd; where a map has no sd, by
+:data:`DEFAULT_RELATIVE_SD` (5%, an assumption) × the size of the measured force or stiffness at
+that position (:func:`relative_scale`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import lsq_linear
+from scipy.special import expit
+
+from fieldbank.fitting.space import ParamSpace
+from fieldbank.maps import FieldMap
+from fieldbank.model import Arm, FloatArray
+
+#: Relative noise assumed for a map without sd columns (see :func:`relative_scale`).
+DEFAULT_RELATIVE_SD = 0.05
+#: Floor of the per-position scale, as a fraction of the map's RMS value.
+SCALE_FLOOR_FRACTION = 0.1
+#: Floor on any sd, as a fraction of the map's RMS value (an sd of 0 would weigh infinitely).
+SD_FLOOR_FRACTION = 1e-3
+
+
+def relative_scale(values: FloatArray) -> FloatArray:
+    """Size of a map's value at each position, shape (N,), in the values' unit.
+
+    The RMS of the entries at the position (force components or stiffness entries), floored at
+    :data:`SCALE_FLOOR_FRACTION` × the RMS over the whole map, so that a position where the
+    force vanishes (the rest posture) is not given an sd of zero.
+    """
+    n = values.shape[0]
+    per = np.sqrt(np.mean(values.reshape(n, -1) ** 2, axis=1))
+    rms = float(np.sqrt(np.mean(values**2)))
+    return np.maximum(per, SCALE_FLOOR_FRACTION * rms)
+_H_BETA = 1e-6
+_H_Q = 1e-6
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Result of the inner (linear) solve at fixed nonlinear parameters."""
+
+    cost: float
+    theta: FloatArray  # full parameter vector
+    r: FloatArray  # whitened data residuals, shape (M,)
+
+
+@dataclass(eq=False)
+class FitProblem:
+    """Precomputed measurement geometry and the fast cost (see module docstring).
+
+    Attributes
+    ----------
+    arm : Arm
+        The base model (segment lengths, moment arms, λ̇_max are not fitted).
+    space : ParamSpace
+    y : ndarray, shape (M,)
+        Measured values, arm-on-handle, flattened map by map (F: x, y; K: xx, xy, yx, yy).
+    sd : ndarray, shape (M,)
+        Their standard deviations.
+    map_rows : list of slice
+        Rows of each map.
+    """
+
+    arm: Arm
+    space: ParamSpace
+    y: FloatArray
+    sd: FloatArray
+    map_rows: list[slice]
+    row_pt: np.ndarray
+    cf: FloatArray
+    cl: FloatArray
+    cd: FloatArray
+    lq: FloatArray  # J_λ q per point, (N, 6)
+    lam_above_min: FloatArray  # λ - λ_min per point (independent of q_rest), (N, 6)
+    corner_max: FloatArray  # max over the range-of-motion corners of J_λ q, (6,)
+    c: FloatArray  # clip(λ̇/λ̇_max, 0, 1), (N, 6)
+    dc: FloatArray  # ∂c/∂λ̇ with the model's kink convention, (N, 6)
+    n_evals: int = 0
+    _xkm_cache: FloatArray | None = None
+
+    # --- construction ---------------------------------------------------------------------
+    @classmethod
+    def from_maps(cls, maps: list[FieldMap], arm: Arm, space: ParamSpace) -> FitProblem:
+        """Precompute for validated, arm-on-handle maps in the shoulder frame."""
+        mirror = np.array([-1.0, 1.0]) if arm.mirror else np.array([1.0, 1.0])
+        ys, sds, rows, pts_rows = [], [], [], []
+        cfs, cls_, cds = [], [], []
+        lqs, ldots, qs = [], [], []
+        start = 0
+        n_pts = 0
+        jl = arm.jl
+        for m in maps:
+            vm = np.asarray(m.velocity_m_per_s) * mirror
+            q = arm.ik(m.positions_m)
+            jac = arm.jacobian(q)
+            jinv = np.linalg.inv(jac)
+            qdot = jinv @ vm
+            n = m.n
+            # A[n, c, i]: force component c per unit tension of muscle i
+            a_mat = -np.einsum("nij,ki->njk", jinv, jl)
+            values = m.values.reshape(n, -1)
+            if m.sd is not None:
+                sd = m.sd.reshape(n, -1).copy()
+            else:
+                sd = np.zeros_like(values)
+            rms = float(np.sqrt(np.mean(values**2))) or 1.0
+            if m.sd is None:
+                sd[:] = DEFAULT_RELATIVE_SD * relative_scale(m.values)[:, None]
+            sd = np.maximum(sd, SD_FLOOR_FRACTION * rms)
+            if m.kind == "postural":
+                out = mirror  # component sign back to the user's frame
+                cf = a_mat * out[None, :, None]
+                cl = np.zeros_like(cf)
+                cd = np.zeros_like(cf)
+            else:
+                q1, q12 = q[:, 0], q[:, 0] + q[:, 1]
+                s1, c1, s12, c12 = np.sin(q1), np.cos(q1), np.sin(q12), np.cos(q12)
+                l1, l2 = arm.l1, arm.l2
+                dj = np.empty((n, 2, 2, 2))  # [n, k, i, j] = ∂J_ij/∂q_k
+                dj[:, 0, 0, 0] = -l1 * c1 - l2 * c12
+                dj[:, 0, 0, 1] = -l2 * c12
+                dj[:, 0, 1, 0] = -l1 * s1 - l2 * s12
+                dj[:, 0, 1, 1] = -l2 * s12
+                dj[:, 1, 0, 0] = -l2 * c12
+                dj[:, 1, 0, 1] = -l2 * c12
+                dj[:, 1, 1, 0] = -l2 * s12
+                dj[:, 1, 1, 1] = -l2 * s12
+                djq = np.einsum("nkij,nj->nik", dj, qdot)
+                qmat = -np.einsum("nij,njk->nik", jinv, djq)
+                jinv_t = np.transpose(jinv, (0, 2, 1))
+                outer = np.einsum("ki,kj->kij", jl, jl)  # J_λ,iᵀ J_λ,i per muscle, (6, 2, 2)
+                m1 = np.einsum("nab,kbc,ncd->nkad", jinv_t, outer, jinv)
+                m2 = np.einsum("nab,kbc,nce,ned->nkad", jinv_t, outer, qmat, jinv)
+                g = np.einsum("nkji,njm->nmik", dj, a_mat)  # G(A_m), (n, 6, 2, 2)
+                m3 = np.einsum("nab,nmbc,ncd->nmad", jinv_t, g, jinv)
+                sgn = np.outer(mirror, mirror)  # D K D for a mirrored arm
+                cf = (m3 * sgn).reshape(n, 6, 4).transpose(0, 2, 1)
+                cl = (m1 * sgn).reshape(n, 6, 4).transpose(0, 2, 1)
+                cd = (m2 * sgn).reshape(n, 6, 4).transpose(0, 2, 1)
+            k = values.shape[1]
+            ys.append(values.ravel())
+            sds.append(sd.ravel())
+            cfs.append(cf.reshape(n * k, 6))
+            cls_.append(cl.reshape(n * k, 6))
+            cds.append(cd.reshape(n * k, 6))
+            pts_rows.append(np.repeat(np.arange(n) + n_pts, k))
+            rows.append(slice(start, start + n * k))
+            start += n * k
+            n_pts += n
+            qs.append(q)
+            lqs.append(q @ jl.T)
+            ldots.append(qdot @ jl.T)
+        p = arm.params
+        corners = np.array([[a, b] for a in p.shoulder_range_rad for b in p.elbow_range_rad])
+        lc = corners @ jl.T
+        lq = np.vstack(lqs)
+        ldot = np.vstack(ldots)
+        r = ldot / arm.ldot_max
+        c = np.clip(r, 0.0, 1.0)
+        dc = np.where((r > 0) & (r < 1), 1.0, 0.0)
+        dc = np.where((r == 0) | (r == 1), 0.5, dc) / arm.ldot_max
+        return cls(
+            arm=arm,
+            space=space,
+            y=np.concatenate(ys),
+            sd=np.concatenate(sds),
+            map_rows=rows,
+            row_pt=np.concatenate(pts_rows),
+            cf=np.vstack(cfs),
+            cl=np.vstack(cls_),
+            cd=np.vstack(cds),
+            lq=lq,
+            lam_above_min=lq - lc.min(axis=0),
+            corner_max=lc.max(axis=0),
+            c=c,
+            dc=dc,
+        )
+
+    # --- the model, linear in Km and α -------------------------------------------------------
+    @property
+    def w(self) -> FloatArray:
+        return 1.0 / self.sd
+
+    def _passive_basis(self, q_rest: FloatArray) -> FloatArray:
+        arm = self.arm
+        d = self.lq - q_rest @ arm.jl.T
+        wd = arm.w
+        z = d / wd
+        sp = wd * np.logaddexp(0.0, z)
+        sig = expit(z)
+        ell = arm.excursion
+        g = np.exp(-((d / ell) ** 2))
+        pb = (sp * g)[self.row_pt]
+        pdb = (g * (sig - sp * 2.0 * d / (ell * ell)))[self.row_pt]
+        return self.cf * pb + self.cl * pdb
+
+    def _reflex_basis(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
+        arm = self.arm
+        lam_max = arm.lam_rest + self.corner_max - q_rest @ arm.jl.T
+        kk = arm.lam_rest / lam_max
+        u = beta * self.c
+        ell = arm.excursion
+        gam = self.lam_above_min / ell - kk * (1.0 - u)
+        e = np.exp(-gam * gam)
+        h = u * gam * e
+        one = 1.0 - 2.0 * gam * gam
+        dh_dlam = u * e * one / ell
+        dh_du = gam * e + u * e * one * kk
+        on = (h > 0) | ((h == 0) & (dh_du > 0))
+        rf = np.where(h > 0, h, 0.0)[self.row_pt]
+        rl = np.where(on, dh_dlam, 0.0)[self.row_pt]
+        rd = np.where(on, dh_du * beta * self.dc, 0.0)[self.row_pt]
+        return self.cf * rf + self.cl * rl + self.cd * rd
+
+    def design(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
+        """X(β, q_rest), shape (M, 12): predicted values per unit Km (cols 0-5) and α (6-11)."""
+        if self.space.fit_q_rest or self._xkm_cache is None:
+            xkm = self._passive_basis(q_rest)
+            if not self.space.fit_q_rest:
+                self._xkm_cache = xkm
+        else:
+            xkm = self._xkm_cache
+        return np.hstack([xkm, self._reflex_basis(beta, q_rest)])
+
+    # --- parameter vector helpers -------------------------------------------------------------
+    def split(self, theta: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(θ_lin = [Km; α] (12,), β (6,), q_rest (2,)) from a full vector."""
+        q_rest = theta[18:20] if self.space.fit_q_rest else self.arm.q_rest
+        return theta[:12], theta[12:18], np.asarray(q_rest, dtype=float)
+
+    def predict(self, theta: FloatArray) -> FloatArray:
+        """Predicted values, shape (M,), for a full parameter vector."""
+        lin, beta, q_rest = self.split(theta)
+        return self.design(beta, q_rest) @ lin
+
+    def residuals(self, theta: FloatArray) -> FloatArray:
+        """Whitened data residuals (y - ŷ)/sd, shape (M,)."""
+        return (self.y - self.predict(theta)) / self.sd
+
+    def prior_cost(self, theta: FloatArray) -> float:
+        s = self.space
+        z = ((theta - s.prior_mean) / s.prior_sd)[s.fitted]
+        return float(s.prior_weight * (z @ z))
+
+    def cost(self, theta: FloatArray) -> float:
+        """Data χ² plus prior for a full parameter vector (the objective of every algorithm)."""
+        self.n_evals += 1
+        r = self.residuals(theta)
+        return float(r @ r) + self.prior_cost(theta)
+
+    # --- variable projection -------------------------------------------------------------------
+    def nonlinear_index(self) -> np.ndarray:
+        """Indices (into the full vector) of the fitted nonlinear parameters."""
+        s = self.space
+        return np.array([i for i in range(12, s.size) if s.fitted[i]], dtype=int)
+
+    def full_from_nonlinear(self, phi: FloatArray) -> FloatArray:
+        theta = self.space.base.copy()
+        theta[self.nonlinear_index()] = phi
+        return theta
+
+    def project(self, theta_nl: FloatArray, x: FloatArray | None = None) -> Projection:
+        """Best Km and α for the nonlinear entries of ``theta_nl`` (full vector; linear part
+        ignored except where not fitted)."""
+        self.n_evals += 1
+        s = self.space
+        lin, beta, q_rest = self.split(theta_nl)
+        if x is None:
+            x = self.design(beta, q_rest)
+        free = s.fitted[:12]
+        w = self.w
+        lin = lin.copy()
+        rhs = (self.y - x[:, ~free] @ lin[~free]) * w
+        a = x[:, free] * w[:, None]
+        if free.any():
+            pw = s.prior_weight
+            mu = s.prior_mean[:12][free]
+            sdp = s.prior_sd[:12][free]
+            lo = s.lower[:12][free]
+            hi = s.upper[:12][free]
+            gram = a.T @ a + np.diag(pw / sdp**2)
+            rhs_n = a.T @ rhs + pw * mu / sdp**2
+            sol: FloatArray | None
+            try:
+                sol = np.linalg.solve(gram, rhs_n)
+            except np.linalg.LinAlgError:
+                sol = None
+            if sol is None or np.any(sol < lo) or np.any(sol > hi):
+                sq = np.sqrt(pw) / sdp
+                aa = np.vstack([a, np.diag(sq)])
+                bb = np.concatenate([rhs, sq * mu])
+                sol = lsq_linear(aa, bb, bounds=(lo, hi), method="bvls").x
+            lin[free] = sol
+        theta = theta_nl.copy()
+        theta[:12] = lin
+        r = rhs - a @ lin[free] if free.any() else rhs
+        return Projection(float(r @ r) + self.prior_cost(theta), theta, r)
+
+    def design_derivatives(self, theta: FloatArray) -> dict[int, FloatArray]:
+        """∂X/∂θ_k for each fitted nonlinear entry k (central differences inside the bounds)."""
+        s = self.space
+        _, beta, q_rest = self.split(theta)
+        out: dict[int, FloatArray] = {}
+        bidx = [i for i in range(12, 18) if s.fitted[i]]
+        if bidx:
+            bp = np.minimum(beta + _H_BETA, s.upper[12:18])
+            bm = np.maximum(beta - _H_BETA, s.lower[12:18])
+            diff = (self._reflex_basis(bp, q_rest) - self._reflex_basis(bm, q_rest)) / (bp - bm)
+            for i in bidx:
+                col = np.zeros((self.y.size, 12))
+                col[:, 6 + i - 12] = diff[:, i - 12]
+                out[i] = col
+        if s.fit_q_rest:
+            for j in range(2):
+                k = 18 + j
+                if not s.fitted[k]:
+                    continue
+                qp = q_rest.copy()
+                qm = q_rest.copy()
+                qp[j] = min(q_rest[j] + _H_Q, s.upper[k])
+                qm[j] = max(q_rest[j] - _H_Q, s.lower[k])
+                xp = np.hstack([self._passive_basis(qp), self._reflex_basis(beta, qp)])
+                xm = np.hstack([self._passive_basis(qm), self._reflex_basis(beta, qm)])
+                out[k] = (xp - xm) / (qp[j] - qm[j])
+        return out
+
+    def projected_cost_grad(self, phi: FloatArray) -> tuple[float, FloatArray, Projection]:
+        """Projected cost and its gradient over the fitted nonlinear entries."""
+        theta = self.full_from_nonlinear(phi)
+        pr = self.project(theta)
+        idx = self.nonlinear_index()
+        grad = np.empty(idx.size)
+        derivs = self.design_derivatives(pr.theta)
+        w = self.w
+        s = self.space
+        lin = pr.theta[:12]
+        for n, k in enumerate(idx):
+            dy = derivs[k] @ lin
+            grad[n] = -2.0 * float(pr.r @ (dy * w))
+            grad[n] += 2.0 * s.prior_weight * (pr.theta[k] - s.prior_mean[k]) / s.prior_sd[k] ** 2
+        return pr.cost, grad, pr
+
+    def jacobian(self, theta: FloatArray) -> FloatArray:
+        """∂r/∂θ of the whitened data residuals, shape (M, P) (zero columns where not fitted)."""
+        lin, beta, q_rest = self.split(theta)
+        x = self.design(beta, q_rest)
+        w = self.w
+        jac = np.zeros((self.y.size, self.space.size))
+        jac[:, :12] = -x * w[:, None]
+        for k, dx in self.design_derivatives(theta).items():
+            jac[:, k] = -(dx @ lin) * w
+        jac[:, ~self.space.fitted] = 0.0
+        return jac

@@ -1,0 +1,145 @@
+"""Fitting a stored patient: the seam between the fitter and the database.
+
+The fitter needs four things from storage, gathered in the :class:`FitStore` protocol so that
+the storage layer (or a test double) can provide them:
+
+* ``patient_params(patient)`` - the patient's base :class:`ArmParams` (segments from mass and
+  height, and the start values); unknown patient -> a FieldbankError naming it;
+* ``maps_for(patient, session)`` - the patient's measured maps as :class:`PatientMap`
+  (all sessions when ``session`` is None; an unknown session -> a FieldbankError);
+* ``add_fit(record)`` - store the fit and the fitted model **in one transaction** and return
+  their ids (:class:`SavedFit`); the record carries the lineage (patient, session, map ids);
+* ``list_models(patient)`` - rows (mappings with at least ``id``, ``patient``, ``origin``,
+  ``label``, ``parent_id``, ``created_at``) for ``fieldbank models list``;
+* ``get_model(model_id)`` - a mapping with those keys plus ``params`` (ArmParams), ``lineage``
+  (list of ancestor rows, newest first) and ``fit`` (the stored fit report, or None) for
+  ``fieldbank models show``.
+
+:func:`fit_patient` runs one fit for a stored patient and stores it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from fieldbank.errors import FitError
+from fieldbank.fitting.fitter import ArmFitter
+from fieldbank.maps import FieldMap
+from fieldbank.params import ArmParams
+
+
+@dataclass(frozen=True)
+class PatientMap:
+    """A measured map as stored: its id, owner and session."""
+
+    map_id: int | str
+    patient: str
+    session: str | None
+    map: FieldMap
+
+
+@dataclass(frozen=True)
+class FitSubmission:
+    """Everything stored for one fit and its fitted model.
+
+    ``report`` is :meth:`ArmFitter.report` (parameters, cost, R² and residual RMS per map,
+    uncertainty, unidentified parameters with reasons, algorithm, seed, evaluations, time,
+    severity); ``params`` the fitted model; ``map_ids`` the maps used, in fit order.
+    """
+
+    patient: str
+    session: str | None
+    map_ids: tuple[int | str, ...]
+    base_params: ArmParams
+    params: ArmParams
+    report: Mapping[str, Any]
+    algorithm: str
+    seed: int
+    status: str
+    severity: Mapping[str, Any] | None = field(default=None)
+
+
+@dataclass(frozen=True)
+class SavedFit:
+    fit_id: int | str
+    model_id: int | str
+
+
+class FitStore(Protocol):
+    """What :func:`fit_patient` and the ``fit``/``models`` commands need from storage."""
+
+    def patient_params(self, patient: str) -> ArmParams: ...
+
+    def maps_for(self, patient: str, session: str | None = None) -> Sequence[PatientMap]: ...
+
+    def add_fit(self, record: FitSubmission) -> SavedFit: ...
+
+    def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]: ...
+
+    def get_model(self, model_id: int | str) -> Mapping[str, Any]: ...
+
+
+@dataclass(frozen=True)
+class FitOutcome:
+    saved: SavedFit
+    fitter: ArmFitter
+    record: FitSubmission
+
+
+def fit_patient(
+    store: FitStore,
+    patient: str,
+    session: str | None,
+    fitter: ArmFitter,
+    progress: Callable[[str], None] | None = None,
+) -> FitOutcome:
+    """Fit ``patient``'s stored maps (one session or all) and store the fit and the model.
+
+    Raises
+    ------
+    FitError
+        The patient has no maps (in that session), or a returned map belongs to another
+        patient; and everything :meth:`ArmFitter.fit` refuses. Nothing is stored then.
+    """
+    base = store.patient_params(patient)
+    stored = list(store.maps_for(patient, session))
+    where = f"patient {patient!r}" + (f", session {session!r}" if session else "")
+    if not stored:
+        raise FitError(f"no maps to fit: {where} has no measured maps.")
+    strangers = [s for s in stored if s.patient != patient]
+    if strangers:
+        s = strangers[0]
+        raise FitError(f"map {s.map_id} belongs to patient {s.patient!r}, not to {patient!r}; "
+                       "refusing to fit maps of another patient.")
+    if progress:
+        progress(f"fitting {len(stored)} maps of {where} with {fitter.algorithm} "
+                 f"(seed {fitter.seed})")
+    maps = []
+    for s in stored:
+        meta = dict(s.map.metadata)
+        meta.setdefault("map_id", str(s.map_id))
+        maps.append(FieldMap(kind=s.map.kind, positions_m=s.map.positions_m,
+                             values=s.map.values, sd=s.map.sd, frame=s.map.frame,
+                             sign=s.map.sign, velocity_m_per_s=s.map.velocity_m_per_s,
+                             source=s.map.source, metadata=meta))
+    fitter.fit(maps, base, patient=None)
+    report = fitter.report()
+    report["patient"] = patient
+    report["session"] = session
+    report["map_ids"] = [s.map_id for s in stored]
+    record = FitSubmission(
+        patient=patient,
+        session=session,
+        map_ids=tuple(s.map_id for s in stored),
+        base_params=base,
+        params=fitter.params_,
+        report=report,
+        algorithm=fitter.algorithm_,
+        seed=fitter.seed_,
+        status=fitter.status_,
+        severity=fitter.severity_,
+    )
+    saved = store.add_fit(record)
+    return FitOutcome(saved, fitter, record)

@@ -1,0 +1,152 @@
+"""``fieldbank fit`` and ``fieldbank models list|show`` over an in-memory FitStore."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import click
+import pytest
+from click.testing import CliRunner
+
+from cli.fit import fit, models
+from fieldbank.errors import FieldbankError, FitError
+from fieldbank.fitting.records import FitSubmission, PatientMap, SavedFit
+from fieldbank.fitting.synthetic import impaired_params, synthetic_patient
+from fieldbank.params import ArmParams
+
+BASE = ArmParams.from_anthropometry()
+
+
+class MemoryStore:
+    """The FitStore protocol in memory: patients, maps per session, models and fits."""
+
+    def __init__(self) -> None:
+        self.patients: dict[str, ArmParams] = {}
+        self.maps: list[PatientMap] = []
+        self.models: list[dict[str, Any]] = []
+        self.fits: list[FitSubmission] = []
+
+    def patient_params(self, patient: str) -> ArmParams:
+        if patient not in self.patients:
+            raise FitError(f"no patient {patient!r}")
+        return self.patients[patient]
+
+    def maps_for(self, patient: str, session: str | None = None) -> Sequence[PatientMap]:
+        return [m for m in self.maps if m.patient == patient
+                and (session is None or m.session == session)]
+
+    def add_fit(self, record: FitSubmission) -> SavedFit:
+        self.fits.append(record)
+        model = {"id": len(self.models) + 1, "patient": record.patient, "origin": "fitted",
+                 "label": f"fit {len(self.fits)}", "parent_id": None, "created_at": "now",
+                 "params": record.params, "fit": dict(record.report), "lineage": []}
+        self.models.append(model)
+        return SavedFit(len(self.fits), model["id"])
+
+    def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]:
+        return [{k: v for k, v in m.items() if k not in ("params", "fit", "lineage")}
+                for m in self.models if patient is None or m["patient"] == patient]
+
+    def get_model(self, model_id: int | str) -> Mapping[str, Any]:
+        for m in self.models:
+            if m["id"] == model_id:
+                return m
+        raise FitError(f"no model {model_id}")
+
+
+@click.group()
+def cli() -> None:
+    pass
+
+
+cli.add_command(fit)
+cli.add_command(models)
+
+
+@pytest.fixture(scope="module")
+def store() -> MemoryStore:
+    s = MemoryStore()
+    s.patients["P1"] = BASE
+    s.patients["P2"] = BASE
+    pat = synthetic_patient(impaired_params("elbow", "moderate", BASE), seed=21, patient="P1")
+    for k, m in enumerate(pat.maps):
+        s.maps.append(PatientMap(100 + k, "P1", "pre", m))
+    static = synthetic_patient(impaired_params("elbow", "moderate", BASE), seed=22,
+                               moving=False, patient="P2")
+    for k, m in enumerate(static.maps):
+        s.maps.append(PatientMap(200 + k, "P2", "pre", m))
+    return s
+
+
+def _run(store: MemoryStore, args: list[str]) -> Any:
+    runner = CliRunner()
+    return runner.invoke(cli, args, obj={"fit_store": lambda url: store}, catch_exceptions=True)
+
+
+def test_fit_json_stores_fit_and_model(store: MemoryStore, tmp_path: Path) -> None:
+    plot = tmp_path / "fit.svg"
+    res = _run(store, ["fit", "P1", "--session", "pre", "--seed", "3", "--json",
+                       "--plot", str(plot)])
+    assert res.exit_code == 0, res.output
+    report = json.loads(res.stdout)
+    assert report["patient"] == "P1" and report["seed"] == 3
+    assert report["map_ids"] == [100, 101, 102, 103]
+    assert report["model_id"] == store.models[-1]["id"]
+    assert store.fits[-1].params == ArmParams.from_dict(report["params"])
+    assert plot.read_text().lstrip().startswith("<?xml")
+    assert "evaluations" in res.stderr  # progress on stderr
+
+
+def test_fit_static_maps_warns_under_determined(store: MemoryStore) -> None:
+    res = _run(store, ["fit", "P2"])
+    assert res.exit_code == 0, res.output
+    assert "status: under-determined" in res.stdout
+    assert "all stiffness maps are static" in res.stdout
+    assert "not identified" in res.stderr
+
+
+def test_fit_refuses_no_maps_and_foreign_maps(store: MemoryStore) -> None:
+    res = _run(store, ["fit", "P1", "--session", "post"])
+    assert res.exit_code != 0
+    assert isinstance(res.exception, FieldbankError)
+    assert "no maps to fit: patient 'P1', session 'post'" in str(res.exception)
+    bad = MemoryStore()
+    bad.patients["P1"] = BASE
+    bad.maps = [PatientMap(1, "P1", None, store.maps[0].map),
+                PatientMap(2, "P9", None, store.maps[1].map)]
+    bad.maps_for = lambda patient, session=None: bad.maps  # type: ignore[method-assign]
+    res = _run(bad, ["fit", "P1"])
+    assert "map 2 belongs to patient 'P9', not to 'P1'" in str(res.exception)
+    assert bad.fits == []  # nothing stored
+
+
+def test_models_list_and_show(store: MemoryStore) -> None:
+    if not store.models:
+        assert _run(store, ["fit", "P1"]).exit_code == 0
+    res = _run(store, ["models", "list", "--json"])
+    rows = json.loads(res.stdout)
+    assert rows and rows[0]["origin"] == "fitted"
+    res = _run(store, ["models", "list", "--patient", "P1"])
+    assert "fitted" in res.stdout
+    mid = str(rows[0]["id"])
+    res = _run(store, ["models", "show", mid])
+    assert res.exit_code == 0, res.output
+    assert "ef" in res.stdout and "Km N/m" in res.stdout and "fit: mlsl+lbfgs" in res.stdout
+    res = _run(store, ["models", "show", mid, "--json"])
+    assert json.loads(res.stdout)["params"]["schema"] == "fieldbank.arm-params"
+
+
+def test_plot_png_and_bad_extension(tmp_path: Path) -> None:
+    from fieldbank.fitting import ArmFitter
+    from fieldbank.fitting.plot import plot_fit
+
+    pat = synthetic_patient(impaired_params("shoulder", "mild", BASE), seed=5)
+    f = ArmFitter().fit(pat.maps, BASE)
+    out = plot_fit(f.maps_, f.predict(f.maps_), tmp_path / "a.png", f.r2_)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(FitError, match=r"\.png, \.svg"):
+        plot_fit(f.maps_, f.predict(f.maps_), tmp_path / "a.pdf")
+    assert not (tmp_path / "a.pdf").exists()
