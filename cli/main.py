@@ -18,6 +18,8 @@ from fieldbank.errors import FieldbankError
 COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.field", "field"),
     ("cli.whatif", "whatif"),
+    ("cli.fit", "fit"),
+    ("cli.fit", "models"),
 )
 
 
