@@ -18,6 +18,12 @@ from fieldbank.errors import FieldbankError
 #: module name -> attribute holding a click command or group
 COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.field", "field"),
+    ("cli.db", "db"),
+    ("cli.patient", "patient"),
+    ("cli.maps", "maps"),
+    ("cli.ingest", "ingest"),
+    ("cli.export", "export"),
+    ("cli.samples", "samples"),
 )
 
 
@@ -38,7 +44,13 @@ def cli() -> None:
 
 
 for _module, _attr in COMMAND_MODULES:
-    cli.add_command(getattr(importlib.import_module(_module), _attr))
+    try:
+        _mod = importlib.import_module(_module)
+    except ModuleNotFoundError as _exc:
+        if _exc.name != _module:  # a missing dependency inside the module is a real error
+            raise
+        continue  # a command group not present in this build
+    cli.add_command(getattr(_mod, _attr))
 
 
 def main() -> None:

@@ -201,7 +201,7 @@ class Database:
         try:
             with Session(self.engine) as s:
                 yield s
-        except sa_exc.OperationalError as exc:
+        except sa_exc.DBAPIError as exc:
             raise StorageError(f"Database {self.url_masked} failed: {exc.orig}") from None
 
     @contextmanager
@@ -219,7 +219,7 @@ class Database:
                         raise
         except sa_exc.IntegrityError as exc:
             raise StorageError(f"The database refused the change: {exc.orig}") from None
-        except sa_exc.OperationalError as exc:
+        except sa_exc.DBAPIError as exc:
             raise StorageError(f"Database {self.url_masked} failed: {exc.orig}") from None
 
     def _audit(self, s: Session, action: str, entity: str, entity_id: object,
