@@ -42,6 +42,7 @@ import hashlib
 import json
 import os
 import re
+import time
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from datetime import UTC, date, datetime
@@ -100,6 +101,9 @@ CODE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 #: Test hook: seconds to sleep after writing each file of an ingest batch, inside the
 #: transaction (lets tests kill an ingest in the middle of a batch). Unset in normal use.
 ENV_TEST_INGEST_SLEEP = "FIELDBANK_TEST_INGEST_SLEEP_S"
+#: Test hook: a file to which a line is appended after each file is written, inside the
+#: transaction (tests wait for it to know the batch is half written). Unset in normal use.
+ENV_TEST_INGEST_MARK = "FIELDBANK_TEST_INGEST_MARK"
 
 
 def _now() -> datetime:
@@ -342,6 +346,7 @@ class Database:
         ``progress`` (optional) is called with each file name after it is written.
         """
         sleep_s = float(os.environ.get(ENV_TEST_INGEST_SLEEP, "0") or 0)
+        mark = os.environ.get(ENV_TEST_INGEST_MARK)
         refs: dict[str, ArrayRef] = {}
         for f in files:
             if len(f.content) > INLINE_MAX_BYTES and f.sha256 not in refs:
@@ -385,9 +390,10 @@ class Database:
                                               len(f.maps)))
                 if progress is not None:
                     progress(f.file_name)
+                if mark:
+                    with open(mark, "a", encoding="utf-8") as fh:
+                        fh.write(f.sha256 + "\n")
                 if sleep_s > 0:
-                    import time
-
                     time.sleep(sleep_s)
         return outcomes
 
