@@ -37,6 +37,6 @@ def list_(db_url: str | None, patient_code: str | None, session_label: str | Non
         v = "static" if m.velocity_m_per_s == (0.0, 0.0) else (
             "v=({:g}, {:g}) m/s".format(*m.velocity_m_per_s))
         click.echo(f"{m.id:>6} {m.patient_code:<12} {m.session_label:<14} "
-                   f"{str(m.session_date or ''):<10} {m.kind:<9} {m.n_points:>4} pts {v:<18} "
+                   f"{m.session_date or ''!s:<10} {m.kind:<9} {m.n_points:>4} pts {v:<18} "
                    f"{m.source_file}")
     click.echo(f"{len(rows)} map(s)", err=True)

@@ -148,10 +148,11 @@ def write_samples(root: str | Path, seed: int = 20240601) -> dict[str, Any]:
             mov = _noisy(stiffness_map(arm, pos_k, MOVING_VELOCITY_M_PER_S, source=src),
                          STIFFNESS_FLOOR_N_PER_M, rng, metadata=meta)
             files: list[dict[str, str]] = []
+            rel = f"{pat.code}/{label}"
 
-            def add(name: str, fmt: str, kinds: str) -> None:
-                files.append({"file": f"{pat.code}/{label}/{name}", "format": fmt,
-                              "kinds": kinds})
+            def add(name: str, fmt: str, kinds: str, files: list[dict[str, str]] = files,
+                    rel: str = rel) -> None:
+                files.append({"file": f"{rel}/{name}", "format": fmt, "kinds": kinds})
 
             if label == "pre-BoNT":
                 (sdir / "postural.csv").write_text(post.to_csv(), encoding="utf-8")

@@ -11,8 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fieldbank.ingest import detect_format, ingest_paths, read_file, write_hdf5
-from fieldbank.ingest import write_mat5, write_mat73
+from fieldbank.ingest import (
+    detect_format,
+    ingest_paths,
+    read_file,
+    write_hdf5,
+    write_mat5,
+    write_mat73,
+)
 from fieldbank.ingest.units import KGF_N
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm

@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 from sqlalchemy import inspect
 
-from fieldbank.storage import Database, make_engine
-from fieldbank.storage import migrate
+from fieldbank.storage import Database, make_engine, migrate
 from fieldbank.storage.orm import Base
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,7 +57,7 @@ def test_downgrade_upgrade_cycle(any_db_url: str, tmp_path: Path) -> None:
     db = Database.open(any_db_url, upgrade="always", store_root=tmp_path / "a")
     db.add_patient("CYC-1", 70, 1.7, "right")
     db.raw_sql("SELECT 1")
-    before, after = migrate.downgrade(db.engine, "base")
+    _, after = migrate.downgrade(db.engine, "base")
     assert after is None and _tables(any_db_url) == set()
     migrate.upgrade(db.engine)
     assert _tables(any_db_url) == set(Base.metadata.tables)
@@ -103,7 +102,7 @@ def test_concurrent_upgrades_on_postgresql(pg_url: str) -> None:
         engine = make_engine(pg_url)
         try:
             results.append(migrate.upgrade(engine))
-        except BaseException as exc:  # noqa: BLE001 - reported by the assertion below
+        except BaseException as exc:
             errors.append(exc)
         finally:
             engine.dispose()

@@ -50,7 +50,7 @@ def read_csv(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
         else:
             rows.append((lineno, line.split(",")))
     if header is None:
-        return [], problems + [Problem(name, "no header row (expected e.g. x_m,y_m,fx_n,fy_n)")]
+        return [], [*problems, Problem(name, "no header row (expected e.g. x_m,y_m,fx_n,fy_n)")]
     kind = meta.get("kind")
     hloc = f"{name}:row {header_line}"
     # Which value columns to expect: from the kind when valid, else guessed from the header.

@@ -81,7 +81,7 @@ def read_hdf5(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
             problems.append(Problem(f"{name}:/", f"attribute format must be {FORMAT!r}; got "
                                     f"{fmt!r} (see docs/formats.md)"))
         if "maps" not in f or not isinstance(f["maps"], h5py.Group) or len(f["maps"]) == 0:
-            return [], problems + [Problem(f"{name}:/", "no /maps group with at least one map")]
+            return [], [*problems, Problem(f"{name}:/", "no /maps group with at least one map")]
         for key in sorted(f["maps"]):
             g = f["maps"][key]
             where = f"{name}:/maps/{key}"

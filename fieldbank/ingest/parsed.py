@@ -130,20 +130,22 @@ def validate_map(pm: ParsedMap, arm: Arm | None, patient: str = "") -> tuple[Fie
             probs.append(Problem(pm.point_location(i), "standard deviation is negative"))
     finite = np.all(np.isfinite(pos), axis=1)
     seen: dict[tuple[int, int], int] = {}
-    for i in np.flatnonzero(finite):
-        key = (round(pos[i, 0] / DUPLICATE_TOLERANCE_M), round(pos[i, 1] / DUPLICATE_TOLERANCE_M))
-        if key in seen:
-            probs.append(Problem(pm.point_location(int(i)), "duplicate position "
-                                 f"({pos[i, 0]:.6g}, {pos[i, 1]:.6g}) m, first at "
-                                 f"{pm.point_location(seen[key])}"))
+    for idx in np.flatnonzero(finite):
+        j = int(idx)
+        cell = (round(pos[j, 0] / DUPLICATE_TOLERANCE_M), round(pos[j, 1] / DUPLICATE_TOLERANCE_M))
+        if cell in seen:
+            probs.append(Problem(pm.point_location(j), "duplicate position "
+                                 f"({pos[j, 0]:.6g}, {pos[j, 1]:.6g}) m, first at "
+                                 f"{pm.point_location(seen[cell])}"))
         else:
-            seen[key] = int(i)
+            seen[cell] = j
     if arm is not None and finite.any():
         ok = np.ones(n, dtype=bool)
         ok[finite] = arm.reachable(pos[finite])
-        for i in np.flatnonzero(~ok):
-            probs.append(Problem(pm.point_location(int(i)), f"position ({pos[i, 0]:.4g}, "
-                                 f"{pos[i, 1]:.4g}) m is out of reach of patient {patient}'s "
+        for idx in np.flatnonzero(~ok):
+            j = int(idx)
+            probs.append(Problem(pm.point_location(j), f"position ({pos[j, 0]:.4g}, "
+                                 f"{pos[j, 1]:.4g}) m is out of reach of patient {patient}'s "
                                  f"{arm.params.side} arm (upper arm {arm.l1:.3f} m, forearm "
                                  f"and hand {arm.l2:.3f} m, within its range of motion)"))
     if probs:

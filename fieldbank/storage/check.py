@@ -73,7 +73,7 @@ def check(db: Database) -> CheckReport:
                     problems.append(f"source file {sha}: {exc}")
                     continue
             else:
-                data = content
+                data = content or b""
             if hashlib.sha256(data).hexdigest() != sha:
                 problems.append(f"source file {sha} does not match its SHA-256")
         counts["source_files"] = n_src

@@ -78,7 +78,7 @@ def sqlite_path(url: URL) -> Path | None:
     """The file of a SQLite URL, or None for an in-memory database."""
     if not is_sqlite(url) or url.database in (None, "", ":memory:"):
         return None
-    return Path(url.database)  # type: ignore[arg-type]
+    return Path(url.database)
 
 
 def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:

@@ -15,13 +15,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import migrations as _migrations_pkg
 from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, Engine, text
 
+import migrations as _migrations_pkg
 from fieldbank.errors import StorageError
 
 #: Arbitrary constant key of the PostgreSQL advisory lock held while migrating.
