@@ -417,7 +417,7 @@ class Database:
     @staticmethod
     def _stored_map(r: Any) -> StoredMap:
         return StoredMap(r[0], r[1], r[2], r[3], r[4], r[5], r[6], (r[7], r[8]), r[9], r[10],
-                         r[11], r[12], r[13], r[14], _utc(r[15]), r[16])
+                         r[11], r[12], r[13], r[14], r[15].replace(tzinfo=UTC), r[16])
 
     def _map_query(self) -> Any:
         return (select(*self._MAP_COLUMNS)
@@ -441,8 +441,13 @@ class Database:
         if until is not None:
             q = q.where(SessionRow.session_date <= until)
         q = q.order_by(PatientRow.code, SessionRow.session_date, MapRow.id)
-        with self._read() as s:
-            return [self._stored_map(r) for r in s.execute(q)]
+        # Core, not the ORM session: listing is on the interactive path (target ≤ 5 ms).
+        try:
+            with self.engine.connect() as conn:
+                rows = conn.execute(q).all()
+        except sa_exc.DBAPIError as exc:
+            raise StorageError(f"Database {self.url_masked} failed: {exc.orig}") from None
+        return [self._stored_map(r) for r in rows]
 
     def get_stored_map(self, map_id: int) -> StoredMap:
         with self._read() as s:
