@@ -98,9 +98,10 @@ def test_hdf5_with_several_maps(tmp_path: Path) -> None:
     assert [m.kind for m in inc.maps] == ["postural", "stiffness"]
 
 
-def test_ingest_sample_set_and_export_round_trip(sample_dir: Path, tmp_path: Path) -> None:
+def test_ingest_sample_set_and_export_round_trip(sample_dir: Path, tmp_path: Path,
+                                                  any_db_url: str) -> None:
     manifest = json.loads((sample_dir / "manifest.json").read_text())
-    db = Database.open(f"sqlite:///{tmp_path / 'x.sqlite3'}")
+    db = Database.open(any_db_url, upgrade="always", store_root=tmp_path / "arrays")
     n_maps = 0
     for p in manifest["patients"]:
         db.add_patient(p["code"], p["body_mass_kg"], p["height_m"], p["side"])
@@ -129,6 +130,7 @@ def test_ingest_sample_set_and_export_round_trip(sample_dir: Path, tmp_path: Pat
     db.close()
 
 
+@pytest.mark.slow
 def test_cli_ingest_dry_run_json_and_duplicates(sample_dir: Path, tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "FIELDBANK_HOME": str(tmp_path / "home")}
 

@@ -78,3 +78,12 @@ def test_cli_check_exit_code(db: Database, monkeypatch: pytest.MonkeyPatch) -> N
     _tamper(db, update(SourceFileRow).values(content=b"x"))
     bad = CliRunner().invoke(cli, ["db", "check", "--db", url])
     assert bad.exit_code == 1 and "problem:" in bad.output
+
+
+def test_map_patient_must_match_session_patient(db: Database) -> None:
+    from sqlalchemy import update
+
+    other = db.add_patient("CH-2", 70, 1.7, "left")
+    _tamper(db, update(MapRow).values(patient_id=other.id))
+    r = db.check()
+    assert any("differs from its session's patient" in p for p in r.problems)

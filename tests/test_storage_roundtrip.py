@@ -117,6 +117,7 @@ def test_duplicate_file_not_stored_twice(db: Database) -> None:
     assert [o.status for o in first] == ["stored", "duplicate"]
     second = db.ingest_files("P-004", "t", [inc])
     assert second[0].status == "duplicate"
+    assert [x.label for x in db.list_sessions("P-004")] == ["s"]  # no empty session "t"
     assert len(db.list_maps()) == 1
 
 

@@ -27,7 +27,14 @@ from sqlalchemy import func, select, text
 from fieldbank.errors import ParameterError
 from fieldbank.params import ArmParams
 from fieldbank.storage import migrate
-from fieldbank.storage.orm import ArrayRow, MapRow, ModelRow, SourceFileRow, TraceRow
+from fieldbank.storage.orm import (
+    ArrayRow,
+    MapRow,
+    ModelRow,
+    SessionRow,
+    SourceFileRow,
+    TraceRow,
+)
 from fieldbank.storage.records import CheckReport
 
 if TYPE_CHECKING:
@@ -100,6 +107,11 @@ def check(db: Database) -> CheckReport:
             except ValueError:
                 problems.append(f"map {m.id}: metadata is not valid JSON")
         counts["maps"] = n_maps
+        mismatched = s.execute(
+            select(MapRow.id).join(SessionRow, MapRow.session_id == SessionRow.id)
+            .where(MapRow.patient_id != SessionRow.patient_id)).scalars().all()
+        for mid in mismatched:
+            problems.append(f"map {mid}: its patient differs from its session's patient")
         n_models = 0
         for mid, pj in s.execute(select(ModelRow.id, ModelRow.params_json)):
             n_models += 1

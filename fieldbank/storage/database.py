@@ -357,10 +357,13 @@ class Database:
         outcomes: list[IngestOutcome] = []
         with self._write() as s:
             p = self._patient_row(s, patient_code)
-            sess = self._session_row(s, p, session_label, session_date, create=True)
             shas = [f.sha256 for f in files]
             existing = set(s.scalars(select(SourceFileRow.sha256)
                                      .where(SourceFileRow.sha256.in_(shas))))
+            if set(shas) <= existing:  # nothing new: do not create an empty session
+                return [IngestOutcome(f.file_name, f.sha256, "duplicate", (), len(f.maps))
+                        for f in files]
+            sess = self._session_row(s, p, session_label, session_date, create=True)
             now = _now()
             for f in files:
                 if f.sha256 in existing:
