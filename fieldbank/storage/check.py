@@ -2,7 +2,8 @@
 
 Problems (the database is damaged; exit non-zero):
 
-* schema not at head; SQLite ``quick_check`` or ``foreign_key_check`` failures;
+* schema not at head or different from the models (alembic check); SQLite ``quick_check``
+  or ``foreign_key_check`` failures;
 * a source file whose bytes do not hash to its SHA-256, or whose store array is missing or
   corrupt; a map whose arrays have the wrong size or non-finite numbers; a model whose
   parameters no longer validate; an ``arrays`` row whose file is missing or corrupt.
@@ -24,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from sqlalchemy import func, select, text
 
-from fieldbank.errors import ParameterError
+from fieldbank.errors import ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.storage import migrate
 from fieldbank.storage.orm import (
@@ -49,6 +50,11 @@ def check(db: Database) -> CheckReport:
     current = migrate.current_revision(db.engine)
     if current != head:
         problems.append(f"schema revision is {current}, expected {head}")
+    else:
+        try:
+            migrate.check_drift(db.engine)
+        except StorageError as exc:
+            problems.append(str(exc))
     with db._read() as s:
         if db.engine.dialect.name == "sqlite":
             res = [r[0] for r in s.execute(text("PRAGMA quick_check"))]

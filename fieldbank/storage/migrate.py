@@ -13,6 +13,8 @@ failed upgrade leaves the previous revision in place.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from alembic import command
@@ -20,9 +22,11 @@ from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, Engine, text
+from sqlalchemy import exc as sa_exc
 
 import migrations as _migrations_pkg
 from fieldbank.errors import StorageError
+from fieldbank.storage.config import mask_url
 
 #: Arbitrary constant key of the PostgreSQL advisory lock held while migrating.
 PG_LOCK_KEY = 0x6669656C64  # "field"
@@ -37,6 +41,15 @@ def alembic_config(connection: Connection | None = None) -> Config:
     return cfg
 
 
+@contextmanager
+def _errors(engine: Engine, doing: str) -> Iterator[None]:
+    """Database failures as StorageError naming the URL without its password."""
+    try:
+        yield
+    except sa_exc.DBAPIError as exc:
+        raise StorageError(f"{doing} {mask_url(engine.url)} failed: {exc.orig}") from None
+
+
 def head_revision() -> str:
     heads = ScriptDirectory.from_config(alembic_config()).get_heads()
     if len(heads) != 1:
@@ -45,7 +58,7 @@ def head_revision() -> str:
 
 
 def current_revision(engine: Engine) -> str | None:
-    with engine.connect() as conn:
+    with _errors(engine, "Reading the schema revision of"), engine.connect() as conn:
         return MigrationContext.configure(conn).get_current_revision()
 
 
@@ -61,6 +74,11 @@ def _locked(engine: Engine) -> Connection:
 
 def upgrade(engine: Engine, revision: str = "head") -> tuple[str | None, str | None]:
     """Migrate to ``revision`` under the lock; returns (revision before, revision after)."""
+    with _errors(engine, "Upgrading"):
+        return _upgrade(engine, revision)
+
+
+def _upgrade(engine: Engine, revision: str) -> tuple[str | None, str | None]:
     conn = _locked(engine)
     try:
         before = MigrationContext.configure(conn).get_current_revision()
@@ -79,6 +97,11 @@ def upgrade(engine: Engine, revision: str = "head") -> tuple[str | None, str | N
 
 def downgrade(engine: Engine, revision: str) -> tuple[str | None, str | None]:
     """Migrate down to ``revision`` ('base' empties the database) under the lock."""
+    with _errors(engine, "Downgrading"):
+        return _downgrade(engine, revision)
+
+
+def _downgrade(engine: Engine, revision: str) -> tuple[str | None, str | None]:
     conn = _locked(engine)
     try:
         before = MigrationContext.configure(conn).get_current_revision()
