@@ -13,6 +13,7 @@ failed upgrade leaves the previous revision in place.
 
 from __future__ import annotations
 
+import io
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -34,7 +35,7 @@ PG_LOCK_KEY = 0x6669656C64  # "field"
 
 def alembic_config(connection: Connection | None = None) -> Config:
     """An alembic Config for the packaged migrations, optionally bound to a connection."""
-    cfg = Config()
+    cfg = Config(stdout=io.StringIO())  # alembic's chatter must not reach our stdout (--json)
     cfg.set_main_option("script_location", str(Path(_migrations_pkg.__file__).parent))
     if connection is not None:
         cfg.attributes["connection"] = connection
