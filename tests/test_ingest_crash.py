@@ -113,3 +113,35 @@ def test_two_ingest_processes_at_once_on_sqlite(tmp_path: Path) -> None:
     assert len(db.list_maps("C-1")) == 20 and len(db.list_maps("C-2")) == 20
     assert db.check().ok
     db.close()
+
+
+@pytest.mark.postgres
+def test_concurrent_ingest_of_the_same_files_on_postgresql(pg_url: str, tmp_path: Path) -> None:
+    import threading
+
+    from fieldbank.ingest import ingest_paths
+
+    db = Database.open(pg_url, upgrade="always", store_root=tmp_path / "arrays")
+    db.add_patient("PG-1", 75, 1.75, "right")
+    files = _files(tmp_path / "in", 10, seed=4)
+    reports = []
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        mine = Database.open(pg_url, store_root=tmp_path / "arrays")
+        try:
+            reports.append(ingest_paths(mine, files, "PG-1", "s"))
+        except BaseException as exc:  # reported by the assertion below
+            errors.append(exc)
+        finally:
+            mine.close()
+
+    threads = [threading.Thread(target=run) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert not errors
+    assert sorted(r.n_stored for r in reports) == [0, 0, 10]
+    assert len(db.list_maps("PG-1")) == 10 and db.check().ok
+    db.close()

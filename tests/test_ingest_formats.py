@@ -169,3 +169,30 @@ def test_cli_ingest_dry_run_json_and_duplicates(sample_dir: Path, tmp_path: Path
     r = cli("patient", "show", "SYN-002", "--json")
     assert json.loads(r.stdout)["sessions"][0]["n_maps"] == 4
     assert cli("db", "check").returncode == 0
+
+
+def test_export_csv_round_trip(sample_dir: Path, tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from cli.main import cli
+
+    url = f"sqlite:///{tmp_path / 'e.sqlite3'}"
+    db = Database.open(url)
+    db.add_patient("SYN-003", 85.0, 1.83, "right")
+    files = sorted((sample_dir / "SYN-003" / "post-BoNT").iterdir())
+    ingest_paths(db, files, "SYN-003", "post-BoNT")
+    out = tmp_path / "csv"
+    r = CliRunner().invoke(cli, ["export", "--db", url, "--patient", "SYN-003", "--kind",
+                                 "stiffness", "--format", "csv", "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    written = json.loads(r.stdout)["files"]
+    assert len(written) == 2
+    stored = db.get_maps([m.id for m in db.list_maps("SYN-003", kind="stiffness")])
+    for path, m in zip(written, stored, strict=True):
+        inc, problems = read_file(Path(path).name, Path(path).read_bytes(), None)
+        assert problems == []
+        _same(m, inc.maps[0], rtol=1e-8)
+    r = CliRunner().invoke(cli, ["export", "--db", url, "--patient", "NOBODY", "-o",
+                                 str(tmp_path / "x.h5")])
+    assert r.exit_code == 1 and "No map matches" in r.output
+    db.close()

@@ -101,6 +101,8 @@ CODE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 #: Test hook: seconds to sleep after writing each file of an ingest batch, inside the
 #: transaction (lets tests kill an ingest in the middle of a batch). Unset in normal use.
 ENV_TEST_INGEST_SLEEP = "FIELDBANK_TEST_INGEST_SLEEP_S"
+#: Arbitrary constant key of the PostgreSQL advisory lock held by an ingest transaction.
+PG_INGEST_LOCK_KEY = 0x696E676573  # "inges"
 #: Test hook: a file to which a line is appended after each file is written, inside the
 #: transaction (tests wait for it to know the batch is half written). Unset in normal use.
 ENV_TEST_INGEST_MARK = "FIELDBANK_TEST_INGEST_MARK"
@@ -356,6 +358,10 @@ class Database:
                      "format": f.file_format, "stored_by": self.actor})
         outcomes: list[IngestOutcome] = []
         with self._write() as s:
+            if self.engine.dialect.name == "postgresql":
+                # Serialise ingests as BEGIN IMMEDIATE does on SQLite, so that two processes
+                # storing the same file see each other's commit instead of colliding.
+                s.execute(text("SELECT pg_advisory_xact_lock(:k)"), {"k": PG_INGEST_LOCK_KEY})
             p = self._patient_row(s, patient_code)
             shas = [f.sha256 for f in files]
             existing = set(s.scalars(select(SourceFileRow.sha256)
@@ -769,7 +775,8 @@ class Database:
         return check(self)
 
     def raw_sql(self, sql: str) -> None:
-        """Run one statement in a write transaction (tests and maintenance only)."""
+        """Run one SQL statement in a write transaction, NOT audited: for tests and
+        maintenance only (application code uses the audited methods above)."""
         with self._write() as s:
             s.execute(text(sql))
 
