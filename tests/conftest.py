@@ -1,8 +1,8 @@
-"""Shared test fixtures.
+"""Shared test configuration.
 
-PostgreSQL: tests marked ``postgres`` use the server at ``FIELDBANK_TEST_PG_URL`` (start one
-with ``eval "$(scripts/pg-test-server)"``). Without that URL they are skipped, unless
-``FIELDBANK_REQUIRE_PG=1`` (CI), where a missing server is an error.
+PostgreSQL tests (marker ``postgres``) use the server at ``FIELDBANK_TEST_PG_URL``. Without it
+they are skipped on a developer machine; with ``FIELDBANK_REQUIRE_PG=1`` (set by scripts/test,
+which starts a real server) a missing URL is an error, so CI never skips them silently.
 """
 
 from __future__ import annotations
@@ -13,35 +13,34 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
-PG_ENV = "FIELDBANK_TEST_PG_URL"
+settings.register_profile(
+    "fieldbank", deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True
+)
+settings.load_profile("fieldbank")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    if os.environ.get(PG_ENV):
+    if os.environ.get("FIELDBANK_TEST_PG_URL"):
         return
-    if os.environ.get("FIELDBANK_REQUIRE_PG") == "1":
-        for item in items:
-            if "postgres" in item.keywords:
-                item.add_marker(pytest.mark.usefixtures("_require_pg"))
-        return
-    skip = pytest.mark.skip(reason=f"{PG_ENV} is not set (no PostgreSQL server)")
+    required = os.environ.get("FIELDBANK_REQUIRE_PG") == "1"
     for item in items:
         if "postgres" in item.keywords:
-            item.add_marker(skip)
-
-
-@pytest.fixture
-def _require_pg() -> None:
-    pytest.fail(f"FIELDBANK_REQUIRE_PG=1 but {PG_ENV} is not set: PostgreSQL tests must run.")
+            if required:
+                raise pytest.UsageError(
+                    "FIELDBANK_REQUIRE_PG=1 but FIELDBANK_TEST_PG_URL is unset: "
+                    "start a server with scripts/pg-test-server."
+                )
+            item.add_marker(pytest.mark.skip(reason="FIELDBANK_TEST_PG_URL not set"))
 
 
 @pytest.fixture
 def pg_url() -> Iterator[str]:
     """URL of a fresh, empty PostgreSQL database on the test server, dropped afterwards."""
-    base = os.environ.get(PG_ENV)
+    base = os.environ.get("FIELDBANK_TEST_PG_URL")
     if not base:
-        pytest.fail(f"{PG_ENV} is not set")
+        pytest.fail("FIELDBANK_TEST_PG_URL is not set")
     from sqlalchemy import create_engine, text
     from sqlalchemy.engine import make_url
 
