@@ -266,8 +266,8 @@ class Database:
     def _patient_row(self, s: Session, code: str) -> PatientRow:
         row = s.scalar(select(PatientRow).where(PatientRow.code == code))
         if row is None:
-            raise StorageError(f"No patient with code {code!r}; add it with 'fieldbank patient "
-                               "add'.")
+            raise StorageError(f"No patient with code {code!r} in the database; add it with "
+                               "'fieldbank patient add'.")
         return row
 
     def get_patient(self, code: str) -> PatientInfo:
