@@ -103,15 +103,17 @@ def lab_units_csv(m: FieldMap) -> str:
     lines += [f"# {k}: {v}" for k, v in m.metadata.items()]
     n = m.n
     if m.kind == "postural":
-        cols = ["x_mm", "y_mm", "fx_kgf", "fy_kgf", "sd_fx_kgf", "sd_fy_kgf"]
+        names = ["fx_kgf", "fy_kgf"]
         scale = 1.0 / KGF_N
     else:
-        cols = ["x_mm", "y_mm", "kxx_n_per_mm", "kxy_n_per_mm", "kyx_n_per_mm", "kyy_n_per_mm",
-                "sd_kxx_n_per_mm", "sd_kxy_n_per_mm", "sd_kyx_n_per_mm", "sd_kyy_n_per_mm"]
+        names = ["kxx_n_per_mm", "kxy_n_per_mm", "kyx_n_per_mm", "kyy_n_per_mm"]
         scale = 1e-3
-    sd = m.sd if m.sd is not None else np.zeros_like(m.values)
-    table = np.hstack([m.positions_m * 1e3, m.values.reshape(n, -1) * scale,
-                       sd.reshape(n, -1) * scale])
+    cols = ["x_mm", "y_mm", *names]
+    parts = [m.positions_m * 1e3, m.values.reshape(n, -1) * scale]
+    if m.sd is not None:
+        cols += [f"sd_{c}" for c in names]
+        parts.append(m.sd.reshape(n, -1) * scale)
+    table = np.hstack(parts)
     lines.append(",".join(cols))
     lines += [",".join(f"{v:.10g}" for v in row) for row in table]
     return "\n".join(lines) + "\n"

@@ -70,10 +70,11 @@ def read_mat73(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
             cls = ds.attrs.get("MATLAB_class", b"")
             cls = cls.decode() if isinstance(cls, bytes) else str(cls)
             arr = np.asarray(ds[()])
-            if cls == "char":
-                variables[k] = "".join(chr(int(c)) for c in arr.T.ravel())
-            elif ds.attrs.get("MATLAB_empty", 0):
-                variables[k] = np.zeros((0, 0))
+            if ds.attrs.get("MATLAB_empty", 0):  # the dataset holds only the dimensions
+                variables[k] = "" if cls == "char" else np.zeros((0, 0))
+            elif cls == "char":  # UTF-16 code units, as MATLAB stores text
+                units = np.ascontiguousarray(arr.T.ravel(), dtype="<u2")
+                variables[k] = units.tobytes().decode("utf-16-le", errors="replace")
             else:
                 variables[k] = arr.T
     return _from_variables(name, variables)
@@ -190,8 +191,10 @@ def write_mat73(path: str | Path, m: FieldMap) -> None:
     with h5py.File(path, "w", userblock_size=512) as f:
         for k, val in _variables(m).items():
             if isinstance(val, str):
-                codes = np.array([[ord(c) for c in val]], dtype=np.uint16)
-                ds = f.create_dataset(k, data=codes.T)
+                codes = np.frombuffer(val.encode("utf-16-le"), dtype="<u2")[None, :]
+                ds = f.create_dataset(k, data=codes.T if codes.size else np.zeros((2,), "<u8"))
+                if not codes.size:  # MATLAB writes an empty char array as its dimensions
+                    ds.attrs["MATLAB_empty"] = np.uint8(1)
                 ds.attrs["MATLAB_class"] = np.bytes_("char")
                 ds.attrs["MATLAB_int_decode"] = np.int32(2)
             else:
