@@ -203,3 +203,13 @@ def test_audit_log_is_append_only(db: Database, sql: str) -> None:
     with pytest.raises(StorageError, match="append-only"):
         db.raw_sql(sql)
     assert db.audit_entries() == before
+
+
+@pytest.mark.postgres
+def test_audit_log_cannot_be_truncated_on_postgresql(pg_url: str, tmp_path) -> None:
+    db = Database.open(pg_url, upgrade="always", store_root=tmp_path / "arrays")
+    db.add_patient("P-010", 70, 1.7, "right")
+    with pytest.raises(StorageError, match="append-only"):
+        db.raw_sql("TRUNCATE audit_log")
+    assert len(db.audit_entries()) == 1
+    db.close()
