@@ -20,6 +20,12 @@ COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.whatif", "whatif"),
     ("cli.fit", "fit"),
     ("cli.fit", "models"),
+    ("cli.db", "db"),
+    ("cli.patient", "patient"),
+    ("cli.maps", "maps"),
+    ("cli.ingest", "ingest"),
+    ("cli.export", "export"),
+    ("cli.samples", "samples"),
 )
 
 

@@ -8,6 +8,9 @@ which starts a real server) a missing URL is an error, so CI never skips them si
 from __future__ import annotations
 
 import os
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -30,3 +33,55 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
                     "start a server with scripts/pg-test-server."
                 )
             item.add_marker(pytest.mark.skip(reason="FIELDBANK_TEST_PG_URL not set"))
+
+
+@pytest.fixture
+def pg_url() -> Iterator[str]:
+    """URL of a fresh, empty PostgreSQL database on the test server, dropped afterwards."""
+    base = os.environ.get("FIELDBANK_TEST_PG_URL")
+    if not base:
+        pytest.fail("FIELDBANK_TEST_PG_URL is not set")
+    from sqlalchemy import create_engine, text
+    from sqlalchemy.engine import make_url
+
+    name = f"fbtest_{uuid.uuid4().hex[:12]}"
+    admin = create_engine(base, isolation_level="AUTOCOMMIT")
+    with admin.connect() as c:
+        c.execute(text(f'CREATE DATABASE "{name}"'))
+    try:
+        yield make_url(base).set(database=name).render_as_string(hide_password=False)
+    finally:
+        with admin.connect() as c:
+            c.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.dispose()
+
+
+@pytest.fixture
+def sqlite_url(tmp_path: Path) -> str:
+    return f"sqlite:///{tmp_path / 'db' / 'fieldbank.sqlite3'}"
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def any_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """A fresh database URL on each backend (SQLite file; PostgreSQL when available)."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'db' / 'fieldbank.sqlite3'}"
+    return str(request.getfixturevalue("pg_url"))
+
+
+@pytest.fixture(scope="session")
+def sample_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The synthetic sample files, written once per test run."""
+    from fieldbank.sampledata import write_samples
+
+    root = tmp_path_factory.mktemp("samples")
+    write_samples(root)
+    return root
+
+
+@pytest.fixture(autouse=True)
+def _isolated_home(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """No test reads or writes the user's real data directory or database."""
+    monkeypatch.setenv("FIELDBANK_HOME", str(tmp_path / "fieldbank-home"))
+    monkeypatch.delenv("FIELDBANK_DB", raising=False)
+    monkeypatch.delenv("FIELDBANK_ARRAYS", raising=False)

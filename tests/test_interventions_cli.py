@@ -94,8 +94,11 @@ def test_bad_input_is_refused_with_a_clear_message(tmp_path: Path) -> None:
     assert code == 2 and "No intervention given" in err
     code, _, err = run("--botox", "ef=100")
     assert code == 2 and "Give exactly one model" in err
-    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=100", "--save")
-    assert code == 1 and "--out DIR" in err
+    bad_db = tmp_path / "no-such-dir" / "sub" / "x.sqlite3"
+    (tmp_path / "no-such-dir").write_text("a file where a directory should be")
+    code, _, err = run("--severity", "elbow=severe", "--botox", "ef=100", "--save",
+                       "--db", f"sqlite:///{bad_db}")
+    assert code == 1 and "no-such-dir" in err
     code, _, err = run("P001", "--botox", "ef=100")
     assert code == 1 and "database" in err
     out = tmp_path / "never"

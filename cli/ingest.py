@@ -1,0 +1,65 @@
+"""``fieldbank ingest``: read lab files into the database, all or nothing."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import click
+
+from cli.dbopt import db_option, emit_json, open_db
+from fieldbank.ingest import ingest_paths
+
+#: Show a progress bar from this many files on (on a terminal).
+PROGRESS_MIN_FILES = 20
+
+
+@click.command("ingest")
+@db_option
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--patient", "patient_code", required=True, help="Patient code.")
+@click.option("--session", "session_label", required=True,
+              help="Session label, e.g. pre-BoNT (created if new).")
+@click.option("--date", "session_date", type=click.DateTime(["%Y-%m-%d"]),
+              help="Date of the session.")
+@click.option("--dry-run", is_flag=True, help="Validate and report; store nothing.")
+@click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stdout.")
+def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, session_label: str,
+           session_date: datetime | None, dry_run: bool, as_json: bool) -> None:
+    """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3).
+
+    Every file is validated first; any problem anywhere stores nothing. A file already
+    stored (same SHA-256) is reported and not stored again.
+    """
+    bar: Any = None
+    if len(files) >= PROGRESS_MIN_FILES:
+        from tqdm import tqdm
+
+        bar = tqdm(total=2 * len(files), unit="step", disable=None, leave=False,
+                   desc="validate+store")
+
+    def progress(done: int, total: int, name: str) -> None:
+        if bar is not None:
+            bar.n = done
+            bar.refresh()
+
+    try:
+        with open_db(db_url) as db:
+            report = ingest_paths(db, [Path(f) for f in files], patient_code, session_label,
+                                  session_date.date() if session_date else None, dry_run,
+                                  progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    if as_json:
+        emit_json(report.to_json_dict())
+    for o in report.outcomes:
+        if o.status == "duplicate":
+            click.echo(f"{o.file_name}: already stored (SHA-256 {o.sha256[:12]}…), skipped",
+                       err=True)
+    verb = "would store" if dry_run else "stored"
+    n = report.n_stored if not dry_run else sum(o.status == "would-store"
+                                                for o in report.outcomes)
+    click.echo(f"{verb} {n} file(s) for {report.patient_code} / {report.session_label}; "
+               f"{report.n_duplicates} duplicate(s)", err=True)

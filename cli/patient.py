@@ -1,0 +1,76 @@
+"""``fieldbank patient``: register and look up patients (pseudonymous codes only)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import click
+
+from cli.dbopt import db_option, emit_json, open_db
+
+
+@click.group("patient")
+def patient() -> None:
+    """Patients: a pseudonymous code, body mass, height and the measured side."""
+
+
+@patient.command("add")
+@db_option
+@click.argument("code")
+@click.option("--mass-kg", type=float, required=True, help="Body mass, kg.")
+@click.option("--height-m", type=float, required=True, help="Height, m.")
+@click.option("--side", type=click.Choice(["right", "left"]), required=True,
+              help="The arm that is measured.")
+@click.option("--notes", default="", help="Free text (no identifying details).")
+@click.option("--json", "as_json", is_flag=True)
+def add(db_url: str | None, code: str, mass_kg: float, height_m: float, side: str, notes: str,
+        as_json: bool) -> None:
+    """Register patient CODE (a pseudonym; never a name or birth date)."""
+    with open_db(db_url) as db:
+        p = db.add_patient(code, mass_kg, height_m, side, notes)
+    if as_json:
+        emit_json(dataclasses.asdict(p))
+    else:
+        click.echo(f"added patient {p.code} (id {p.id})", err=True)
+
+
+@patient.command("list")
+@db_option
+@click.option("--json", "as_json", is_flag=True)
+def list_(db_url: str | None, as_json: bool) -> None:
+    """List patients."""
+    with open_db(db_url) as db:
+        rows = db.list_patients()
+    if as_json:
+        emit_json([dataclasses.asdict(p) for p in rows])
+        return
+    for p in rows:
+        click.echo(f"{p.code:<16} {p.body_mass_kg:6.1f} kg {p.height_m:5.2f} m {p.side}")
+
+
+@patient.command("show")
+@db_option
+@click.argument("code")
+@click.option("--json", "as_json", is_flag=True)
+def show(db_url: str | None, code: str, as_json: bool) -> None:
+    """Show a patient with sessions, map counts and models."""
+    with open_db(db_url) as db:
+        p = db.get_patient(code)
+        sessions = db.list_sessions(code)
+        models = db.list_models(code)
+    if as_json:
+        emit_json({
+            **dataclasses.asdict(p),
+            "sessions": [dataclasses.asdict(s) for s in sessions],
+            "models": [{"id": m.id, "origin": m.origin, "label": m.label,
+                        "parent_id": m.parent_id} for m in models],
+        })
+        return
+    click.echo(f"patient {p.code}: {p.body_mass_kg:g} kg, {p.height_m:g} m, {p.side} arm")
+    if p.notes:
+        click.echo(f"notes: {p.notes}")
+    for s in sessions:
+        click.echo(f"  session {s.label!r} {s.session_date or '(no date)'}: {s.n_maps} map(s)")
+    for m in models:
+        parent = f" from model {m.parent_id}" if m.parent_id else ""
+        click.echo(f"  model {m.id} ({m.origin}{parent}): {m.label}")

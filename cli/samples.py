@@ -1,0 +1,22 @@
+"""``fieldbank samples``: write the synthetic sample files (not patient data)."""
+
+from __future__ import annotations
+
+import click
+
+from cli.dbopt import emit_json
+from fieldbank.sampledata import write_samples
+
+
+@click.command("samples")
+@click.argument("directory", type=click.Path(file_okay=False))
+@click.option("--seed", type=int, default=20240601, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="The manifest on stdout.")
+def samples(directory: str, seed: int, as_json: bool) -> None:
+    """Write lab-style map files of synthetic patients into DIRECTORY (seeded)."""
+    manifest = write_samples(directory, seed)
+    if as_json:
+        emit_json(manifest)
+    n = sum(len(s["files"]) for p in manifest["patients"] for s in p["sessions"])
+    click.echo(f"wrote {n} synthetic sample file(s) for {len(manifest['patients'])} patients "
+               f"to {directory} (see manifest.json)", err=True)

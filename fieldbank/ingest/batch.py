@@ -1,0 +1,167 @@
+"""Ingest of a batch of files: detect, read, validate every file, then store all at once.
+
+1. Each file is read whole; its SHA-256 is taken over the exact bytes.
+2. The format is detected from the content (not the extension): fieldbank HDF5, MATLAB v5,
+   MATLAB v7.3, or CSV text.
+3. Every map of every file is validated against the patient's arm; every problem of every file
+   is collected, located. If there is any, :class:`~fieldbank.errors.ValidationError` lists
+   them all and nothing is written.
+4. Otherwise all files go to :meth:`Database.ingest_files` in one transaction: the batch lands
+   whole or not at all. A file already stored (same SHA-256) is reported as a duplicate.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import date
+from pathlib import Path
+from typing import Any
+
+from fieldbank.errors import Problem, ValidationError
+from fieldbank.ingest.csvfmt import read_csv
+from fieldbank.ingest.hdf5fmt import read_hdf5
+from fieldbank.ingest.matfmt import read_mat5, read_mat73
+from fieldbank.ingest.parsed import ParsedMap, validate_map
+from fieldbank.model import Arm
+from fieldbank.storage.database import Database
+from fieldbank.storage.records import IncomingFile, IngestOutcome
+
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+FORMATS = ("csv", "hdf5", "mat5", "mat73")
+
+Reader = Callable[[str, bytes], tuple[list[ParsedMap], list[Problem]]]
+READERS: dict[str, Reader] = {"csv": read_csv, "hdf5": read_hdf5, "mat5": read_mat5,
+                              "mat73": read_mat73}
+
+
+def detect_format(data: bytes) -> str | None:
+    """'csv', 'hdf5', 'mat5', 'mat73', or None when the content is none of them."""
+    if data.startswith(b"MATLAB 7.3 MAT-file"):
+        return "mat73"
+    if data.startswith(b"MATLAB 5.0 MAT-file"):
+        return "mat5"
+    if data.startswith(HDF5_SIGNATURE):
+        return "hdf5"
+    if data[:1024].find(b"\0") >= 0:
+        return None
+    try:
+        head = data[:4096].decode("utf-8-sig", errors="strict")
+    except UnicodeDecodeError:
+        head = data[:4095].decode("utf-8-sig", errors="ignore")
+    first = next((ln.strip() for ln in head.splitlines() if ln.strip()), "")
+    if first.startswith("#") or "," in first:
+        return "csv"
+    return None
+
+
+@dataclass(frozen=True)
+class IngestReport:
+    """Result of a batch: one outcome per file, in the order given."""
+
+    patient_code: str
+    session_label: str
+    dry_run: bool
+    outcomes: tuple[IngestOutcome, ...]
+
+    @property
+    def n_stored(self) -> int:
+        return sum(o.status == "stored" for o in self.outcomes)
+
+    @property
+    def n_duplicates(self) -> int:
+        return sum(o.status == "duplicate" for o in self.outcomes)
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return {
+            "patient": self.patient_code,
+            "session": self.session_label,
+            "dry_run": self.dry_run,
+            "files": [
+                {"file": o.file_name, "sha256": o.sha256, "status": o.status,
+                 "maps": o.n_maps, "map_ids": list(o.map_ids)}
+                for o in self.outcomes
+            ],
+            "stored": self.n_stored,
+            "duplicates": self.n_duplicates,
+        }
+
+
+def read_file(name: str, data: bytes, arm: Arm | None,
+              patient: str = "") -> tuple[IncomingFile | None, list[Problem]]:
+    """Detect, read and validate one file's bytes; the IncomingFile or its problems."""
+    sha = hashlib.sha256(data).hexdigest()
+    fmt = detect_format(data)
+    if fmt is None:
+        return None, [Problem(name, "unknown format: expected map CSV, fieldbank HDF5, or "
+                              "MATLAB .mat v5/v7.3")]
+    parsed, problems = READERS[fmt](name, data)
+    maps = []
+    for pm in parsed:
+        fm, probs = validate_map(pm, arm, patient)
+        problems += probs
+        if fm is not None:
+            maps.append(fm)
+    if not problems and not maps:
+        problems.append(Problem(name, "no map in file"))
+    if problems:
+        return None, problems
+    return IncomingFile(name, sha, fmt, data, tuple(maps)), []
+
+
+def ingest_paths(
+    db: Database,
+    paths: Sequence[str | Path],
+    patient_code: str,
+    session_label: str,
+    session_date: date | None = None,
+    dry_run: bool = False,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> IngestReport:
+    """Validate then store a batch of files for one patient's session (see module docstring).
+
+    ``progress(done, total, file_name)`` is called as files are read and as they are stored.
+    """
+    patient = db.get_patient(patient_code)
+    arm = Arm.from_params(patient.arm_params())
+    files: list[IncomingFile] = []
+    problems: list[Problem] = []
+    total = len(paths)
+    for k, p in enumerate(paths):
+        path = Path(p)
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            problems.append(Problem(str(path), f"cannot read ({exc.strerror})"))
+            continue
+        inc, probs = read_file(path.name, data, arm, patient.code)
+        problems += probs
+        if inc is not None:
+            files.append(inc)
+        if progress is not None:
+            progress(k + 1, 2 * total, path.name)
+    if problems:
+        n_bad = len({p.location.split(":")[0] for p in problems})
+        raise ValidationError(problems, header=f"Nothing was stored: {len(problems)} problem(s) "
+                              f"in {n_bad} file(s):")
+    if dry_run:
+        seen: set[str] = set()
+        outcomes = []
+        for f in files:
+            dup = f.sha256 in seen or db.has_source(f.sha256)
+            seen.add(f.sha256)
+            outcomes.append(IngestOutcome(f.file_name, f.sha256,
+                                          "duplicate" if dup else "would-store", (),
+                                          len(f.maps)))
+        return IngestReport(patient.code, session_label, True, tuple(outcomes))
+    done = [total]
+
+    def stored(name: str) -> None:
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], 2 * total, name)
+
+    outcomes = db.ingest_files(patient.code, session_label, files, session_date,
+                               progress=stored)
+    return IngestReport(patient.code, session_label, False, tuple(outcomes))

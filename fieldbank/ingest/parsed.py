@@ -1,0 +1,160 @@
+"""What every reader produces, and the validation shared by all formats.
+
+A reader turns a file into :class:`ParsedMap` objects — arrays already in SI, NaN where a cell
+was not a number (the reader has reported that), metadata as read — plus the problems it found
+in the file's structure. :func:`validate_map` then checks everything that does not depend on the
+format (required metadata, NaN/inf, duplicate positions, reachability by the patient's arm) and
+builds the :class:`~fieldbank.maps.FieldMap`. Every problem is located (file, row or dataset).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fieldbank.errors import MapError, Problem
+from fieldbank.maps import FRAMES, KINDS, SIGNS, FieldMap
+from fieldbank.model import Arm
+
+#: positions closer than this (m) in both coordinates count as the same position
+DUPLICATE_TOLERANCE_M = 1e-6
+#: metadata keys that the map itself holds; others are kept verbatim as provenance
+RESERVED_KEYS = ("kind", "frame", "sign", "velocity_m_per_s", "velocity_vector_m_per_s", "source")
+
+
+@dataclass
+class ParsedMap:
+    """A map as read from a file, before validation.
+
+    positions_m : (N, 2) m; values : (N, 2) N or (N, 2, 2) N/m; sd : same as values or None.
+    velocity_m_per_s : the velocity vector when the file states it unambiguously, else None;
+    velocity_problem : why the file's velocity is unusable (already located), if so.
+    point_location : gives the location of point i (e.g. ``f.csv:row 7``).
+    """
+
+    location: str
+    kind: str | None
+    frame: str | None
+    sign: str | None
+    source: str
+    metadata: dict[str, str]
+    positions_m: np.ndarray
+    values: np.ndarray
+    sd: np.ndarray | None
+    velocity_m_per_s: tuple[float, float] | None
+    point_location: Callable[[int], str]
+    velocity_missing: bool = False
+    problems: list[Problem] = field(default_factory=list)
+    #: points whose unreadable cells the reader has already reported (NaN placeholders)
+    reported: set[int] = field(default_factory=set)
+
+
+def parse_velocity(
+    speed_text: str | None, vector_text: str | None, where: str, kind: str | None,
+    problems: list[Problem],
+) -> tuple[tuple[float, float] | None, bool]:
+    """Velocity vector from the metadata texts; returns (vector or None, missing?)."""
+    vec: tuple[float, float] | None = None
+    if vector_text is not None:
+        parts = [p for p in vector_text.replace(";", ",").split(",") if p.strip()]
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            vals = []
+        if len(vals) != 2 or not all(math.isfinite(v) for v in vals):
+            problems.append(Problem(where, "velocity_vector_m_per_s must be two finite numbers "
+                                    f"'vx, vy' in m/s; got {vector_text!r}"))
+            return None, False
+        vec = (vals[0], vals[1])
+    if speed_text is None:
+        if vec is not None:
+            return vec, False
+        return ((0.0, 0.0), False) if kind == "postural" else (None, True)
+    try:
+        speed = float(speed_text)
+    except ValueError:
+        problems.append(Problem(where, f"velocity_m_per_s must be a number in m/s; got "
+                                f"{speed_text!r}"))
+        return None, False
+    if not math.isfinite(speed) or speed < 0:
+        problems.append(Problem(where, f"velocity_m_per_s must be a finite speed ≥ 0; got "
+                                f"{speed_text!r}"))
+        return None, False
+    if vec is None:
+        if speed == 0:
+            return (0.0, 0.0), False
+        problems.append(Problem(where, f"velocity_m_per_s is {speed:g} but no direction is "
+                                "given: add 'velocity_vector_m_per_s: vx, vy'"))
+        return None, False
+    if abs(math.hypot(*vec) - speed) > 1e-6 * max(1.0, speed):
+        problems.append(Problem(where, f"velocity_m_per_s {speed:g} disagrees with the length "
+                                f"{math.hypot(*vec):g} of velocity_vector_m_per_s"))
+        return None, False
+    return vec, False
+
+
+def validate_map(pm: ParsedMap, arm: Arm | None, patient: str = "") -> tuple[FieldMap | None,
+                                                                             list[Problem]]:
+    """Check a parsed map; the FieldMap when it has no problem, else None and the problems."""
+    probs = list(pm.problems)
+    loc = pm.location
+    for key, value, allowed in (("kind", pm.kind, KINDS), ("frame", pm.frame, FRAMES),
+                                ("sign", pm.sign, SIGNS)):
+        if value is None:
+            probs.append(Problem(loc, f"missing '{key}' ({' | '.join(allowed)})"))
+        elif value not in allowed:
+            probs.append(Problem(loc, f"unknown {key} {value!r}; expected "
+                                 f"{' | '.join(allowed)}"))
+    if pm.velocity_missing:
+        probs.append(Problem(loc, "missing 'velocity_m_per_s' (a stiffness map must state the "
+                             "endpoint velocity of its measurement; 0 = static)"))
+    if (pm.kind == "postural" and pm.velocity_m_per_s is not None
+            and any(v != 0 for v in pm.velocity_m_per_s)):
+        probs.append(Problem(loc, "a postural map is static; velocity must be 0"))
+    pos, vals, sd = pm.positions_m, pm.values, pm.sd
+    n = pos.shape[0]
+    if n == 0:
+        probs.append(Problem(loc, "no data rows"))
+    for i in range(n):
+        cells = [pos[i].ravel(), vals[i].ravel()] + ([sd[i].ravel()] if sd is not None else [])
+        row = np.concatenate(cells)
+        if i not in pm.reported:
+            if np.any(np.isnan(row)):
+                probs.append(Problem(pm.point_location(i), "NaN where a number is required"))
+            if np.any(np.isinf(row)):
+                probs.append(Problem(pm.point_location(i), "infinite value"))
+        if sd is not None and np.any(sd[i] < 0):
+            probs.append(Problem(pm.point_location(i), "standard deviation is negative"))
+    finite = np.all(np.isfinite(pos), axis=1)
+    seen: dict[tuple[int, int], int] = {}
+    for idx in np.flatnonzero(finite):
+        j = int(idx)
+        cell = (round(pos[j, 0] / DUPLICATE_TOLERANCE_M), round(pos[j, 1] / DUPLICATE_TOLERANCE_M))
+        if cell in seen:
+            probs.append(Problem(pm.point_location(j), "duplicate position "
+                                 f"({pos[j, 0]:.6g}, {pos[j, 1]:.6g}) m, first at "
+                                 f"{pm.point_location(seen[cell])}"))
+        else:
+            seen[cell] = j
+    if arm is not None and finite.any():
+        ok = np.ones(n, dtype=bool)
+        ok[finite] = arm.reachable(pos[finite])
+        for idx in np.flatnonzero(~ok):
+            j = int(idx)
+            probs.append(Problem(pm.point_location(j), f"position ({pos[j, 0]:.4g}, "
+                                 f"{pos[j, 1]:.4g}) m is out of reach of patient {patient}'s "
+                                 f"{arm.params.side} arm (upper arm {arm.l1:.3f} m, forearm "
+                                 f"and hand {arm.l2:.3f} m, within its range of motion)"))
+    if probs:
+        return None, probs
+    try:
+        fm = FieldMap(kind=str(pm.kind), positions_m=pos, values=vals, sd=sd,
+                      frame=str(pm.frame), sign=str(pm.sign),
+                      velocity_m_per_s=pm.velocity_m_per_s or (0.0, 0.0), source=pm.source,
+                      metadata=pm.metadata)
+    except MapError as exc:
+        return None, [Problem(loc, str(exc))]
+    return fm, []

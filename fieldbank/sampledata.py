@@ -1,0 +1,189 @@
+"""Synthetic sample data: lab-style map files of made-up patients, from a seeded generator.
+
+Nothing here is patient data. Every file says so in its ``source`` (``fieldbank synthetic sample
+(not patient data)``), and the directory holds a ``README.txt`` and a ``manifest.json`` that
+list the synthetic patients, their sessions, each file's format and kind, and the model
+parameters each patient's maps were computed from (``params-<session>.json``), so that a fit can
+be compared with the truth.
+
+Each patient has two sessions, 'pre-BoNT' and 'post-BoNT' (botulinum toxin halves α and β of the
+hypertonic groups). Maps are the model's postural map on 25 scattered reachable positions and
+stiffness maps on 9, static and at a moving endpoint, with 5 % Gaussian noise (plus a small
+floor) and the matching standard deviations. The files come in every format ingest reads: CSV in
+SI units, CSV in lab units (mm, kgf, N/mm), MATLAB v5, MATLAB v7.3 and fieldbank HDF5.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fieldbank.ingest.hdf5fmt import write_hdf5
+from fieldbank.ingest.matfmt import write_mat5, write_mat73
+from fieldbank.ingest.units import KGF_N
+from fieldbank.maps import FieldMap, postural_map, stiffness_map
+from fieldbank.model import Arm
+from fieldbank.params import ArmParams
+
+SOURCE = "fieldbank synthetic sample (not patient data)"
+NOISE_FRACTION = 0.05
+FORCE_FLOOR_N = 0.05
+STIFFNESS_FLOOR_N_PER_M = 5.0
+N_POSTURAL = 25
+N_STIFFNESS = 9
+MOVING_VELOCITY_M_PER_S = (0.0, 0.15)
+BONT_FACTOR = 0.5
+
+
+@dataclass(frozen=True)
+class SyntheticPatient:
+    code: str
+    body_mass_kg: float
+    height_m: float
+    side: str
+    hypertonic: tuple[tuple[str, float], ...]  # (group, Km multiple of unimpaired)
+
+    def params(self) -> ArmParams:
+        p = ArmParams.from_anthropometry(self.body_mass_kg, self.height_m, self.side)
+        for g, mult in self.hypertonic:
+            km = p.group_value("km_n_per_m", g) * mult
+            alpha = p.group_value("alpha_n", g) * mult
+            p = p.with_group(g, km_n_per_m=km, alpha_n=alpha, beta=0.8)
+        return p
+
+    def after_bont(self) -> ArmParams:
+        p = self.params()
+        for g, _ in self.hypertonic:
+            p = p.with_group(g, alpha_n=p.group_value("alpha_n", g) * BONT_FACTOR,
+                             beta=p.group_value("beta", g) * BONT_FACTOR)
+        return p
+
+
+PATIENTS = (
+    SyntheticPatient("SYN-001", 72.0, 1.74, "right", (("ef", 6.0), ("bf", 4.0))),
+    SyntheticPatient("SYN-002", 61.0, 1.62, "left", (("sf", 5.0),)),
+    SyntheticPatient("SYN-003", 85.0, 1.83, "right", (("ee", 3.0), ("be", 3.0))),
+)
+
+
+def scattered_positions(arm: Arm, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n reachable hand positions (m), scattered, at least 2 cm apart, away from the limits."""
+    p = arm.params
+    out: list[np.ndarray] = []
+    lo1, hi1 = p.shoulder_range_rad
+    lo2, hi2 = p.elbow_range_rad
+    while len(out) < n:
+        q = np.array([rng.uniform(lo1 + 0.25, hi1 - 0.25), rng.uniform(lo2 + 0.35, hi2 - 0.25)])
+        x = arm.fk(q[None])[0]
+        x = np.round(x, 4)  # lab robots report positions to 0.1 mm
+        if arm.reachable(x[None])[0] and all(np.hypot(*(x - y)) > 0.02 for y in out):
+            out.append(x)
+    return np.array(out)
+
+
+def _noisy(m: FieldMap, floor: float, rng: np.random.Generator, **changes: Any) -> FieldMap:
+    sd = NOISE_FRACTION * np.abs(m.values) + floor
+    vals = m.values + rng.normal(0.0, 1.0, m.values.shape) * sd
+    return FieldMap(kind=m.kind, positions_m=m.positions_m, values=vals, sd=sd,
+                    velocity_m_per_s=m.velocity_m_per_s, source=m.source,
+                    metadata=changes.get("metadata", {}))
+
+
+def lab_units_csv(m: FieldMap) -> str:
+    """The map as CSV in lab units: positions in mm, forces in kgf, stiffness in N/mm."""
+    lines = [f"# kind: {m.kind}", f"# frame: {m.frame}", f"# sign: {m.sign}",
+             f"# velocity_m_per_s: {m.speed_m_per_s:.17g}"]
+    if m.speed_m_per_s > 0:
+        lines.append("# velocity_vector_m_per_s: {:.17g}, {:.17g}".format(*m.velocity_m_per_s))
+    lines.append(f"# source: {m.source}")
+    lines += [f"# {k}: {v}" for k, v in m.metadata.items()]
+    n = m.n
+    if m.kind == "postural":
+        names = ["fx_kgf", "fy_kgf"]
+        scale = 1.0 / KGF_N
+    else:
+        names = ["kxx_n_per_mm", "kxy_n_per_mm", "kyx_n_per_mm", "kyy_n_per_mm"]
+        scale = 1e-3
+    cols = ["x_mm", "y_mm", *names]
+    parts = [m.positions_m * 1e3, m.values.reshape(n, -1) * scale]
+    if m.sd is not None:
+        cols += [f"sd_{c}" for c in names]
+        parts.append(m.sd.reshape(n, -1) * scale)
+    table = np.hstack(parts)
+    lines.append(",".join(cols))
+    lines += [",".join(f"{v:.10g}" for v in row) for row in table]
+    return "\n".join(lines) + "\n"
+
+
+def write_samples(root: str | Path, seed: int = 20240601) -> dict[str, Any]:
+    """Write the sample set under ``root``; returns the manifest (also in manifest.json)."""
+    rng = np.random.default_rng(seed)
+    base = Path(root)
+    base.mkdir(parents=True, exist_ok=True)
+    manifest: dict[str, Any] = {"synthetic": True, "source": SOURCE, "seed": seed,
+                                "patients": []}
+    for k, pat in enumerate(PATIENTS):
+        pdir = base / pat.code
+        pdir.mkdir(exist_ok=True)
+        entry: dict[str, Any] = {"code": pat.code, "body_mass_kg": pat.body_mass_kg,
+                                 "height_m": pat.height_m, "side": pat.side,
+                                 "hypertonic": dict(pat.hypertonic), "sessions": []}
+        pre_arm = Arm.from_params(pat.params())
+        pos_p = scattered_positions(pre_arm, N_POSTURAL, rng)
+        pos_k = scattered_positions(pre_arm, N_STIFFNESS, rng)
+        for label, params in (("pre-BoNT", pat.params()), ("post-BoNT", pat.after_bont())):
+            arm = Arm.from_params(params)
+            sdir = pdir / label
+            sdir.mkdir(exist_ok=True)
+            (pdir / f"params-{label}.json").write_text(params.to_json() + "\n", encoding="utf-8")
+            meta = {"patient": pat.code, "session": label, "synthetic": "yes",
+                    "robot": "simulated 2-DOF planar manipulandum"}
+            src = f"{SOURCE}; seed {seed}; patient {pat.code}; session {label}"
+            post = _noisy(postural_map(arm, pos_p, source=src), FORCE_FLOOR_N, rng,
+                          metadata=meta)
+            stat = _noisy(stiffness_map(arm, pos_k, source=src), STIFFNESS_FLOOR_N_PER_M, rng,
+                          metadata=meta)
+            mov = _noisy(stiffness_map(arm, pos_k, MOVING_VELOCITY_M_PER_S, source=src),
+                         STIFFNESS_FLOOR_N_PER_M, rng, metadata=meta)
+            files: list[dict[str, str]] = []
+            rel = f"{pat.code}/{label}"
+
+            def add(name: str, fmt: str, kinds: str, files: list[dict[str, str]] = files,
+                    rel: str = rel) -> None:
+                files.append({"file": f"{rel}/{name}", "format": fmt, "kinds": kinds})
+
+            if label == "pre-BoNT":
+                (sdir / "postural.csv").write_text(post.to_csv(), encoding="utf-8")
+                add("postural.csv", "csv", "postural")
+                if k % 2 == 0:
+                    (sdir / "stiffness-static.csv").write_text(stat.to_csv(), encoding="utf-8")
+                else:
+                    (sdir / "stiffness-static.csv").write_text(lab_units_csv(stat),
+                                                               encoding="utf-8")
+                add("stiffness-static.csv", "csv", "stiffness")
+                write_mat5(sdir / "stiffness-moving.mat", mov)
+                add("stiffness-moving.mat", "mat5", "stiffness")
+            else:
+                (sdir / "postural-lab-units.csv").write_text(lab_units_csv(post),
+                                                             encoding="utf-8")
+                add("postural-lab-units.csv", "csv", "postural")
+                write_mat73(sdir / "postural.mat", post)
+                add("postural.mat", "mat73", "postural")
+                write_hdf5(sdir / "stiffness.h5", [stat, mov])
+                add("stiffness.h5", "hdf5", "stiffness,stiffness")
+            entry["sessions"].append({"label": label, "params": f"{pat.code}/params-{label}.json",
+                                      "files": files})
+        manifest["patients"].append(entry)
+    (base / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+    (base / "README.txt").write_text(
+        "SYNTHETIC SAMPLE DATA - NOT PATIENT DATA.\n"
+        f"Written by fieldbank.sampledata (seed {seed}): maps of made-up patients computed from "
+        "the arm model with 5 % noise. manifest.json lists patients, sessions and files; "
+        "params-*.json hold the true model parameters.\n",
+        encoding="utf-8",
+    )
+    return manifest

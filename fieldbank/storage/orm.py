@@ -1,0 +1,233 @@
+"""ORM rows of the field database (SQLAlchemy 2 typed mappings).
+
+These classes stay inside :mod:`fieldbank.storage`; callers get frozen records and domain
+objects from :class:`fieldbank.storage.Database`. Every constraint is named through
+:data:`NAMING_CONVENTION` so that migrations can refer to it on every backend.
+
+Tables::
+
+    patients ─┬─ sessions ── maps ── source_files ── arrays
+              ├─ models (parent → models)
+              ├─ fits ── fit_maps ── maps
+              ├─ plans (base/result → models)
+              └─ haptic_sessions ── traces ── arrays
+    audit_log  (append-only: UPDATE and DELETE are refused by triggers)
+
+Timestamps are UTC, stored without a zone. Arrays of a map are little-endian float64 blobs in
+the ``maps`` row (N×2 positions, N×2 or N×4 values); JSON documents are text.
+"""
+
+from __future__ import annotations
+
+from datetime import date, datetime
+
+from sqlalchemy import (
+    BigInteger,
+    CheckConstraint,
+    Column,
+    Date,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Table,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+NAMING_CONVENTION = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+SHA = String(64)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING_CONVENTION)
+
+
+class PatientRow(Base):
+    __tablename__ = "patients"
+    __table_args__ = (
+        CheckConstraint("side IN ('left', 'right')", name="side"),
+        CheckConstraint("body_mass_kg > 0", name="body_mass_positive"),
+        CheckConstraint("height_m > 0", name="height_positive"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    code: Mapped[str] = mapped_column(String(64), unique=True)
+    body_mass_kg: Mapped[float] = mapped_column(Float)
+    height_m: Mapped[float] = mapped_column(Float)
+    side: Mapped[str] = mapped_column(String(8))
+    notes: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class SessionRow(Base):
+    __tablename__ = "sessions"
+    __table_args__ = (UniqueConstraint("patient_id", "label"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    patient_id: Mapped[int] = mapped_column(ForeignKey("patients.id"), index=True)
+    label: Mapped[str] = mapped_column(String(128))
+    session_date: Mapped[date | None] = mapped_column(Date, nullable=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    patient: Mapped[PatientRow] = relationship()
+
+
+class ArrayRow(Base):
+    """An array in the content-addressed HDF5 store."""
+
+    __tablename__ = "arrays"
+    sha256: Mapped[str] = mapped_column(SHA, primary_key=True)
+    relpath: Mapped[str] = mapped_column(String(255))
+    nbytes: Mapped[int] = mapped_column(BigInteger)
+    shape_json: Mapped[str] = mapped_column(Text)
+    dtype: Mapped[str] = mapped_column(String(32))
+    unit: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class SourceFileRow(Base):
+    """An ingested file, kept unchanged: inline bytes, or an array in the store if large."""
+
+    __tablename__ = "source_files"
+    __table_args__ = (
+        CheckConstraint(
+            "(content IS NULL) <> (array_sha256 IS NULL)", name="content_xor_array"
+        ),
+    )
+    sha256: Mapped[str] = mapped_column(SHA, primary_key=True)
+    file_name: Mapped[str] = mapped_column(String(255))
+    file_format: Mapped[str] = mapped_column(String(16))
+    nbytes: Mapped[int] = mapped_column(BigInteger)
+    content: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True)
+    array_sha256: Mapped[str | None] = mapped_column(
+        ForeignKey("arrays.sha256"), nullable=True
+    )
+    ingested_at: Mapped[datetime] = mapped_column(DateTime)
+    ingested_by: Mapped[str] = mapped_column(String(128))
+
+
+class MapRow(Base):
+    __tablename__ = "maps"
+    __table_args__ = (
+        UniqueConstraint("source_sha256", "index_in_file"),
+        CheckConstraint("kind IN ('postural', 'stiffness')", name="kind"),
+        CheckConstraint("sign IN ('arm-on-handle', 'handle-on-arm')", name="sign"),
+        CheckConstraint("n_points > 0", name="n_points_positive"),
+        Index("ix_maps_patient_kind", "patient_id", "kind"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    # patient_id repeats sessions.patient_id so that a patient's maps list with one index.
+    patient_id: Mapped[int] = mapped_column(ForeignKey("patients.id"))
+    session_id: Mapped[int] = mapped_column(ForeignKey("sessions.id"), index=True)
+    source_sha256: Mapped[str] = mapped_column(ForeignKey("source_files.sha256"))
+    index_in_file: Mapped[int] = mapped_column(Integer)
+    kind: Mapped[str] = mapped_column(String(16))
+    frame: Mapped[str] = mapped_column(String(32))
+    sign: Mapped[str] = mapped_column(String(16))
+    velocity_x_m_per_s: Mapped[float] = mapped_column(Float)
+    velocity_y_m_per_s: Mapped[float] = mapped_column(Float)
+    n_points: Mapped[int] = mapped_column(Integer)
+    value_unit: Mapped[str] = mapped_column(String(16))
+    positions_m: Mapped[bytes] = mapped_column(LargeBinary)
+    values: Mapped[bytes] = mapped_column(LargeBinary)
+    sd: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True)
+    source_text: Mapped[str] = mapped_column(Text)
+    metadata_json: Mapped[str] = mapped_column(Text)
+    ingested_at: Mapped[datetime] = mapped_column(DateTime)
+    ingested_by: Mapped[str] = mapped_column(String(128))
+
+
+class ModelRow(Base):
+    __tablename__ = "models"
+    __table_args__ = (
+        CheckConstraint("origin IN ('synthetic', 'fitted', 'intervention')", name="origin"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    patient_id: Mapped[int | None] = mapped_column(
+        ForeignKey("patients.id"), nullable=True, index=True
+    )
+    parent_id: Mapped[int | None] = mapped_column(ForeignKey("models.id"), nullable=True)
+    origin: Mapped[str] = mapped_column(String(16))
+    label: Mapped[str] = mapped_column(String(255))
+    params_json: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+fit_maps = Table(
+    "fit_maps",
+    Base.metadata,
+    Column("fit_id", ForeignKey("fits.id"), primary_key=True),
+    Column("map_id", ForeignKey("maps.id"), primary_key=True),
+)
+
+
+class FitRow(Base):
+    __tablename__ = "fits"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    patient_id: Mapped[int] = mapped_column(ForeignKey("patients.id"), index=True)
+    model_id: Mapped[int] = mapped_column(ForeignKey("models.id"))
+    algorithm: Mapped[str] = mapped_column(String(64))
+    seed: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    n_evals: Mapped[int] = mapped_column(Integer)
+    time_s: Mapped[float] = mapped_column(Float)
+    cost: Mapped[float] = mapped_column(Float)
+    result_json: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class PlanRow(Base):
+    __tablename__ = "plans"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    patient_id: Mapped[int | None] = mapped_column(
+        ForeignKey("patients.id"), nullable=True, index=True
+    )
+    base_model_id: Mapped[int] = mapped_column(ForeignKey("models.id"))
+    result_model_id: Mapped[int] = mapped_column(ForeignKey("models.id"))
+    label: Mapped[str] = mapped_column(String(255))
+    spec_json: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class HapticSessionRow(Base):
+    __tablename__ = "haptic_sessions"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    patient_id: Mapped[int | None] = mapped_column(
+        ForeignKey("patients.id"), nullable=True, index=True
+    )
+    model_a_id: Mapped[int] = mapped_column(ForeignKey("models.id"))
+    model_b_id: Mapped[int | None] = mapped_column(ForeignKey("models.id"), nullable=True)
+    started_at: Mapped[datetime] = mapped_column(DateTime)
+    ended_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
+    robot_url: Mapped[str] = mapped_column(String(255))
+    stats_json: Mapped[str] = mapped_column(Text)
+
+
+class TraceRow(Base):
+    __tablename__ = "traces"
+    __table_args__ = (UniqueConstraint("haptic_session_id", "name"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    haptic_session_id: Mapped[int] = mapped_column(ForeignKey("haptic_sessions.id"), index=True)
+    name: Mapped[str] = mapped_column(String(128))
+    array_sha256: Mapped[str] = mapped_column(ForeignKey("arrays.sha256"))
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class AuditRow(Base):
+    __tablename__ = "audit_log"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    at: Mapped[datetime] = mapped_column(DateTime)
+    actor: Mapped[str] = mapped_column(String(128))
+    action: Mapped[str] = mapped_column(String(64))
+    entity: Mapped[str] = mapped_column(String(64))
+    entity_id: Mapped[str] = mapped_column(String(128))
+    detail_json: Mapped[str] = mapped_column(Text)

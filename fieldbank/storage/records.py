@@ -1,0 +1,191 @@
+"""Frozen records that :class:`fieldbank.storage.Database` returns (never ORM rows).
+
+Timestamps are timezone-aware UTC datetimes; JSON documents come back as dicts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import date, datetime
+from typing import Any
+
+from fieldbank.arraystore import ArrayRef
+from fieldbank.params import ArmParams
+
+
+@dataclass(frozen=True)
+class PatientInfo:
+    """A patient: a pseudonymous code and the anthropometry the arm model needs."""
+
+    id: int
+    code: str
+    body_mass_kg: float
+    height_m: float
+    side: str
+    notes: str
+    created_at: datetime
+
+    def arm_params(self) -> ArmParams:
+        """Unimpaired parameters of this patient's arm (used to check reachability)."""
+        return ArmParams.from_anthropometry(self.body_mass_kg, self.height_m, self.side)
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    """A visit of a patient, e.g. label 'pre-BoNT' on a date."""
+
+    id: int
+    patient_code: str
+    label: str
+    session_date: date | None
+    created_at: datetime
+    n_maps: int = 0
+
+
+@dataclass(frozen=True)
+class StoredMap:
+    """What the database holds about a map besides its arrays (load those with get_map)."""
+
+    id: int
+    patient_code: str
+    session_label: str
+    session_date: date | None
+    kind: str
+    frame: str
+    sign: str
+    velocity_m_per_s: tuple[float, float]
+    n_points: int
+    value_unit: str
+    source_text: str
+    source_file: str
+    source_sha256: str
+    index_in_file: int
+    ingested_at: datetime
+    ingested_by: str
+
+
+@dataclass(frozen=True)
+class SourceFileInfo:
+    """A raw file as ingested, kept unchanged."""
+
+    sha256: str
+    file_name: str
+    file_format: str
+    nbytes: int
+    ingested_at: datetime
+    ingested_by: str
+    in_array_store: bool
+
+
+@dataclass(frozen=True)
+class StoredModel:
+    """A set of arm parameters with its origin and lineage."""
+
+    id: int
+    patient_code: str | None
+    parent_id: int | None
+    origin: str
+    label: str
+    params: ArmParams
+    created_at: datetime
+
+
+@dataclass(frozen=True)
+class FitRecord:
+    """A fit of a model to maps, with what is needed to reproduce it."""
+
+    id: int
+    patient_code: str
+    model_id: int
+    algorithm: str
+    seed: int | None
+    n_evals: int
+    time_s: float
+    cost: float
+    result: dict[str, Any]
+    map_ids: tuple[int, ...]
+    created_at: datetime
+
+
+@dataclass(frozen=True)
+class PlanRecord:
+    """An intervention plan applied to a base model, giving a result model."""
+
+    id: int
+    patient_code: str | None
+    base_model_id: int
+    result_model_id: int
+    label: str
+    spec: dict[str, Any]
+    created_at: datetime
+
+
+@dataclass(frozen=True)
+class HapticSessionRecord:
+    """A haptic rendering session on a robot (URL stored without password)."""
+
+    id: int
+    patient_code: str | None
+    model_a_id: int
+    model_b_id: int | None
+    started_at: datetime
+    ended_at: datetime | None
+    robot_url: str
+    stats: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class TraceRecord:
+    """A recorded trace of a haptic session; its array is in the array store."""
+
+    id: int
+    haptic_session_id: int
+    name: str
+    array: ArrayRef
+    created_at: datetime
+
+
+@dataclass(frozen=True)
+class AuditEntry:
+    id: int
+    at: datetime
+    actor: str
+    action: str
+    entity: str
+    entity_id: str
+    detail: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """Result of :meth:`Database.check`: problems are errors; orphans are harmless leftovers."""
+
+    problems: tuple[str, ...]
+    orphans: tuple[str, ...]
+    counts: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+@dataclass(frozen=True, eq=False)
+class IncomingFile:
+    """A validated file ready to be stored: its raw bytes and the maps read from it."""
+
+    file_name: str
+    sha256: str
+    file_format: str
+    content: bytes
+    maps: tuple[Any, ...]  # tuple[FieldMap, ...]; Any keeps this module free of maps imports
+
+
+@dataclass(frozen=True)
+class IngestOutcome:
+    """What happened to one file of a batch: 'stored', 'duplicate' or (dry run) 'would-store'."""
+
+    file_name: str
+    sha256: str
+    status: str
+    map_ids: tuple[int, ...]
+    n_maps: int
