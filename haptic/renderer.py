@@ -424,9 +424,13 @@ class Renderer:
         sim_a, sim_b = self.sims
         fa_x = fa_y = fb_x = fb_y = 0.0
         if math.isfinite(x) and math.isfinite(y) and math.isfinite(vx) and math.isfinite(vy):
-            fa_x, fa_y = sim_a.tick(x, y, vx, vy)
-            fb_x, fb_y = sim_b.tick(x, y, vx, vy)
-            if not (math.isfinite(fa_x + fa_y) and math.isfinite(fb_x + fb_y)):
+            try:
+                fa_x, fa_y = sim_a.tick(x, y, vx, vy)
+                fb_x, fb_y = sim_b.tick(x, y, vx, vy)
+                ok = math.isfinite(fa_x + fa_y) and math.isfinite(fb_x + fb_y)
+            except (ArithmeticError, ValueError):  # overflow inside a diverging arm
+                ok = False
+            if not ok:
                 self._trip(FaultCode.MODEL, "a virtual arm diverged (non-finite force)")
                 self._reset_arms()
                 fa_x = fa_y = fb_x = fb_y = 0.0
@@ -491,14 +495,13 @@ class Renderer:
                         "with normal priority and its timing will show more jitter", exc)
             return None
 
-    def run(self, duration_s: float | None = None, first_state_timeout_s: float = 1.0) -> Trace:
-        """Render until ``duration_s`` passes or a ``stop`` command; return the session trace."""
+    def start(self, first_state_timeout_s: float = 1.0, expected_ticks: int | None = None) -> None:
+        """Wait for the first STATE, put both arms at the handle, arm (``arm_on_start``)."""
         cfg = self.config
-        n_ticks = None if duration_s is None else max(1, round(duration_s * cfg.rate_hz))
         if not self.link.wait_state(first_state_timeout_s) and self.link.states == 0:
             raise HapticError(f"no STATE from the robot within {first_state_timeout_s} s")
         self._reset_arms()
-        self._buf = TraceBuffer(n_ticks or 60 * cfg.rate_hz) if cfg.record else None
+        self._buf = TraceBuffer(expected_ticks or 60 * cfg.rate_hz) if cfg.record else None
         self._wake = array.array("q")
         self.running = True
         self._stop = False
@@ -507,6 +510,25 @@ class Renderer:
                 self.arm()
             except HapticError as exc:
                 log.warning("not armed at start: %s", exc)
+
+    def finish(self) -> Trace:
+        """Command zero force, disarm the device, answer pending commands; return the trace."""
+        self.running = False
+        try:
+            if not self._link_down:
+                self.link.send_force(0.0, 0.0)
+                self.link.disarm()
+        except LinkDown:
+            self._link_down = True
+        self._drain()
+        self.trace = self._make_trace()
+        return self.trace
+
+    def run(self, duration_s: float | None = None, first_state_timeout_s: float = 1.0) -> Trace:
+        """Render until ``duration_s`` passes or a ``stop`` command; return the session trace."""
+        cfg = self.config
+        n_ticks = None if duration_s is None else max(1, round(duration_s * cfg.rate_hz))
+        self.start(first_state_timeout_s, n_ticks)
         old_sched = self._enter_realtime()
         clock = self.clock
         period = self.period_ns
@@ -515,9 +537,12 @@ class Renderer:
         gc.freeze()
         gc_was_enabled = gc.isenabled()
         gc.disable()
+        end = None if n_ticks is None else self.ticks + n_ticks
+        errstate = np.errstate(over="ignore", invalid="ignore")  # diverging arms are faults
+        errstate.__enter__()
         try:
             deadline = clock.now_ns()
-            while not self._stop and (n_ticks is None or self.ticks < n_ticks):
+            while not self._stop and (end is None or self.ticks < end):
                 clock.sleep_until(deadline)
                 now = clock.now_ns()
                 wake.append(now - deadline)
@@ -526,6 +551,7 @@ class Renderer:
                 if now - deadline > 50 * period:  # hopelessly behind: resynchronise
                     deadline = now + period
         finally:
+            errstate.__exit__(None, None, None)
             if gc_was_enabled:
                 gc.enable()
             gc.unfreeze()
@@ -535,15 +561,7 @@ class Renderer:
                 except OSError:
                     pass
             self.running = False
-            try:
-                if not self._link_down:
-                    self.link.send_force(0.0, 0.0)
-                    self.link.disarm()
-            except LinkDown:
-                self._link_down = True
-            self._drain()
-        self.trace = self._make_trace()
-        return self.trace
+        return self.finish()
 
     # --- reporting --------------------------------------------------------------------------
     def loop_stats(self) -> dict[str, Any]:
