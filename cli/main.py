@@ -18,6 +18,7 @@ from fieldbank.errors import FieldbankError
 #: module name -> attribute holding a click command or group
 COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.field", "field"),
+    ("cli.haptic", "haptic"),
 )
 
 

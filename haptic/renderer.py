@@ -32,6 +32,7 @@ import logging
 import math
 import os
 import queue
+import sys
 import threading
 import time
 from dataclasses import asdict, dataclass
@@ -50,6 +51,10 @@ from haptic.recording import NCOL, Trace, TraceBuffer
 from haptic.safety import Mode, Safety, SafetyConfig
 
 log = logging.getLogger("fieldbank.haptic.renderer")
+
+#: GIL switch interval while the loop runs (default 5 ms would let another thread hold the
+#: interpreter for several ticks).
+SWITCH_INTERVAL_S = 1e-4
 
 PHASES = ("link_in", "checks", "models", "safety", "link_out", "record")
 
@@ -219,8 +224,10 @@ class Renderer:
         self.trace: Trace | None = None
         self._buf: TraceBuffer | None = None
         self._wake = array.array("q")
+        self._late = array.array("q")
         self._cost = [0] * len(PHASES)
         self.realtime_scheduling: bool | None = None
+        self.skipped_ticks = 0
         self.metadata: dict[str, Any] = {}
 
     # --- thread-safe requests ---------------------------------------------------------------
@@ -328,6 +335,7 @@ class Renderer:
     def _reset_arms(self) -> None:
         ox, oy = self.config.shoulder_offset_m
         hx, hy = self.link.x - ox, self.link.y - oy
+        self._event("reset_arms", at_m=[hx, hy])
         for sim in self.sims:
             try:
                 if math.isfinite(hx) and math.isfinite(hy):
@@ -503,6 +511,7 @@ class Renderer:
         self._reset_arms()
         self._buf = TraceBuffer(expected_ticks or 60 * cfg.rate_hz) if cfg.record else None
         self._wake = array.array("q")
+        self._late = array.array("q")
         self.running = True
         self._stop = False
         if cfg.arm_on_start:
@@ -533,6 +542,7 @@ class Renderer:
         clock = self.clock
         period = self.period_ns
         wake = self._wake
+        late = self._late
         gc.collect()
         gc.freeze()
         gc_was_enabled = gc.isenabled()
@@ -540,17 +550,28 @@ class Renderer:
         end = None if n_ticks is None else self.ticks + n_ticks
         errstate = np.errstate(over="ignore", invalid="ignore")  # diverging arms are faults
         errstate.__enter__()
+        # other threads (control channel) must hand the interpreter back quickly
+        old_switch = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL_S)
         try:
             deadline = clock.now_ns()
             while not self._stop and (end is None or self.ticks < end):
                 clock.sleep_until(deadline)
                 now = clock.now_ns()
-                wake.append(now - deadline)
+                wake.append(now)
+                late.append(now - deadline)
                 self.tick()
                 deadline += period
-                if now - deadline > 50 * period:  # hopelessly behind: resynchronise
-                    deadline = now + period
+                if now >= deadline:
+                    # a whole period late: skip the missed ticks instead of bursting through
+                    # them back to back (which would read no new state and command stale forces)
+                    skipped = (now - deadline) // period + 1
+                    self.skipped_ticks += skipped
+                    deadline += skipped * period
+        except KeyboardInterrupt:
+            self._event("interrupted")
         finally:
+            sys.setswitchinterval(old_switch)
             errstate.__exit__(None, None, None)
             if gc_was_enabled:
                 gc.enable()
@@ -566,19 +587,22 @@ class Renderer:
     # --- reporting --------------------------------------------------------------------------
     def loop_stats(self) -> dict[str, Any]:
         """Period error (ns → µs) percentiles, overruns, tick cost breakdown."""
-        late = np.frombuffer(self._wake, dtype=np.int64).astype(np.float64) if self._wake else \
+        wake = np.frombuffer(self._wake, dtype=np.int64).astype(np.float64) if self._wake else \
+            np.zeros(0)
+        late = np.frombuffer(self._late, dtype=np.int64).astype(np.float64) if self._late else \
             np.zeros(0)
         out: dict[str, Any] = {"ticks": self.ticks, "rate_hz": self.config.rate_hz,
                                "realtime_scheduling": self.realtime_scheduling}
         if late.size >= 2:
-            # period error: actual period between wakes minus nominal (= difference of lateness)
-            per_err = np.abs(np.diff(late))
+            # period error: actual period between wakes minus nominal
+            periods_ns = np.diff(wake)
+            per_err = np.abs(periods_ns - self.period_ns)
             out["period_error_us"] = {
                 "p50": float(np.percentile(per_err, 50) / 1e3),
                 "p99": float(np.percentile(per_err, 99) / 1e3),
                 "max": float(per_err.max() / 1e3),
             }
-            periods = (np.diff(late) + self.period_ns) / 1e3
+            periods = periods_ns / 1e3
             out["period_us"] = {"p50": float(np.percentile(periods, 50)),
                                 "p99": float(np.percentile(periods, 99)),
                                 "max": float(periods.max())}
@@ -589,6 +613,7 @@ class Renderer:
             over = late > thr
             out["overruns"] = int(over.sum())
             out["overrun_threshold_ms"] = self.config.overrun_ms
+            out["skipped_ticks"] = self.skipped_ticks
             out["overrun_times_s"] = [float(i / self.config.rate_hz)
                                       for i in np.flatnonzero(over)[:100]]
         n = max(1, self.ticks)
@@ -605,7 +630,9 @@ class Renderer:
         s = self.safety
         return {
             "running": self.running, "mode": s.mode.name, "t_s": round(self.t_s, 4),
-            "ticks": self.ticks, "blend": self.blend.value, "gain": self.gain.value,
+            "ticks": self.ticks, "gain": self.gain.value,
+            # while an A/B/X block runs, which model is rendered is hidden
+            "blend": "hidden" if self.abx is not None else self.blend.value,
             "force_n": [self.fx, self.fy],
             "handle_m": [self.link.x, self.link.y],
             "latched_faults": [c.name for c in FaultCode if s.latched & (1 << (c - 1))],

@@ -16,7 +16,7 @@ from fieldbank.params import ArmParams
 from haptic.link import RobotLink
 from haptic.protocol import FaultCode
 from haptic.renderer import Renderer, RendererConfig, VirtualClock
-from haptic.safety import Mode, SafetyConfig
+from haptic.safety import Mode
 from haptic.simrobot import PtyRobot, SimDevice
 from tests.haptic_util import pty_session, severe_shoulder
 
@@ -56,7 +56,7 @@ def test_fault_zeroes_force_latches_and_is_recorded(kind: str) -> None:
     cfg = RendererConfig(state_wait_s=0.01 if kind == "freeze" else 0.05)
     with pty_session(severe_shoulder(), motion="fastpull", config=cfg) as (rd, robot):
         rd.start(expected_ticks=1200)
-        for i in range(1200):
+        for i in range(INJECT_AT + 60):
             if i == INJECT_AT:
                 _inject(kind, robot)
             rd.tick()
