@@ -46,7 +46,7 @@ def from_severity(severities: dict[str, str], base: ArmParams | None = None) -> 
     except ImportError:
         sev = None
     if sev is not None and hasattr(sev, "synthesize"):
-        return sev.synthesize(severities, base)  # type: ignore[no-any-return]
+        return sev.synthesize(severities, base)
     p = base or ArmParams.from_anthropometry()
     for joint, level in severities.items():
         steps = LEVELS.index(level)

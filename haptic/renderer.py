@@ -213,6 +213,7 @@ class Renderer:
         self._pending: tuple[tuple[ArmSim, ArmSim], tuple[ArmParams, ArmParams]] | None = None
         self._link_down = False
         self._stale = 0
+        self._awaiting = False
         self._timeout_ticks = max(1, math.ceil(self.safety.config.state_timeout_ms * 1e-3
                                                / self.dt_s))
         self._device_faults_seen = 0
@@ -397,7 +398,8 @@ class Renderer:
         if not self._link_down:
             try:
                 wait = self.config.state_wait_s
-                new = link.wait_state(wait) if wait > 0 else link.poll()
+                # lockstep devices answer each FORCE with one STATE: wait for it, not for more
+                new = link.wait_state(wait) if wait > 0 and self._awaiting else link.poll()
             except LinkDown as exc:
                 self._link_down = True
                 self._trip(FaultCode.DISCONNECT, str(exc))
@@ -462,6 +464,7 @@ class Renderer:
         if not self._link_down:
             try:
                 link.send_force(fx, fy)
+                self._awaiting = True
             except LinkDown as exc:
                 self._link_down = True
                 self._trip(FaultCode.DISCONNECT, str(exc))

@@ -55,7 +55,7 @@ def pty_session(
         try:
             link.handshake(1000, 20)
             rd = Renderer(link, before, after or before,
-                          config or RendererConfig(state_wait_s=0.05), safety=safety,
+                          config or RendererConfig(state_wait_s=0.5), safety=safety,
                           clock=VirtualClock())
             yield rd, robot
         finally:

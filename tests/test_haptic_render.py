@@ -45,7 +45,7 @@ SWITCH_STEP_BOUND_N = 0.1
 
 def _switch_run(crossfade_s: float) -> tuple[float, float]:
     before, after = severe(("ef", "ee", "bf", "be")), unimpaired()
-    cfg = RendererConfig(state_wait_s=0.05, crossfade_s=crossfade_s)
+    cfg = RendererConfig(state_wait_s=0.5, crossfade_s=crossfade_s)
     with pty_session(before, after, motion="circle", config=cfg) as (rd, _robot):
         rd.start(expected_ticks=4000)
         for i in range(4000):
