@@ -10,6 +10,7 @@ job (:mod:`haptic.safety`); a port that fails raises :class:`LinkDown`.
 
 from __future__ import annotations
 
+import os
 import select
 import time
 
@@ -60,6 +61,12 @@ class RobotLink:
             self._fd: int | None = port.fileno()
         except (AttributeError, OSError, ValueError, serial.SerialException):
             self._fd = None
+        # Fast path: a POSIX serial port (or pty) that pyserial opened non-blocking is read and
+        # written with one system call each; pyserial's write adds a select() per frame.
+        self._raw_fd: int | None = None
+        if self._fd is not None and type(port).__module__ == "serial.serialposix":
+            self._raw_fd = self._fd
+        self.tx_dropped = 0
 
     @classmethod
     def open(cls, url: str, baudrate: int = DEFAULT_BAUDRATE) -> RobotLink:
@@ -88,12 +95,33 @@ class RobotLink:
         seq = self._tx_seq
         frame = P.encode_frame(msg_type, seq, payload)
         self._tx_seq = (seq + 1) & 0xFFFF
+        fd = self._raw_fd
         try:
-            self.port.write(frame)
+            if fd is not None:
+                n = os.write(fd, frame)
+                if n < len(frame):
+                    self._write_rest(frame[n:])
+            else:
+                self.port.write(frame)
+        except BlockingIOError:
+            self.tx_dropped += 1  # the device is not reading (its input buffer is full)
         except (serial.SerialException, OSError) as exc:
             raise LinkDown(f"robot port write failed: {exc}") from None
         self.frames_tx += 1
         return seq
+
+    def _write_rest(self, rest: bytes) -> None:
+        assert self._raw_fd is not None
+        deadline = time.perf_counter() + 0.005
+        while rest:
+            if time.perf_counter() > deadline:
+                self.tx_dropped += 1
+                return
+            select.select([], [self._raw_fd], [], 0.001)
+            try:
+                rest = rest[os.write(self._raw_fd, rest):]
+            except BlockingIOError:
+                pass
 
     def send_force(self, fx_n: float, fy_n: float) -> int:
         """Send a FORCE frame; returns its sequence number."""
@@ -114,12 +142,23 @@ class RobotLink:
     # --- receiving --------------------------------------------------------------------------
     def poll(self) -> int:
         """Read what has arrived without blocking; return the number of new STATE frames."""
-        port = self.port
-        try:
-            n = port.in_waiting
-            data = port.read(n if n > 0 else 1)
-        except (serial.SerialException, OSError) as exc:
-            raise LinkDown(f"robot port read failed: {exc}") from None
+        fd = self._raw_fd
+        if fd is not None:
+            try:
+                data = os.read(fd, 4096)
+            except BlockingIOError:
+                return 0
+            except OSError as exc:
+                raise LinkDown(f"robot port read failed: {exc}") from None
+            if not data:
+                return 0  # a tty in raw mode (VMIN = 0) reads 0 bytes when idle; a hang-up is EIO
+        else:
+            port = self.port
+            try:
+                n = port.in_waiting
+                data = port.read(n if n > 0 else 1)
+            except (serial.SerialException, OSError) as exc:
+                raise LinkDown(f"robot port read failed: {exc}") from None
         if not data:
             return 0
         new = 0

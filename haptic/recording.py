@@ -13,6 +13,7 @@ the same method and records the trace (and the file's checksum) as a row of the 
 
 from __future__ import annotations
 
+import array
 import csv
 import hashlib
 import io
@@ -53,36 +54,40 @@ _CHUNK_ROWS = 65_536
 
 
 class TraceBuffer:
-    """Growable per-tick storage used inside the loop (one ``add`` per tick)."""
+    """Growable per-tick storage used inside the loop (one ``add`` per tick).
+
+    Rows go into fixed-size ``array`` chunks (float32 columns, float64 time): appending a tuple
+    to an array costs well under a microsecond, and no chunk is ever reallocated, so a long
+    session never stalls the loop on a large copy.
+    """
 
     def __init__(self, expected_rows: int = _CHUNK_ROWS) -> None:
-        self._chunk = max(1024, int(expected_rows))
-        self._t: list[NDArray[np.float64]] = []
-        self._rows: list[NDArray[np.float32]] = []
-        self._i = 0
+        self._chunk = min(_CHUNK_ROWS, max(1024, int(expected_rows)))
+        self._t: list[array.array[float]] = []
+        self._rows: list[array.array[float]] = []
         self.n = 0
         self._grow()
 
     def _grow(self) -> None:
-        self._t.append(np.empty(self._chunk, dtype=np.float64))
-        self._rows.append(np.empty((self._chunk, NCOL), dtype=np.float32))
-        self._i = 0
+        self._tcur: array.array[float] = array.array("d")
+        self._rcur: array.array[float] = array.array("f")
+        self._t.append(self._tcur)
+        self._rows.append(self._rcur)
 
     def add(self, t_s: float, row: tuple[float, ...]) -> None:
-        i = self._i
-        if i == self._chunk:
+        tc = self._tcur
+        if len(tc) == self._chunk:
             self._grow()
-            i = 0
-        self._t[-1][i] = t_s
-        self._rows[-1][i] = row
-        self._i = i + 1
+            tc = self._tcur
+        tc.append(t_s)
+        self._rcur.extend(row)
         self.n += 1
 
     def arrays(self) -> tuple[NDArray[np.float64], NDArray[np.float32]]:
         """Time (N,) s and columns (N, NCOL) as contiguous copies."""
-        ts = [t for t in self._t[:-1]] + [self._t[-1][: self._i]]
-        rs = [r for r in self._rows[:-1]] + [self._rows[-1][: self._i]]
-        return np.concatenate(ts), np.concatenate(rs)
+        t = np.concatenate([np.frombuffer(c, dtype=np.float64) for c in self._t])
+        r = np.concatenate([np.frombuffer(c, dtype=np.float32) for c in self._rows])
+        return t.copy(), r.reshape(-1, NCOL).copy()
 
 
 @dataclass(frozen=True)

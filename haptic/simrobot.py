@@ -366,6 +366,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", default="{}")
     a = ap.parse_args(argv)
     cfg = SimRobotConfig(**json.loads(a.config))
+    if cfg.mode == "realtime" and hasattr(os, "sched_setscheduler"):
+        # a robot's firmware runs real-time; grant the simulation the same where the OS allows
+        # (one step below the host loop's priority), silently otherwise
+        try:
+            prio = max(1, os.sched_get_priority_max(os.SCHED_FIFO) - 20)
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+        except OSError:
+            pass
     try:
         serve_fd(SimDevice(cfg), a.fd)
     except (OSError, KeyboardInterrupt):
