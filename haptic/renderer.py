@@ -506,6 +506,14 @@ class Renderer:
                         "with normal priority and its timing will show more jitter", exc)
             return None
 
+    @staticmethod
+    def _leave_realtime(old: Any) -> None:
+        if old is not None:
+            try:
+                os.sched_setscheduler(0, old[0], old[1])
+            except OSError:
+                pass
+
     def start(self, first_state_timeout_s: float = 1.0, expected_ticks: int | None = None) -> None:
         """Wait for the first STATE, put both arms at the handle, arm (``arm_on_start``)."""
         cfg = self.config
@@ -540,16 +548,25 @@ class Renderer:
         """Render until ``duration_s`` passes or a ``stop`` command; return the session trace."""
         cfg = self.config
         n_ticks = None if duration_s is None else max(1, round(duration_s * cfg.rate_hz))
-        self.start(first_state_timeout_s, n_ticks)
-        old_sched = self._enter_realtime()
-        clock = self.clock
-        period = self.period_ns
-        wake = self._wake
-        late = self._late
+        # collect and freeze before arming: a full collection can take longer than the device
+        # watchdog, and nothing may stand between the ARM frame and the first FORCE
         gc.collect()
         gc.freeze()
         gc_was_enabled = gc.isenabled()
         gc.disable()
+        old_sched = self._enter_realtime()
+        try:
+            self.start(first_state_timeout_s, n_ticks)
+        except BaseException:
+            if gc_was_enabled:
+                gc.enable()
+            gc.unfreeze()
+            self._leave_realtime(old_sched)
+            raise
+        clock = self.clock
+        period = self.period_ns
+        wake = self._wake
+        late = self._late
         end = None if n_ticks is None else self.ticks + n_ticks
         errstate = np.errstate(over="ignore", invalid="ignore")  # diverging arms are faults
         errstate.__enter__()
@@ -579,11 +596,7 @@ class Renderer:
             if gc_was_enabled:
                 gc.enable()
             gc.unfreeze()
-            if old_sched is not None:
-                try:
-                    os.sched_setscheduler(0, old_sched[0], old_sched[1])
-                except OSError:
-                    pass
+            self._leave_realtime(old_sched)
             self.running = False
         return self.finish()
 
