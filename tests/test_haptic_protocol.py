@@ -149,3 +149,20 @@ def test_reader_memory_is_bounded_without_delimiters() -> None:
         reader.feed(os.urandom(50).replace(b"\x00", b"\x01"))
     assert len(reader._buf) <= P.MAX_FRAME_BYTES
     assert reader.errors.get("length", 0) > 0
+
+
+def test_example_frames_in_the_protocol_document_match_the_encoder() -> None:
+    from pathlib import Path
+
+    doc = (Path(__file__).parent.parent / "docs" / "robot-protocol.md").read_text()
+    lines = doc.splitlines()
+    wires = [(lines[i - 1].split()[0], bytes.fromhex(ln[len("wire:"):]))
+             for i, ln in enumerate(lines) if ln.startswith("wire:")]
+    assert len(wires) == 8
+    for name, wire in wires:
+        assert wire.endswith(b"\x00")
+        f = P.decode_frame(wire[:-1])
+        assert P.MsgType(f.type).name == name
+        assert P.encode_frame(f.type, f.seq, f.payload) == wire
+    force = dict(wires)["FORCE"]
+    assert P.FORCE_FMT.unpack(P.decode_frame(force[:-1]).payload) == (1.0, 2.0)
