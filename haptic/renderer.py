@@ -630,7 +630,7 @@ class Renderer:
             out["overruns"] = int(over.sum())
             out["overrun_threshold_ms"] = self.config.overrun_ms
             out["skipped_ticks"] = self.skipped_ticks
-            out["overrun_times_s"] = [float(i / self.config.rate_hz)
+            out["overrun_times_s"] = [float((wake[i] - wake[0]) / 1e9)
                                       for i in np.flatnonzero(over)[:100]]
         n = max(1, self.ticks)
         out["tick_cost_us"] = {name: self._cost[i] / n / 1e3 for i, name in enumerate(PHASES)}

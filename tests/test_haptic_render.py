@@ -81,3 +81,20 @@ def test_renderer_arms_ramps_in_and_records() -> None:
     assert trace.stats["ticks"] == 1000
     assert set(trace.stats["tick_cost_us"]) >= {"link_in", "models", "safety", "record", "total"}
     assert list(trace.models["A"]["km_n_per_m"]) == list(p.km_n_per_m)
+
+
+@pytest.mark.parametrize("rate_hz", [500, 4000])
+def test_other_loop_rates(rate_hz: int) -> None:
+    from haptic.probe import probe
+
+    res = probe(severe_shoulder(), "fastpull", rate_hz=rate_hz, duration_s=0.6)
+    assert len(res.trace) == round(0.6 * rate_hz)
+    assert res.trace.faults == []
+    assert res.summary()["peak_force_n"] > 5.0
+
+
+def test_rate_outside_the_range_is_refused() -> None:
+    from fieldbank.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="rate_hz"):
+        RendererConfig(rate_hz=5000)
