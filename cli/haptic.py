@@ -91,6 +91,12 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
     before = _model(before_file, before_severity)
     after = _model(after_file, after_severity) if (after_file or after_severity) else before
+    offset = _pair(shoulder_offset, "--shoulder-offset")
+    if robot.startswith("sim://"):
+        from haptic.probe import sim_url
+
+        # the simulated operator starts at the model's rest hand position unless told otherwise
+        robot = sim_url(before, "explore", offset, robot)
     link = RobotLink.open(robot)
     try:
         info = link.handshake(rate_hz, 20)
@@ -98,7 +104,7 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
                    f"{info.max_rate_hz} Hz, device force limit {info.force_limit_n:g} N, "
                    f"watchdog {info.watchdog_ms} ms", err=True)
         cfg = RendererConfig(rate_hz=rate_hz, crossfade_s=crossfade_s,
-                             shoulder_offset_m=_pair(shoulder_offset, "--shoulder-offset"),
+                             shoulder_offset_m=offset,
                              arm_on_start=arm_on_start)
         rd = Renderer(link, before, after, cfg, safety=SafetyConfig(force_limit_n=force_limit_n))
         rd.metadata["robot"] = robot
@@ -300,7 +306,13 @@ def sim_robot(motion: str, mode: str, start: str | None) -> None:
     """Run the simulated robot on a pty and print the port to give to 'serve --robot'."""
     from haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
 
-    x0, y0 = _pair(start, "--start") if start else (0.082, 0.547)
+    if start:
+        x0, y0 = _pair(start, "--start")
+    else:  # the rest hand position of the default (unimpaired) arm
+        from fieldbank.model import Arm
+
+        x0, y0 = (float(v) for v in Arm.from_params(ArmParams.from_anthropometry())
+                  .rest_position())
     robot = PtyRobot(SimRobotConfig(mode=mode, motion=motion, x0_m=x0, y0_m=y0))
     click.echo(robot.port)
     try:

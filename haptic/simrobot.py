@@ -294,14 +294,19 @@ class PtyRobot:
 
     def _run_thread(self) -> None:
         try:
-            serve_fd(self.device, self.master_fd, self._stop.is_set)
+            # no spinning in a thread: it would hold the interpreter the host loop needs
+            serve_fd(self.device, self.master_fd, self._stop.is_set, spin=False)
         except OSError:
             pass
 
     def start_process(self) -> PtyRobot:
         cmd = [sys.executable, "-m", "haptic.simrobot", "--fd", str(self.master_fd),
                "--config", json.dumps(asdict(self.config))]
-        self._proc = subprocess.Popen(cmd, pass_fds=(self.master_fd,))
+        # the child must import this package from wherever this process imported it
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+        self._proc = subprocess.Popen(cmd, pass_fds=(self.master_fd,), env=env)
         return self
 
     def unplug(self) -> None:
@@ -331,8 +336,12 @@ class PtyRobot:
         self.close()
 
 
-def serve_fd(device: SimDevice, fd: int, stop: object = lambda: False) -> None:
-    """Run ``device`` on file descriptor ``fd`` until ``stop()`` or the fd fails."""
+def serve_fd(device: SimDevice, fd: int, stop: object = lambda: False, spin: bool = True) -> None:
+    """Run ``device`` on file descriptor ``fd`` until ``stop()`` or the fd fails.
+
+    In realtime mode the loop sleeps in ``select`` until about 200 µs before the next STATE is
+    due and then, with ``spin``, busy-waits to the deadline for a steady period.
+    """
     realtime = device.config.mode == "realtime"
     clock = time.perf_counter
     while not stop():  # type: ignore[operator]
@@ -348,7 +357,8 @@ def serve_fd(device: SimDevice, fd: int, stop: object = lambda: False) -> None:
                 return
             device.feed(data)
         if realtime:
-            while device._wall0 is not None and clock() < device._next_state_wall and not r:
+            while (spin and not r and device._wall0 is not None
+                   and clock() < device._next_state_wall):
                 pass  # spin the last ~200 µs to the STATE deadline
             device.poll_realtime(clock())
         out = device.take_output()
