@@ -8,6 +8,7 @@ socket (``--socket``, default ``haptic.sock`` in the fieldbank data directory). 
 from __future__ import annotations
 
 import datetime as _dt
+import importlib.util
 import json
 import logging
 import os
@@ -38,6 +39,45 @@ def _model(path: Path | None, severity: str | None) -> ArmParams:
     return load_model(path, severity)
 
 
+db_option = click.option(
+    "--db", "db_url", default=None, metavar="URL",
+    help="Field database URL (default: $FIELDBANK_DB, else the embedded SQLite file).")
+
+
+def _open_db(db_url: str | None) -> Any:
+    try:
+        from fieldbank.storage import Database
+    except ImportError:
+        raise HapticError("the field database (fieldbank.storage) is not part of this "
+                          "installation") from None
+    return Database.open(db_url)
+
+
+def _models(db_url: str | None, files: tuple[Path | None, Path | None],
+            severities: tuple[str | None, str | None],
+            ids: tuple[int | None, int | None]) -> tuple[ArmParams, ArmParams,
+                                                       tuple[int | None, int | None]]:
+    """Models A and B from files, severities or database ids (B defaults to A)."""
+    out: list[ArmParams | None] = []
+    for f, sev, mid, label in zip(files, severities, ids, ("before", "after"), strict=True):
+        given = [x for x in (f, sev, mid) if x is not None]
+        if len(given) > 1:
+            raise click.UsageError(f"give the {label} model once: a file, a severity or an id")
+        if mid is not None:
+            db = _open_db(db_url)
+            try:
+                out.append(db.get_model(mid).params)
+            finally:
+                db.close()
+        elif f is not None or sev:
+            out.append(_model(f, sev))
+        else:
+            out.append(None)
+    a = out[0] if out[0] is not None else ArmParams.from_anthropometry()
+    b = out[1] if out[1] is not None else a
+    return a, b, (ids[0], ids[1] if out[1] is not None else ids[0])
+
+
 def _pair(x: str | None, name: str) -> tuple[float, float]:
     if x is None:
         return (0.0, 0.0)
@@ -65,6 +105,8 @@ def haptic() -> None:
               help="ArmParams JSON of the model after (B).")
 @click.option("--before-severity", help="Model A from a severity, e.g. elbow=severe.")
 @click.option("--after-severity", help="Model B from a severity, e.g. elbow=mild.")
+@click.option("--before-id", type=int, help="Model A by its id in the field database.")
+@click.option("--after-id", type=int, help="Model B by its id in the field database.")
 @click.option("--force-limit-n", type=click.FloatRange(min=0.1, max=200.0), default=40.0,
               show_default=True)
 @click.option("--shoulder-offset", help="Shoulder position in robot coordinates, X,Y in m.")
@@ -75,22 +117,30 @@ def haptic() -> None:
 @click.option("--trace-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Where the session trace goes (default: traces/ in the data dir).")
 @socket_option
+@db_option
+@click.option("--patient", help="Patient code the session belongs to (in the database).")
+@click.option("--no-db", is_flag=True, help="Write the trace file only, not the database.")
 @click.option("--json", "as_json", is_flag=True, help="Print the session summary as JSON.")
 def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path | None,
           after_file: Path | None, before_severity: str | None, after_severity: str | None,
-          force_limit_n: float, shoulder_offset: str | None, crossfade_s: float,
-          arm_on_start: bool, trace_dir: Path | None, socket_path: Path | None,
-          as_json: bool) -> None:
-    """Run the real-time renderer on ROBOT with models A (before) and B (after)."""
-    from haptic.control import ControlServer, default_socket_path
+          before_id: int | None, after_id: int | None, force_limit_n: float,
+          shoulder_offset: str | None, crossfade_s: float, arm_on_start: bool,
+          trace_dir: Path | None, socket_path: Path | None, db_url: str | None,
+          patient: str | None, no_db: bool, as_json: bool) -> None:
+    """Run the real-time renderer on ROBOT with models A (before) and B (after).
+
+    The session's trace is written to an HDF5 file in --trace-dir and recorded in the field
+    database (unless --no-db).
+    """
+    from haptic.control import ControlServer, data_home
     from haptic.link import RobotLink
     from haptic.recording import Hdf5TraceSink
     from haptic.renderer import Renderer, RendererConfig
     from haptic.safety import SafetyConfig
 
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
-    before = _model(before_file, before_severity)
-    after = _model(after_file, after_severity) if (after_file or after_severity) else before
+    before, after, ids = _models(db_url, (before_file, after_file),
+                                 (before_severity, after_severity), (before_id, after_id))
     offset = _pair(shoulder_offset, "--shoulder-offset")
     if robot.startswith("sim://"):
         from haptic.probe import sim_url
@@ -108,23 +158,39 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
                              arm_on_start=arm_on_start)
         rd = Renderer(link, before, after, cfg, safety=SafetyConfig(force_limit_n=force_limit_n))
         rd.metadata["robot"] = robot
+        if any(i is not None for i in ids):
+            rd.metadata["model_ids"] = {"A": ids[0], "B": ids[1]}
         with ControlServer(rd, socket_path) as server:
             click.echo(f"rendering at {rate_hz} Hz; control socket {server.path}", err=True)
             trace = rd.run(duration_s)
     finally:
         link.close()
-    base = trace_dir or (socket_path or default_socket_path()).parent / "traces"
+    base = trace_dir or data_home() / "traces"
     name = "haptic-" + _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
     sink = Hdf5TraceSink(base)
-    ref = sink.write_trace(trace, name)
+    ref = sink.write_trace(trace, name)  # the file first: it survives a database failure
+    click.echo(f"trace file: {ref}", err=True)
     summary = {**trace.summary(), "trace": ref, "sha256": sink.sha256[ref]}
+    if not no_db and db_url is None and importlib.util.find_spec("fieldbank.storage") is None:
+        click.echo("the field database is not part of this installation: trace file only",
+                   err=True)
+        no_db = True
+    if not no_db:
+        from haptic.dbsink import DatabaseTraceSink
+
+        db = _open_db(db_url)
+        try:
+            summary["database"] = DatabaseTraceSink(db, patient).write_trace(trace, name)
+        finally:
+            db.close()
     st = trace.stats.get("period_error_us", {})
     _emit(summary, as_json,
           f"session: {len(trace)} ticks, max force {summary['max_force_n']:.2f} N, "
           f"{len(trace.faults)} fault(s), period error p50 {st.get('p50', 0):.1f} µs p99 "
           f"{st.get('p99', 0):.1f} µs max {st.get('max', 0):.1f} µs, "
           f"overruns >{trace.stats.get('overrun_threshold_ms', 1)} ms: "
-          f"{trace.stats.get('overruns', 0)}\ntrace: {ref}")
+          f"{trace.stats.get('overruns', 0)}\ntrace: {ref}"
+          + (f"\ndatabase: {summary['database']}" if "database" in summary else ""))
 
 
 @haptic.command("push")
@@ -132,18 +198,23 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
 @click.argument("after_file", required=False, type=click.Path(exists=True, path_type=Path))
 @click.option("--before-severity")
 @click.option("--after-severity")
+@click.option("--before-id", type=int, help="Model A by its id in the field database.")
+@click.option("--after-id", type=int, help="Model B by its id in the field database.")
 @socket_option
+@db_option
 @click.option("--json", "as_json", is_flag=True)
 def push(before_file: Path | None, after_file: Path | None, before_severity: str | None,
-         after_severity: str | None, socket_path: Path | None, as_json: bool) -> None:
+         after_severity: str | None, before_id: int | None, after_id: int | None,
+         socket_path: Path | None, db_url: str | None, as_json: bool) -> None:
     """Send models BEFORE (A) and AFTER (B) to the running renderer (faded swap)."""
     from haptic.control import push_models
 
-    if before_file is None and not before_severity:
-        raise click.UsageError("give BEFORE_FILE or --before-severity")
-    before = _model(before_file, before_severity)
-    after = _model(after_file, after_severity) if (after_file or after_severity) else before
-    res = push_models(before, after, socket_path)
+    if before_file is None and not before_severity and before_id is None:
+        raise click.UsageError("give BEFORE_FILE, --before-severity or --before-id")
+    before, after, ids = _models(db_url, (before_file, after_file),
+                                 (before_severity, after_severity), (before_id, after_id))
+    res = push_models(before, after, socket_path,
+                      ids if any(i is not None for i in ids) else None)
     _emit(res, as_json, "models pushed")
 
 
@@ -264,18 +335,38 @@ def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | 
 
 
 @haptic.command("replay")
-@click.argument("trace_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("trace_ref", metavar="TRACE")
 @click.option("--csv", "csv_out", type=click.Path(dir_okay=False, path_type=Path),
               help="Export the trace as CSV.")
 @click.option("--rerun", is_flag=True, help="Recompute the model forces from the recorded "
               "handle motion and compare.")
+@db_option
 @click.option("--json", "as_json", is_flag=True)
-def replay(trace_file: Path, csv_out: Path | None, rerun: bool, as_json: bool) -> None:
-    """Summarise a recorded session; export it; re-run it offline."""
+def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None,
+           as_json: bool) -> None:
+    """Summarise a recorded session; export it; re-run it offline.
+
+    TRACE is a trace file (.h5) or a database session, haptic_session:ID.
+    """
+    from haptic.dbsink import SESSION_PREFIX, read_trace_db
     from haptic.recording import read_trace_h5
     from haptic.replay import rerun as do_rerun
 
-    trace = read_trace_h5(trace_file)
+    if trace_ref.startswith(SESSION_PREFIX):
+        try:
+            sid = int(trace_ref[len(SESSION_PREFIX):])
+        except ValueError:
+            raise click.BadParameter(f"expected {SESSION_PREFIX}ID; got {trace_ref!r}") from None
+        db = _open_db(db_url)
+        try:
+            trace = read_trace_db(db, sid)
+        finally:
+            db.close()
+    else:
+        if not Path(trace_ref).is_file():
+            raise click.BadParameter(f"no trace file {trace_ref!r} (nor {SESSION_PREFIX}ID)")
+        trace = read_trace_h5(trace_ref)
+    trace_file = trace_ref
     s = trace.summary()
     if csv_out is not None:
         tmp = csv_out.with_name(csv_out.name + ".tmp")

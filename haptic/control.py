@@ -40,18 +40,23 @@ MAX_REQUEST_BYTES = 1 << 20
 SOCKET_NAME = "haptic.sock"
 
 
+def data_home() -> Path:
+    """fieldbank's data directory: ``$FIELDBANK_HOME``, else the platform's user data dir
+    (the same rule as the storage layer's ``fieldbank.storage.config.data_home``)."""
+    env = os.environ.get("FIELDBANK_HOME")
+    if env:
+        return Path(env).expanduser()
+    import platformdirs
+
+    return Path(platformdirs.user_data_dir("fieldbank", appauthor=False))
+
+
 def default_socket_path() -> Path:
-    """``$FIELDBANK_HAPTIC_SOCKET``, else ``haptic.sock`` in the user's fieldbank data dir
-    (``$FIELDBANK_DATA_DIR`` or the platform's user data directory)."""
+    """``$FIELDBANK_HAPTIC_SOCKET``, else ``haptic.sock`` in :func:`data_home`."""
     env = os.environ.get("FIELDBANK_HAPTIC_SOCKET")
     if env:
         return Path(env)
-    base = os.environ.get("FIELDBANK_DATA_DIR")
-    if not base:
-        import platformdirs
-
-        base = platformdirs.user_data_dir("fieldbank")
-    return Path(base) / SOCKET_NAME
+    return data_home() / SOCKET_NAME
 
 
 def _peer_uid(conn: socket.socket) -> int | None:
@@ -166,7 +171,10 @@ class ControlServer:
         if cmd == "push":
             before = ArmParams.from_dict(req["before"], where="push: before")
             after = ArmParams.from_dict(req["after"], where="push: after")
-            return rd.push_params(before, after).wait()
+            ids = req.get("model_ids")
+            if ids is not None and not (isinstance(ids, dict) and set(ids) <= {"A", "B"}):
+                raise HapticError('push: "model_ids" must be {"A": id, "B": id}')
+            return rd.push_params(before, after, ids).wait()
         if cmd == "switch":
             return rd.submit("switch", target=req["to"]).wait()
         if cmd == "abx":
@@ -233,6 +241,14 @@ class ControlClient:
         return resp.get("result")
 
 
-def push_models(before: ArmParams, after: ArmParams, path: str | Path | None = None) -> Any:
-    """Push a before/after pair to a running renderer (used by ``whatif … --render``)."""
-    return ControlClient(path).request("push", before=before.to_dict(), after=after.to_dict())
+def push_models(before: ArmParams, after: ArmParams, path: str | Path | None = None,
+                model_ids: tuple[int | None, int | None] | None = None) -> Any:
+    """Push a before/after pair to a running renderer (used by ``whatif … --render``).
+
+    ``model_ids``: the pair's ids in the field database, if stored, so the session's trace
+    refers to them.
+    """
+    args: dict[str, Any] = {"before": before.to_dict(), "after": after.to_dict()}
+    if model_ids is not None:
+        args["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
+    return ControlClient(path).request("push", **args)

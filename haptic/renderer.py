@@ -211,6 +211,7 @@ class Renderer:
         self.abx: AbxSession | None = None
         self.abx_results: list[dict[str, Any]] = []
         self._pending: tuple[tuple[ArmSim, ArmSim], tuple[ArmParams, ArmParams]] | None = None
+        self._pending_ids: dict[str, int | None] | None = None
         self._link_down = False
         self._stale = 0
         self._awaiting = False
@@ -245,11 +246,15 @@ class Renderer:
             self._drain()
         return cmd
 
-    def push_params(self, before: ArmParams, after: ArmParams) -> Command:
-        """Compile two models here (outside the loop) and queue them for a faded swap."""
+    def push_params(self, before: ArmParams, after: ArmParams,
+                    model_ids: dict[str, int | None] | None = None) -> Command:
+        """Compile two models here (outside the loop) and queue them for a faded swap.
+
+        ``model_ids``: database ids of the two models ({'A': id, 'B': id}), kept in the trace.
+        """
         sims = (build_sim(before, self.dt_s, self.coupling),
                 build_sim(after, self.dt_s, self.coupling))
-        return self.submit("push", sims=sims, params=(before, after))
+        return self.submit("push", sims=sims, params=(before, after), model_ids=model_ids)
 
     # --- command handling (loop thread) -----------------------------------------------------
     def _drain(self) -> None:
@@ -282,6 +287,7 @@ class Renderer:
             return {"blend_target": w}
         if cmd.name == "push":
             self._pending = (a["sims"], a["params"])
+            self._pending_ids = a.get("model_ids")
             if not self.running:
                 self._swap()
             else:
@@ -331,6 +337,10 @@ class Renderer:
         self._pending = None
         self.sims = sims
         self.params = params
+        if self._pending_ids:
+            self.metadata["model_ids"] = dict(self._pending_ids)
+        else:
+            self.metadata.pop("model_ids", None)
         self._reset_arms()
 
     def _reset_arms(self) -> None:
