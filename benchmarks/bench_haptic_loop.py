@@ -132,9 +132,12 @@ def main() -> int:
     print(f"overruns > {s['overrun_threshold_ms']:g} ms: {s['overruns']}"
           + (f" at t = {', '.join(f'{t:.3f}' for t in s['overrun_times_s'][:20])} s"
              if s["overruns"] else "") + f"; ticks skipped: {s['skipped_ticks']}")
-    print("tick cost (mean per tick):")
+    print("tick cost (mean per tick; a tick preempted mid-way inflates the mean of its phase):")
     for k, v in s["tick_cost_us"].items():
         print(f"  {k:9s} {v:7.2f} µs")
+    tt = s["tick_total_us"]
+    print(f"tick total    p50 {tt['p50']:.1f} µs   p99 {tt['p99']:.1f} µs   max {tt['max']:.1f} µs "
+          f"(budget {1e6 / a.rate_hz:.0f} µs)")
     print(f"faults: {[f['name'] for f in trace.faults] or 'none'}; link: {s['link']}")
     return 0
 

@@ -228,6 +228,7 @@ class Renderer:
         self._wake = array.array("q")
         self._late = array.array("q")
         self._cost = [0] * len(PHASES)
+        self._tick_ns = array.array("q")
         self.realtime_scheduling: bool | None = None
         self.skipped_ticks = 0
         self.metadata: dict[str, Any] = {}
@@ -496,6 +497,7 @@ class Renderer:
         cost[3] += c4 - c3
         cost[4] += c5 - c4
         cost[5] += c6 - c5
+        self._tick_ns.append(c6 - c0)
         self.ticks += 1
         self.t_s += self.dt_s
 
@@ -645,6 +647,12 @@ class Renderer:
         n = max(1, self.ticks)
         out["tick_cost_us"] = {name: self._cost[i] / n / 1e3 for i, name in enumerate(PHASES)}
         out["tick_cost_us"]["total"] = sum(self._cost) / n / 1e3
+        if self._tick_ns:
+            tc = np.frombuffer(self._tick_ns, dtype=np.int64) / 1e3
+            # percentiles are robust to the few ticks preempted mid-way (the mean is not)
+            out["tick_total_us"] = {"p50": float(np.percentile(tc, 50)),
+                                    "p99": float(np.percentile(tc, 99)),
+                                    "max": float(tc.max())}
         out["passivity_active_ticks"] = self.safety.passivity.active_ticks
         out["link"] = {"crc_errors": self.link.crc_errors,
                        "decode_errors": dict(self.link.reader.errors),
