@@ -4,6 +4,7 @@ the trace records it, and only an explicit re-arm resumes. Also adversarial mode
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -37,10 +38,13 @@ def _inject(kind: str, robot: PtyRobot) -> None:
         robot.unplug()
 
 
-#: fault -> (expected code, ticks from injection until the command is zero). Stated times at
-#: 1 kHz: CRC errors trip when the leaky bucket passes 5 (6th bad frame); a gap of 6 frames is
-#: seen on the first good frame after it (5th tick); a frozen device trips after 5 ms without
-#: STATE (6th tick); NaN and an unplugged port trip on the tick that sees them.
+#: fault -> (expected code, N): the command is zero from the N-th tick on, counting the first
+#: tick that receives an affected frame as 1 (the tick after the injection for device-side
+#: faults, since a lockstep device answers each FORCE on the next tick; the injection tick for
+#: an unplugged port). Stated times at 1 kHz: CRC errors trip when the leaky bucket passes 5
+#: (6th bad frame); a gap of 4 frames is seen on the first good frame after it (5th tick); a
+#: frozen device trips after 5 ms without STATE (6th tick); NaN and an unplugged port trip on
+#: the tick that sees them.
 CASES: dict[str, tuple[FaultCode, int]] = {
     "corrupt": (FaultCode.CRC, 6),
     "drop": (FaultCode.SEQ_GAP, 5),
@@ -56,8 +60,10 @@ def test_fault_zeroes_force_latches_and_is_recorded(kind: str) -> None:
     cfg = RendererConfig(state_wait_s=0.2)
     with pty_session(severe_shoulder(), motion="fastpull", config=cfg) as (rd, robot):
         rd.start(expected_ticks=1200)
-        for i in range(INJECT_AT + within + 3):
+        first = INJECT_AT if kind == "unplug" else INJECT_AT + 1
+        for i in range(INJECT_AT + within + 4):
             if i == INJECT_AT:
+                time.sleep(0.05)  # the device has answered the last FORCE: injection is exact
                 _inject(kind, robot)
             rd.tick()
             if i == INJECT_AT - 1:
@@ -65,14 +71,15 @@ def test_fault_zeroes_force_latches_and_is_recorded(kind: str) -> None:
         trace = rd.finish()
         assert rd.safety.mode == Mode.FAULT
         f = np.hypot(trace.column("fx_n"), trace.column("fy_n"))
-        assert np.all(f[INJECT_AT + within - 1:] == 0.0), np.flatnonzero(f[INJECT_AT:])[:5]
+        assert np.all(f[first + within - 1:] == 0.0), np.flatnonzero(f[INJECT_AT:])[:5]
+        assert f[first - 1] > 1.0  # still rendering before the fault could be seen
         # the trace records it: latched bitmask per tick and the fault log
         bits = trace.column("faults").astype(np.int64)
         assert np.all(bits[:INJECT_AT] == 0)
         assert bits[-1] & (1 << (code - 1))
         assert code in [r["code"] for r in trace.faults]
         rec = next(r for r in trace.faults if r["code"] == code)
-        assert INJECT_AT * 1e-3 <= rec["t_s"] <= (INJECT_AT + within) * 1e-3 + 1e-9
+        assert INJECT_AT * 1e-3 <= rec["t_s"] <= (first + within - 1) * 1e-3 + 1e-9
         assert trace.column("mode")[-1] == float(Mode.FAULT)
         if kind in ("corrupt", "drop", "nan"):
             # the link is healthy again but the fault stays latched until an explicit re-arm
