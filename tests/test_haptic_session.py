@@ -370,3 +370,54 @@ def test_cli_errors_are_clean() -> None:
 def test_fault_log_mode_values_are_documented_bits() -> None:
     assert [m.value for m in Mode] == [0, 1, 2]
     assert math.log2(1 << 8) == 8
+
+
+def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-untyped-def]
+    rd, sock = served
+    run = CliRunner()
+    s = ["--socket", str(sock)]
+    r = run.invoke(haptic, ["status", *s, "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["mode"] == "ARMED"
+    assert run.invoke(haptic, ["switch", "after", *s]).exit_code == 0
+    r = run.invoke(haptic, ["abx", "start", "--trials", "2", "--seed", "9", *s, "--json"])
+    assert r.exit_code == 0 and json.loads(r.stdout)["n_trials"] == 2
+    assert json.loads(run.invoke(haptic, ["status", *s, "--json"]).stdout)["blend"] == "hidden"
+    assert run.invoke(haptic, ["abx", "present", "x", *s]).exit_code == 0
+    assert run.invoke(haptic, ["abx", "answer", "A", *s]).exit_code == 0
+    r = run.invoke(haptic, ["abx", "answer", "B", *s, "--json"])
+    res = json.loads(r.stdout)
+    assert res["done"] and res["result"]["answered"] == 2
+    r = run.invoke(haptic, ["abx", "answer", "B", *s])
+    assert isinstance(r.exception, HapticError)
+    assert run.invoke(haptic, ["disarm", *s]).exit_code == 0
+    assert rd.safety.mode == Mode.DISARMED
+    assert run.invoke(haptic, ["arm", *s]).exit_code == 0
+    assert rd.safety.mode == Mode.ARMED
+
+
+def test_loop_runs_with_gc_off_and_warns_without_realtime(monkeypatch, caplog) -> None:  # type: ignore[no-untyped-def]
+    import gc
+
+    seen: list[bool] = []
+
+    class Probe(Renderer):
+        def tick(self) -> None:
+            seen.append(gc.isenabled())
+            super().tick()
+
+    def refuse(*a: object) -> None:
+        raise PermissionError("not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    p = severe_shoulder()
+    link = RobotLink.open(sim_url(p, "hold"))
+    link.handshake(1000, 20)
+    rd = Probe(link, p, p, RendererConfig())
+    was = gc.isenabled()
+    with caplog.at_level("WARNING", logger="fieldbank.haptic.renderer"):
+        trace = rd.run(0.05)
+    assert seen and not any(seen)            # the collector is off inside the loop
+    assert gc.isenabled() == was             # and restored after
+    assert trace.stats["realtime_scheduling"] is False
+    assert any("SCHED_FIFO" in r.message for r in caplog.records)
