@@ -254,3 +254,19 @@ def test_random_bytes_over_a_pty_never_crash_the_renderer() -> None:
         link.close()
     assert rd.link.decode_errors > 0
     assert np.all(np.hypot(trace.column("fx_n"), trace.column("fy_n")) <= 40.0)
+
+
+def test_simulated_handle_settles_where_the_operator_spring_balances_the_force() -> None:
+    """Independent check of the device physics: a constant 6 N against the operator's 600 N/m
+    hand settles at 6/600 = 10 mm from the hold point (friction vanishes at rest)."""
+    from haptic import protocol as P
+    from haptic.simrobot import SimRobotConfig
+
+    dev = SimDevice(SimRobotConfig(motion="hold", x0_m=0.1, y0_m=0.4))
+    dev.feed(P.encode_frame(P.MsgType.HELLO, 0, P.HELLO_FMT.pack(1, 1000, 20)))
+    dev.feed(P.encode_frame(P.MsgType.ARM, 1))
+    for k in range(3000):
+        dev.feed(P.encode_frame(P.MsgType.FORCE, 2 + k, P.FORCE_FMT.pack(6.0, -3.0)))
+    assert dev.x - 0.1 == pytest.approx(6.0 / 600.0, rel=1e-3)
+    assert dev.y - 0.4 == pytest.approx(-3.0 / 600.0, rel=1e-3)
+    assert abs(dev.vx) < 1e-6
