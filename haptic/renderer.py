@@ -613,12 +613,14 @@ class Renderer:
         return self.finish()
 
     # --- reporting --------------------------------------------------------------------------
-    def loop_stats(self) -> dict[str, Any]:
-        """Period error (ns → µs) percentiles, overruns, tick cost breakdown."""
-        wake = np.frombuffer(self._wake, dtype=np.int64).astype(np.float64) if self._wake else \
-            np.zeros(0)
-        late = np.frombuffer(self._late, dtype=np.int64).astype(np.float64) if self._late else \
-            np.zeros(0)
+    def loop_stats(self, last: int | None = None) -> dict[str, Any]:
+        """Period error (ns → µs) percentiles, overruns, tick cost breakdown; over the whole
+        session or its ``last`` ticks. Safe to call from another thread while the loop runs
+        (it works on copies: a numpy view would stop the loop's arrays from growing)."""
+        k = -last if last else 0
+        wake = np.array(self._wake[k:], dtype=np.float64)
+        late = np.array(self._late[k:], dtype=np.float64)
+        tick_ns = np.array(self._tick_ns[k:], dtype=np.float64)
         out: dict[str, Any] = {"ticks": self.ticks, "rate_hz": self.config.rate_hz,
                                "realtime_scheduling": self.realtime_scheduling}
         if late.size >= 2:
@@ -647,8 +649,8 @@ class Renderer:
         n = max(1, self.ticks)
         out["tick_cost_us"] = {name: self._cost[i] / n / 1e3 for i, name in enumerate(PHASES)}
         out["tick_cost_us"]["total"] = sum(self._cost) / n / 1e3
-        if self._tick_ns:
-            tc = np.frombuffer(self._tick_ns, dtype=np.int64) / 1e3
+        if tick_ns.size:
+            tc = tick_ns / 1e3
             # percentiles are robust to the few ticks preempted mid-way (the mean is not)
             out["tick_total_us"] = {"p50": float(np.percentile(tc, 50)),
                                     "p99": float(np.percentile(tc, 99)),
@@ -671,6 +673,9 @@ class Renderer:
             "handle_m": [self.link.x, self.link.y],
             "latched_faults": [c.name for c in FaultCode if s.latched & (1 << (c - 1))],
             "faults_logged": len(s.log_records),
+            "loop_last_10s": {k: v for k, v in self.loop_stats(last=10 * self.config.rate_hz)
+                              .items() if k in ("period_error_us", "overruns", "skipped_ticks",
+                                                "tick_total_us", "realtime_scheduling")},
             "abx_trial": None if self.abx is None else self.abx.trial,
         }
 
