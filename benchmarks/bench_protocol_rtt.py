@@ -25,6 +25,48 @@ from haptic import protocol as P
 from haptic.link import RobotLink
 from haptic.simrobot import PtyRobot, SimRobotConfig
 
+ECHO = """
+import os, select, sys
+fd = int(sys.argv[1])
+while True:
+    select.select([fd], [], [])
+    data = os.read(fd, 4096)
+    if not data:
+        break
+    os.write(fd, data)
+"""
+
+
+def raw_echo_rtt(n: int) -> np.ndarray:
+    """Baseline: the same pty, a process that echoes bytes back with no protocol at all."""
+    import subprocess
+    import tty
+
+    m, s = os.openpty()
+    tty.setraw(m)
+    tty.setraw(s)
+    proc = subprocess.Popen([sys.executable, "-c", ECHO, str(m)], pass_fds=(m,))
+    frame = P.encode_frame(P.MsgType.FORCE, 1, P.FORCE_FMT.pack(0.0, 0.0))
+    import select
+
+    out = np.empty(n)
+    pc = time.perf_counter_ns
+    try:
+        for i in range(n):
+            t0 = pc()
+            os.write(s, frame)
+            got = 0
+            while got < len(frame):
+                select.select([s], [], [], 0.1)
+                got += len(os.read(s, 4096))
+            out[i] = pc() - t0
+    finally:
+        proc.kill()
+        proc.wait()
+        os.close(m)
+        os.close(s)
+    return out / 1e3
+
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -75,10 +117,15 @@ def main() -> int:
         robot.close()
     us = rtt / 1e3
     p50, p99 = np.percentile(us, [50, 99])
+    echo = raw_echo_rtt(a.n)
+    e50, e99 = np.percentile(echo, [50, 99])
     print(f"protocol round trip over a pty ({a.n} FORCE→STATE exchanges, device process; "
           f"SCHED_FIFO {'granted' if fifo else 'refused'}):")
     print(f"  p50 {p50:7.1f} µs   p99 {p99:7.1f} µs   max {us.max():8.1f} µs   lost {lost}   "
           f"(target p99 <= 150 µs: {'met' if p99 <= 150 else 'NOT met'})")
+    print(f"  baseline, raw byte echo over the same kind of pty (no protocol, no physics): "
+          f"p50 {e50:.1f} µs   p99 {e99:.1f} µs   max {echo.max():.1f} µs  "
+          f"(ratio p99 / baseline p99 {p99 / e99:.2f}×)")
     print(f"  of which framing alone (encode FORCE, decode FORCE, decode STATE; no I/O) "
           f"in one process: {codec_us:.1f} µs (ratio p50 / codec {p50 / codec_us:.1f}×)")
     return 0
