@@ -270,3 +270,23 @@ def test_simulated_handle_settles_where_the_operator_spring_balances_the_force()
     assert dev.x - 0.1 == pytest.approx(6.0 / 600.0, rel=1e-3)
     assert dev.y - 0.4 == pytest.approx(-3.0 / 600.0, rel=1e-3)
     assert abs(dev.vx) < 1e-6
+
+
+@pytest.mark.parametrize("limit,code", [
+    ({"workspace_m": (-0.5, 0.6, 0.47, 0.8)}, FaultCode.WORKSPACE),
+    ({"speed_limit_m_per_s": 0.4}, FaultCode.SPEED),
+])
+def test_workspace_and_speed_limits_end_to_end(limit: dict[str, object], code: FaultCode) -> None:
+    from haptic.safety import SafetyConfig
+
+    safety = SafetyConfig(**limit)  # type: ignore[arg-type]
+    with pty_session(severe_shoulder(), motion="fastpull", safety=safety) as (rd, _robot):
+        trace = rd.run(0.9)
+    y = trace.column("y_m").astype(float)
+    speed = np.hypot(trace.column("vx_m_per_s"), trace.column("vy_m_per_s")).astype(float)
+    out = (y < 0.47) if code == FaultCode.WORKSPACE else (speed > 0.4)
+    first = int(np.argmax(out))
+    assert out.any() and first > 0
+    f = np.hypot(trace.column("fx_n"), trace.column("fy_n"))
+    assert f[first - 1] > 0.0 and np.all(f[first:] == 0.0)  # zero on the tick it is seen
+    assert [r["code"] for r in trace.faults] == [code]
