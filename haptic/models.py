@@ -20,8 +20,21 @@ SEVERE_FACTOR = 10.0
 WEBER_FRACTION = 0.6
 
 
+def _severity_module() -> object | None:
+    try:
+        return importlib.import_module("fieldbank.severity")
+    except ImportError:
+        return None
+
+
 def parse_severity(spec: str) -> dict[str, str]:
-    """``"shoulder=severe,elbow=mild"`` → {'shoulder': 'severe', 'elbow': 'mild'}."""
+    """``"shoulder=severe,elbow=mild"`` → {'shoulder': 'severe', 'elbow': 'mild'}.
+
+    Uses the severity module's parser (and its aliases) where present.
+    """
+    sev = _severity_module()
+    if sev is not None and hasattr(sev, "parse_severity_options"):
+        return sev.parse_severity_options([spec])
     out: dict[str, str] = {}
     for part in filter(None, (p.strip() for p in spec.split(","))):
         if "=" not in part:
@@ -41,10 +54,7 @@ def parse_severity(spec: str) -> dict[str, str]:
 
 def from_severity(severities: dict[str, str], base: ArmParams | None = None) -> ArmParams:
     """An arm with the given severity per joint group (see the module docstring)."""
-    try:
-        sev = importlib.import_module("fieldbank.severity")
-    except ImportError:
-        sev = None
+    sev = _severity_module()
     if sev is not None and hasattr(sev, "synthesize"):
         return sev.synthesize(severities, base)
     p = base or ArmParams.from_anthropometry()
