@@ -38,10 +38,15 @@ def test_replay_refuses_a_missing_trace() -> None:
 
 
 # --- with the field database ----------------------------------------------------------------
-@pytest.fixture()
-def db(tmp_path: Path):  # type: ignore[no-untyped-def]
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def db(request: pytest.FixtureRequest, tmp_path: Path):  # type: ignore[no-untyped-def]
+    """The field database on each backend (PostgreSQL through the shared ``pg_url`` fixture)."""
     storage = pytest.importorskip("fieldbank.storage")
-    d = storage.Database.open(f"sqlite:///{tmp_path / 'fb.sqlite'}", store_root=tmp_path / "a")
+    if request.param == "postgres":
+        url = request.getfixturevalue("pg_url")
+    else:
+        url = f"sqlite:///{tmp_path / 'fb.sqlite'}"
+    d = storage.Database.open(url, upgrade="always", store_root=tmp_path / "a")
     yield d
     d.close()
 
@@ -70,7 +75,7 @@ def test_database_sink_round_trip(db) -> None:  # type: ignore[no-untyped-def]
 
 def test_serve_records_the_session_in_the_database(db, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     m = db.add_model(severe_shoulder(), "synthetic", "severe shoulder")
-    url = str(db.engine.url)
+    url = db.engine.url.render_as_string(hide_password=False)
     r = CliRunner().invoke(haptic, [
         "serve", "--robot", "sim://?mode=realtime&motion=hold", "--duration-s", "0.3",
         "--before-id", str(m.id), "--db", url, "--trace-dir", str(tmp_path / "t"),
