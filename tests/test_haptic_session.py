@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import os
 import stat
 import threading
@@ -367,9 +366,18 @@ def test_cli_errors_are_clean() -> None:
     assert isinstance(r.exception, HapticError) and "no renderer" in str(r.exception)
 
 
-def test_fault_log_mode_values_are_documented_bits() -> None:
-    assert [m.value for m in Mode] == [0, 1, 2]
-    assert math.log2(1 << 8) == 8
+def test_fault_codes_match_the_protocol_document() -> None:
+    import re
+
+    from haptic.protocol import FaultCode
+
+    doc = (Path(__file__).parent.parent / "docs" / "robot-protocol.md").read_text()
+    para = " ".join(doc[doc.index("Fault codes"):].split("\n\n")[0].split())
+    listed = {int(n): name for n, name in re.findall(r"(\d+) ([a-zA-Z ]+?)[,.]", para)}
+    assert sorted(listed) == [c.value for c in FaultCode]
+    for code in FaultCode:  # the document's words for each code start like the enum's name
+        assert listed[code.value].split()[0][:3].lower() in code.name.lower() or \
+            code.name.lower()[:3] in listed[code.value].lower(), (code, listed[code.value])
 
 
 def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-untyped-def]
