@@ -26,6 +26,7 @@ COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.ingest", "ingest"),
     ("cli.export", "export"),
     ("cli.samples", "samples"),
+    ("cli.haptic", "haptic"),
 )
 
 
