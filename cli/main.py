@@ -26,6 +26,8 @@ COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.ingest", "ingest"),
     ("cli.export", "export"),
     ("cli.samples", "samples"),
+    ("cli.report", "report"),
+    ("cli.demo", "demo"),
 )
 
 
