@@ -28,7 +28,7 @@ SCHEMA = "fieldbank.report"
 VERSION = 1
 #: Below this many cases per worker a process pool costs more than it saves (measured with
 #: benchmarks/bench_report.py: starting a worker and shipping results ≈ 0.1 s).
-MIN_CASES_PER_JOB = 3
+MIN_CASES_PER_JOB = 2
 FILES = ("report.html", "metrics.csv", "metrics.json")
 
 

@@ -19,6 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from fieldbank import plotting
 from fieldbank.maps import ellipse
@@ -37,8 +38,13 @@ def png_bytes(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def _panels(n: int, size_in: tuple[float, float] = PANEL_IN) -> tuple[Figure, list[Any]]:
-    fig = plt.figure(figsize=(size_in[0] * n, size_in[1]), layout="constrained")
+def _panels(n: int, size_in: tuple[float, float] = PANEL_IN,
+            left_in: float = 0.5) -> tuple[Figure, list[Any]]:
+    fig = plt.figure(figsize=(size_in[0] * n, size_in[1]))
+    # Fixed margins instead of a layout engine: constrained layout doubled the drawing time.
+    fig.subplots_adjust(left=left_in / (size_in[0] * n), right=1 - 0.15 / (size_in[0] * n),
+                        bottom=0.55 / size_in[1], top=1 - 0.35 / size_in[1],
+                        wspace=0.35 if n > 1 else 0.2)
     axes = list(fig.subplots(1, n, squeeze=False)[0])
     return fig, axes
 
@@ -49,6 +55,8 @@ def _spatial(ax: Any, title: str) -> None:
     ax.set_xlabel("x (m)", fontsize=8)
     ax.set_ylabel("y (m)", fontsize=8)
     ax.tick_params(labelsize=7)
+    ax.xaxis.set_major_locator(MaxNLocator(5))
+    ax.yaxis.set_major_locator(MaxNLocator(5))
 
 
 def _field_row(axes: Sequence[Any], fig: Figure, arm_b: Arm, grid_m: FloatArray,
@@ -56,20 +64,20 @@ def _field_row(axes: Sequence[Any], fig: Figure, arm_b: Arm, grid_m: FloatArray,
                label: str) -> None:
     spacing = float(np.min(np.ptp(grid_m, axis=0))) / 8.0
 
-    def arrow_scale(f: FloatArray) -> float:
-        # 90th percentile: a few near-singular edge postures do not shrink every other arrow
-        return max(float(np.percentile(np.hypot(*f.T), 90)), 1e-9) / (0.8 * spacing)
+    def arrow_scale(f: FloatArray, pct: float = 90.0) -> float:
+        # a high percentile: a few near-singular edge postures do not shrink every other arrow
+        return max(float(np.percentile(np.hypot(*f.T), pct)), 1e-9) / (0.8 * spacing)
 
     d = fa - fb
     scale = arrow_scale(np.vstack([fb, fa]))
     panels = ((fb, ub, scale, f"before: {label}", "C0"), (fa, ua, scale, f"after: {label}", "C0"),
-              (d, None if ub is None or ua is None else ua - ub, arrow_scale(d),
+              (d, None if ub is None or ua is None else ua - ub, arrow_scale(d, 98.0),
                f"after − before: {label}", "C3"))
     for ax, (f, u, sc, title, color) in zip(axes, panels, strict=True):
         if u is not None and float(np.ptp(u)) > 1e-9:
             cs = ax.tricontourf(grid_m[:, 0], grid_m[:, 1], u, levels=10, cmap="Greys",
                                 alpha=0.55)
-            cb = fig.colorbar(cs, ax=ax, shrink=0.75)
+            cb = fig.colorbar(cs, ax=ax, shrink=0.8, pad=0.02, fraction=0.05)
             cb.ax.tick_params(labelsize=6)
             cb.set_label("U (J)" if color == "C0" else "ΔU (J)", fontsize=7)
         if float(np.abs(f).max()) < 1e-9:
@@ -96,7 +104,8 @@ def fields_figure(arm_b: Arm, arm_a: Arm, grid_m: FloatArray, speed_m_per_s: flo
     field changes most (the reflex acts on lengthening muscles only, so a flexor injection
     shows when the elbow extends and an extensor injection when it flexes).
     """
-    fig = plt.figure(figsize=(PANEL_IN[0] * 3, PANEL_IN[1] * 2), layout="constrained")
+    fig = plt.figure(figsize=(PANEL_IN[0] * 3, PANEL_IN[1] * 2))
+    fig.subplots_adjust(left=0.05, right=0.98, bottom=0.09, top=0.95, wspace=0.3, hspace=0.4)
     axes = fig.subplots(2, 3, squeeze=False)
     _field_row(axes[0], fig, arm_b, grid_m, arm_b.endpoint_force(grid_m),
                arm_a.endpoint_force(grid_m), arm_b.potential(grid_m), arm_a.potential(grid_m),
@@ -134,7 +143,7 @@ def ellipses_figure(grid_m: FloatArray, k_before: FloatArray, k_after: FloatArra
 def severity_figure(groups: Sequence[str], before: Sequence[float],
                     after: Sequence[float], levels: Sequence[str]) -> bytes:
     """Severity score per joint group before and after (0 unimpaired … 4 severe)."""
-    fig, axes = _panels(1, (4.6, 2.8))
+    fig, axes = _panels(1, (5.2, 2.8), left_in=0.9)
     ax = axes[0]
     x = np.arange(len(groups))
     ax.bar(x - 0.18, before, 0.36, label="before", color="C0")
