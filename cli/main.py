@@ -28,6 +28,7 @@ COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.samples", "samples"),
     ("cli.report", "report"),
     ("cli.demo", "demo"),
+    ("cli.haptic", "haptic"),
 )
 
 

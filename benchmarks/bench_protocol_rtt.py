@@ -1,0 +1,88 @@
+"""Host-side protocol round trip over a pty: FORCE out, the device's STATE reply back.
+
+The simulated robot runs in its own process on the master end of a pty in lockstep mode (it
+answers each FORCE with a STATE after stepping its physics); the host uses the same RobotLink
+as the renderer, sleeping in select() for the reply (``--spin`` to busy-poll instead). The time
+runs from just before encoding the FORCE to the moment the STATE echoing that FORCE's sequence
+number is decoded. Target: p99 <= 150 µs. The host asks for SCHED_FIFO like the renderer
+(``--no-fifo`` not to). A second figure times the framing alone, in one process.
+
+    python benchmarks/bench_protocol_rtt.py [--n 20000] [--spin] [--no-fifo]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+import numpy as np
+
+from haptic import protocol as P
+from haptic.link import RobotLink
+from haptic.simrobot import PtyRobot, SimRobotConfig
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, default=20000)
+    ap.add_argument("--spin", action="store_true",
+                    help="poll for the reply in a busy loop instead of sleeping in select()")
+    ap.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO")
+    a = ap.parse_args()
+    robot = PtyRobot(SimRobotConfig(mode="lockstep")).start_process()
+    fifo = False
+    try:
+        if a.no_fifo:
+            raise OSError("not asked")  # the same priority the renderer asks for
+        os.sched_setscheduler(0, os.SCHED_FIFO,
+                              os.sched_param(os.sched_get_priority_max(os.SCHED_FIFO) - 10))
+        fifo = True
+    except (OSError, AttributeError):
+        pass
+    link = RobotLink.open(robot.port)
+    try:
+        link.handshake(1000, 20, timeout_s=3.0)
+        link.arm()
+        pc = time.perf_counter_ns
+        rtt = np.empty(a.n)
+        lost = 0
+        for i in range(a.n):
+            t0 = pc()
+            seq = link.send_force(0.0, 0.0)
+            give_up = t0 + 100_000_000
+            while True:
+                got = link.poll() if a.spin else link.wait_state(0.1)
+                if got and link.echo_seq == seq:
+                    break
+                if pc() > give_up:
+                    lost += 1
+                    break
+            rtt[i] = pc() - t0
+        # baseline in the same process: encode + decode of the two frames, no I/O
+        f = P.encode_frame(P.MsgType.STATE, 1, P.STATE_FMT.pack(0, 0, 0, 0, 0, 0, 0))
+        r = P.FrameReader()
+        t0 = pc()
+        for _ in range(a.n):
+            r.feed(P.encode_frame(P.MsgType.FORCE, 1, P.FORCE_FMT.pack(0.0, 0.0)))
+            r.feed(f)
+        codec_us = (pc() - t0) / a.n / 1e3
+    finally:
+        link.close()
+        robot.close()
+    us = rtt / 1e3
+    p50, p99 = np.percentile(us, [50, 99])
+    print(f"protocol round trip over a pty ({a.n} FORCE→STATE exchanges, device process; "
+          f"SCHED_FIFO {'granted' if fifo else 'refused'}):")
+    print(f"  p50 {p50:7.1f} µs   p99 {p99:7.1f} µs   max {us.max():8.1f} µs   lost {lost}   "
+          f"(target p99 <= 150 µs: {'met' if p99 <= 150 else 'NOT met'})")
+    print(f"  of which framing alone (encode FORCE, decode FORCE, decode STATE; no I/O) "
+          f"in one process: {codec_us:.1f} µs (ratio p50 / codec {p50 / codec_us:.1f}×)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,81 @@
+"""Traces into the field database: a :class:`haptic.recording.TraceSink` over
+:class:`fieldbank.storage.Database`.
+
+A session becomes one ``haptic_session`` row (models A and B, robot URL, and as its statistics
+the loop figures, faults, events, A/B/X results and metadata) plus one trace per column — time
+and every per-tick column of :data:`haptic.recording.COLUMNS`, each an array in the HDF5 array
+store with its unit, checksummed by the storage layer. Models rendered without a database id
+are stored first (origin 'synthetic', labelled as haptic-session models).
+
+The storage layer is imported only by whoever builds a ``Database``; this module needs nothing
+from it at import time.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fieldbank.errors import StorageError
+from fieldbank.params import ArmParams
+from haptic.recording import COLUMNS, NCOL, Trace
+
+SESSION_PREFIX = "haptic_session:"
+
+
+class DatabaseTraceSink:
+    """Records traces in ``db`` (a :class:`fieldbank.storage.Database`)."""
+
+    def __init__(self, db: Any, patient_code: str | None = None) -> None:
+        self.db = db
+        self.patient_code = patient_code
+
+    def _model_id(self, trace: Trace, key: str, name: str) -> int:
+        ids = trace.metadata.get("model_ids") or {}
+        if ids.get(key) is not None:
+            return int(ids[key])
+        params = ArmParams.from_dict(trace.models[key], where=f"trace {name} model {key}")
+        stored = self.db.add_model(params, "synthetic", f"haptic session {name}: model {key}",
+                                   patient_code=self.patient_code)
+        return int(stored.id)
+
+    def write_trace(self, trace: Trace, name: str) -> str:
+        a_id = self._model_id(trace, "A", name)
+        b_id = self._model_id(trace, "B", name)
+        robot = str(trace.metadata.get("robot", "unknown"))
+        sess = self.db.start_haptic_session(a_id, robot, model_b_id=b_id,
+                                            patient_code=self.patient_code)
+        prov = {"trace_name": name, "rate_hz": trace.rate_hz, "frame": "robot",
+                "sign": "force on the handle"}
+        self.db.add_trace(sess.id, "t_s", np.asarray(trace.t_s, dtype=np.float64), "s", prov)
+        for i, (col, unit) in enumerate(COLUMNS):
+            self.db.add_trace(sess.id, col, np.ascontiguousarray(trace.data[:, i]), unit, prov)
+        self.db.end_haptic_session(sess.id, {
+            "name": name, "rate_hz": trace.rate_hz, "loop": trace.stats,
+            "faults": trace.faults, "events": trace.events, "metadata": trace.metadata,
+        })
+        return f"{SESSION_PREFIX}{sess.id}"
+
+
+def read_trace_db(db: Any, haptic_session_id: int) -> Trace:
+    """Rebuild a :class:`Trace` from a recorded haptic session; StorageError if incomplete."""
+    sess = db.get_haptic_session(haptic_session_id)
+    arrays = {t.name: t for t in db.list_traces(haptic_session_id)}
+    missing = [c for c in ["t_s"] + [n for n, _ in COLUMNS] if c not in arrays]
+    if missing:
+        raise StorageError(f"haptic session {haptic_session_id} lacks trace(s) "
+                           f"{', '.join(missing)}")
+    t = np.asarray(db.get_trace_array(arrays["t_s"].id), dtype=np.float64)
+    data = np.empty((t.shape[0], NCOL), dtype=np.float32)
+    for i, (col, _unit) in enumerate(COLUMNS):
+        data[:, i] = db.get_trace_array(arrays[col].id)
+    st = sess.stats
+    models = {"A": db.get_model(sess.model_a_id).params.to_dict()}
+    models["B"] = (db.get_model(sess.model_b_id).params.to_dict() if sess.model_b_id is not None
+                   else models["A"])
+    meta = dict(st.get("metadata", {}))
+    meta.setdefault("model_ids", {"A": sess.model_a_id, "B": sess.model_b_id})
+    return Trace(t_s=t, data=data, rate_hz=float(st.get("rate_hz", 1000.0)), models=models,
+                 events=list(st.get("events", [])), faults=list(st.get("faults", [])),
+                 stats=dict(st.get("loop", {})), metadata=meta)

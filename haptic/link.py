@@ -1,0 +1,248 @@
+"""Host side of the robot link: a pyserial port speaking :mod:`haptic.protocol`.
+
+:class:`RobotLink` wraps any port :func:`serial.serial_for_url` returns (a USB serial device, a
+pty, ``socket://``, or the simulated robot ``sim://``). Reads never block the loop: each
+:meth:`RobotLink.poll` takes the bytes that have arrived, reassembles frames, keeps the newest
+STATE in plain attributes, and counts what went wrong (CRC and other decode errors, frames lost
+to sequence gaps, duplicates, device FAULT frames). Judging those counts is the safety layer's
+job (:mod:`haptic.safety`); a port that fails raises :class:`LinkDown`.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import time
+
+import serial
+
+from fieldbank.errors import HapticError
+from haptic import protocol as P
+
+if "haptic" not in serial.protocol_handler_packages:
+    serial.protocol_handler_packages.append("haptic")  # makes sim:// resolve to protocol_sim
+
+#: Baud rate asked of real USB serial adapters (ignored by ptys and sim://).
+DEFAULT_BAUDRATE = 1_000_000
+
+
+class LinkDown(HapticError):
+    """The port failed (unplugged, closed, I/O error)."""
+
+
+class RobotLink:
+    """Protocol endpoint on the host.
+
+    Attributes (newest STATE): ``t_us``, ``x``, ``y``, ``vx``, ``vy`` (m, m/s, robot frame),
+    ``flags``, ``echo_seq`` (last FORCE seq the device applied), ``states`` (STATE frames
+    received so far). Counters: ``frames_lost``, ``max_gap``, ``duplicates``, ``device_faults``,
+    ``decode_errors`` (by kind, from the frame reader).
+    """
+
+    def __init__(self, port: serial.SerialBase) -> None:
+        self.port = port
+        self.reader = P.FrameReader()
+        self._tx_seq = 0
+        self._rx_seq = -1
+        self.device: P.DeviceInfo | None = None
+        self.t_us = 0
+        self.x = self.y = self.vx = self.vy = 0.0
+        self.flags = 0
+        self.echo_seq = 0
+        self.states = 0
+        self.frames_rx = 0
+        self.frames_tx = 0
+        self.frames_lost = 0
+        self.max_gap = 0
+        self.duplicates = 0
+        self.device_faults = 0
+        self.last_device_fault = 0
+        try:
+            self._fd: int | None = port.fileno()
+        except (AttributeError, OSError, ValueError, serial.SerialException):
+            self._fd = None
+        # Fast path: a POSIX serial port (or pty) that pyserial opened non-blocking is read and
+        # written with one system call each; pyserial's write adds a select() per frame.
+        self._raw_fd: int | None = None
+        if self._fd is not None and type(port).__module__ == "serial.serialposix":
+            self._raw_fd = self._fd
+        self.tx_dropped = 0
+
+    @classmethod
+    def open(cls, url: str, baudrate: int = DEFAULT_BAUDRATE) -> RobotLink:
+        """Open ``url`` (``sim://…``, ``/dev/ttyUSB0``, a pty path, ``socket://…``)."""
+        try:
+            port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0.05)
+        except (serial.SerialException, ValueError, OSError) as exc:
+            raise HapticError(f"cannot open robot port {url!r}: {exc}") from None
+        if hasattr(port, "set_low_latency_mode"):
+            try:
+                port.set_low_latency_mode(True)  # FTDI latency timer 16 ms -> 1 ms
+            except (OSError, ValueError, serial.SerialException):
+                pass
+        return cls(port)
+
+    @property
+    def crc_errors(self) -> int:
+        return self.reader.errors.get("crc", 0)
+
+    @property
+    def decode_errors(self) -> int:
+        return sum(self.reader.errors.values())
+
+    # --- sending ----------------------------------------------------------------------------
+    def _send(self, msg_type: int, payload: bytes = b"") -> int:
+        seq = self._tx_seq
+        frame = P.encode_frame(msg_type, seq, payload)
+        self._tx_seq = (seq + 1) & 0xFFFF
+        fd = self._raw_fd
+        try:
+            if fd is not None:
+                n = os.write(fd, frame)
+                if n < len(frame):
+                    self._write_rest(frame[n:])
+            else:
+                self.port.write(frame)
+        except BlockingIOError:
+            self.tx_dropped += 1  # the device is not reading (its input buffer is full)
+        except (serial.SerialException, OSError) as exc:
+            raise LinkDown(f"robot port write failed: {exc}") from None
+        self.frames_tx += 1
+        return seq
+
+    def _write_rest(self, rest: bytes) -> None:
+        assert self._raw_fd is not None
+        deadline = time.perf_counter() + 0.005
+        while rest:
+            if time.perf_counter() > deadline:
+                self.tx_dropped += 1
+                return
+            select.select([], [self._raw_fd], [], 0.001)
+            try:
+                rest = rest[os.write(self._raw_fd, rest):]
+            except BlockingIOError:
+                pass
+
+    def send_force(self, fx_n: float, fy_n: float) -> int:
+        """Send a FORCE frame; returns its sequence number."""
+        return self._send(P.MsgType.FORCE, P.FORCE_FMT.pack(fx_n, fy_n))
+
+    def arm(self) -> None:
+        self._send(P.MsgType.ARM)
+
+    def disarm(self) -> None:
+        self._send(P.MsgType.DISARM)
+
+    def heartbeat(self) -> None:
+        self._send(P.MsgType.HEARTBEAT)
+
+    def send_fault(self, code: int, detail: int = 0) -> None:
+        self._send(P.MsgType.FAULT, P.FAULT_FMT.pack(code, detail & 0xFFFF))
+
+    # --- receiving --------------------------------------------------------------------------
+    def poll(self) -> int:
+        """Read what has arrived without blocking; return the number of new STATE frames."""
+        fd = self._raw_fd
+        if fd is not None:
+            try:
+                data = os.read(fd, 4096)
+            except BlockingIOError:
+                return 0
+            except OSError as exc:
+                raise LinkDown(f"robot port read failed: {exc}") from None
+            if not data:
+                return 0  # a tty in raw mode (VMIN = 0) reads 0 bytes when idle; a hang-up is EIO
+        else:
+            port = self.port
+            try:
+                n = port.in_waiting
+                data = port.read(n if n > 0 else 1)
+            except (serial.SerialException, OSError) as exc:
+                raise LinkDown(f"robot port read failed: {exc}") from None
+        if not data:
+            return 0
+        new = 0
+        for frame in self.reader.feed(data):
+            self.frames_rx += 1
+            seq = frame.seq
+            if self._rx_seq >= 0:
+                lost = (seq - self._rx_seq - 1) & 0xFFFF
+                if lost >= 0x8000:
+                    self.duplicates += 1
+                    continue
+                if lost:
+                    self.frames_lost += lost
+                    if lost > self.max_gap:
+                        self.max_gap = lost
+            self._rx_seq = seq
+            t = frame.type
+            if t == P.MsgType.STATE:
+                (self.t_us, self.x, self.y, self.vx, self.vy, self.flags,
+                 self.echo_seq) = P.STATE_FMT.unpack(frame.payload)
+                self.states += 1
+                new += 1
+            elif t == P.MsgType.HELLO_ACK:
+                self.device = P.DeviceInfo.from_payload(frame.payload)
+            elif t == P.MsgType.FAULT:
+                self.device_faults += 1
+                self.last_device_fault = P.FAULT_FMT.unpack(frame.payload)[0]
+        return new
+
+    def wait_state(self, timeout_s: float) -> int:
+        """Poll until at least one STATE arrives or ``timeout_s`` passes; return how many."""
+        new = self.poll()
+        if new or timeout_s <= 0:
+            return new
+        deadline = time.perf_counter() + timeout_s
+        while True:
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                return 0
+            if self._fd is not None:
+                select.select([self._fd], [], [], left)
+            else:
+                time.sleep(min(left, 1e-4))
+            new = self.poll()
+            if new:
+                return new
+
+    def take_gap(self) -> int:
+        """Largest sequence gap since the last call (and reset it)."""
+        g = self.max_gap
+        self.max_gap = 0
+        return g
+
+    # --- session ----------------------------------------------------------------------------
+    def handshake(self, rate_hz: int, watchdog_ms: int, timeout_s: float = 1.0,
+                  attempts: int = 3) -> P.DeviceInfo:
+        """HELLO → HELLO_ACK; checks version and rate. Raises HapticError on failure."""
+        for _ in range(attempts):
+            self._send(P.MsgType.HELLO, P.HELLO_FMT.pack(P.PROTOCOL_VERSION, rate_hz, watchdog_ms))
+            deadline = time.perf_counter() + timeout_s / attempts
+            while time.perf_counter() < deadline:
+                self.wait_state(min(0.01, max(0.0, deadline - time.perf_counter())))
+                if self.device is not None:
+                    break
+                if self.device_faults:
+                    raise HapticError(
+                        f"the robot refused HELLO (protocol {P.PROTOCOL_VERSION}, {rate_hz} Hz): "
+                        f"fault code {self.last_device_fault}"
+                    )
+            if self.device is not None:
+                break
+        info = self.device
+        if info is None:
+            raise HapticError(f"no HELLO_ACK from the robot within {timeout_s:g} s")
+        if info.protocol_version != P.PROTOCOL_VERSION:
+            raise HapticError(
+                f"robot speaks protocol {info.protocol_version}, host {P.PROTOCOL_VERSION}"
+            )
+        if rate_hz > info.max_rate_hz:
+            raise HapticError(f"robot accepts at most {info.max_rate_hz} Hz; asked {rate_hz} Hz")
+        return info
+
+    def close(self) -> None:
+        try:
+            self.port.close()
+        except (serial.SerialException, OSError):
+            pass

@@ -1,0 +1,62 @@
+"""Shared builders for the haptic tests: arms, simulated robots, renderers."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+from fieldbank.model import Arm
+from fieldbank.params import ArmParams
+from haptic.link import RobotLink
+from haptic.renderer import Renderer, RendererConfig, VirtualClock
+from haptic.safety import SafetyConfig
+from haptic.simrobot import PtyRobot, SimRobotConfig
+
+#: MAS-4 ("severe") is about ten times unimpaired joint stiffness (BRIEF §3, §5); the severe
+#: group's reflex gain is 1. Used when the severity module is not at hand.
+SEVERE_FACTOR = 10.0
+
+
+def unimpaired() -> ArmParams:
+    return ArmParams.from_anthropometry()
+
+
+def severe(groups: tuple[str, ...]) -> ArmParams:
+    p = unimpaired()
+    for g in groups:
+        p = p.with_group(g, km_n_per_m=p.group_value("km_n_per_m", g) * SEVERE_FACTOR,
+                         alpha_n=p.group_value("alpha_n", g) * SEVERE_FACTOR, beta=1.0)
+    return p
+
+
+def severe_shoulder() -> ArmParams:
+    return severe(("sf", "se"))
+
+
+def rest_hand(p: ArmParams) -> tuple[float, float]:
+    x, y = Arm.from_params(p).rest_position()
+    return float(x), float(y)
+
+
+@contextlib.contextmanager
+def pty_session(
+    before: ArmParams,
+    after: ArmParams | None = None,
+    motion: str = "hold",
+    config: RendererConfig | None = None,
+    safety: SafetyConfig | None = None,
+    **sim: object,
+) -> Iterator[tuple[Renderer, PtyRobot]]:
+    """Lockstep simulated robot on a pty (device thread) + a renderer on a virtual clock."""
+    x0, y0 = rest_hand(before)
+    cfg = SimRobotConfig(motion=motion, x0_m=x0, y0_m=y0, **sim)  # type: ignore[arg-type]
+    with PtyRobot(cfg).start_thread() as robot:
+        link = RobotLink.open(robot.port)
+        try:
+            link.handshake(1000, 20)
+            rd = Renderer(link, before, after or before,
+                          config or RendererConfig(state_wait_s=0.5), safety=safety,
+                          clock=VirtualClock())
+            yield rd, robot
+        finally:
+            link.close()

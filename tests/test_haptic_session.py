@@ -1,0 +1,372 @@
+"""Recording, replay, A/B/X, the control channel, the CLI, and real-time runs on a pty."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import stat
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+from click.testing import CliRunner
+
+from cli.haptic import haptic
+from fieldbank.errors import HapticError, ParameterError, StorageError
+from haptic import motions
+from haptic.abx import AbxSession
+from haptic.control import ControlClient, ControlServer, push_models
+from haptic.link import RobotLink
+from haptic.models import from_severity, parse_severity
+from haptic.probe import probe, sim_url
+from haptic.recording import COLUMNS, Hdf5TraceSink, read_trace_h5, write_trace_h5
+from haptic.renderer import Renderer, RendererConfig, VirtualClock
+from haptic.replay import rerun
+from haptic.safety import Mode
+from haptic.simrobot import PtyRobot, SimRobotConfig
+from tests.haptic_util import rest_hand, severe_shoulder, unimpaired
+
+
+# --- recording ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def probe_result():  # type: ignore[no-untyped-def]
+    return probe(severe_shoulder(), "fastpull")
+
+
+def test_trace_h5_round_trip_with_units(probe_result, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    trace = probe_result.trace
+    sink = Hdf5TraceSink(tmp_path)
+    ref = sink.write_trace(trace, "s1")
+    back = read_trace_h5(ref)
+    assert np.array_equal(back.t_s, trace.t_s)
+    assert np.array_equal(back.data, trace.data)
+    assert back.models == json.loads(json.dumps(trace.models))
+    assert back.events == json.loads(json.dumps(trace.events))
+    assert back.rate_hz == trace.rate_hz
+    import h5py
+
+    with h5py.File(ref) as h:
+        for name, unit in COLUMNS:
+            assert h[f"columns/{name}"].attrs["unit"] == unit
+            assert h[f"columns/{name}"].fletcher32
+    assert len(sink.sha256[ref]) == 64
+    # write-once: a second write under the same name is refused and the first is untouched
+    before = Path(ref).read_bytes()
+    with pytest.raises(StorageError, match="write-once"):
+        sink.write_trace(trace, "s1")
+    assert Path(ref).read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["s1.h5"]  # no temp file left behind
+
+
+def test_failed_trace_write_leaves_nothing(probe_result, tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    def boom(*a: object, **k: object) -> None:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError):
+        write_trace_h5(probe_result.trace, tmp_path / "x.h5")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_read_trace_refuses_other_files(tmp_path: Path) -> None:
+    import h5py
+
+    with h5py.File(tmp_path / "other.h5", "w") as h:
+        h.attrs["format"] = "something else"
+    with pytest.raises(StorageError, match="not a haptic trace"):
+        read_trace_h5(tmp_path / "other.h5")
+    (tmp_path / "junk.h5").write_bytes(b"not hdf5")
+    with pytest.raises(StorageError, match=r"junk\.h5"):
+        read_trace_h5(tmp_path / "junk.h5")
+
+
+def test_replay_reproduces_the_session(probe_result) -> None:  # type: ignore[no-untyped-def]
+    r = rerun(probe_result.trace)
+    assert r["ticks"] == len(probe_result.trace)
+    assert r["max_deviation_n"] < 1e-4  # float32 storage of the recorded force
+    # and it is a real check: replaying with the other model deviates
+    t = probe_result.trace
+    other = type(t)(t_s=t.t_s, data=t.data, rate_hz=t.rate_hz,
+                    models={"A": unimpaired().to_dict(), "B": unimpaired().to_dict()},
+                    events=t.events, metadata=t.metadata)
+    assert rerun(other)["max_deviation_n"] > 1.0
+
+
+def test_trace_csv_export(probe_result) -> None:  # type: ignore[no-untyped-def]
+    text = probe_result.trace.to_csv()
+    lines = [ln for ln in text.splitlines() if not ln.startswith("#")]
+    assert lines[0].split(",") == ["t_s"] + [c for c, _ in COLUMNS]
+    assert len(lines) == len(probe_result.trace) + 1
+
+
+# --- A/B/X ----------------------------------------------------------------------------------
+def test_abx_is_seeded_balanced_and_scored() -> None:
+    a = AbxSession(n_trials=10, seed=4)
+    b = AbxSession(n_trials=10, seed=4)
+    assert a.x_labels == b.x_labels and a.label_model == b.label_model
+    assert sorted(a.x_labels) == ["A"] * 5 + ["B"] * 5
+    assert AbxSession(n_trials=10, seed=5).x_labels != a.x_labels or \
+        AbxSession(n_trials=10, seed=6).x_labels != a.x_labels
+    labels = {AbxSession(n_trials=2, seed=s).label_model["A"] for s in range(20)}
+    assert labels == {0, 1}  # hide_labels draws which model is A
+    assert AbxSession(n_trials=2, seed=1, hide_labels=False).label_model == {"A": 0, "B": 1}
+    for i in range(10):
+        x = a.model_for("X")
+        truth = "A" if x == a.label_model["A"] else "B"
+        a.answer(truth if i % 2 else ("B" if truth == "A" else "A"), t_s=float(i))
+    res = a.result()
+    assert res["answered"] == 10 and res["correct"] == 5
+    with pytest.raises(HapticError, match="finished"):
+        a.answer("A", 11.0)
+    with pytest.raises(HapticError):
+        AbxSession(n_trials=2).answer("C", 0.0)
+
+
+def test_abx_through_the_renderer_hides_and_records() -> None:
+    p = severe_shoulder()
+    link = RobotLink.open(sim_url(p, "hold"))
+    link.handshake(1000, 20)
+    rd = Renderer(link, p, unimpaired(), RendererConfig(state_wait_s=0.05), clock=VirtualClock())
+    rd.start(expected_ticks=3000)
+    cmds = [rd.submit("abx_start", n_trials=2, seed=3, hide_labels=True)]
+    rd.tick()
+    assert rd.status()["blend"] == "hidden"
+    for ans in ("A", "B"):
+        cmds.append(rd.submit("abx_present", label="X"))
+        for _ in range(600):
+            rd.tick()
+        expected_w = float(rd.abx.model_for("X")) if rd.abx else None
+        assert rd.blend.value == pytest.approx(expected_w)
+        cmds.append(rd.submit("abx_answer", answer=ans))
+        rd.tick()
+    for c in cmds:
+        c.wait()
+    trace = rd.finish()
+    link.close()
+    res = trace.metadata["abx"][0]
+    assert res["answered"] == 2 and len(res["answers"]) == 2
+    assert [e["event"] for e in trace.events].count("abx_answer") == 2
+
+
+# --- control channel ------------------------------------------------------------------------
+@pytest.fixture()
+def served(tmp_path: Path):  # type: ignore[no-untyped-def]
+    """A renderer on the in-process simulated robot (real time) with its control socket."""
+    p = severe_shoulder()
+    link = RobotLink.open(sim_url(p, "circle", base="sim://?mode=realtime"))
+    link.handshake(1000, 20)
+    rd = Renderer(link, p, p, RendererConfig(realtime_priority=False))
+    sock = tmp_path / "run" / "haptic.sock"
+    server = ControlServer(rd, sock).start()
+    th = threading.Thread(target=rd.run, kwargs={"duration_s": 30.0}, daemon=True)
+    th.start()
+    while not rd.running:
+        time.sleep(0.01)
+    yield rd, sock
+    if rd.running:
+        rd.submit("stop")
+    th.join(5)
+    server.close()
+    link.close()
+
+
+def test_control_socket_is_private(served) -> None:  # type: ignore[no-untyped-def]
+    _rd, sock = served
+    assert stat.S_IMODE(sock.stat().st_mode) == 0o600
+    assert stat.S_IMODE(sock.parent.stat().st_mode) == 0o700
+    assert stat.S_ISSOCK(sock.stat().st_mode)
+
+
+def test_control_push_switch_status_stop(served) -> None:  # type: ignore[no-untyped-def]
+    rd, sock = served
+    c = ControlClient(sock)
+    st = c.request("status")
+    assert st["running"] and st["mode"] == "ARMED"
+    before, after = unimpaired(), from_severity({"elbow": "severe"})
+    assert push_models(before, after, sock) == {"pushed": True}
+    deadline = time.time() + 3
+    while rd.params[1] != after and time.time() < deadline:
+        time.sleep(0.01)
+    assert rd.params == (before, after)  # swapped in by the loop after the fade-out
+    assert c.request("switch", to="B") == {"blend_target": 1.0}
+    with pytest.raises(HapticError, match="switch to"):
+        c.request("switch", to="C")
+    with pytest.raises(HapticError, match="unknown control command"):
+        c.request("explode")
+    with pytest.raises(HapticError, match="km_n_per_m"):
+        c.request("push", before={**before.to_dict(), "km_n_per_m": [-1] * 6},
+                  after=after.to_dict())
+    c.request("stop")
+    deadline = time.time() + 3
+    while rd.trace is None and time.time() < deadline:
+        time.sleep(0.01)
+    assert not rd.running
+    assert rd.trace is not None and [e["event"] for e in rd.trace.events].count("push") == 1
+
+
+def test_control_rejects_malformed_lines(served) -> None:  # type: ignore[no-untyped-def]
+    rd, sock = served
+    server = ControlServer(rd, sock.parent / "unused.sock")
+    assert server.handle_line(b"not json")["ok"] is False
+    assert server.handle_line(b"[1, 2]")["ok"] is False
+    assert "cmd" in server.handle_line(b'{"x": 1}')["error"]
+
+
+def test_client_without_server_says_so(tmp_path: Path) -> None:
+    with pytest.raises(HapticError, match="no renderer on"):
+        ControlClient(tmp_path / "none.sock").request("status")
+
+
+def test_second_server_on_a_live_socket_is_refused(served) -> None:  # type: ignore[no-untyped-def]
+    rd, sock = served
+    with pytest.raises(HapticError, match="already serving"):
+        ControlServer(rd, sock).start()
+
+
+# --- real time on a pty ---------------------------------------------------------------------
+def test_realtime_pty_session_with_device_process() -> None:
+    p = severe_shoulder()
+    x0, y0 = rest_hand(p)
+    with PtyRobot(SimRobotConfig(mode="realtime", motion="fastpull", x0_m=x0, y0_m=y0)) as robot:
+        robot.start_process()
+        link = RobotLink.open(robot.port)
+        link.handshake(1000, 20, timeout_s=3.0)
+        rd = Renderer(link, p, p, RendererConfig())
+        t0 = time.perf_counter()
+        trace = rd.run(1.0)
+        wall = time.perf_counter() - t0
+        link.close()
+    assert 0.95 < wall < 1.6
+    assert len(trace) == 1000
+    s = trace.stats
+    assert s["period_us"]["p50"] == pytest.approx(1000.0, abs=20.0)
+    assert "p99" in s["period_error_us"] and "overruns" in s
+    assert s["link"]["states"] > 900
+    f = np.hypot(trace.column("fx_n"), trace.column("fy_n"))
+    if not trace.faults:  # a loaded machine may starve the device: then the fault is recorded
+        assert f.max() > 3.0  # the fast pull was felt
+
+
+def test_device_watchdog_over_a_pty_in_real_time() -> None:
+    """The host stops commanding: the device zeroes the force and reports it within 20 ms."""
+    from haptic import protocol as P
+
+    with PtyRobot(SimRobotConfig(mode="realtime", watchdog_ms=20)) as robot:
+        robot.start_thread()
+        link = RobotLink.open(robot.port)
+        link.handshake(1000, 20)
+        link.arm()
+        for _ in range(50):
+            link.send_force(5.0, 0.0)
+            link.wait_state(0.01)
+        assert robot.device.fx_cmd == 5.0
+        t0 = time.perf_counter()
+        while not link.flags & P.FLAG_WATCHDOG and time.perf_counter() - t0 < 1.0:
+            link.wait_state(0.01)
+        elapsed = time.perf_counter() - t0
+        assert link.flags & P.FLAG_WATCHDOG and not link.flags & P.FLAG_ARMED
+        assert robot.device.fx_cmd == 0.0
+        assert elapsed < 0.2  # 20 ms watchdog + scheduling slack of a test machine
+        link.close()
+
+
+def test_sim_url_handler_and_bad_options() -> None:
+    port = serial.serial_for_url("sim://?motion=hold&x0_m=0.1&y0_m=0.4", timeout=0)
+    assert port.device.config.x0_m == 0.1  # type: ignore[attr-defined]
+    port.close()
+    with pytest.raises(HapticError, match="unknown sim:// option"):
+        RobotLink.open("sim://?speed=11")
+    with pytest.raises(HapticError, match="motion"):
+        RobotLink.open("sim://?motion=dance")
+
+
+def test_handshake_refuses_a_rate_over_the_device_maximum() -> None:
+    link = RobotLink.open("sim://?max_rate_hz=2000")
+    with pytest.raises(HapticError, match="refused HELLO"):
+        link.handshake(4000, 20)
+
+
+def test_handshake_times_out_without_a_device() -> None:
+    with PtyRobot(SimRobotConfig()) as robot:  # device never started
+        link = RobotLink.open(robot.port)
+        with pytest.raises(HapticError, match="no HELLO_ACK"):
+            link.handshake(1000, 20, timeout_s=0.2)
+        link.close()
+
+
+# --- motions and models ---------------------------------------------------------------------
+@pytest.mark.parametrize("kind", motions.MOTIONS)
+def test_motions_start_at_rest_and_velocity_is_the_derivative(kind: str) -> None:
+    m = motions.make_motion(kind, 0.1, 0.5, seed=2)
+    x, y, vx, vy = m(0.0)
+    assert (x, y) == pytest.approx((0.1, 0.5), abs=1e-12) and (vx, vy) == (0.0, 0.0)
+    h = 1e-6
+    for t in (0.35, 0.7, 1.3):
+        a, b = m(t - h), m(t + h)
+        assert m(t)[2] == pytest.approx((b[0] - a[0]) / (2 * h), abs=1e-5)
+        assert m(t)[3] == pytest.approx((b[1] - a[1]) / (2 * h), abs=1e-5)
+
+
+def test_pull_goes_toward_the_body_by_its_distance() -> None:
+    m = motions.make_motion("pull", 0.1, 0.5, distance_m=0.12, duration_s=2.0)
+    end = m(motions.LEAD_IN_S + 2.0)
+    assert end[:2] == pytest.approx((0.1, 0.38))
+    assert end[2:] == pytest.approx((0.0, 0.0))
+
+
+def test_severity_parsing_and_fallback_rule() -> None:
+    assert parse_severity("shoulder=severe, elbow=very_mild") == {"shoulder": "severe",
+                                                                  "elbow": "very mild"}
+    with pytest.raises(ParameterError, match="knee"):
+        parse_severity("knee=severe")
+    with pytest.raises(ParameterError, match="level"):
+        parse_severity("elbow=terrible")
+    base = unimpaired()
+    sev = from_severity({"elbow": "severe"}, base)
+    mod = from_severity({"elbow": "moderate"}, base)
+    ef = 2
+    assert sev.km_n_per_m[ef] > mod.km_n_per_m[ef] > base.km_n_per_m[ef]
+    assert sev.km_n_per_m[0] == base.km_n_per_m[0]  # the shoulder untouched
+
+
+# --- CLI ------------------------------------------------------------------------------------
+def test_cli_probe_csv_and_json(tmp_path: Path) -> None:
+    out = tmp_path / "p.csv"
+    r = CliRunner().invoke(haptic, ["probe", "--motion", "fastpull", "--severity",
+                                    "shoulder=severe", "--out", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    assert s["peak_force_n"] > 5.0 and s["faults"] == []
+    assert len(s["profile"]) == 100
+    rows = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
+    assert rows[0] == "t_s,x_m,y_m,fx_n,fy_n,static_fx_n,static_fy_n"
+    assert len(rows) == 1001
+
+
+def test_cli_replay_and_export(probe_result, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    ref = Hdf5TraceSink(tmp_path).write_trace(probe_result.trace, "t")
+    csv_path = tmp_path / "t.csv"
+    r = CliRunner().invoke(haptic, ["replay", ref, "--rerun", "--csv", str(csv_path), "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.stdout)
+    assert s["ticks"] == len(probe_result.trace)
+    assert s["rerun"]["max_deviation_n"] < 1e-4
+    assert csv_path.exists()
+
+
+def test_cli_errors_are_clean() -> None:
+    r = CliRunner().invoke(haptic, ["probe", "--severity", "knee=severe"])
+    assert r.exit_code != 0 and isinstance(r.exception, ParameterError)
+    r = CliRunner().invoke(haptic, ["switch", "C"])
+    assert r.exit_code == 2
+    r = CliRunner().invoke(haptic, ["status", "--socket", "/nonexistent/x.sock"])
+    assert isinstance(r.exception, HapticError) and "no renderer" in str(r.exception)
+
+
+def test_fault_log_mode_values_are_documented_bits() -> None:
+    assert [m.value for m in Mode] == [0, 1, 2]
+    assert math.log2(1 << 8) == 8
