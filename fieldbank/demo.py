@@ -168,7 +168,8 @@ def run_demo(out_dir: str | Path, home: str | Path | None = None, force: bool = 
         t = time.perf_counter()
         say("[7/7] simulated side-by-side haptic session")
         first = res.patients[0]
-        res.haptic = run_haptic(db, first, res.fitted_models[first], res.plans[first][0],
+        # the lengthening plan: its change is felt at rest as well as in motion
+        res.haptic = run_haptic(db, first, res.fitted_models[first], res.plans[first][-1],
                                 haptic_s, say)
         res.timings_s["haptic"] = time.perf_counter() - t
     return res
@@ -176,13 +177,61 @@ def run_demo(out_dir: str | Path, home: str | Path | None = None, force: bool = 
 
 def run_haptic(db: Any, patient: str, before_id: int, plan_id: int, duration_s: float,
                say: Say) -> dict[str, Any] | None:
-    """A short before/after session on the simulated robot; None without the haptic package."""
+    """A short before/after session on the simulated robot; None without the haptic package.
+
+    The simulated operator explores around the rest hand position at 1 kHz (real time) while
+    the renderer shows the model before (A), crossfades to the model after (B) halfway and
+    back for the last quarter. The trace goes to the database (``haptic_sessions``, traces in
+    the array store).
+    """
     try:
-        from fieldbank import demo_haptic
+        from haptic.dbsink import DatabaseTraceSink
+        from haptic.link import RobotLink
+        from haptic.probe import sim_url
+        from haptic.renderer import Renderer, RendererConfig
     except ImportError:
         say("haptic step left out: the haptic package is not part of this build")
         return None
-    return demo_haptic.side_by_side(db, patient, before_id, plan_id, duration_s, say)
+    import threading
+
+    before = db.get_model(before_id).params
+    plan = db.get_plan(plan_id)
+    after = db.get_model(plan.result_model_id).params
+    robot = sim_url(before, "explore", (0.0, 0.0), "sim://?mode=realtime")
+    link = RobotLink.open(robot)
+    try:
+        info = link.handshake(1000, 20)
+        say(f"simulated robot {info.device_id!r} (protocol {info.protocol_version}); rendering "
+            f"{patient} before (A, model {before_id}) and after plan {plan_id} (B, model "
+            f"{plan.result_model_id}) for {duration_s:g} s at 1 kHz")
+        rd = Renderer(link, before, after, RendererConfig(rate_hz=1000, crossfade_s=0.5))
+        rd.metadata["robot"] = robot
+        rd.metadata["model_ids"] = {"A": before_id, "B": int(plan.result_model_id)}
+
+        def switches() -> None:
+            t0 = time.monotonic()
+            for at, to in ((0.4, "B"), (0.75, "A")):
+                time.sleep(max(0.0, t0 + at * duration_s - time.monotonic()))
+                if not rd.running:
+                    return
+                rd.submit("switch", target=to)
+                say(f"  switch to {'after' if to == 'B' else 'before'} ({to}), 0.5 s crossfade")
+
+        th = threading.Thread(target=switches, daemon=True)
+        th.start()
+        trace = rd.run(duration_s)
+        th.join(timeout=1.0)
+    finally:
+        link.close()
+    ref = DatabaseTraceSink(db, patient).write_trace(trace, f"demo-{patient}-plan-{plan_id}")
+    summ = trace.summary()
+    st = trace.stats.get("period_error_us", {})
+    say(f"haptic session: {summ['ticks']} ticks, max force {summ['max_force_n']:.2f} N, "
+        f"{len(trace.faults)} fault(s), period error p99 {st.get('p99', 0):.0f} µs; "
+        f"recorded as {ref}")
+    return {"ticks": summ["ticks"], "max_force_n": summ["max_force_n"],
+            "faults": len(trace.faults), "record": ref,
+            "switches": [e for e in trace.events if e.get("event") == "switch"]}
 
 
 def _clear_demo_home(h: Path) -> None:
