@@ -16,7 +16,8 @@ from typing import Any
 from fieldbank.report.compute import COLUMNS, CaseResult
 
 CSS = """
-body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1180px; color: #222; }
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; padding: 0 1em; max-width: 1180px;
+       color: #222; }
 h1 { font-size: 1.5em; margin-bottom: 0.2em; }
 h2 { font-size: 1.15em; border-top: 2px solid #ccd; padding-top: 0.6em; margin-top: 1.6em; }
 table { border-collapse: collapse; font-size: 0.78em; margin: 0.6em 0; }
