@@ -27,6 +27,8 @@ COMMAND_MODULES: tuple[tuple[str, str], ...] = (
     ("cli.export", "export"),
     ("cli.samples", "samples"),
     ("cli.haptic", "haptic"),
+    ("cli.report", "report"),
+    ("cli.demo", "demo"),
 )
 
 

@@ -1,0 +1,129 @@
+"""Build a report: select the cases, compute them (over worker processes for batches), write
+``report.html``, ``metrics.csv`` and ``metrics.json`` into the output directory.
+
+Determinism: cases are ordered by patient code and plan id, results are collected in that
+order whatever the number of workers, figures carry no dates, and the page states the inputs
+(database, selection) but the time of writing only when a ``stamp`` is given. Each file is
+written to a temporary name and renamed, so a failed run leaves no half-written file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fieldbank.report.compute import COLUMNS, CaseResult, compute_case
+from fieldbank.report.html import render
+from fieldbank.report.select import CaseSpec, Selection, select_cases
+
+SCHEMA = "fieldbank.report"
+VERSION = 1
+#: Below this many cases per worker a process pool costs more than it saves (measured with
+#: benchmarks/bench_report.py: starting a worker and shipping results ≈ 0.1 s).
+MIN_CASES_PER_JOB = 2
+FILES = ("report.html", "metrics.csv", "metrics.json")
+
+
+@dataclass(frozen=True)
+class ReportOutput:
+    out_dir: Path
+    html: Path
+    csv: Path
+    json: Path
+    n_cases: int
+    jobs_used: int
+
+
+def default_jobs() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+               else (os.cpu_count() or 1))
+
+
+def compute_all(cases: list[CaseSpec], jobs: int,
+                wrap: Callable[[Iterable[CaseResult], int], Iterable[CaseResult]] | None = None
+                ) -> tuple[list[CaseResult], int]:
+    """Compute every case, in order; returns the results and the number of processes used."""
+    jobs = max(1, min(jobs, len(cases) // MIN_CASES_PER_JOB or 1))
+    it: Iterator[CaseResult]
+    if jobs == 1:
+        it = map(compute_case, cases)
+        return list(wrap(it, len(cases)) if wrap else it), 1
+    chunk = max(1, len(cases) // (jobs * 8))
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        it = pool.map(compute_case, cases, chunksize=chunk)
+        return list(wrap(it, len(cases)) if wrap else it), jobs
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def metrics_csv(results: Iterable[CaseResult]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow([k for k, _ in COLUMNS])
+    for r in results:
+        w.writerow(["" if r.row.get(k) is None else repr(r.row[k])
+                    if isinstance(r.row[k], float) else r.row[k] for k, _ in COLUMNS])
+    return buf.getvalue()
+
+
+def metrics_json(results: Iterable[CaseResult], inputs: dict[str, Any]) -> str:
+    doc = {"schema": SCHEMA, "version": VERSION, "inputs": inputs,
+           "columns": [k for k, _ in COLUMNS],
+           "cases": [{"metrics": r.row, **r.detail} for r in results]}
+    return json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False) + "\n"
+
+
+def build_report(db: Any, selection: Selection, out_dir: str | Path, jobs: int = 1,
+                 progress: bool = False, stamp: str | None = None,
+                 title: str | None = None) -> ReportOutput:
+    """Select, compute and write the report; raises SelectionError for an empty selection."""
+    cases = select_cases(db, selection)
+    wrap = None
+    if progress:
+        from tqdm import tqdm
+
+        def wrap(it: Iterable[CaseResult], n: int) -> Iterable[CaseResult]:
+            return tqdm(it, total=n, unit="case", desc="report", leave=False, disable=None)
+
+    results, used = compute_all(cases, jobs, wrap)
+    if title is None:
+        title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
+                 f"fieldbank report: {len(cases)} cases")
+    inputs: dict[str, Any] = {"title": title, "database": db.url_masked,
+                              "selection": selection.describe(), "cases": len(cases)}
+    if stamp:
+        inputs["generated"] = stamp
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / f for f in FILES]
+    json_inputs = {**inputs, "selection": selection.to_dict()}
+    _write_atomic(paths[1], metrics_csv(results).encode("utf-8"))
+    _write_atomic(paths[2], metrics_json(results, json_inputs).encode("utf-8"))
+    _write_atomic(paths[0], render(results, inputs).encode("utf-8"))
+    return ReportOutput(out, paths[0], paths[1], paths[2], len(cases), used)

@@ -1,0 +1,193 @@
+"""One case of a report: metrics, time course, probing profiles and figures of a stored plan.
+
+:func:`compute_case` is a pure function of a :class:`~fieldbank.report.select.CaseSpec`, so
+batches can run it in worker processes; it returns a picklable :class:`CaseResult`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fieldbank.errors import FieldbankError
+from fieldbank.model import Arm
+from fieldbank.params import ArmParams
+from fieldbank.report import figures
+from fieldbank.report.select import CaseSpec
+
+#: Weeks after the most recent injection at which the time course is evaluated.
+TIMECOURSE_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(0, 25))
+#: Grid of the field figures (``workspace_grid`` n; denser grids only crowd the arrows).
+FIGURE_GRID_N = 11
+#: Hand speed of the moving-field row (the metrics' moving speed), m/s toward the body.
+FIGURE_SPEED_M_PER_S = 0.3
+LEVELS = ("unimpaired", "very mild", "mild", "moderate", "severe")
+
+#: Columns of the metrics table (CSV header and HTML table), in order, with their headings.
+COLUMNS: tuple[tuple[str, str], ...] = (
+    ("patient", "patient"),
+    ("plan_id", "plan"),
+    ("plan_label", "plan label"),
+    ("kinds", "kinds"),
+    ("sessions", "sessions"),
+    ("case_date", "date"),
+    ("base_model_id", "before model"),
+    ("result_model_id", "after model"),
+    ("static_force_rms_before_n", "static |F| RMS before (N)"),
+    ("static_force_rms_after_n", "static |F| RMS after (N)"),
+    ("static_diff_rms_n", "static ΔF RMS (N)"),
+    ("moving_diff_rms_n", "moving ΔF RMS (N)"),
+    ("moving_diff_max_n", "moving ΔF max (N)"),
+    ("stiffness_area_ratio_median", "ellipse area ratio"),
+    ("orientation_change_deg", "axis change (°)"),
+    ("potential_rms_change_j", "ΔU RMS (J)"),
+    ("pull_peak_before_n", "pull peak before (N)"),
+    ("pull_peak_after_n", "pull peak after (N)"),
+    ("semi_ellipse_peak_before_n", "semi-ellipse peak before (N)"),
+    ("semi_ellipse_peak_after_n", "semi-ellipse peak after (N)"),
+    ("elbow_extension_reflex_before_n_m", "elbow ext. reflex before (N·m)"),
+    ("elbow_extension_reflex_after_n_m", "elbow ext. reflex after (N·m)"),
+    ("severity_before", "severity before"),
+    ("severity_after", "severity after"),
+)
+
+
+@dataclass(frozen=True)
+class Figure:
+    key: str
+    caption: str
+    png: bytes
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """Computed case: ``row`` (metrics table row), ``detail`` (JSON), ``figures``."""
+
+    spec: CaseSpec
+    row: dict[str, Any]
+    detail: dict[str, Any]
+    figures: tuple[Figure, ...]
+
+
+def finite(obj: Any) -> Any:
+    """NaN and infinities as None (JSON has neither); recursively, keys kept in order."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite(v) for v in obj]
+    return obj
+
+
+def _plan(spec: CaseSpec) -> Any | None:
+    """The stored plan document as a Plan, or None if it cannot be read (no time course)."""
+    from interventions.plan import Plan
+
+    doc = spec.plan_doc.get("plan", spec.plan_doc)
+    try:
+        return Plan.from_dict(doc, where=f"plan {spec.plan_id}")
+    except FieldbankError:
+        return None
+
+
+def _levels(sev: dict[str, Any]) -> str:
+    return "; ".join(f"{g} {s.level}" for g, s in sev.items())
+
+
+def compute_case(spec: CaseSpec) -> CaseResult:
+    """Metrics and figures of one stored plan (before = base model, after = result model)."""
+    from interventions.catalogue import Botulinum
+    from interventions.course import time_course
+    from interventions.metrics import Conditions, compare
+
+    before = ArmParams.from_json(spec.base_params_json, where=f"model {spec.base_model_id}")
+    after = ArmParams.from_json(spec.result_params_json, where=f"model {spec.result_model_id}")
+    arm_b, arm_a = Arm.from_params(before), Arm.from_params(after)
+    cond = Conditions.standard(arm_b)
+    c = compare(before, after, cond)
+    plan = _plan(spec)
+    course = None
+    if plan is not None and any(isinstance(s, Botulinum) for s in plan.steps):
+        course = time_course(before, plan, TIMECOURSE_WEEKS, conditions=cond)
+
+    static, moving = c.fields[0], c.fields[min(1, len(c.fields) - 1)]
+    probes = {n: (b, a) for n, b, a in c.probe_rows()}
+    stretches = {n: (b, a) for n, b, a in c.stretch_rows()}
+    sev_b, sev_a = c.before.severity, c.after.severity
+    row: dict[str, Any] = {
+        "patient": spec.patient_code or "",
+        "plan_id": spec.plan_id,
+        "plan_label": spec.plan_label,
+        "kinds": " ".join(spec.kinds),
+        "sessions": " ".join(label for label, _ in spec.sessions),
+        "case_date": spec.case_date,
+        "base_model_id": spec.base_model_id,
+        "result_model_id": spec.result_model_id,
+        "static_force_rms_before_n": static.force_rms_before_n,
+        "static_force_rms_after_n": static.force_rms_after_n,
+        "static_diff_rms_n": static.diff_rms_n,
+        "moving_diff_rms_n": moving.diff_rms_n,
+        "moving_diff_max_n": moving.diff_max_n,
+        "stiffness_area_ratio_median": static.area_ratio_median,
+        "orientation_change_deg": static.orientation_change_deg_mean,
+        "potential_rms_change_j": c.potential.rms_j,
+        "pull_peak_before_n": probes["pull"][0].peak_force_n,
+        "pull_peak_after_n": probes["pull"][1].peak_force_n,
+        "semi_ellipse_peak_before_n": probes["semi-ellipse"][0].peak_force_n,
+        "semi_ellipse_peak_after_n": probes["semi-ellipse"][1].peak_force_n,
+        "elbow_extension_reflex_before_n_m": stretches["elbow extension"][0].reflex_torque_n_m,
+        "elbow_extension_reflex_after_n_m": stretches["elbow extension"][1].reflex_torque_n_m,
+        "severity_before": _levels(sev_b),
+        "severity_after": _levels(sev_a),
+    }
+    detail: dict[str, Any] = {
+        "plan_id": spec.plan_id,
+        "patient": spec.patient,
+        "plan_label": spec.plan_label,
+        "plan": spec.plan_doc,
+        "kinds": list(spec.kinds),
+        "sessions": [{"label": lb, "date": d} for lb, d in spec.sessions],
+        "case_date": spec.case_date,
+        "fit_id": spec.fit_id,
+        "before_model": {"id": spec.base_model_id, "origin": spec.base_origin,
+                         "label": spec.base_label},
+        "after_model": {"id": spec.result_model_id},
+        "comparison": c.to_dict(),
+        "steps": plan.describe() if plan is not None else [],
+        "timecourse": course.to_dict() if course is not None else None,
+    }
+
+    grid = Conditions.standard(arm_b, grid_n=FIGURE_GRID_N).grid_m
+    _, kb, _ = arm_b.field(grid)
+    _, ka, _ = arm_a.field(grid)
+    figs = [
+        Figure("fields", "Endpoint force field before, after and the difference: static "
+               "(postural) over contours of the passive potential U, and with the hand moving "
+               f"at {FIGURE_SPEED_M_PER_S:g} m/s (where the stretch reflex acts) in the "
+               "direction, of 8 (angle from +x), where the field changes most; + marks the "
+               "rest hand position.",
+               figures.fields_figure(arm_b, arm_a, grid, FIGURE_SPEED_M_PER_S)),
+        Figure("ellipses", "Static endpoint stiffness ellipses before and after "
+               "(symmetric part of K, one scale).",
+               figures.ellipses_figure(grid, kb, ka)),
+        Figure("severity", "Severity per joint group before and after (scale reads passive "
+               "stiffness Km; reflex-only interventions leave it unchanged).",
+               figures.severity_figure(
+                   list(sev_b), [min(s.score, 4.5) for s in sev_b.values()],
+                   [min(s.score, 4.5) for s in sev_a.values()], LEVELS)),
+        Figure("probes", "Force felt along the probing motions (seed Fig. 3b, 3c), before "
+               "and after.",
+               figures.probes_figure([
+                   (n, b.motion.times_s, np.hypot(*b.force_n.T), np.hypot(*a.force_n.T))
+                   for n, b, a in c.probe_rows()])),
+    ]
+    if course is not None:
+        figs.append(Figure(
+            "timecourse", "Botulinum time course: effect per injected group and probing peak "
+            "force, weeks after the most recent injection.",
+            figures.timecourse_figure(course.weeks, course.effect, course.probe_peak_n)))
+    return CaseResult(spec, finite(row), finite(detail), tuple(figs))

@@ -1,0 +1,137 @@
+"""``fieldbank report``: determinism, selection, and clear refusals."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.report_helpers import build_batch, run_cli
+
+FILES = ("report.html", "metrics.csv", "metrics.json")
+
+
+@pytest.fixture(scope="module")
+def batch(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    return build_batch(tmp_path_factory.mktemp("report-batch"))
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    return list(csv.DictReader(io.StringIO((out / "metrics.csv").read_text(encoding="utf-8"))))
+
+
+def test_stored_batch_reports_byte_identically(batch: dict[str, Any], tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    r1 = run_cli("report", "--db", batch["url"], "--out", str(a), "--jobs", "1", "--json")
+    r2 = run_cli("report", "--db", batch["url"], "--out", str(b), "--jobs", "2", "--json")
+    assert r1.exit_code == 0, r1.output
+    assert r2.exit_code == 0, r2.output
+    assert json.loads(r1.stdout)["jobs"] == 1
+    assert json.loads(r2.stdout)["jobs"] == 2  # the second run really used two processes
+    for name in FILES:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    rows = _rows(a)
+    plan_ids = sorted(i for ids in batch["plans"].values() for i in ids)
+    assert sorted(int(r["plan_id"]) for r in rows) == plan_ids
+    assert [r["patient"] for r in rows] == sorted(r["patient"] for r in rows)
+    doc = json.loads((a / "metrics.json").read_text(encoding="utf-8"))
+    assert doc["schema"] == "fieldbank.report"
+    assert "generated" not in doc["inputs"]
+    assert len(doc["cases"]) == len(plan_ids)
+    html = (a / "report.html").read_text(encoding="utf-8")
+    n_img = html.count('<img src="data:image/png;base64,')
+    # 4 figures per case, a 5th (time course) for each botulinum plan
+    n_bot = sum("botulinum" in r["kinds"] for r in rows)
+    assert n_img == 4 * len(rows) + n_bot
+    assert "http://" not in html and "https://" not in html  # self-contained
+
+
+def test_metrics_match_the_intervention(batch: dict[str, Any], tmp_path: Path) -> None:
+    assert run_cli("report", "--db", batch["url"], "--out", str(tmp_path)).exit_code == 0
+    for r in _rows(tmp_path):
+        if r["kinds"] == "botulinum":
+            # botulinum acts on reflexes: the static field and potential do not change
+            assert abs(float(r["static_diff_rms_n"])) < 1e-9
+            assert abs(float(r["potential_rms_change_j"])) < 1e-9
+            assert float(r["moving_diff_rms_n"]) > 0
+        else:
+            assert r["kinds"] == "lengthening"
+            assert float(r["static_diff_rms_n"]) > 1e-3
+            assert float(r["potential_rms_change_j"]) > 0
+    doc = json.loads((tmp_path / "metrics.json").read_text(encoding="utf-8"))
+    for case in doc["cases"]:
+        assert (case["timecourse"] is not None) == ("botulinum" in case["kinds"])
+        assert case["sessions"] == [{"label": "pre-BoNT", "date": "2024-01-10"}]
+
+
+@pytest.mark.parametrize(("args", "expect"), [
+    (("--kind", "lengthening"), {"lengthening"}),
+    (("--kind", "botulinum", "--patient", "SYN-002"), {"botulinum"}),
+    (("--session", "pre-BoNT", "--until", "2024-01-31"), {"botulinum", "lengthening"}),
+])
+def test_selection_filters(batch: dict[str, Any], tmp_path: Path, args: tuple[str, ...],
+                           expect: set[str]) -> None:
+    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path), "--jobs", "1", *args)
+    assert res.exit_code == 0, res.output
+    rows = _rows(tmp_path)
+    assert rows and {r["kinds"] for r in rows} == expect
+    if "--patient" in args:
+        assert {r["patient"] for r in rows} == {"SYN-002"}
+
+
+def test_one_plan(batch: dict[str, Any], tmp_path: Path) -> None:
+    plan_id = batch["plans"]["SYN-002"][1]
+    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path), "--plan", str(plan_id))
+    assert res.exit_code == 0, res.output
+    assert [int(r["plan_id"]) for r in _rows(tmp_path)] == [plan_id]
+    assert f"plan {plan_id}" in (tmp_path / "report.html").read_text(encoding="utf-8")
+
+
+def test_stamp_is_opt_in(batch: dict[str, Any], tmp_path: Path) -> None:
+    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path), "--plan",
+                  str(batch["plans"]["SYN-001"][0]), "--stamp")
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "metrics.json").read_text(encoding="utf-8"))
+    assert doc["inputs"]["generated"]
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--session", "post-BoNT"), "No stored plan matches the selection (sessions post-BoNT)"),
+    (("--since", "2025-01-01"), "No stored plan matches the selection (since 2025-01-01)"),
+    (("--patient", "NOBODY"), "NOBODY"),
+    (("--plan", "999"), "No plan with id 999"),
+])
+def test_empty_selection_is_a_clear_error(batch: dict[str, Any], tmp_path: Path,
+                                          args: tuple[str, ...], message: str) -> None:
+    out = tmp_path / "out"
+    res = run_cli("report", "--db", batch["url"], "--out", str(out), *args)
+    assert res.exit_code == 1
+    assert message in res.stderr
+    assert not out.exists()  # nothing written
+
+
+def test_bad_kind_and_dates_are_usage_errors(batch: dict[str, Any], tmp_path: Path) -> None:
+    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path), "--kind", "surgery")
+    assert res.exit_code == 2 and "'surgery' is not an intervention kind" in res.stderr
+    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path), "--since",
+                  "2024-03-01", "--until", "2024-01-01")
+    assert res.exit_code == 2 and "--since is after --until" in res.stderr
+
+
+def test_missing_data_names_what_is_missing(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'empty.sqlite3'}"
+    out = tmp_path / "out"
+    res = run_cli("report", "--db", url, "--out", str(out))
+    assert res.exit_code == 1
+    assert "No stored plans in" in res.stderr and "--save" in res.stderr
+    assert run_cli("patient", "add", "P-1", "--db", url, "--mass-kg", "70", "--height-m",
+                   "1.7", "--side", "left").exit_code == 0
+    res = run_cli("report", "--db", url, "--out", str(out), "--patient", "P-1")
+    assert res.exit_code == 1
+    assert "Patient 'P-1' has no fitted model and no stored plans" in res.stderr
+    assert "fieldbank fit P-1" in res.stderr
+    assert not out.exists()
