@@ -247,13 +247,20 @@ def _write_atomic(path: Path, text: str) -> None:
               help="Store the after model and the plan, with lineage, in the database.")
 @click.option("--db", "db_url", default=None, metavar="URL",
               help="Database URL for PATIENT and --save (default: the configured database).")
+@click.option("--render", is_flag=True,
+              help="Push before and after to a running 'fieldbank haptic serve' (A = before, "
+                   "B = after) to feel them side by side.")
+@click.option("--socket", "control_path", default=None, metavar="SOCKET",
+              help="Control socket of the renderer for --render (default: the one "
+                   "'fieldbank haptic serve' uses).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON document on stdout.")
 def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ...],
            plan_file: str | None, botox: tuple[str, ...], weeks: float | None,
            lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
            rhizotomy: str | None, baclofen: str | None, timecourse: bool, optimize: bool,
            total_units: float | None, opt_groups: str | None, plot_path: str | None,
-           out_dir: str | None, save: bool, db_url: str | None, as_json: bool) -> None:
+           out_dir: str | None, save: bool, db_url: str | None, render: bool,
+           control_path: str | None, as_json: bool) -> None:
     """Apply clinical interventions to a model and compare the fields before and after.
 
     Results are model predictions, not treatment advice.
@@ -311,6 +318,13 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
         if save:
             doc["saved"] = save_result(db_url, patient, base_model_id, before, after, source,
                                        plan, lineage.to_dict())
+        if render:
+            from haptic.control import push_models
+
+            ids = doc.get("saved")
+            model_ids = ((ids["base_model_id"], ids["result_model_id"]) if ids else
+                         (base_model_id, None))
+            doc["rendered"] = push_models(before, after, control_path, model_ids=model_ids)
     except FieldbankError as exc:
         raise click.ClickException(str(exc)) from None
     if as_json:
@@ -321,6 +335,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             click.echo(f"plot written to {plot_path}", err=True)
         if out_dir:
             click.echo(f"plan, after model and lineage written to {out_dir}", err=True)
+        if render:
+            click.echo("pushed to the renderer: A = before, B = after "
+                       "(switch with 'fieldbank haptic switch')", err=True)
         if save:
             ids = doc["saved"]
             click.echo(f"stored: after model {ids['result_model_id']} (parent "

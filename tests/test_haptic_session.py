@@ -429,3 +429,25 @@ def test_loop_runs_with_gc_off_and_warns_without_realtime(monkeypatch, caplog) -
     assert gc.isenabled() == was             # and restored after
     assert trace.stats["realtime_scheduling"] is False
     assert any("SCHED_FIFO" in r.message for r in caplog.records)
+
+
+def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from cli.whatif import whatif
+
+    rd, sock = served
+    r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
+                                    "--render", "--socket", str(sock), "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["rendered"] == {"pushed": True}
+    before = from_severity({"elbow": "severe"})
+    deadline = time.time() + 3
+    while rd.params[0] != before and time.time() < deadline:
+        time.sleep(0.01)
+    a, b = rd.params
+    assert a == before
+    assert b != before and b.km_n_per_m == before.km_n_per_m  # botulinum acts on α, β only
+    assert b.alpha_n[2] < before.alpha_n[2]
+    # no renderer: a clean error, not a traceback
+    r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
+                                    "--render", "--socket", str(tmp_path / "none.sock")])
+    assert r.exit_code == 1 and "no renderer on" in r.output
