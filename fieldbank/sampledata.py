@@ -35,7 +35,10 @@ FORCE_FLOOR_N = 0.05
 STIFFNESS_FLOOR_N_PER_M = 5.0
 N_POSTURAL = 25
 N_STIFFNESS = 9
-MOVING_VELOCITY_M_PER_S = (0.0, 0.15)
+#: Speed of the moving stiffness measurement. The seed's reflex (eq. 3) only fires on a fast
+#: stretch, so the lab perturbs the arm while moving the hand at 1 m/s along the mid-sagittal
+#: direction that stretches the patient's hypertonic groups (see ``SyntheticPatient``).
+MOVING_SPEED_M_PER_S = 1.0
 BONT_FACTOR = 0.5
 
 
@@ -46,6 +49,12 @@ class SyntheticPatient:
     height_m: float
     side: str
     hypertonic: tuple[tuple[str, float], ...]  # (group, Km multiple of unimpaired)
+    #: +1: hand moving away from the body (+y, stretches the flexors); -1: toward the body.
+    moving_direction: float = -1.0
+
+    @property
+    def moving_velocity_m_per_s(self) -> tuple[float, float]:
+        return (0.0, self.moving_direction * MOVING_SPEED_M_PER_S)
 
     def params(self) -> ArmParams:
         p = ArmParams.from_anthropometry(self.body_mass_kg, self.height_m, self.side)
@@ -64,7 +73,7 @@ class SyntheticPatient:
 
 
 PATIENTS = (
-    SyntheticPatient("SYN-001", 72.0, 1.74, "right", (("ef", 6.0), ("bf", 4.0))),
+    SyntheticPatient("SYN-001", 72.0, 1.74, "right", (("ef", 6.0), ("bf", 4.0)), +1.0),
     SyntheticPatient("SYN-002", 61.0, 1.62, "left", (("sf", 5.0),)),
     SyntheticPatient("SYN-003", 85.0, 1.83, "right", (("ee", 3.0), ("be", 3.0))),
 )
@@ -147,7 +156,7 @@ def write_samples(root: str | Path, seed: int = 20240601) -> dict[str, Any]:
                           metadata=meta)
             stat = _noisy(stiffness_map(arm, pos_k, source=src), STIFFNESS_FLOOR_N_PER_M, rng,
                           metadata=meta)
-            mov = _noisy(stiffness_map(arm, pos_k, MOVING_VELOCITY_M_PER_S, source=src),
+            mov = _noisy(stiffness_map(arm, pos_k, pat.moving_velocity_m_per_s, source=src),
                          STIFFNESS_FLOOR_N_PER_M, rng, metadata=meta)
             files: list[dict[str, str]] = []
             rel = f"{pat.code}/{label}"
