@@ -10,6 +10,7 @@ import click
 import numpy as np
 
 from fieldbank.errors import ParameterError
+from fieldbank.files import write_atomic
 from fieldbank.maps import FieldMap, ellipse, postural_map, stiffness_map, workspace_grid
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
@@ -156,9 +157,7 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     if out is None:
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
     else:
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(out)
+        write_atomic(out, text)
         click.echo(f"wrote {out} ({m.n} positions)", err=True)
 
 

@@ -19,6 +19,7 @@ from typing import Any
 import click
 
 from fieldbank.errors import HapticError
+from fieldbank.files import write_atomic
 from fieldbank.params import ArmParams
 
 socket_option = click.option(
@@ -321,9 +322,7 @@ def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | 
     params = _model(model_file, severity)
     res = probe(params, motion, robot, rate_hz, duration_s, seed)
     if out is not None:
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(res.to_csv())
-        os.replace(tmp, out)
+        write_atomic(out, res.to_csv())
     s = res.summary()
     if as_json:
         s["profile"] = res.table(every=max(1, rate_hz // 100))
@@ -369,9 +368,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
     trace_file = trace_ref
     s = trace.summary()
     if csv_out is not None:
-        tmp = csv_out.with_name(csv_out.name + ".tmp")
-        tmp.write_text(trace.to_csv())
-        os.replace(tmp, csv_out)
+        write_atomic(csv_out, trace.to_csv())
     if rerun:
         s["rerun"] = do_rerun(trace)
     lines = [f"{trace_file}: {s['ticks']} ticks at {s['rate_hz']:g} Hz "

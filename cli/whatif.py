@@ -14,17 +14,15 @@ Human-readable tables go to stdout, or one JSON document with ``--json``.
 from __future__ import annotations
 
 import json
-import math
-import os
 import re
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import click
 
 from fieldbank.errors import FieldbankError, InterventionError
+from fieldbank.files import json_finite, write_atomic
 from fieldbank.params import GROUPS, ArmParams
 from interventions.catalogue import (
     Baclofen,
@@ -197,20 +195,6 @@ def _source_model(patient: str | None, params_file: str | None, severity: tuple[
     return load_patient_model(patient, db_url)
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 @click.command("whatif")
 @click.argument("patient", required=False)
 @click.option("--params", "params_file", type=click.Path(dir_okay=False),
@@ -311,9 +295,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             doc["plot"] = plot_path
         if out_dir:
             d = Path(out_dir)
-            _write_atomic(d / "plan.json", plan.to_json() + "\n")
-            _write_atomic(d / "after.json", after.to_json() + "\n")
-            _write_atomic(d / "lineage.json", json.dumps(lineage.to_dict(), indent=2) + "\n")
+            write_atomic(d / "plan.json", plan.to_json() + "\n")
+            write_atomic(d / "after.json", after.to_json() + "\n")
+            write_atomic(d / "lineage.json", json.dumps(lineage.to_dict(), indent=2) + "\n")
             doc["out"] = str(d)
         if save:
             doc["saved"] = save_result(db_url, patient, base_model_id, before, after, source,
@@ -328,7 +312,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     except FieldbankError as exc:
         raise click.ClickException(str(exc)) from None
     if as_json:
-        click.echo(json.dumps(_finite(doc), indent=2))
+        click.echo(json.dumps(json_finite(doc), indent=2))
     else:
         click.echo(render_text(source, plan, comparison, course, inverse))
         if plot_path:
@@ -342,17 +326,6 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             ids = doc["saved"]
             click.echo(f"stored: after model {ids['result_model_id']} (parent "
                        f"{ids['base_model_id']}), plan {ids['plan_id']}", err=True)
-
-
-def _finite(obj: Any) -> Any:
-    """JSON has no NaN/inf: write them as null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fieldbank.errors import IntegrityError, StorageError
+from fieldbank.files import fsync_dir
 
 _PREFIX = b"fieldbank-array\0"
 
@@ -58,16 +59,6 @@ class ArrayRef:
     shape: tuple[int, ...]
     dtype: str
     unit: str
-
-
-def _fsync_dir(path: Path) -> None:
-    if os.name != "posix":  # directories cannot be opened for fsync on Windows
-        return
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 class ArrayStore:
@@ -130,7 +121,7 @@ class ArrayStore:
             with open(tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
             os.replace(tmp, final)
-            _fsync_dir(final.parent)
+            fsync_dir(final.parent)
         except BaseException:
             tmp.unlink(missing_ok=True)
             raise

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fieldbank.errors import StorageError
+from fieldbank.files import fsync_dir
 
 TRACE_FORMAT = "fieldbank-haptic-trace"
 TRACE_FORMAT_VERSION = 1
@@ -208,11 +209,7 @@ def write_trace_h5(trace: Trace, path: str | Path) -> None:
         with open(tmp, "rb+") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
+        fsync_dir(path.parent)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)

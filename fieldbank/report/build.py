@@ -13,13 +13,13 @@ import csv
 import io
 import json
 import os
-import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fieldbank.files import write_atomic
 from fieldbank.report.compute import COLUMNS, CaseResult, compute_case
 from fieldbank.report.html import render
 from fieldbank.report.select import CaseSpec, Selection, select_cases
@@ -60,26 +60,6 @@ def compute_all(cases: list[CaseSpec], jobs: int,
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         it = pool.map(compute_case, cases, chunksize=chunk)
         return list(wrap(it, len(cases)) if wrap else it), jobs
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        os.chmod(tmp, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def metrics_csv(results: Iterable[CaseResult]) -> str:
@@ -123,7 +103,7 @@ def build_report(db: Any, selection: Selection, out_dir: str | Path, jobs: int =
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f for f in FILES]
     json_inputs = {**inputs, "selection": selection.to_dict()}
-    _write_atomic(paths[1], metrics_csv(results).encode("utf-8"))
-    _write_atomic(paths[2], metrics_json(results, json_inputs).encode("utf-8"))
-    _write_atomic(paths[0], render(results, inputs).encode("utf-8"))
+    write_atomic(paths[1], metrics_csv(results).encode("utf-8"))
+    write_atomic(paths[2], metrics_json(results, json_inputs).encode("utf-8"))
+    write_atomic(paths[0], render(results, inputs).encode("utf-8"))
     return ReportOutput(out, paths[0], paths[1], paths[2], len(cases), used)

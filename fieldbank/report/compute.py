@@ -6,13 +6,13 @@ batches can run it in worker processes; it returns a picklable :class:`CaseResul
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from fieldbank.errors import FieldbankError
+from fieldbank.files import json_finite
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.report import figures
@@ -70,17 +70,6 @@ class CaseResult:
     row: dict[str, Any]
     detail: dict[str, Any]
     figures: tuple[Figure, ...]
-
-
-def finite(obj: Any) -> Any:
-    """NaN and infinities as None (JSON has neither); recursively, keys kept in order."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [finite(v) for v in obj]
-    return obj
 
 
 def _plan(spec: CaseSpec) -> Any | None:
@@ -190,4 +179,4 @@ def compute_case(spec: CaseSpec) -> CaseResult:
             "timecourse", "Botulinum time course: effect per injected group and probing peak "
             "force, weeks after the most recent injection.",
             figures.timecourse_figure(course.weeks, course.effect, course.probe_peak_n)))
-    return CaseResult(spec, finite(row), finite(detail), tuple(figs))
+    return CaseResult(spec, json_finite(row), json_finite(detail), tuple(figs))
