@@ -42,7 +42,7 @@ from fieldbank.params import (
 )
 from interventions.catalogue import Botulinum
 from interventions.defaults import value
-from interventions.metrics import Conditions
+from interventions.metrics import Conditions, fields_per_velocity
 from interventions.plan import Plan
 
 STIFFNESS_LENGTH_M = 0.01
@@ -59,13 +59,7 @@ def unimpaired_reference(params: ArmParams) -> ArmParams:
 
 
 def _fields(params: ArmParams, cond: Conditions) -> tuple[FloatArray, FloatArray]:
-    arm = Arm.from_params(params)
-    fs, ks = [], []
-    for k in range(len(cond.velocities)):
-        x, v = cond.points(k)
-        f, kk, _ = arm.field(x, v)
-        fs.append(f)
-        ks.append(kk)
+    fs, ks = fields_per_velocity(Arm.from_params(params), cond)
     return np.concatenate(fs), np.concatenate(ks)
 
 

@@ -93,23 +93,31 @@ class Evaluation:
     severity: dict[str, Any]
 
 
-def evaluate_model(params: ArmParams, conditions: Conditions | None = None) -> Evaluation:
-    """Evaluate a model on ``conditions`` (default: its own standard conditions)."""
-    from fieldbank.severity import classify
-
-    arm = Arm.from_params(params)
-    cond = conditions if conditions is not None else Conditions.standard(arm)
+def fields_per_velocity(
+    arm: Arm, cond: Conditions
+) -> tuple[tuple[FloatArray, ...], tuple[FloatArray, ...]]:
+    """Force (N, 2) and stiffness (N, 2, 2) on the grid at each of the conditions' velocities."""
     forces, stiff = [], []
     for k in range(len(cond.velocities)):
         x, v = cond.points(k)
         f, kk, _ = arm.field(x, v)
         forces.append(f)
         stiff.append(kk)
+    return tuple(forces), tuple(stiff)
+
+
+def evaluate_model(params: ArmParams, conditions: Conditions | None = None) -> Evaluation:
+    """Evaluate a model on ``conditions`` (default: its own standard conditions)."""
+    from fieldbank.severity import classify
+
+    arm = Arm.from_params(params)
+    cond = conditions if conditions is not None else Conditions.standard(arm)
+    forces, stiff = fields_per_velocity(arm, cond)
     return Evaluation(
         params=params,
         conditions=cond,
-        force_n=tuple(forces),
-        stiffness_n_per_m=tuple(stiff),
+        force_n=forces,
+        stiffness_n_per_m=stiff,
         potential_j=arm.potential(cond.grid_m),
         probes=tuple(profile(arm, m) for m in cond.probes),
         stretches=standard_stretches(arm),
