@@ -166,14 +166,10 @@ def save_result(db_url: str | None, patient_code: str | None, base_model_id: int
     """
     label = plan.label or "; ".join(s.describe() for s in plan.steps)
     with _open_database(db_url) as db:
-        if base_model_id is None:
-            base_model_id = int(db.add_model(before, "synthetic", source,
-                                             patient_code=patient_code).id)
-        child = db.add_model(after, "intervention", label, patient_code=patient_code,
-                             parent_id=base_model_id)
-        rec = db.add_plan(base_model_id, int(child.id), lineage_doc, label=label,
-                          patient_code=patient_code)
-    return {"base_model_id": base_model_id, "result_model_id": int(child.id),
+        base_id, child, rec = db.add_plan_result(
+            after, lineage_doc, label, patient_code=patient_code, base_model_id=base_model_id,
+            before=before if base_model_id is None else None, before_label=source)
+    return {"base_model_id": int(base_id), "result_model_id": int(child.id),
             "plan_id": int(rec.id)}
 
 

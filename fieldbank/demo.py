@@ -63,10 +63,8 @@ def store_plan(db: Any, patient: str, base_model_id: int, before: ArmParams,
     """
     after, lineage = plan.derive(before)
     label = plan.label or "; ".join(s.describe() for s in plan.steps)
-    child = db.add_model(after, "intervention", label, patient_code=patient,
-                         parent_id=base_model_id)
-    rec = db.add_plan(base_model_id, int(child.id), lineage.to_dict(), label=label,
-                      patient_code=patient)
+    _, child, rec = db.add_plan_result(after, lineage.to_dict(), label, patient_code=patient,
+                                       base_model_id=base_model_id)
     return int(child.id), int(rec.id)
 
 

@@ -152,6 +152,42 @@ def test_models_fits_plans_round_trip(db: Database) -> None:
         db.add_model(fitted_params, "guessed", "x")
 
 
+def test_fitted_model_and_fit_land_together_or_not_at_all(db: Database) -> None:
+    p = db.add_patient("P-006", 70, 1.7, "right")
+    post, _ = _maps(p.arm_params())
+    out = db.ingest_files("P-006", "s", [_incoming("a.csv", [post])])
+    params = p.arm_params().with_group("ee", km_n_per_m=2500.0)
+    n_audit = len(db.audit_entries())
+    with pytest.raises(StorageError, match="not maps of patient"):
+        db.add_fitted_model(params, "fit", "P-006", "mlsl", 1, 10, 0.1, 1.0, {}, [999])
+    assert db.list_models("P-006") == [] and db.list_fits("P-006") == []
+    assert len(db.audit_entries()) == n_audit
+    model, fit = db.add_fitted_model(params, "fit", "P-006", "mlsl", 1, 10, 0.1, 1.0,
+                                     {"cost": 1.0}, list(out[0].map_ids))
+    assert db.get_model(model.id).origin == "fitted" and fit.model_id == model.id
+    assert db.list_fits("P-006") == [fit]
+
+
+def test_plan_and_its_result_model_land_together_or_not_at_all(db: Database) -> None:
+    db.add_patient("P-007", 70, 1.7, "right")
+    before = ArmParams.from_anthropometry(70, 1.7).with_group("ef", km_n_per_m=5000.0)
+    after = before.with_group("ef", alpha_n=40.0)
+    with pytest.raises(StorageError, match="No model with id 424242"):
+        db.add_plan_result(after, {"steps": []}, "BoNT", "P-007", base_model_id=424242)
+    with pytest.raises(StorageError, match="No patient"):
+        db.add_plan_result(after, {"steps": []}, "BoNT", "P-404", before=before)
+    assert db.list_models() == [] and db.list_plans() == []
+    with pytest.raises(ParameterError, match="exactly one"):
+        db.add_plan_result(after, {}, "x", base_model_id=1, before=before)
+    base_id, child, plan = db.add_plan_result(after, {"steps": [1]}, "BoNT", "P-007",
+                                              before=before, before_label="synthetic")
+    assert db.get_model(base_id).params == before and db.get_model(base_id).origin == "synthetic"
+    assert child.parent_id == base_id and child.origin == "intervention"
+    assert (plan.base_model_id, plan.result_model_id) == (base_id, child.id)
+    again = db.add_plan_result(after, {"steps": [2]}, "BoNT 2", "P-007", base_model_id=base_id)
+    assert again[0] == base_id and len(db.list_plans("P-007")) == 2
+
+
 def test_haptic_sessions_and_traces_round_trip(db: Database) -> None:
     p = db.add_patient("P-006", 70, 1.7, "right")
     a = db.add_model(p.arm_params(), "synthetic", "before", "P-006")

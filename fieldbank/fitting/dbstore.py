@@ -1,9 +1,10 @@
 """The :class:`~fieldbank.fitting.records.FitStore` on the field database.
 
 An adapter over :class:`fieldbank.storage.Database` (imported when a store is opened), using
-its ``get_patient``, ``list_maps``, ``get_maps``, ``add_model``, ``add_fit``, ``list_models``,
-``get_model``, ``model_lineage`` and ``list_fits``. The fitted model is stored with origin
-'fitted' and the fit (report, algorithm, seed, evaluations, time, cost, map ids) refers to it.
+its ``get_patient``, ``list_maps``, ``get_maps``, ``add_fitted_model`` (model and fit in one
+transaction), ``list_models``, ``get_model``, ``model_lineage`` and ``list_fits``. The fitted
+model is stored with origin 'fitted' and the fit (report, algorithm, seed, evaluations, time,
+cost, map ids) refers to it.
 """
 
 from __future__ import annotations
@@ -44,11 +45,11 @@ class DatabaseFitStore:
         label = (f"fit of {len(record.map_ids)} maps"
                  + (f", session {record.session}" if record.session else "")
                  + f" ({record.algorithm}, seed {record.seed})")
-        model = self.db.add_model(record.params, "fitted", label, patient_code=record.patient)
         report = dict(record.report)
-        fit = self.db.add_fit(record.patient, model.id, record.algorithm, record.seed,
-                              int(report["n_evals"]), float(report["time_s"]),
-                              float(report["cost"]), report, list(record.map_ids))
+        model, fit = self.db.add_fitted_model(
+            record.params, label, record.patient, record.algorithm, record.seed,
+            int(report["n_evals"]), float(report["time_s"]), float(report["cost"]), report,
+            list(record.map_ids))
         return SavedFit(fit.id, model.id)
 
     def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]:

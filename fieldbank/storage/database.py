@@ -19,8 +19,12 @@ never leave this package)::
     db.add_model(params, origin, label, patient_code=None, parent_id=None) -> StoredModel
     db.get_model(id) / db.list_models(patient_code=None, origin=None) / db.model_lineage(id)
     db.add_fit(patient_code, model_id, algorithm, seed, n_evals, time_s, cost, result, map_ids)
+    db.add_fitted_model(params, label, patient_code, algorithm, seed, n_evals, time_s, cost,
+                        result, map_ids) -> (StoredModel, FitRecord)   # one transaction
     db.list_fits(patient_code=None) / db.get_fit(id)
     db.add_plan(base_model_id, result_model_id, spec, label="", patient_code=None)
+    db.add_plan_result(after, spec, label, patient_code=None, base_model_id=None, before=None)
+        -> (base model id, after StoredModel, PlanRecord)              # one transaction
     db.list_plans(patient_code=None) / db.get_plan(id)
     # haptic sessions and traces (arrays go to the HDF5 array store)
     db.start_haptic_session(model_a_id, robot_url, model_b_id=None, patient_code=None)
@@ -532,19 +536,23 @@ class Database:
     def add_model(self, params: ArmParams, origin: str, label: str,
                   patient_code: str | None = None, parent_id: int | None = None) -> StoredModel:
         """Store arm parameters; ``origin`` is 'synthetic', 'fitted' or 'intervention'."""
+        with self._write() as s:
+            return self._add_model(s, params, origin, label, patient_code, parent_id)
+
+    def _add_model(self, s: Session, params: ArmParams, origin: str, label: str,
+                   patient_code: str | None, parent_id: int | None) -> StoredModel:
         if origin not in ORIGINS:
             raise ParameterError(f"origin must be one of {', '.join(ORIGINS)}; got {origin!r}.")
-        with self._write() as s:
-            pid = self._optional_patient_id(s, patient_code)
-            if parent_id is not None and s.get(ModelRow, parent_id) is None:
-                raise StorageError(f"No model with id {parent_id} (the parent).")
-            row = ModelRow(patient_id=pid, parent_id=parent_id, origin=origin, label=label,
-                           params_json=params.to_json(), created_at=_now())
-            s.add(row)
-            s.flush()
-            self._audit(s, "add", "model", row.id,
-                        {"origin": origin, "label": label, "parent": parent_id})
-            return self._model(row, patient_code)
+        pid = self._optional_patient_id(s, patient_code)
+        if parent_id is not None and s.get(ModelRow, parent_id) is None:
+            raise StorageError(f"No model with id {parent_id} (the parent).")
+        row = ModelRow(patient_id=pid, parent_id=parent_id, origin=origin, label=label,
+                       params_json=params.to_json(), created_at=_now())
+        s.add(row)
+        s.flush()
+        self._audit(s, "add", "model", row.id,
+                    {"origin": origin, "label": label, "parent": parent_id})
+        return self._model(row, patient_code)
 
     def get_model(self, model_id: int) -> StoredModel:
         with self._read() as s:
@@ -581,27 +589,44 @@ class Database:
                 map_ids: Sequence[int]) -> FitRecord:
         """Record a fit: the fitted model (stored before, origin 'fitted') and the maps used."""
         with self._write() as s:
-            p = self._patient_row(s, patient_code)
-            if s.get(ModelRow, model_id) is None:
-                raise StorageError(f"No model with id {model_id}.")
-            found = set(s.scalars(select(MapRow.id).where(MapRow.id.in_(list(map_ids)),
-                                                          MapRow.patient_id == p.id)))
-            missing = [m for m in map_ids if m not in found]
-            if missing:
-                raise StorageError(f"Maps {missing} are not maps of patient {patient_code!r}.")
-            row = FitRow(patient_id=p.id, model_id=model_id, algorithm=algorithm, seed=seed,
-                         n_evals=int(n_evals), time_s=float(time_s), cost=float(cost),
-                         result_json=json.dumps(dict(result), sort_keys=True),
-                         created_at=_now())
-            s.add(row)
-            s.flush()
-            ids = tuple(dict.fromkeys(int(m) for m in map_ids))
-            if ids:
-                s.execute(fit_maps.insert(), [{"fit_id": row.id, "map_id": m} for m in ids])
-            self._audit(s, "add", "fit", row.id, {"model": model_id, "maps": list(ids)})
-            return FitRecord(row.id, p.code, model_id, algorithm, seed, row.n_evals,
-                             row.time_s, row.cost, json.loads(row.result_json), ids,
-                             _utc(row.created_at))
+            return self._add_fit(s, patient_code, model_id, algorithm, seed, n_evals, time_s,
+                                 cost, result, map_ids)
+
+    def add_fitted_model(self, params: ArmParams, label: str, patient_code: str,
+                         algorithm: str, seed: int | None, n_evals: int, time_s: float,
+                         cost: float, result: Mapping[str, Any],
+                         map_ids: Sequence[int]) -> tuple[StoredModel, FitRecord]:
+        """Store a fitted model and its fit record in one transaction: both or neither."""
+        with self._write() as s:
+            model = self._add_model(s, params, "fitted", label, patient_code, None)
+            fit = self._add_fit(s, patient_code, model.id, algorithm, seed, n_evals, time_s,
+                                cost, result, map_ids)
+            return model, fit
+
+    def _add_fit(self, s: Session, patient_code: str, model_id: int, algorithm: str,
+                 seed: int | None, n_evals: int, time_s: float, cost: float,
+                 result: Mapping[str, Any], map_ids: Sequence[int]) -> FitRecord:
+        p = self._patient_row(s, patient_code)
+        if s.get(ModelRow, model_id) is None:
+            raise StorageError(f"No model with id {model_id}.")
+        found = set(s.scalars(select(MapRow.id).where(MapRow.id.in_(list(map_ids)),
+                                                      MapRow.patient_id == p.id)))
+        missing = [m for m in map_ids if m not in found]
+        if missing:
+            raise StorageError(f"Maps {missing} are not maps of patient {patient_code!r}.")
+        row = FitRow(patient_id=p.id, model_id=model_id, algorithm=algorithm, seed=seed,
+                     n_evals=int(n_evals), time_s=float(time_s), cost=float(cost),
+                     result_json=json.dumps(dict(result), sort_keys=True),
+                     created_at=_now())
+        s.add(row)
+        s.flush()
+        ids = tuple(dict.fromkeys(int(m) for m in map_ids))
+        if ids:
+            s.execute(fit_maps.insert(), [{"fit_id": row.id, "map_id": m} for m in ids])
+        self._audit(s, "add", "fit", row.id, {"model": model_id, "maps": list(ids)})
+        return FitRecord(row.id, p.code, model_id, algorithm, seed, row.n_evals,
+                         row.time_s, row.cost, json.loads(row.result_json), ids,
+                         _utc(row.created_at))
 
     def _fit(self, s: Session, r: FitRow) -> FitRecord:
         ids = tuple(s.scalars(select(fit_maps.c.map_id).where(fit_maps.c.fit_id == r.id)
@@ -627,19 +652,45 @@ class Database:
     def add_plan(self, base_model_id: int, result_model_id: int, spec: Mapping[str, Any],
                  label: str = "", patient_code: str | None = None) -> PlanRecord:
         with self._write() as s:
-            pid = self._optional_patient_id(s, patient_code)
-            for mid in (base_model_id, result_model_id):
-                if s.get(ModelRow, mid) is None:
-                    raise StorageError(f"No model with id {mid}.")
-            row = PlanRow(patient_id=pid, base_model_id=base_model_id,
-                          result_model_id=result_model_id, label=label,
-                          spec_json=json.dumps(dict(spec), sort_keys=True), created_at=_now())
-            s.add(row)
-            s.flush()
-            self._audit(s, "add", "plan", row.id,
-                        {"base": base_model_id, "result": result_model_id})
-            return PlanRecord(row.id, patient_code, base_model_id, result_model_id, label,
-                              json.loads(row.spec_json), _utc(row.created_at))
+            return self._add_plan(s, base_model_id, result_model_id, spec, label, patient_code)
+
+    def add_plan_result(self, after: ArmParams, spec: Mapping[str, Any], label: str,
+                        patient_code: str | None = None, base_model_id: int | None = None,
+                        before: ArmParams | None = None,
+                        before_label: str = "") -> tuple[int, StoredModel, PlanRecord]:
+        """Store a plan with its result model in one transaction: all or nothing.
+
+        The base is a stored model (``base_model_id``) or, when it is not stored yet, the
+        ``before`` parameters, stored first as a synthetic model. Returns (base model id,
+        the after model (origin 'intervention', parent = base), the plan record).
+        """
+        if (base_model_id is None) == (before is None):
+            raise ParameterError("Give exactly one of base_model_id and before.")
+        with self._write() as s:
+            if base_model_id is None:
+                assert before is not None
+                base_model_id = self._add_model(s, before, "synthetic", before_label,
+                                                patient_code, None).id
+            child = self._add_model(s, after, "intervention", label, patient_code,
+                                    base_model_id)
+            plan = self._add_plan(s, base_model_id, child.id, spec, label, patient_code)
+            return base_model_id, child, plan
+
+    def _add_plan(self, s: Session, base_model_id: int, result_model_id: int,
+                  spec: Mapping[str, Any], label: str, patient_code: str | None) -> PlanRecord:
+        pid = self._optional_patient_id(s, patient_code)
+        for mid in (base_model_id, result_model_id):
+            if s.get(ModelRow, mid) is None:
+                raise StorageError(f"No model with id {mid}.")
+        row = PlanRow(patient_id=pid, base_model_id=base_model_id,
+                      result_model_id=result_model_id, label=label,
+                      spec_json=json.dumps(dict(spec), sort_keys=True), created_at=_now())
+        s.add(row)
+        s.flush()
+        self._audit(s, "add", "plan", row.id,
+                    {"base": base_model_id, "result": result_model_id})
+        return PlanRecord(row.id, patient_code, base_model_id, result_model_id, label,
+                          json.loads(row.spec_json), _utc(row.created_at))
 
     def _plan(self, s: Session, r: PlanRow) -> PlanRecord:
         return PlanRecord(r.id, self._code_of(s, r.patient_id), r.base_model_id,
