@@ -13,14 +13,13 @@ import click
 import pytest
 from click.testing import CliRunner
 
+import fieldbank.storage as storage
 from cli.fit import fit, models
 from fieldbank.fitting import ArmFitter
 from fieldbank.fitting.dbstore import DatabaseFitStore
 from fieldbank.fitting.records import fit_patient
 from fieldbank.fitting.synthetic import impaired_params, synthetic_patient
 from fieldbank.params import ArmParams
-
-storage = pytest.importorskip("fieldbank.storage")
 
 
 @click.group()

@@ -110,9 +110,6 @@ def test_fitting_the_rest_posture() -> None:
 
 @pytest.mark.parametrize("group", list(JOINT_GROUPS))
 def test_fitted_model_gets_the_synthesized_severity(group: str) -> None:
-    # Runs where the severity scale (fieldbank.severity) is installed; the fitter skips only
-    # the severity field without it.
-    pytest.importorskip("fieldbank.severity")
     truth = impaired_params(group, "moderate", BASE)
     patient = synthetic_patient(truth, seed=1, n_stiffness=N_STIFFNESS)
     fit = ArmFitter(seed=0).fit(patient.maps, BASE)

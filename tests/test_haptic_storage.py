@@ -41,7 +41,7 @@ def test_replay_refuses_a_missing_trace() -> None:
 @pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
 def db(request: pytest.FixtureRequest, tmp_path: Path):  # type: ignore[no-untyped-def]
     """The field database on each backend (PostgreSQL through the shared ``pg_url`` fixture)."""
-    storage = pytest.importorskip("fieldbank.storage")
+    import fieldbank.storage as storage
     if request.param == "postgres":
         url = request.getfixturevalue("pg_url")
     else:

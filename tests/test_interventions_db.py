@@ -8,14 +8,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
 from click.testing import CliRunner
 
-storage = pytest.importorskip("fieldbank.storage")
-
-from cli.whatif import whatif  # noqa: E402
-from fieldbank.severity import synthesize  # noqa: E402
-from interventions.plan import Plan, params_sha256  # noqa: E402
+import fieldbank.storage as storage
+from cli.whatif import whatif
+from fieldbank.severity import synthesize
+from interventions.plan import Plan, params_sha256
 
 
 def _db(tmp_path: Path) -> str:
