@@ -76,37 +76,25 @@ def _locked(engine: Engine) -> Connection:
 def upgrade(engine: Engine, revision: str = "head") -> tuple[str | None, str | None]:
     """Migrate to ``revision`` under the lock; returns (revision before, revision after)."""
     with _errors(engine, "Upgrading"):
-        return _upgrade(engine, revision)
-
-
-def _upgrade(engine: Engine, revision: str) -> tuple[str | None, str | None]:
-    conn = _locked(engine)
-    try:
-        before = MigrationContext.configure(conn).get_current_revision()
-        target = head_revision() if revision == "head" else revision
-        if before != target:
-            command.upgrade(alembic_config(conn), revision)
-        after = MigrationContext.configure(conn).get_current_revision()
-        conn.commit()
-    except Exception:
-        conn.rollback()
-        raise
-    finally:
-        conn.close()
-    return before, after
+        return _migrate(engine, revision, down=False)
 
 
 def downgrade(engine: Engine, revision: str) -> tuple[str | None, str | None]:
     """Migrate down to ``revision`` ('base' empties the database) under the lock."""
     with _errors(engine, "Downgrading"):
-        return _downgrade(engine, revision)
+        return _migrate(engine, revision, down=True)
 
 
-def _downgrade(engine: Engine, revision: str) -> tuple[str | None, str | None]:
+def _migrate(engine: Engine, revision: str, down: bool) -> tuple[str | None, str | None]:
+    """One migration step in one locked transaction; an upgrade already at the target is a
+    no-op (concurrent first uses each find the head the first one reached)."""
     conn = _locked(engine)
     try:
         before = MigrationContext.configure(conn).get_current_revision()
-        command.downgrade(alembic_config(conn), revision)
+        if down:
+            command.downgrade(alembic_config(conn), revision)
+        elif before != (head_revision() if revision == "head" else revision):
+            command.upgrade(alembic_config(conn), revision)
         after = MigrationContext.configure(conn).get_current_revision()
         conn.commit()
     except Exception:
