@@ -19,12 +19,12 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.models import from_severity
+from fieldbank.haptic.renderer import RealClock, Renderer, RendererConfig
+from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from haptic.link import RobotLink
-from haptic.models import from_severity
-from haptic.renderer import RealClock, Renderer, RendererConfig
-from haptic.simrobot import PtyRobot, SimRobotConfig
 
 
 def empty_loop(seconds: float, rate_hz: int) -> dict[str, float]:

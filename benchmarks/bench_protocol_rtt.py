@@ -22,9 +22,9 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import numpy as np
 
-from haptic import protocol as P
-from haptic.link import RobotLink
-from haptic.simrobot import PtyRobot, SimRobotConfig
+from fieldbank.haptic import protocol as P
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 
 ECHO = """
 import os, select, sys

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from fieldbank.interventions import Botulinum, Lengthening, Plan
 from fieldbank.params import ArmParams
 from fieldbank.report import Selection, build_report
 from fieldbank.severity import synthesize
 from fieldbank.storage import Database
-from interventions import Botulinum, Lengthening, Plan
 
 LEVELS = ("unimpaired", "very mild", "mild", "moderate", "severe")
 JOINTS = ("shoulder", "elbow", "biarticular")

@@ -19,14 +19,14 @@ import timeit
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from fieldbank.haptic import protocol as P
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.models import from_severity
+from fieldbank.haptic.probe import sim_url
+from fieldbank.haptic.recording import NCOL, TraceBuffer
+from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock, build_sim
+from fieldbank.haptic.safety import Safety, SafetyConfig
 from fieldbank.params import ArmParams
-from haptic import protocol as P
-from haptic.link import RobotLink
-from haptic.models import from_severity
-from haptic.probe import sim_url
-from haptic.recording import NCOL, TraceBuffer
-from haptic.renderer import Renderer, RendererConfig, VirtualClock, build_sim
-from haptic.safety import Safety, SafetyConfig
 
 
 def per_call_us(fn: object, n: int = 20000) -> float:

@@ -19,13 +19,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from fieldbank.interventions.catalogue import Botulinum, Lengthening
+from fieldbank.interventions.course import time_course
+from fieldbank.interventions.inverse import optimise_botulinum
+from fieldbank.interventions.metrics import Conditions, compare
+from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm
 from fieldbank.severity import synthesize
-from interventions.catalogue import Botulinum, Lengthening
-from interventions.course import time_course
-from interventions.inverse import optimise_botulinum
-from interventions.metrics import Conditions, compare
-from interventions.plan import Plan
 
 
 def timeit(fn: Callable[[], object], repeat: int) -> tuple[float, float]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.dbopt import db_option, emit_json, open_db
 from fieldbank.storage import migrate
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.dbopt import db_option, emit_json, open_db
 from fieldbank.errors import StorageError
 from fieldbank.ingest import write_hdf5
 

@@ -35,7 +35,7 @@ def _emit(data: Any, as_json: bool, human: str) -> None:
 
 
 def _model(path: Path | None, severity: str | None) -> ArmParams:
-    from haptic.models import load_model
+    from fieldbank.haptic.models import load_model
 
     return load_model(path, severity)
 
@@ -133,18 +133,18 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
     The session's trace is written to an HDF5 file in --trace-dir and recorded in the field
     database (unless --no-db).
     """
-    from haptic.control import ControlServer, data_home
-    from haptic.link import RobotLink
-    from haptic.recording import Hdf5TraceSink
-    from haptic.renderer import Renderer, RendererConfig
-    from haptic.safety import SafetyConfig
+    from fieldbank.haptic.control import ControlServer, data_home
+    from fieldbank.haptic.link import RobotLink
+    from fieldbank.haptic.recording import Hdf5TraceSink
+    from fieldbank.haptic.renderer import Renderer, RendererConfig
+    from fieldbank.haptic.safety import SafetyConfig
 
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
     before, after, ids = _models(db_url, (before_file, after_file),
                                  (before_severity, after_severity), (before_id, after_id))
     offset = _pair(shoulder_offset, "--shoulder-offset")
     if robot.startswith("sim://"):
-        from haptic.probe import sim_url
+        from fieldbank.haptic.probe import sim_url
 
         # the simulated operator starts at the model's rest hand position unless told otherwise
         robot = sim_url(before, "explore", offset, robot)
@@ -177,7 +177,7 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
                    err=True)
         no_db = True
     if not no_db:
-        from haptic.dbsink import DatabaseTraceSink
+        from fieldbank.haptic.dbsink import DatabaseTraceSink
 
         db = _open_db(db_url)
         try:
@@ -208,7 +208,7 @@ def push(before_file: Path | None, after_file: Path | None, before_severity: str
          after_severity: str | None, before_id: int | None, after_id: int | None,
          socket_path: Path | None, db_url: str | None, as_json: bool) -> None:
     """Send models BEFORE (A) and AFTER (B) to the running renderer (faded swap)."""
-    from haptic.control import push_models
+    from fieldbank.haptic.control import push_models
 
     if before_file is None and not before_severity and before_id is None:
         raise click.UsageError("give BEFORE_FILE, --before-severity or --before-id")
@@ -220,7 +220,7 @@ def push(before_file: Path | None, after_file: Path | None, before_severity: str
 
 
 def _request(socket_path: Path | None, cmd: str, **args: Any) -> Any:
-    from haptic.control import ControlClient
+    from fieldbank.haptic.control import ControlClient
 
     return ControlClient(socket_path).request(cmd, **args)
 
@@ -317,7 +317,7 @@ def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | 
               rate_hz: int, duration_s: float | None, seed: int, out: Path | None,
               as_json: bool) -> None:
     """Run a scripted probing motion and report the force profile felt at the handle."""
-    from haptic.probe import probe
+    from fieldbank.haptic.probe import probe
 
     params = _model(model_file, severity)
     res = probe(params, motion, robot, rate_hz, duration_s, seed)
@@ -347,9 +347,9 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
 
     TRACE is a trace file (.h5) or a database session, haptic_session:ID.
     """
-    from haptic.dbsink import SESSION_PREFIX, read_trace_db
-    from haptic.recording import read_trace_h5
-    from haptic.replay import rerun as do_rerun
+    from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
+    from fieldbank.haptic.recording import read_trace_h5
+    from fieldbank.haptic.replay import rerun as do_rerun
 
     if trace_ref.startswith(SESSION_PREFIX):
         try:
@@ -392,7 +392,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
 @click.option("--start", help="Start of the motion X,Y in m (robot frame).")
 def sim_robot(motion: str, mode: str, start: str | None) -> None:
     """Run the simulated robot on a pty and print the port to give to 'serve --robot'."""
-    from haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
+    from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
 
     if start:
         x0, y0 = _pair(start, "--start")

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.dbopt import db_option, emit_json, open_db
 from fieldbank.ingest import ingest_paths
 
 #: Show a progress bar from this many files on (on a terminal).

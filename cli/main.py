@@ -16,19 +16,19 @@ from fieldbank.errors import FieldbankError
 
 #: module name -> attribute holding a click command or group
 COMMAND_MODULES: tuple[tuple[str, str], ...] = (
-    ("cli.field", "field"),
-    ("cli.whatif", "whatif"),
-    ("cli.fit", "fit"),
-    ("cli.fit", "models"),
-    ("cli.db", "db"),
-    ("cli.patient", "patient"),
-    ("cli.maps", "maps"),
-    ("cli.ingest", "ingest"),
-    ("cli.export", "export"),
-    ("cli.samples", "samples"),
-    ("cli.haptic", "haptic"),
-    ("cli.report", "report"),
-    ("cli.demo", "demo"),
+    ("fieldbank.cli.field", "field"),
+    ("fieldbank.cli.whatif", "whatif"),
+    ("fieldbank.cli.fit", "fit"),
+    ("fieldbank.cli.fit", "models"),
+    ("fieldbank.cli.db", "db"),
+    ("fieldbank.cli.patient", "patient"),
+    ("fieldbank.cli.maps", "maps"),
+    ("fieldbank.cli.ingest", "ingest"),
+    ("fieldbank.cli.export", "export"),
+    ("fieldbank.cli.samples", "samples"),
+    ("fieldbank.cli.haptic", "haptic"),
+    ("fieldbank.cli.report", "report"),
+    ("fieldbank.cli.demo", "demo"),
 )
 
 

@@ -7,7 +7,7 @@ from datetime import datetime
 
 import click
 
-from cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.dbopt import db_option, emit_json, open_db
 
 
 @click.group("maps")

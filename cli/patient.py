@@ -6,7 +6,7 @@ import dataclasses
 
 import click
 
-from cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.dbopt import db_option, emit_json, open_db
 
 
 @click.group("patient")

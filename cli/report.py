@@ -12,7 +12,7 @@ from datetime import datetime
 
 import click
 
-from cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.dbopt import db_option, emit_json, open_db
 from fieldbank.report import Selection, build_report
 from fieldbank.report.build import default_jobs
 
@@ -49,7 +49,7 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
            until: datetime | None, kinds: tuple[str, ...], out_dir: str, jobs: int | None,
            stamp: bool, as_json: bool) -> None:
     """Report the field changes of stored intervention plans (HTML + CSV + JSON)."""
-    from interventions.catalogue import KINDS
+    from fieldbank.interventions.catalogue import KINDS
 
     bad = [k for k in kinds if k not in KINDS]
     if bad:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from cli.dbopt import emit_json
+from fieldbank.cli.dbopt import emit_json
 from fieldbank.sampledata import write_samples
 
 

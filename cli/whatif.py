@@ -23,8 +23,7 @@ import click
 
 from fieldbank.errors import FieldbankError, InterventionError
 from fieldbank.files import json_finite, write_atomic
-from fieldbank.params import GROUPS, ArmParams
-from interventions.catalogue import (
+from fieldbank.interventions.catalogue import (
     Baclofen,
     Botulinum,
     Intervention,
@@ -33,8 +32,9 @@ from interventions.catalogue import (
     SerialCasting,
     Tenotomy,
 )
-from interventions.defaults import value
-from interventions.plan import Plan, params_sha256
+from fieldbank.interventions.defaults import value
+from fieldbank.interventions.plan import Plan, params_sha256
+from fieldbank.params import GROUPS, ArmParams
 
 _NUM = r"([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)"
 _LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -245,10 +245,10 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
 
     Results are model predictions, not treatment advice.
     """
-    from cli.whatif_report import render_text
-    from interventions.course import time_course
-    from interventions.inverse import optimise_botulinum
-    from interventions.metrics import Conditions, compare
+    from fieldbank.cli.whatif_report import render_text
+    from fieldbank.interventions.course import time_course
+    from fieldbank.interventions.inverse import optimise_botulinum
+    from fieldbank.interventions.metrics import Conditions, compare
 
     try:
         before, source, base_model_id = _source_model(patient, params_file, severity, db_url)
@@ -285,7 +285,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             course = time_course(before, plan, conditions=cond)
             doc["timecourse"] = course.to_dict()
         if plot_path:
-            from interventions.plot import plot_comparison
+            from fieldbank.interventions.plot import plot_comparison
 
             plot_comparison(before, after, plot_path, title=source)
             doc["plot"] = plot_path
@@ -299,7 +299,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             doc["saved"] = save_result(db_url, patient, base_model_id, before, after, source,
                                        plan, lineage.to_dict())
         if render:
-            from haptic.control import push_models
+            from fieldbank.haptic.control import push_models
 
             ids = doc.get("saved")
             model_ids = ((ids["base_model_id"], ids["result_model_id"]) if ids else

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 
-from interventions.course import TimeCourse
-from interventions.inverse import DoseSplitResult
-from interventions.metrics import Comparison
-from interventions.plan import Plan
+from fieldbank.interventions.course import TimeCourse
+from fieldbank.interventions.inverse import DoseSplitResult
+from fieldbank.interventions.metrics import Comparison
+from fieldbank.interventions.plan import Plan
 
 
 def _pct(before: float, after: float) -> str:

@@ -70,7 +70,7 @@ def store_plan(db: Any, patient: str, base_model_id: int, before: ArmParams,
 
 def demo_plans(hypertonic: Sequence[str]) -> list[Any]:
     """The botulinum plan and the lengthening plan for a patient's hypertonic groups."""
-    from interventions import Botulinum, Lengthening, Plan
+    from fieldbank.interventions import Botulinum, Lengthening, Plan
 
     groups = list(hypertonic)
     bot = Plan.of(Botulinum({g: BOTULINUM_UNITS_PER_GROUP for g in groups}),
@@ -183,10 +183,10 @@ def run_haptic(db: Any, patient: str, before_id: int, plan_id: int, duration_s: 
     the array store).
     """
     try:
-        from haptic.dbsink import DatabaseTraceSink
-        from haptic.link import RobotLink
-        from haptic.probe import sim_url
-        from haptic.renderer import Renderer, RendererConfig
+        from fieldbank.haptic.dbsink import DatabaseTraceSink
+        from fieldbank.haptic.link import RobotLink
+        from fieldbank.haptic.probe import sim_url
+        from fieldbank.haptic.renderer import Renderer, RendererConfig
     except ImportError:
         say("haptic step left out: the haptic package is not part of this build")
         return None

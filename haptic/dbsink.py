@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from fieldbank.errors import StorageError
+from fieldbank.haptic.recording import COLUMNS, NCOL, Trace
 from fieldbank.params import ArmParams
-from haptic.recording import COLUMNS, NCOL, Trace
 
 SESSION_PREFIX = "haptic_session:"
 

@@ -17,10 +17,11 @@ import time
 import serial
 
 from fieldbank.errors import HapticError
-from haptic import protocol as P
+from fieldbank.haptic import protocol as P
 
-if "haptic" not in serial.protocol_handler_packages:
-    serial.protocol_handler_packages.append("haptic")  # makes sim:// resolve to protocol_sim
+# pyserial resolves a URL scheme X to the module <package>.protocol_X: sim:// -> protocol_sim
+if "fieldbank.haptic" not in serial.protocol_handler_packages:
+    serial.protocol_handler_packages.append("fieldbank.haptic")
 
 #: Baud rate asked of real USB serial adapters (ignored by ptys and sim://).
 DEFAULT_BAUDRATE = 1_000_000

@@ -17,13 +17,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.motions import MOTIONS, motion_duration_s
+from fieldbank.haptic.recording import Trace
+from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from haptic.link import RobotLink
-from haptic.motions import MOTIONS, motion_duration_s
-from haptic.recording import Trace
-from haptic.renderer import Renderer, RendererConfig, VirtualClock
-from haptic.safety import SafetyConfig
 
 
 @dataclass(frozen=True)

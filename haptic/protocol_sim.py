@@ -14,7 +14,7 @@ import urllib.parse
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
-from haptic.simrobot import SimDevice, SimRobotConfig
+from fieldbank.haptic.simrobot import SimDevice, SimRobotConfig
 
 
 class Serial(SerialBase):

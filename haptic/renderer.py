@@ -41,14 +41,14 @@ from typing import Any, Protocol
 import numpy as np
 
 from fieldbank.errors import HapticError, ParameterError, UnreachableError
+from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.link import LinkDown, RobotLink
+from fieldbank.haptic.protocol import FLAG_WATCHDOG, FaultCode
+from fieldbank.haptic.recording import NCOL, Trace, TraceBuffer
+from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig
-from haptic.abx import AbxSession
-from haptic.link import LinkDown, RobotLink
-from haptic.protocol import FLAG_WATCHDOG, FaultCode
-from haptic.recording import NCOL, Trace, TraceBuffer
-from haptic.safety import Mode, Safety, SafetyConfig
 
 log = logging.getLogger("fieldbank.haptic.renderer")
 

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from fieldbank.haptic.recording import Trace
+from fieldbank.haptic.renderer import build_sim
 from fieldbank.params import ArmParams
-from haptic.recording import Trace
-from haptic.renderer import build_sim
 
 
 def rerun(trace: Trace) -> dict[str, Any]:

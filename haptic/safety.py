@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 from fieldbank.errors import HapticError, ParameterError
-from haptic.protocol import FaultCode
+from fieldbank.haptic.protocol import FaultCode
 
 log = logging.getLogger("fieldbank.haptic.safety")
 

@@ -41,8 +41,8 @@ import tty
 from dataclasses import asdict, dataclass, fields
 from urllib.parse import parse_qsl
 
-from haptic import protocol as P
-from haptic.motions import MOTIONS, MotionFn, make_motion
+from fieldbank.haptic import protocol as P
+from fieldbank.haptic.motions import MOTIONS, MotionFn, make_motion
 
 
 @dataclass(frozen=True)
@@ -300,7 +300,7 @@ class PtyRobot:
             pass
 
     def start_process(self) -> PtyRobot:
-        cmd = [sys.executable, "-m", "haptic.simrobot", "--fd", str(self.master_fd),
+        cmd = [sys.executable, "-m", "fieldbank.haptic.simrobot", "--fd", str(self.master_fd),
                "--config", json.dumps(asdict(self.config))]
         # the child must import this package from wherever this process imported it
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

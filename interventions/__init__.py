@@ -16,7 +16,7 @@ plot          before / after / difference figures
 Everything here is a model prediction, not treatment advice.
 """
 
-from interventions.catalogue import (
+from fieldbank.interventions.catalogue import (
     KINDS,
     Baclofen,
     Botulinum,
@@ -26,7 +26,7 @@ from interventions.catalogue import (
     SerialCasting,
     Tenotomy,
 )
-from interventions.plan import Derivation, Plan, params_sha256
+from fieldbank.interventions.plan import Derivation, Plan, params_sha256
 
 __all__ = [
     "KINDS",

@@ -36,9 +36,9 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from fieldbank.errors import InterventionError, ParameterError
+from fieldbank.interventions.defaults import value
+from fieldbank.interventions.timecourse import dose_effect, shape_exponent, time_shape
 from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
-from interventions.defaults import value
-from interventions.timecourse import dose_effect, shape_exponent, time_shape
 
 
 def _known_groups() -> str:

@@ -14,11 +14,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fieldbank.errors import InterventionError
+from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.metrics import (
+    Comparison,
+    Conditions,
+    compare_evaluations,
+    evaluate_model,
+)
+from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from interventions.catalogue import Botulinum
-from interventions.metrics import Comparison, Conditions, compare_evaluations, evaluate_model
-from interventions.plan import Plan
 
 DEFAULT_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(25))
 

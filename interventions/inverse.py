@@ -31,6 +31,10 @@ import nlopt
 import numpy as np
 
 from fieldbank.errors import InterventionError
+from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.defaults import value
+from fieldbank.interventions.metrics import Conditions, fields_per_velocity
+from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import (
     DEFAULT_ALPHA_N,
@@ -40,10 +44,6 @@ from fieldbank.params import (
     GROUPS,
     ArmParams,
 )
-from interventions.catalogue import Botulinum
-from interventions.defaults import value
-from interventions.metrics import Conditions, fields_per_velocity
-from interventions.plan import Plan
 
 STIFFNESS_LENGTH_M = 0.01
 NOTICE = ("Model result: the dose split this model predicts brings the field closest to its "

@@ -31,10 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.maps import ellipse, workspace_grid
-from fieldbank.model import Arm, FloatArray
-from fieldbank.params import ArmParams
-from interventions.probing import (
+from fieldbank.interventions.probing import (
     JointStretch,
     ProbeMotion,
     ProbeProfile,
@@ -42,6 +39,9 @@ from interventions.probing import (
     standard_probes,
     standard_stretches,
 )
+from fieldbank.maps import ellipse, workspace_grid
+from fieldbank.model import Arm, FloatArray
+from fieldbank.params import ArmParams
 
 GRID_N = 15
 #: Grid postures with the elbow within this angle of straight are left out: there the endpoint

@@ -25,8 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from fieldbank.errors import InterventionError
+from fieldbank.interventions.catalogue import Botulinum, Intervention
 from fieldbank.params import ArmParams
-from interventions.catalogue import Botulinum, Intervention
 
 PLAN_SCHEMA = "fieldbank.intervention-plan"
 PLAN_VERSION = 1

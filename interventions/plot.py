@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from fieldbank.errors import FieldbankError
+from fieldbank.interventions.metrics import Conditions
+from fieldbank.interventions.probing import profile
 from fieldbank.maps import ellipse
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from interventions.metrics import Conditions
-from interventions.probing import profile
 
 PLOT_SPEED_M_PER_S = 0.3
 

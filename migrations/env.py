@@ -10,6 +10,7 @@ SQLite uses batch mode, since it cannot alter most constraints in place.
 from __future__ import annotations
 
 from alembic import context
+from sqlalchemy import Connection
 
 from fieldbank.storage.config import make_engine
 from fieldbank.storage.orm import Base
@@ -18,7 +19,7 @@ config = context.config
 target_metadata = Base.metadata
 
 
-def _run(connection) -> None:  # type: ignore[no-untyped-def]
+def _run(connection: Connection) -> None:
     context.configure(
         connection=connection,
         target_metadata=target_metadata,

@@ -5,12 +5,12 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.safety import SafetyConfig
+from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from haptic.link import RobotLink
-from haptic.renderer import Renderer, RendererConfig, VirtualClock
-from haptic.safety import SafetyConfig
-from haptic.simrobot import PtyRobot, SimRobotConfig
 
 #: MAS-4 ("severe") is about ten times unimpaired joint stiffness (BRIEF §3, §5); the severe
 #: group's reflex gain is 1. Used when the severity module is not at hand.

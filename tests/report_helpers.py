@@ -21,6 +21,6 @@ def build_batch(root: Path, patients: tuple[str, ...] = ("SYN-001", "SYN-002")) 
 
 
 def run_cli(*args: str) -> Result:
-    from cli.main import cli
+    from fieldbank.cli.main import cli
 
     return CliRunner().invoke(cli, list(args), catch_exceptions=False)

@@ -8,7 +8,7 @@ import json
 import numpy as np
 from click.testing import CliRunner
 
-from cli.main import cli
+from fieldbank.cli.main import cli
 from fieldbank.model import Arm
 from fieldbank.severity import synthesize
 

@@ -11,7 +11,7 @@ import click
 import pytest
 from click.testing import CliRunner
 
-from cli.fit import fit, models
+from fieldbank.cli.fit import fit, models
 from fieldbank.errors import FieldbankError, FitError
 from fieldbank.fitting.records import FitSubmission, PatientMap, SavedFit
 from fieldbank.fitting.synthetic import impaired_params, synthetic_patient

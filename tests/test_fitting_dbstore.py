@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 import fieldbank.storage as storage
-from cli.fit import fit, models
+from fieldbank.cli.fit import fit, models
 from fieldbank.fitting import ArmFitter
 from fieldbank.fitting.dbstore import DatabaseFitStore
 from fieldbank.fitting.records import fit_patient

@@ -13,12 +13,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fieldbank.errors import HapticError
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.protocol import FaultCode
+from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.safety import Mode
+from fieldbank.haptic.simrobot import PtyRobot, SimDevice
 from fieldbank.params import ArmParams
-from haptic.link import RobotLink
-from haptic.protocol import FaultCode
-from haptic.renderer import Renderer, RendererConfig, VirtualClock
-from haptic.safety import Mode
-from haptic.simrobot import PtyRobot, SimDevice
 from tests.haptic_util import pty_session, severe_shoulder
 
 INJECT_AT = 800  # tick at which the fault is injected (handle moving, force well above zero)
@@ -124,8 +124,8 @@ def test_rearm_refused_while_link_down() -> None:
 
 def test_device_watchdog_zeroes_force_when_commands_stop() -> None:
     # realtime device with a fake wall clock: no FORCE for more than 20 ms -> zero, disarmed
-    from haptic import protocol as P
-    from haptic.simrobot import SimRobotConfig
+    from fieldbank.haptic import protocol as P
+    from fieldbank.haptic.simrobot import SimRobotConfig
 
     now = [0.0]
     dev = SimDevice(SimRobotConfig(mode="realtime", watchdog_ms=20), clock=lambda: now[0])
@@ -148,8 +148,8 @@ def test_device_watchdog_zeroes_force_when_commands_stop() -> None:
 
 
 def test_device_clamps_to_its_own_force_limit() -> None:
-    from haptic import protocol as P
-    from haptic.simrobot import SimRobotConfig
+    from fieldbank.haptic import protocol as P
+    from fieldbank.haptic.simrobot import SimRobotConfig
 
     dev = SimDevice(SimRobotConfig(force_limit_n=30.0))
     dev.feed(P.encode_frame(P.MsgType.HELLO, 0, P.HELLO_FMT.pack(1, 1000, 20)))
@@ -223,7 +223,7 @@ class _FuzzPort:
 @given(st.binary(min_size=0, max_size=3000), st.integers(1, 64))
 def test_random_bytes_on_the_link_never_crash_the_renderer(data: bytes, chunk: int) -> None:
     # a valid STATE first so the renderer starts, then garbage
-    from haptic import protocol as P
+    from fieldbank.haptic import protocol as P
 
     head = P.encode_frame(P.MsgType.STATE, 0, P.STATE_FMT.pack(0, 0.05, 0.5, 0.0, 0.0, 1, 0))
     link = RobotLink(_FuzzPort(head + data, lambda: chunk))  # type: ignore[arg-type]
@@ -236,11 +236,11 @@ def test_random_bytes_on_the_link_never_crash_the_renderer(data: bytes, chunk: i
 
 
 def test_random_bytes_over_a_pty_never_crash_the_renderer() -> None:
-    from haptic.simrobot import SimRobotConfig
+    from fieldbank.haptic.simrobot import SimRobotConfig
 
     with PtyRobot(SimRobotConfig()) as robot:
         link = RobotLink.open(robot.port)
-        from haptic import protocol as P
+        from fieldbank.haptic import protocol as P
         os.write(robot.master_fd, P.encode_frame(
             P.MsgType.STATE, 0, P.STATE_FMT.pack(0, 0.05, 0.5, 0.0, 0.0, 1, 0)))
         rng = np.random.default_rng(1)
@@ -259,8 +259,8 @@ def test_random_bytes_over_a_pty_never_crash_the_renderer() -> None:
 def test_simulated_handle_settles_where_the_operator_spring_balances_the_force() -> None:
     """Independent check of the device physics: a constant 6 N against the operator's 600 N/m
     hand settles at 6/600 = 10 mm from the hold point (friction vanishes at rest)."""
-    from haptic import protocol as P
-    from haptic.simrobot import SimRobotConfig
+    from fieldbank.haptic import protocol as P
+    from fieldbank.haptic.simrobot import SimRobotConfig
 
     dev = SimDevice(SimRobotConfig(motion="hold", x0_m=0.1, y0_m=0.4))
     dev.feed(P.encode_frame(P.MsgType.HELLO, 0, P.HELLO_FMT.pack(1, 1000, 20)))
@@ -277,7 +277,7 @@ def test_simulated_handle_settles_where_the_operator_spring_balances_the_force()
     ({"speed_limit_m_per_s": 0.4}, FaultCode.SPEED),
 ])
 def test_workspace_and_speed_limits_end_to_end(limit: dict[str, object], code: FaultCode) -> None:
-    from haptic.safety import SafetyConfig
+    from fieldbank.haptic.safety import SafetyConfig
 
     safety = SafetyConfig(**limit)  # type: ignore[arg-type]
     with pty_session(severe_shoulder(), motion="fastpull", safety=safety) as (rd, _robot):

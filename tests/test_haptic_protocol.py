@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptic import protocol as P
+from fieldbank.haptic import protocol as P
 
 
 def test_crc_check_value_and_reference() -> None:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fieldbank.haptic.renderer import RendererConfig
+from fieldbank.haptic.safety import Mode
 from fieldbank.model import Arm
-from haptic.renderer import RendererConfig
-from haptic.safety import Mode
 from tests.haptic_util import pty_session, severe, severe_shoulder, unimpaired
 
 #: Stated tolerance of the slow-pull force profile against the static field prediction:
@@ -85,7 +85,7 @@ def test_renderer_arms_ramps_in_and_records() -> None:
 
 @pytest.mark.parametrize("rate_hz", [500, 4000])
 def test_other_loop_rates(rate_hz: int) -> None:
-    from haptic.probe import probe
+    from fieldbank.haptic.probe import probe
 
     res = probe(severe_shoulder(), "fastpull", rate_hz=rate_hz, duration_s=0.6)
     assert len(res.trace) == round(0.6 * rate_hz)

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fieldbank.errors import HapticError, ParameterError
-from haptic.protocol import FORCE_FMT, FaultCode
-from haptic.safety import ForceLimiter, Mode, PassivityController, Safety, SafetyConfig
+from fieldbank.haptic.protocol import FORCE_FMT, FaultCode
+from fieldbank.haptic.safety import ForceLimiter, Mode, PassivityController, Safety, SafetyConfig
 
 forces = st.floats(allow_nan=True, allow_infinity=True, width=64)
 

@@ -14,19 +14,19 @@ import pytest
 import serial
 from click.testing import CliRunner
 
-from cli.haptic import haptic
+from fieldbank.cli.haptic import haptic
 from fieldbank.errors import HapticError, ParameterError, StorageError
-from haptic import motions
-from haptic.abx import AbxSession
-from haptic.control import ControlClient, ControlServer, push_models
-from haptic.link import RobotLink
-from haptic.models import from_severity, parse_severity
-from haptic.probe import probe, sim_url
-from haptic.recording import COLUMNS, Hdf5TraceSink, read_trace_h5, write_trace_h5
-from haptic.renderer import Renderer, RendererConfig, VirtualClock
-from haptic.replay import rerun
-from haptic.safety import Mode
-from haptic.simrobot import PtyRobot, SimRobotConfig
+from fieldbank.haptic import motions
+from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.control import ControlClient, ControlServer, push_models
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.models import from_severity, parse_severity
+from fieldbank.haptic.probe import probe, sim_url
+from fieldbank.haptic.recording import COLUMNS, Hdf5TraceSink, read_trace_h5, write_trace_h5
+from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.replay import rerun
+from fieldbank.haptic.safety import Mode
+from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from tests.haptic_util import rest_hand, severe_shoulder, unimpaired
 
 
@@ -252,7 +252,7 @@ def test_realtime_pty_session_with_device_process() -> None:
 
 def test_device_watchdog_over_a_pty_in_real_time() -> None:
     """The host stops commanding: the device zeroes the force and reports it within 20 ms."""
-    from haptic import protocol as P
+    from fieldbank.haptic import protocol as P
 
     with PtyRobot(SimRobotConfig(mode="realtime", watchdog_ms=20)) as robot:
         robot.start_thread()
@@ -369,7 +369,7 @@ def test_cli_errors_are_clean() -> None:
 def test_fault_codes_match_the_protocol_document() -> None:
     import re
 
-    from haptic.protocol import FaultCode
+    from fieldbank.haptic.protocol import FaultCode
 
     doc = (Path(__file__).parent.parent / "docs" / "robot-protocol.md").read_text()
     para = " ".join(doc[doc.index("Fault codes"):].split("\n\n")[0].split())
@@ -432,7 +432,7 @@ def test_loop_runs_with_gc_off_and_warns_without_realtime(monkeypatch, caplog) -
 
 
 def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    from cli.whatif import whatif
+    from fieldbank.cli.whatif import whatif
 
     rd, sock = served
     r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",

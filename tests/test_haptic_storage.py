@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from cli.haptic import haptic
-from haptic.probe import probe
-from haptic.recording import COLUMNS
-from haptic.replay import rerun
+from fieldbank.cli.haptic import haptic
+from fieldbank.haptic.probe import probe
+from fieldbank.haptic.recording import COLUMNS
+from fieldbank.haptic.replay import rerun
 from tests.haptic_util import severe_shoulder
 
 
@@ -52,7 +52,7 @@ def db(request: pytest.FixtureRequest, tmp_path: Path):  # type: ignore[no-untyp
 
 
 def test_database_sink_round_trip(db) -> None:  # type: ignore[no-untyped-def]
-    from haptic.dbsink import DatabaseTraceSink, read_trace_db
+    from fieldbank.haptic.dbsink import DatabaseTraceSink, read_trace_db
 
     trace = probe(severe_shoulder(), "fastpull").trace
     ref = DatabaseTraceSink(db).write_trace(trace, "s1")

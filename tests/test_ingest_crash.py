@@ -54,7 +54,7 @@ def test_kill_9_mid_batch_leaves_database_and_store_consistent(tmp_path: Path) -
     files = _files(tmp_path / "in", 30, seed=1, n_large=2)
     mark = tmp_path / "mark.txt"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cli", "ingest", *map(str, files), "--patient", "K-1",
+        [sys.executable, "-m", "fieldbank.cli", "ingest", *map(str, files), "--patient", "K-1",
          "--session", "s1"],
         cwd=ROOT, env=_env(url, FIELDBANK_TEST_INGEST_SLEEP_S="0.05",
                            FIELDBANK_TEST_INGEST_MARK=str(mark)),
@@ -81,8 +81,8 @@ def test_kill_9_mid_batch_leaves_database_and_store_consistent(tmp_path: Path) -
     assert len(report.orphans) == 2
     assert all("not referenced by the database" in o for o in report.orphans)
     # re-running the batch stores it whole and adopts the orphaned store files
-    r = subprocess.run([sys.executable, "-m", "cli", "ingest", *map(str, files), "--patient",
-                        "K-1", "--session", "s1"], cwd=ROOT, env=_env(url), text=True,
+    r = subprocess.run([sys.executable, "-m", "fieldbank.cli", "ingest", *map(str, files),
+                        "--patient", "K-1", "--session", "s1"], cwd=ROOT, env=_env(url), text=True,
                        capture_output=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert len(db2.list_maps()) == len(files)
@@ -101,7 +101,7 @@ def test_two_ingest_processes_at_once_on_sqlite(tmp_path: Path) -> None:
     batches = [_files(tmp_path / "a", 20, seed=2), _files(tmp_path / "b", 20, seed=3)]
     procs = [
         subprocess.Popen(
-            [sys.executable, "-m", "cli", "ingest", *map(str, fs), "--patient", code,
+            [sys.executable, "-m", "fieldbank.cli", "ingest", *map(str, fs), "--patient", code,
              "--session", "s"],
             cwd=ROOT, env=_env(url, FIELDBANK_TEST_INGEST_SLEEP_S="0.02"),
             stdout=subprocess.PIPE, stderr=subprocess.PIPE)

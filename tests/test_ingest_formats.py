@@ -135,8 +135,8 @@ def test_cli_ingest_dry_run_json_and_duplicates(sample_dir: Path, tmp_path: Path
     env = {**os.environ, "PYTHONPATH": str(ROOT), "FIELDBANK_HOME": str(tmp_path / "home")}
 
     def cli(*a: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "cli", *a], cwd=ROOT, env=env, text=True,
-                              capture_output=True, timeout=120)
+        return subprocess.run([sys.executable, "-m", "fieldbank.cli", *a], cwd=ROOT, env=env,
+                              text=True, capture_output=True, timeout=120)
 
     files = sorted(str(p) for p in (sample_dir / "SYN-002" / "post-BoNT").iterdir())
     assert cli("patient", "add", "SYN-002", "--mass-kg", "61", "--height-m", "1.62",
@@ -174,7 +174,7 @@ def test_cli_ingest_dry_run_json_and_duplicates(sample_dir: Path, tmp_path: Path
 def test_export_csv_round_trip(sample_dir: Path, tmp_path: Path) -> None:
     from click.testing import CliRunner
 
-    from cli.main import cli
+    from fieldbank.cli.main import cli
 
     url = f"sqlite:///{tmp_path / 'e.sqlite3'}"
     db = Database.open(url)

@@ -138,8 +138,8 @@ def test_cli_rejects_bad_batch_with_every_problem(tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "FIELDBANK_HOME": str(tmp_path / "home")}
 
     def cli(*a: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "cli", *a], cwd=ROOT, env=env, text=True,
-                              capture_output=True, timeout=120)
+        return subprocess.run([sys.executable, "-m", "fieldbank.cli", *a], cwd=ROOT, env=env,
+                              text=True, capture_output=True, timeout=120)
 
     assert cli("patient", "add", "V-2", "--mass-kg", "75", "--height-m", "1.75",
                "--side", "right").returncode == 0

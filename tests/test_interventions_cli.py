@@ -7,9 +7,9 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from cli.whatif import parse_length, parse_units, whatif
+from fieldbank.cli.whatif import parse_length, parse_units, whatif
+from fieldbank.interventions.plan import Plan, params_sha256
 from fieldbank.params import ArmParams
-from interventions.plan import Plan, params_sha256
 
 
 def run(*args: str) -> tuple[int, str, str]:

@@ -9,17 +9,17 @@ import pytest
 from scipy.optimize import brentq
 
 from fieldbank.errors import InterventionError
+from fieldbank.interventions.catalogue import Botulinum, Lengthening, SerialCasting, Tenotomy
+from fieldbank.interventions.course import time_course
+from fieldbank.interventions.defaults import DEFAULTS
+from fieldbank.interventions.inverse import optimise_botulinum, unimpaired_reference
+from fieldbank.interventions.metrics import compare
+from fieldbank.interventions.plan import Plan, params_sha256
+from fieldbank.interventions.probing import joint_stretch
+from fieldbank.interventions.timecourse import dose_effect, time_shape
 from fieldbank.model import Arm
 from fieldbank.params import GROUP_INDEX, PER_GROUP_FIELDS, ArmParams
 from fieldbank.severity import synthesize
-from interventions.catalogue import Botulinum, Lengthening, SerialCasting, Tenotomy
-from interventions.course import time_course
-from interventions.defaults import DEFAULTS
-from interventions.inverse import optimise_botulinum, unimpaired_reference
-from interventions.metrics import compare
-from interventions.plan import Plan, params_sha256
-from interventions.probing import joint_stretch
-from interventions.timecourse import dose_effect, time_shape
 
 
 @pytest.fixture(scope="module")

@@ -13,10 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from fieldbank.model import Arm
-from fieldbank.params import GROUP_INDEX, PER_GROUP_FIELDS, ArmParams
-from fieldbank.severity import synthesize
-from interventions.catalogue import (
+from fieldbank.interventions.catalogue import (
     KINDS,
     Baclofen,
     Botulinum,
@@ -26,6 +23,9 @@ from interventions.catalogue import (
     SerialCasting,
     Tenotomy,
 )
+from fieldbank.model import Arm
+from fieldbank.params import GROUP_INDEX, PER_GROUP_FIELDS, ArmParams
+from fieldbank.severity import synthesize
 
 INSTANCES: dict[str, Intervention] = {
     "botulinum": Botulinum({"ef": 200.0, "be": 80.0}, weeks_since=4.0),

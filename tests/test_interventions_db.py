@@ -11,9 +11,9 @@ from pathlib import Path
 from click.testing import CliRunner
 
 import fieldbank.storage as storage
-from cli.whatif import whatif
+from fieldbank.cli.whatif import whatif
+from fieldbank.interventions.plan import Plan, params_sha256
 from fieldbank.severity import synthesize
-from interventions.plan import Plan, params_sha256
 
 
 def _db(tmp_path: Path) -> str:

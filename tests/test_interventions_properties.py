@@ -6,11 +6,11 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
+from fieldbank.interventions.catalogue import Botulinum, Lengthening
+from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm
 from fieldbank.params import GROUP_INDEX, GROUPS
 from fieldbank.severity import synthesize
-from interventions.catalogue import Botulinum, Lengthening
-from interventions.plan import Plan
 
 BASE = synthesize({"elbow": "severe", "shoulder": "mild"})
 doses = st.dictionaries(st.sampled_from(GROUPS), st.floats(0.0, 600.0), min_size=1, max_size=6)

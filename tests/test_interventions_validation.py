@@ -8,8 +8,7 @@ from pathlib import Path
 import pytest
 
 from fieldbank.errors import InterventionError
-from fieldbank.params import ArmParams
-from interventions.catalogue import (
+from fieldbank.interventions.catalogue import (
     Baclofen,
     Botulinum,
     Intervention,
@@ -18,7 +17,8 @@ from interventions.catalogue import (
     SerialCasting,
     Tenotomy,
 )
-from interventions.plan import Plan
+from fieldbank.interventions.plan import Plan
+from fieldbank.params import ArmParams
 
 
 @pytest.mark.parametrize(
@@ -111,7 +111,7 @@ def test_from_dict_refuses_a_kind_mismatch() -> None:
 
 
 def test_docs_list_every_default_with_its_value_and_source() -> None:
-    from interventions.defaults import DEFAULTS
+    from fieldbank.interventions.defaults import DEFAULTS
 
     text = (Path(__file__).resolve().parents[1] / "docs" / "interventions.md").read_text()
     for name, d in DEFAULTS.items():

@@ -82,7 +82,7 @@ def test_embedded_default_is_created_at_head_on_first_use(tmp_path: Path) -> Non
 def test_concurrent_first_use_of_embedded_database(tmp_path: Path) -> None:
     env = {**os.environ, "FIELDBANK_HOME": str(tmp_path / "shared-home"),
            "PYTHONPATH": str(ROOT)}
-    procs = [subprocess.Popen([sys.executable, "-m", "cli", "patient", "list", "--json"],
+    procs = [subprocess.Popen([sys.executable, "-m", "fieldbank.cli", "patient", "list", "--json"],
                               env=env, cwd=ROOT, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE) for _ in range(4)]
     results = [p.communicate(timeout=120) for p in procs]
@@ -118,7 +118,7 @@ def test_concurrent_upgrades_on_postgresql(pg_url: str) -> None:
 
 
 def _cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "cli", *args], cwd=ROOT, text=True,
+    return subprocess.run([sys.executable, "-m", "fieldbank.cli", *args], cwd=ROOT, text=True,
                           capture_output=True, timeout=120,
                           env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})})
 

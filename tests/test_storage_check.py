@@ -70,7 +70,7 @@ def test_cli_check_exit_code(db: Database, monkeypatch: pytest.MonkeyPatch) -> N
     from click.testing import CliRunner
     from sqlalchemy import update
 
-    from cli.main import cli
+    from fieldbank.cli.main import cli
 
     url = db.engine.url.render_as_string(hide_password=False)
     monkeypatch.setenv("FIELDBANK_ARRAYS", str(db.store.root))

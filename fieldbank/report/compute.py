@@ -74,7 +74,7 @@ class CaseResult:
 
 def _plan(spec: CaseSpec) -> Any | None:
     """The stored plan document as a Plan, or None if it cannot be read (no time course)."""
-    from interventions.plan import Plan
+    from fieldbank.interventions.plan import Plan
 
     doc = spec.plan_doc.get("plan", spec.plan_doc)
     try:
@@ -89,9 +89,9 @@ def _levels(sev: dict[str, Any]) -> str:
 
 def compute_case(spec: CaseSpec) -> CaseResult:
     """Metrics and figures of one stored plan (before = base model, after = result model)."""
-    from interventions.catalogue import Botulinum
-    from interventions.course import time_course
-    from interventions.metrics import Conditions, compare
+    from fieldbank.interventions.catalogue import Botulinum
+    from fieldbank.interventions.course import time_course
+    from fieldbank.interventions.metrics import Conditions, compare
 
     before = ArmParams.from_json(spec.base_params_json, where=f"model {spec.base_model_id}")
     after = ArmParams.from_json(spec.result_params_json, where=f"model {spec.result_model_id}")

@@ -1,7 +1,8 @@
 """Schema migrations, driven by alembic from code.
 
 The alembic configuration is built here with ``script_location`` pointing at the installed
-``migrations`` package, so ``fieldbank db upgrade`` works from any directory.
+``fieldbank.migrations`` package (the repository's ``migrations/`` folder), so ``fieldbank db
+upgrade`` works from any directory.
 
 Concurrent upgrades are serialised: the upgrade runs inside one transaction that first takes a
 lock — ``pg_advisory_xact_lock`` on PostgreSQL, ``BEGIN IMMEDIATE`` (the write lock) on
@@ -16,7 +17,7 @@ from __future__ import annotations
 import io
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
+from importlib import resources
 
 from alembic import command
 from alembic.config import Config
@@ -25,7 +26,6 @@ from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, Engine, text
 from sqlalchemy import exc as sa_exc
 
-import migrations as _migrations_pkg
 from fieldbank.errors import StorageError
 from fieldbank.storage.config import mask_url
 
@@ -36,7 +36,8 @@ PG_LOCK_KEY = 0x6669656C64  # "field"
 def alembic_config(connection: Connection | None = None) -> Config:
     """An alembic Config for the packaged migrations, optionally bound to a connection."""
     cfg = Config(stdout=io.StringIO())  # alembic's chatter must not reach our stdout (--json)
-    cfg.set_main_option("script_location", str(Path(_migrations_pkg.__file__).parent))
+    # The migrations ship as the package fieldbank.migrations (the repository's migrations/).
+    cfg.set_main_option("script_location", str(resources.files("fieldbank.migrations")))
     if connection is not None:
         cfg.attributes["connection"] = connection
     return cfg
