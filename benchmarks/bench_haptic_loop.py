@@ -20,11 +20,11 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.models import from_severity
 from fieldbank.haptic.renderer import RealClock, Renderer, RendererConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.severity import synthesize
 
 
 def empty_loop(seconds: float, rate_hz: int) -> dict[str, float]:
@@ -76,7 +76,7 @@ def main() -> int:
     a = ap.parse_args()
     base = empty_loop(a.baseline_seconds, a.rate_hz) if a.baseline_seconds > 0 else None
 
-    before = from_severity({"elbow": "severe"})
+    before = synthesize({"elbow": "severe"})
     after = ArmParams.from_anthropometry()
     x0, y0 = (float(v) for v in Arm.from_params(before).rest_position())
     cfg = SimRobotConfig(mode="realtime", motion="explore", x0_m=x0, y0_m=y0, seed=1)

@@ -23,10 +23,9 @@ import numpy as np
 from fieldbank.interventions import Botulinum, Lengthening, Plan
 from fieldbank.params import ArmParams
 from fieldbank.report import Selection, build_report
-from fieldbank.severity import synthesize
+from fieldbank.severity import LEVELS, synthesize
 from fieldbank.storage import Database
 
-LEVELS = ("unimpaired", "very mild", "mild", "moderate", "severe")
 JOINTS = ("shoulder", "elbow", "biarticular")
 GROUPS = {"shoulder": ("sf", "se"), "elbow": ("ef", "ee"), "biarticular": ("bf", "be")}
 

@@ -21,12 +21,12 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.models import from_severity
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import NCOL, TraceBuffer
 from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock, build_sim
 from fieldbank.haptic.safety import Safety, SafetyConfig
 from fieldbank.params import ArmParams
+from fieldbank.severity import synthesize
 
 
 def per_call_us(fn: object, n: int = 20000) -> float:
@@ -37,7 +37,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--ticks", type=int, default=20000)
     a = ap.parse_args()
-    before = from_severity({"elbow": "severe"})
+    before = synthesize({"elbow": "severe"})
     after = ArmParams.from_anthropometry()
     sa, sb = build_sim(before, 1e-3), build_sim(after, 1e-3)
     x0, y0, _, _ = sa.hand()

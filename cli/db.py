@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fieldbank.cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.storage import migrate
 
 
@@ -41,7 +41,7 @@ def downgrade(db_url: str | None, revision: str) -> None:
 
 @db.command("current")
 @db_option
-@click.option("--json", "as_json", is_flag=True, help="Machine-readable output on stdout.")
+@json_option
 def current(db_url: str | None, as_json: bool) -> None:
     """Show the database's schema revision and the newest one this program knows."""
     database = open_db(db_url, upgrade="never")
@@ -60,7 +60,7 @@ def current(db_url: str | None, as_json: bool) -> None:
 
 @db.command("check")
 @db_option
-@click.option("--json", "as_json", is_flag=True, help="Machine-readable output on stdout.")
+@json_option
 def check(db_url: str | None, as_json: bool) -> None:
     """Verify every reference and checksum; report orphans. Exit 1 on any problem."""
     database = open_db(db_url, upgrade="never")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from fieldbank.cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.errors import StorageError
 from fieldbank.ingest import write_hdf5
 
@@ -25,7 +25,7 @@ from fieldbank.ingest import write_hdf5
 @click.option("--raw", "raw_sha", metavar="SHA256",
               help="Instead: write the source file with this SHA-256 exactly as ingested.")
 @click.option("-o", "--output", type=click.Path(), required=True)
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def export(db_url: str | None, patient_code: str | None, session_label: str | None,
            kind: str | None, since: datetime | None, until: datetime | None, fmt: str,
            raw_sha: str | None, output: str, as_json: bool) -> None:

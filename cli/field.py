@@ -2,18 +2,18 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import click
 import numpy as np
 
+from fieldbank import modelsource
+from fieldbank.cli.options import json_option
 from fieldbank.errors import ParameterError
-from fieldbank.files import write_atomic
+from fieldbank.files import to_json, write_atomic
 from fieldbank.maps import FieldMap, ellipse, postural_map, stiffness_map, workspace_grid
 from fieldbank.model import Arm
-from fieldbank.params import ArmParams
 from fieldbank.severity import classify, parse_severity_options, synthesize
 
 
@@ -50,27 +50,6 @@ def _read_positions(path: Path) -> np.ndarray:
     return np.array(rows)
 
 
-def build_params(params_file: Path | None, severity: tuple[str, ...], mass: float | None,
-                 height: float | None, side: str | None) -> ArmParams:
-    """An arm from a parameter file, or a synthetic one with the requested severities."""
-    if params_file is not None:
-        if mass is not None or height is not None or side is not None:
-            raise ParameterError("--mass/--height/--side describe a synthetic arm; they cannot "
-                                 "be combined with --params (edit the file instead).")
-        base = ArmParams.from_file(params_file)
-    else:
-        kw: dict[str, object] = {}
-        if mass is not None:
-            kw["body_mass_kg"] = mass
-        if height is not None:
-            kw["height_m"] = height
-        if side is not None:
-            kw["side"] = side
-        base = ArmParams.from_anthropometry(**kw)  # type: ignore[arg-type]
-    sev = parse_severity_options(severity)
-    return synthesize(sev, base) if sev else base
-
-
 @click.command("field")
 @click.argument("kind", type=click.Choice(["postural", "stiffness"]))
 @click.option("--params", "params_file", type=click.Path(exists=True, dir_okay=False,
@@ -90,7 +69,7 @@ def build_params(params_file: Path | None, severity: tuple[str, ...], mass: floa
               help="Endpoint velocity for a stiffness map, m/s.")
 @click.option("--format", "fmt", type=click.Choice(["csv", "json", "png", "svg"]),
               help="Output format (default from --out's suffix, else csv).")
-@click.option("--json", "as_json", is_flag=True, help="Same as --format json.")
+@json_option
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Output file (default stdout for csv/json; required for plots).")
 def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: float | None,
@@ -102,7 +81,17 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     Examples: ``fieldbank field postural --severity elbow=severe --out elbow.csv``;
     ``fieldbank field stiffness --params arm.json --at 0.05,0.45 --json``.
     """
-    p = build_params(params_file, severity, mass, height, side)
+    if params_file is not None and (mass is not None or height is not None
+                                    or side is not None):
+        raise ParameterError("--mass/--height/--side describe a synthetic arm; they cannot "
+                             "be combined with --params (edit the file instead).")
+    if params_file is not None:
+        p = modelsource.from_file(params_file).params
+        if severity:
+            p = synthesize(parse_severity_options(severity), p)
+    else:
+        p = modelsource.synthetic(severity, body_mass_kg=mass, height_m=height,
+                                  side=side).params
     arm = Arm.from_params(p)
     if at is not None and positions_file is not None:
         raise ParameterError("Give positions with --at or --positions, not both.")
@@ -151,7 +140,7 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
                 "curl_n_per_m": e.curl_n_per_m.tolist(),
             }
             doc["damping_n_s_per_m"] = arm.field(pos, vel)[2].tolist()
-        text = json.dumps(doc, indent=1)
+        text = to_json(doc)
     else:
         text = m.to_csv()
     if out is None:

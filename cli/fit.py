@@ -8,13 +8,12 @@ else from :func:`fieldbank.fitting.dbstore.open_fit_store` on the field database
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
 
 import click
 
+from fieldbank.cli.options import db_option, emit_json, json_option
 from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
@@ -31,27 +30,6 @@ def _store(ctx: click.Context, db_url: str | None) -> FitStore:
 
         factory = open_fit_store
     return factory(db_url)
-
-
-def _db_option(f: Callable[..., Any]) -> Callable[..., Any]:
-    return click.option("--db", "db_url", default=None, metavar="URL",
-                        help="Database URL; default: $FIELDBANK_DB or the embedded SQLite file.")(f)
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, Mapping):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if hasattr(x, "to_dict"):
-        return _jsonable(x.to_dict())
-    return x
-
-
-def _emit_json(data: Any) -> None:
-    click.echo(json.dumps(_jsonable(data), indent=2, default=str))
 
 
 def _summary(out: FitOutcome) -> str:
@@ -92,8 +70,8 @@ def _summary(out: FitOutcome) -> str:
 @click.option("--max-evals", type=click.IntRange(min=10), default=None)
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write measured against fitted fields to this .png or .svg.")
-@click.option("--json", "as_json", is_flag=True, help="Print the fit report as JSON.")
-@_db_option
+@json_option
+@db_option
 @click.pass_context
 def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, seed: int,
         fit_kinds: str, prior_weight: float, max_evals: int | None, plot_path: str | None,
@@ -120,7 +98,7 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
         report = dict(out.record.report)
         report["fit_id"] = out.saved.fit_id
         report["model_id"] = out.saved.model_id
-        _emit_json(report)
+        emit_json(report)
     else:
         click.echo(_summary(out))
     if out.fitter.unidentified_:
@@ -136,15 +114,15 @@ def models() -> None:
 
 @models.command("list")
 @click.option("--patient", default=None, help="Only this patient's models.")
-@click.option("--json", "as_json", is_flag=True)
-@_db_option
+@json_option
+@db_option
 @click.pass_context
 def models_list(ctx: click.Context, patient: str | None, as_json: bool,
                 db_url: str | None) -> None:
     """List models with their origin and parent."""
     rows = list(_store(ctx, db_url).list_models(patient))
     if as_json:
-        _emit_json(rows)
+        emit_json(rows)
         return
     if not rows:
         click.echo("no models", err=True)
@@ -158,15 +136,15 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
 
 @models.command("show")
 @click.argument("model_id")
-@click.option("--json", "as_json", is_flag=True)
-@_db_option
+@json_option
+@db_option
 @click.pass_context
 def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | None) -> None:
     """Show a model's parameters, lineage and the fit that produced it."""
     key: int | str = int(model_id) if model_id.isdigit() else model_id
     row = dict(_store(ctx, db_url).get_model(key))
     if as_json:
-        _emit_json(row)
+        emit_json(row)
         return
     p = row["params"]
     click.echo(f"model {row['id']} ({row.get('origin', '')}) patient {row.get('patient')}: "

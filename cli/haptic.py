@@ -8,8 +8,6 @@ socket (``--socket``, default ``haptic.sock`` in the fieldbank data directory). 
 from __future__ import annotations
 
 import datetime as _dt
-import importlib.util
-import json
 import logging
 import os
 import sys
@@ -18,6 +16,8 @@ from typing import Any
 
 import click
 
+from fieldbank import modelsource
+from fieldbank.cli.options import db_option, emit, json_option, open_db
 from fieldbank.errors import HapticError
 from fieldbank.files import write_atomic
 from fieldbank.params import ArmParams
@@ -27,31 +27,9 @@ socket_option = click.option(
     help="Control socket of the renderer (default: haptic.sock in the fieldbank data dir).")
 
 
-def _emit(data: Any, as_json: bool, human: str) -> None:
-    if as_json:
-        click.echo(json.dumps(data, indent=2, default=float))
-    else:
-        click.echo(human)
-
-
 def _model(path: Path | None, severity: str | None) -> ArmParams:
-    from fieldbank.haptic.models import load_model
-
-    return load_model(path, severity)
-
-
-db_option = click.option(
-    "--db", "db_url", default=None, metavar="URL",
-    help="Field database URL (default: $FIELDBANK_DB, else the embedded SQLite file).")
-
-
-def _open_db(db_url: str | None) -> Any:
-    try:
-        from fieldbank.storage import Database
-    except ImportError:
-        raise HapticError("the field database (fieldbank.storage) is not part of this "
-                          "installation") from None
-    return Database.open(db_url)
+    return modelsource.resolve(params_file=path, severity=[severity] if severity else [],
+                               default=modelsource.synthetic()).params
 
 
 def _models(db_url: str | None, files: tuple[Path | None, Path | None],
@@ -59,23 +37,18 @@ def _models(db_url: str | None, files: tuple[Path | None, Path | None],
             ids: tuple[int | None, int | None]) -> tuple[ArmParams, ArmParams,
                                                        tuple[int | None, int | None]]:
     """Models A and B from files, severities or database ids (B defaults to A)."""
-    out: list[ArmParams | None] = []
+    out: list[modelsource.ModelSource | None] = []
     for f, sev, mid, label in zip(files, severities, ids, ("before", "after"), strict=True):
-        given = [x for x in (f, sev, mid) if x is not None]
-        if len(given) > 1:
+        if sum(x is not None for x in (f, sev, mid)) > 1:
             raise click.UsageError(f"give the {label} model once: a file, a severity or an id")
-        if mid is not None:
-            db = _open_db(db_url)
-            try:
-                out.append(db.get_model(mid).params)
-            finally:
-                db.close()
-        elif f is not None or sev:
-            out.append(_model(f, sev))
-        else:
+        if f is None and not sev and mid is None:
             out.append(None)
-    a = out[0] if out[0] is not None else ArmParams.from_anthropometry()
-    b = out[1] if out[1] is not None else a
+            continue
+        out.append(modelsource.resolve(
+            params_file=f, severity=[sev] if sev else [], model_id=mid,
+            open_db=lambda: open_db(db_url), what=f"{label} model"))
+    a = out[0].params if out[0] is not None else ArmParams.from_anthropometry()
+    b = out[1].params if out[1] is not None else a
     return a, b, (ids[0], ids[1] if out[1] is not None else ids[0])
 
 
@@ -121,7 +94,7 @@ def haptic() -> None:
 @db_option
 @click.option("--patient", help="Patient code the session belongs to (in the database).")
 @click.option("--no-db", is_flag=True, help="Write the trace file only, not the database.")
-@click.option("--json", "as_json", is_flag=True, help="Print the session summary as JSON.")
+@json_option
 def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path | None,
           after_file: Path | None, before_severity: str | None, after_severity: str | None,
           before_id: int | None, after_id: int | None, force_limit_n: float,
@@ -172,20 +145,16 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
     ref = sink.write_trace(trace, name)  # the file first: it survives a database failure
     click.echo(f"trace file: {ref}", err=True)
     summary = {**trace.summary(), "trace": ref, "sha256": sink.sha256[ref]}
-    if not no_db and db_url is None and importlib.util.find_spec("fieldbank.storage") is None:
-        click.echo("the field database is not part of this installation: trace file only",
-                   err=True)
-        no_db = True
     if not no_db:
         from fieldbank.haptic.dbsink import DatabaseTraceSink
 
-        db = _open_db(db_url)
+        db = open_db(db_url)
         try:
             summary["database"] = DatabaseTraceSink(db, patient).write_trace(trace, name)
         finally:
             db.close()
     st = trace.stats.get("period_error_us", {})
-    _emit(summary, as_json,
+    emit(summary, as_json,
           f"session: {len(trace)} ticks, max force {summary['max_force_n']:.2f} N, "
           f"{len(trace.faults)} fault(s), period error p50 {st.get('p50', 0):.1f} µs p99 "
           f"{st.get('p99', 0):.1f} µs max {st.get('max', 0):.1f} µs, "
@@ -203,7 +172,7 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
 @click.option("--after-id", type=int, help="Model B by its id in the field database.")
 @socket_option
 @db_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def push(before_file: Path | None, after_file: Path | None, before_severity: str | None,
          after_severity: str | None, before_id: int | None, after_id: int | None,
          socket_path: Path | None, db_url: str | None, as_json: bool) -> None:
@@ -216,7 +185,7 @@ def push(before_file: Path | None, after_file: Path | None, before_severity: str
                                  (before_severity, after_severity), (before_id, after_id))
     res = push_models(before, after, socket_path,
                       ids if any(i is not None for i in ids) else None)
-    _emit(res, as_json, "models pushed")
+    emit(res, as_json, "models pushed")
 
 
 def _request(socket_path: Path | None, cmd: str, **args: Any) -> Any:
@@ -228,20 +197,20 @@ def _request(socket_path: Path | None, cmd: str, **args: Any) -> Any:
 @haptic.command("switch")
 @click.argument("to", type=click.Choice(["A", "B", "before", "after"], case_sensitive=False))
 @socket_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def switch(to: str, socket_path: Path | None, as_json: bool) -> None:
     """Crossfade the rendered model to A (before) or B (after)."""
     to = to.upper() if len(to) == 1 else to.lower()
-    _emit(_request(socket_path, "switch", to=to), as_json, f"switching to {to}")
+    emit(_request(socket_path, "switch", to=to), as_json, f"switching to {to}")
 
 
 @haptic.command("status")
 @socket_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def status(socket_path: Path | None, as_json: bool) -> None:
     """Show the running renderer's mode, model blend, force and faults."""
     s = _request(socket_path, "status")
-    _emit(s, as_json, "\n".join(f"{k}: {v}" for k, v in s.items()))
+    emit(s, as_json, "\n".join(f"{k}: {v}" for k, v in s.items()))
 
 
 for _name, _help in (("arm", "Arm (or re-arm after a fault) the running renderer."),
@@ -251,7 +220,7 @@ for _name, _help in (("arm", "Arm (or re-arm after a fault) the running renderer
         @socket_option
         @click.option("--json", "as_json", is_flag=True)
         def cmd(socket_path: Path | None, as_json: bool) -> None:
-            _emit(_request(socket_path, name), as_json, f"{name}: done")
+            emit(_request(socket_path, name), as_json, f"{name}: done")
         return cmd
     haptic.command(_name, help=_help)(_make(_name))
 
@@ -266,30 +235,30 @@ def abx() -> None:
 @click.option("--seed", type=int, default=None, help="Randomization seed (default: random).")
 @click.option("--show-labels", is_flag=True, help="A = before and B = after (not hidden).")
 @socket_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def abx_start(trials: int, seed: int | None, show_labels: bool, socket_path: Path | None,
               as_json: bool) -> None:
     """Start a block of TRIALS A/B/X trials."""
     seed = seed if seed is not None else int.from_bytes(os.urandom(4), "little")
     r = _request(socket_path, "abx", action="start", n_trials=trials, seed=seed,
                  hide_labels=not show_labels)
-    _emit(r, as_json, f"A/B/X block of {trials} trials started (seed {seed})")
+    emit(r, as_json, f"A/B/X block of {trials} trials started (seed {seed})")
 
 
 @abx.command("present")
 @click.argument("label", type=click.Choice(["A", "B", "X"], case_sensitive=False))
 @socket_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def abx_present(label: str, socket_path: Path | None, as_json: bool) -> None:
     """Render A, B or this trial's X."""
     r = _request(socket_path, "abx", action="present", label=label.upper())
-    _emit(r, as_json, f"presenting {label.upper()} (trial {r['trial'] + 1})")
+    emit(r, as_json, f"presenting {label.upper()} (trial {r['trial'] + 1})")
 
 
 @abx.command("answer")
 @click.argument("answer", type=click.Choice(["A", "B"], case_sensitive=False))
 @socket_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def abx_answer(answer: str, socket_path: Path | None, as_json: bool) -> None:
     """Record that X felt like A or B; go to the next trial."""
     r = _request(socket_path, "abx", action="answer", answer=answer.upper())
@@ -297,7 +266,7 @@ def abx_answer(answer: str, socket_path: Path | None, as_json: bool) -> None:
     if r.get("done"):
         res = r["result"]
         msg = f"block done: {res['correct']} of {res['answered']} correct"
-    _emit(r, as_json, msg)
+    emit(r, as_json, msg)
 
 
 @haptic.command("probe")
@@ -312,7 +281,7 @@ def abx_answer(answer: str, socket_path: Path | None, as_json: bool) -> None:
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the full profile as CSV.")
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | None,
               rate_hz: int, duration_s: float | None, seed: int, out: Path | None,
               as_json: bool) -> None:
@@ -326,7 +295,7 @@ def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | 
     s = res.summary()
     if as_json:
         s["profile"] = res.table(every=max(1, rate_hz // 100))
-    _emit(s, as_json,
+    emit(s, as_json,
           f"{motion}: peak {s['peak_force_n']:.2f} N at {s['peak_at_s']:.3f} s, direction "
           f"{s['peak_direction_deg']:.0f}°, path {s['path_length_m'] * 100:.1f} cm, RMS "
           f"difference to the static field {s['rms_error_vs_static_n']:.2f} N"
@@ -340,7 +309,7 @@ def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | 
 @click.option("--rerun", is_flag=True, help="Recompute the model forces from the recorded "
               "handle motion and compare.")
 @db_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None,
            as_json: bool) -> None:
     """Summarise a recorded session; export it; re-run it offline.
@@ -356,7 +325,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
             sid = int(trace_ref[len(SESSION_PREFIX):])
         except ValueError:
             raise click.BadParameter(f"expected {SESSION_PREFIX}ID; got {trace_ref!r}") from None
-        db = _open_db(db_url)
+        db = open_db(db_url)
         try:
             trace = read_trace_db(db, sid)
         finally:
@@ -381,7 +350,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
                      f"{s['rerun']['max_deviation_n']:.3g} N")
     if csv_out:
         lines.append(f"csv: {csv_out}")
-    _emit(s, as_json, "\n".join(lines))
+    emit(s, as_json, "\n".join(lines))
 
 
 @haptic.command("sim-robot")

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from fieldbank.cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.ingest import ingest_paths
 
 #: Show a progress bar from this many files on (on a terminal).
@@ -24,7 +24,7 @@ PROGRESS_MIN_FILES = 20
 @click.option("--date", "session_date", type=click.DateTime(["%Y-%m-%d"]),
               help="Date of the session.")
 @click.option("--dry-run", is_flag=True, help="Validate and report; store nothing.")
-@click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stdout.")
+@json_option
 def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, session_label: str,
            session_date: datetime | None, dry_run: bool, as_json: bool) -> None:
     """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3).

@@ -1,38 +1,54 @@
 """The ``fieldbank`` command: a thin layer over the library.
 
-Each command group lives in its own module and is registered in :data:`COMMAND_MODULES`.
-Commands build library objects, call them, and turn library errors into a message on stderr
-and a non-zero exit at this edge. Machine-readable output goes to stdout (``--json``); human
-messages and progress go to stderr.
+Each command (or command group) lives in its own module, registered in :data:`COMMANDS` with
+its one-line help and imported only when it runs (:class:`fieldbank.cli.lazy.LazyGroup`), so
+``fieldbank --version``, ``--help`` and a live ``haptic switch`` answer without loading numpy,
+SQLAlchemy or matplotlib. Commands build library objects, call them, and turn library errors
+into a message on stderr and a non-zero exit at this edge. Machine-readable output goes to
+stdout (``--json``); human messages and progress go to stderr.
 """
 
 from __future__ import annotations
 
-import importlib
-
 import click
 
+from fieldbank.cli.lazy import LazyCommand, LazyGroup
 from fieldbank.errors import FieldbankError
 
-#: module name -> attribute holding a click command or group
-COMMAND_MODULES: tuple[tuple[str, str], ...] = (
-    ("fieldbank.cli.field", "field"),
-    ("fieldbank.cli.whatif", "whatif"),
-    ("fieldbank.cli.fit", "fit"),
-    ("fieldbank.cli.fit", "models"),
-    ("fieldbank.cli.db", "db"),
-    ("fieldbank.cli.patient", "patient"),
-    ("fieldbank.cli.maps", "maps"),
-    ("fieldbank.cli.ingest", "ingest"),
-    ("fieldbank.cli.export", "export"),
-    ("fieldbank.cli.samples", "samples"),
-    ("fieldbank.cli.haptic", "haptic"),
-    ("fieldbank.cli.report", "report"),
-    ("fieldbank.cli.demo", "demo"),
-)
+C = LazyCommand
+#: command name -> where it lives and its one-line help (tests check the help is the command's)
+COMMANDS: dict[str, LazyCommand] = {
+    "field": C("fieldbank.cli.field", "field",
+               "Compute a postural or stiffness map of an arm model."),
+    "whatif": C("fieldbank.cli.whatif", "whatif",
+                "Apply clinical interventions to a model and compare the fields before and after."),
+    "fit": C("fieldbank.cli.fit", "fit",
+             "Fit PATIENT's arm model to the patient's measured maps and store it."),
+    "models": C("fieldbank.cli.fit", "models",
+                "Stored arm models (fitted, synthetic, after interventions)."),
+    "db": C("fieldbank.cli.db", "db",
+            "The database itself: migrations and integrity."),
+    "patient": C("fieldbank.cli.patient", "patient",
+                 "Patients: a pseudonymous code, body mass, height and the measured side."),
+    "maps": C("fieldbank.cli.maps", "maps",
+              "Measured postural and stiffness maps."),
+    "ingest": C("fieldbank.cli.ingest", "ingest",
+                "Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3)."),
+    "export": C("fieldbank.cli.export", "export",
+                "Export maps matching the filters (SI units, arm-on-handle as stored)."),
+    "samples": C("fieldbank.cli.samples", "samples",
+                 "Write lab-style map files of synthetic patients into DIRECTORY (seeded)."),
+    "haptic": C("fieldbank.cli.haptic", "haptic",
+                "Feel arm models on a 2-DOF robot: serve, push, switch, abx, probe, status, "
+                "replay."),
+    "report": C("fieldbank.cli.report", "report",
+                "Report the field changes of stored intervention plans (HTML + CSV + JSON)."),
+    "demo": C("fieldbank.cli.demo", "demo",
+              "Run the whole product once on synthetic sample data, saying what it does."),
+}
 
 
-class FieldbankGroup(click.Group):
+class FieldbankGroup(LazyGroup):
     """Top-level group that reports library errors as clean messages with exit code 1."""
 
     def invoke(self, ctx: click.Context) -> object:
@@ -42,14 +58,11 @@ class FieldbankGroup(click.Group):
             raise click.ClickException(str(exc)) from None
 
 
-@click.group(cls=FieldbankGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=FieldbankGroup, lazy=COMMANDS,
+             context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="fieldbank")
 def cli() -> None:
     """fieldbank: force-field database and intervention what-if for hypertonic arms."""
-
-
-for _module, _attr in COMMAND_MODULES:
-    cli.add_command(getattr(importlib.import_module(_module), _attr))
 
 
 def main() -> None:

@@ -7,7 +7,7 @@ from datetime import datetime
 
 import click
 
-from fieldbank.cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 
 
 @click.group("maps")
@@ -22,7 +22,7 @@ def maps() -> None:
 @click.option("--kind", type=click.Choice(["postural", "stiffness"]))
 @click.option("--since", type=click.DateTime(["%Y-%m-%d"]), help="Sessions on or after.")
 @click.option("--until", type=click.DateTime(["%Y-%m-%d"]), help="Sessions on or before.")
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def list_(db_url: str | None, patient_code: str | None, session_label: str | None,
           kind: str | None, since: datetime | None, until: datetime | None,
           as_json: bool) -> None:

@@ -6,7 +6,7 @@ import dataclasses
 
 import click
 
-from fieldbank.cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 
 
 @click.group("patient")
@@ -22,7 +22,7 @@ def patient() -> None:
 @click.option("--side", type=click.Choice(["right", "left"]), required=True,
               help="The arm that is measured.")
 @click.option("--notes", default="", help="Free text (no identifying details).")
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def add(db_url: str | None, code: str, mass_kg: float, height_m: float, side: str, notes: str,
         as_json: bool) -> None:
     """Register patient CODE (a pseudonym; never a name or birth date)."""
@@ -36,7 +36,7 @@ def add(db_url: str | None, code: str, mass_kg: float, height_m: float, side: st
 
 @patient.command("list")
 @db_option
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def list_(db_url: str | None, as_json: bool) -> None:
     """List patients."""
     with open_db(db_url) as db:
@@ -51,7 +51,7 @@ def list_(db_url: str | None, as_json: bool) -> None:
 @patient.command("show")
 @db_option
 @click.argument("code")
-@click.option("--json", "as_json", is_flag=True)
+@json_option
 def show(db_url: str | None, code: str, as_json: bool) -> None:
     """Show a patient with sessions, map counts and models."""
     with open_db(db_url) as db:

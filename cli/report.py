@@ -12,7 +12,7 @@ from datetime import datetime
 
 import click
 
-from fieldbank.cli.dbopt import db_option, emit_json, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.report import Selection, build_report
 from fieldbank.report.build import default_jobs
 
@@ -43,7 +43,7 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
               help="Worker processes for batches (default: the cores available).")
 @click.option("--stamp", is_flag=True,
               help="Write the time of writing into the report (reruns then differ).")
-@click.option("--json", "as_json", is_flag=True, help="Print a summary as JSON on stdout.")
+@json_option
 def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ...],
            plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: datetime | None,
            until: datetime | None, kinds: tuple[str, ...], out_dir: str, jobs: int | None,

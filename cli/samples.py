@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import click
 
-from fieldbank.cli.dbopt import emit_json
+from fieldbank.cli.options import emit_json, json_option
 from fieldbank.sampledata import write_samples
 
 
 @click.command("samples")
 @click.argument("directory", type=click.Path(file_okay=False))
 @click.option("--seed", type=int, default=20240601, show_default=True)
-@click.option("--json", "as_json", is_flag=True, help="The manifest on stdout.")
+@json_option
 def samples(directory: str, seed: int, as_json: bool) -> None:
     """Write lab-style map files of synthetic patients into DIRECTORY (seeded)."""
     manifest = write_samples(directory, seed)

@@ -13,7 +13,6 @@ Human-readable tables go to stdout, or one JSON document with ``--json``.
 
 from __future__ import annotations
 
-import json
 import re
 import sys
 from pathlib import Path
@@ -21,8 +20,10 @@ from typing import Any
 
 import click
 
+from fieldbank import modelsource
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.errors import FieldbankError, InterventionError
-from fieldbank.files import json_finite, write_atomic
+from fieldbank.files import to_json, write_atomic
 from fieldbank.interventions.catalogue import (
     Baclofen,
     Botulinum,
@@ -127,35 +128,6 @@ def build_plan(plan_file: str | None, botox: tuple[str, ...], weeks: float | Non
     return Plan(tuple(steps), label) if steps else None
 
 
-def _open_database(db_url: str | None) -> Any:
-    try:
-        from fieldbank.storage import Database
-    except ImportError:
-        raise FieldbankError(
-            "This needs the fieldbank database, which is not part of this build; give the model "
-            "with --params FILE or --severity GROUP=LEVEL, and keep results with --out DIR."
-        ) from None
-    return Database.open(db_url)
-
-
-def load_patient_model(patient_code: str, db_url: str | None) -> tuple[ArmParams, str, int]:
-    """The patient's latest fitted model (else latest synthetic one) from the database.
-
-    Returns the parameters, a description and the stored model id.
-    """
-    with _open_database(db_url) as db:
-        db.get_patient(patient_code)  # a clear error for an unknown patient
-        models = db.list_models(patient_code)
-    for origin in ("fitted", "synthetic"):
-        found = [m for m in models if m.origin == origin]
-        if found:
-            m = max(found, key=lambda r: r.id)
-            return m.params, f"patient {patient_code}, {origin} model {m.id}", int(m.id)
-    raise FieldbankError(
-        f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
-        "first, or give the model with --params FILE.")
-
-
 def save_result(db_url: str | None, patient_code: str | None, base_model_id: int | None,
                 before: ArmParams, after: ArmParams, source: str, plan: Plan,
                 lineage_doc: dict[str, Any]) -> dict[str, int]:
@@ -165,30 +137,12 @@ def save_result(db_url: str | None, patient_code: str | None, base_model_id: int
     a synthetic model, so the lineage always has both ends.
     """
     label = plan.label or "; ".join(s.describe() for s in plan.steps)
-    with _open_database(db_url) as db:
+    with open_db(db_url) as db:
         base_id, child, rec = db.add_plan_result(
             after, lineage_doc, label, patient_code=patient_code, base_model_id=base_model_id,
             before=before if base_model_id is None else None, before_label=source)
     return {"base_model_id": int(base_id), "result_model_id": int(child.id),
             "plan_id": int(rec.id)}
-
-
-def _source_model(patient: str | None, params_file: str | None, severity: tuple[str, ...],
-                  db_url: str | None) -> tuple[ArmParams, str, int | None]:
-    given = sum(bool(x) for x in (patient, params_file, severity))
-    if given != 1:
-        raise click.UsageError(
-            "Give exactly one model: PATIENT, --params FILE or --severity GROUP=LEVEL.")
-    if params_file:
-        return ArmParams.from_file(params_file), f"parameters {params_file}", None
-    if severity:
-        from fieldbank.severity import parse_severity_options, synthesize
-
-        sev = parse_severity_options(list(severity))
-        return synthesize(sev), "synthetic arm (" + ", ".join(
-            f"{g} {lvl}" for g, lvl in sev.items()) + ")", None
-    assert patient is not None
-    return load_patient_model(patient, db_url)
 
 
 @click.command("whatif")
@@ -225,15 +179,14 @@ def _source_model(patient: str | None, params_file: str | None, severity: tuple[
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,
               help="Store the after model and the plan, with lineage, in the database.")
-@click.option("--db", "db_url", default=None, metavar="URL",
-              help="Database URL for PATIENT and --save (default: the configured database).")
+@db_option
 @click.option("--render", is_flag=True,
               help="Push before and after to a running 'fieldbank haptic serve' (A = before, "
                    "B = after) to feel them side by side.")
 @click.option("--socket", "control_path", default=None, metavar="SOCKET",
               help="Control socket of the renderer for --render (default: the one "
                    "'fieldbank haptic serve' uses).")
-@click.option("--json", "as_json", is_flag=True, help="One JSON document on stdout.")
+@json_option
 def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ...],
            plan_file: str | None, botox: tuple[str, ...], weeks: float | None,
            lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
@@ -251,7 +204,12 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     from fieldbank.interventions.metrics import Conditions, compare
 
     try:
-        before, source, base_model_id = _source_model(patient, params_file, severity, db_url)
+        if sum(bool(x) for x in (patient, params_file, severity)) != 1:
+            raise click.UsageError(
+                "Give exactly one model: PATIENT, --params FILE or --severity GROUP=LEVEL.")
+        src = modelsource.resolve(params_file=params_file, severity=severity, patient=patient,
+                                  open_db=lambda: open_db(db_url))
+        before, source, base_model_id = src.params, src.description, src.model_id
         plan = build_plan(plan_file, botox, weeks, lengthen, tenotomy, cast, rhizotomy,
                           baclofen)
         if plan is None and not optimize:
@@ -293,7 +251,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             d = Path(out_dir)
             write_atomic(d / "plan.json", plan.to_json() + "\n")
             write_atomic(d / "after.json", after.to_json() + "\n")
-            write_atomic(d / "lineage.json", json.dumps(lineage.to_dict(), indent=2) + "\n")
+            write_atomic(d / "lineage.json", to_json(lineage) + "\n")
             doc["out"] = str(d)
         if save:
             doc["saved"] = save_result(db_url, patient, base_model_id, before, after, source,
@@ -308,7 +266,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     except FieldbankError as exc:
         raise click.ClickException(str(exc)) from None
     if as_json:
-        click.echo(json.dumps(json_finite(doc), indent=2))
+        emit_json(doc)
     else:
         click.echo(render_text(source, plan, comparison, course, inverse))
         if plot_path:

@@ -1,4 +1,4 @@
-"""Durable file writes and JSON-safe values, shared by the CLI, reports, stores and traces.
+"""Durable file writes and the one JSON encoder, shared by the CLI, reports, stores and traces.
 
 :func:`write_atomic` never leaves a half-written file: the data go to a temporary file in the
 target's directory, are flushed and fsynced, renamed over the target with ``os.replace``
@@ -7,9 +7,12 @@ target's directory, are flushed and fsynced, renamed over the target with ``os.r
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import tempfile
+from collections.abc import Mapping
+from datetime import date, datetime
 from pathlib import Path
 from typing import Any
 
@@ -64,3 +67,40 @@ def json_finite(obj: Any) -> Any:
     if isinstance(obj, (list, tuple)):
         return [json_finite(v) for v in obj]
     return obj
+
+
+#: Indentation of every JSON document fieldbank prints or writes for people to read.
+JSON_INDENT = 2
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` as plain JSON values: the one conversion every JSON output goes through.
+
+    Objects with ``to_dict()`` become their dict; numpy arrays and scalars (anything with
+    ``tolist()``) lists and numbers; paths strings; dates ISO 8601; NaN and infinities None
+    (JSON has neither). Mapping keys become strings; key order is kept. Anything else is an
+    error rather than a silent ``str()``.
+    """
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, (datetime, date)):
+        return obj.isoformat()
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    if hasattr(obj, "to_dict"):
+        return jsonable(obj.to_dict())
+    if hasattr(obj, "tolist"):  # numpy arrays and scalars, without importing numpy here
+        return jsonable(obj.tolist())
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def to_json(obj: Any, *, indent: int | None = JSON_INDENT, sort_keys: bool = False) -> str:
+    """The JSON text of ``obj`` (through :func:`jsonable`; strict: never NaN or Infinity)."""
+    return json.dumps(jsonable(obj), indent=indent, sort_keys=sort_keys, allow_nan=False,
+                      ensure_ascii=False)

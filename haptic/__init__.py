@@ -8,7 +8,7 @@
 - :mod:`haptic.renderer` — the real-time loop, A↔B crossfade, A/B/X (:mod:`haptic.abx`)
 - :mod:`haptic.control` — local control channel (Unix socket)
 - :mod:`haptic.recording`, :mod:`haptic.dbsink`, :mod:`haptic.replay` — traces
-- :mod:`haptic.probe`, :mod:`haptic.models` — scripted probing, models from files/severities
+- :mod:`haptic.probe` — scripted probing (models come from :mod:`fieldbank.modelsource`)
 
 Design and safety: ``docs/haptics.md``; wire specification: ``docs/robot-protocol.md``.
 """

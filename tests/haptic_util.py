@@ -11,26 +11,16 @@ from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-
-#: MAS-4 ("severe") is about ten times unimpaired joint stiffness (BRIEF §3, §5); the severe
-#: group's reflex gain is 1. Used when the severity module is not at hand.
-SEVERE_FACTOR = 10.0
+from fieldbank.severity import synthesize
 
 
 def unimpaired() -> ArmParams:
     return ArmParams.from_anthropometry()
 
 
-def severe(groups: tuple[str, ...]) -> ArmParams:
-    p = unimpaired()
-    for g in groups:
-        p = p.with_group(g, km_n_per_m=p.group_value("km_n_per_m", g) * SEVERE_FACTOR,
-                         alpha_n=p.group_value("alpha_n", g) * SEVERE_FACTOR, beta=1.0)
-    return p
-
-
 def severe_shoulder() -> ArmParams:
-    return severe(("sf", "se"))
+    """The shoulder group at "severe" on the one severity scale (fieldbank.severity)."""
+    return synthesize({"shoulder": "severe"})
 
 
 def rest_hand(p: ArmParams) -> tuple[float, float]:

@@ -8,7 +8,8 @@ import pytest
 from fieldbank.haptic.renderer import RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.model import Arm
-from tests.haptic_util import pty_session, severe, severe_shoulder, unimpaired
+from fieldbank.severity import synthesize
+from tests.haptic_util import pty_session, severe_shoulder, unimpaired
 
 #: Stated tolerance of the slow-pull force profile against the static field prediction:
 #: 10 % of the predicted force plus 0.25 N. The handle leads the virtual hand by F/k_c through
@@ -44,7 +45,7 @@ SWITCH_STEP_BOUND_N = 0.1
 
 
 def _switch_run(crossfade_s: float) -> tuple[float, float]:
-    before, after = severe(("ef", "ee", "bf", "be")), unimpaired()
+    before, after = synthesize({"elbow": "severe", "biarticular": "severe"}), unimpaired()
     cfg = RendererConfig(state_wait_s=0.5, crossfade_s=crossfade_s)
     with pty_session(before, after, motion="circle", config=cfg) as (rd, _robot):
         rd.start(expected_ticks=4000)

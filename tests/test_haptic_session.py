@@ -20,13 +20,13 @@ from fieldbank.haptic import motions
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.control import ControlClient, ControlServer, push_models
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.models import from_severity, parse_severity
 from fieldbank.haptic.probe import probe, sim_url
 from fieldbank.haptic.recording import COLUMNS, Hdf5TraceSink, read_trace_h5, write_trace_h5
 from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
 from fieldbank.haptic.replay import rerun
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
+from fieldbank.severity import parse_severity_options, synthesize
 from tests.haptic_util import rest_hand, severe_shoulder, unimpaired
 
 
@@ -185,7 +185,7 @@ def test_control_push_switch_status_stop(served) -> None:  # type: ignore[no-unt
     c = ControlClient(sock)
     st = c.request("status")
     assert st["running"] and st["mode"] == "ARMED"
-    before, after = unimpaired(), from_severity({"elbow": "severe"})
+    before, after = unimpaired(), synthesize({"elbow": "severe"})
     assert push_models(before, after, sock) == {"pushed": True}
     deadline = time.time() + 3
     while rd.params[1] != after and time.time() < deadline:
@@ -317,16 +317,16 @@ def test_pull_goes_toward_the_body_by_its_distance() -> None:
     assert end[2:] == pytest.approx((0.0, 0.0))
 
 
-def test_severity_parsing_and_fallback_rule() -> None:
-    assert parse_severity("shoulder=severe, elbow=very_mild") == {"shoulder": "severe",
+def test_severity_specs_for_the_renderer() -> None:
+    assert parse_severity_options(["shoulder=severe, elbow=very_mild"]) == {"shoulder": "severe",
                                                                   "elbow": "very mild"}
     with pytest.raises(ParameterError, match="knee"):
-        parse_severity("knee=severe")
+        parse_severity_options(["knee=severe"])
     with pytest.raises(ParameterError, match="level"):
-        parse_severity("elbow=terrible")
+        parse_severity_options(["elbow=terrible"])
     base = unimpaired()
-    sev = from_severity({"elbow": "severe"}, base)
-    mod = from_severity({"elbow": "moderate"}, base)
+    sev = synthesize({"elbow": "severe"}, base)
+    mod = synthesize({"elbow": "moderate"}, base)
     ef = 2
     assert sev.km_n_per_m[ef] > mod.km_n_per_m[ef] > base.km_n_per_m[ef]
     assert sev.km_n_per_m[0] == base.km_n_per_m[0]  # the shoulder untouched
@@ -439,7 +439,7 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
                                     "--render", "--socket", str(sock), "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["rendered"] == {"pushed": True}
-    before = from_severity({"elbow": "severe"})
+    before = synthesize({"elbow": "severe"})
     deadline = time.time() + 3
     while rd.params[0] != before and time.time() < deadline:
         time.sleep(0.01)

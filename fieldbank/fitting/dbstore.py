@@ -1,6 +1,6 @@
 """The :class:`~fieldbank.fitting.records.FitStore` on the field database.
 
-An adapter over :class:`fieldbank.storage.Database` (imported when a store is opened), using
+An adapter over :class:`fieldbank.storage.Database`, using
 its ``get_patient``, ``list_maps``, ``get_maps``, ``add_fitted_model`` (model and fit in one
 transaction), ``list_models``, ``get_model``, ``model_lineage`` and ``list_fits``. The fitted
 model is stored with origin 'fitted' and the fit (report, algorithm, seed, evaluations, time,
@@ -12,12 +12,12 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from fieldbank.errors import FitError
 from fieldbank.fitting.records import FitSubmission, PatientMap, SavedFit
 from fieldbank.params import ArmParams
+from fieldbank.storage import Database, StoredModel
 
 
-def _row(m: Any) -> dict[str, Any]:
+def _row(m: StoredModel) -> dict[str, Any]:
     return {"id": m.id, "patient": m.patient_code, "origin": m.origin, "label": m.label,
             "parent_id": m.parent_id, "created_at": m.created_at}
 
@@ -25,7 +25,7 @@ def _row(m: Any) -> dict[str, Any]:
 class DatabaseFitStore:
     """FitStore over a ``fieldbank.storage.Database``."""
 
-    def __init__(self, db: Any) -> None:
+    def __init__(self, db: Database) -> None:
         self.db = db
 
     def patient_params(self, patient: str) -> ArmParams:
@@ -49,7 +49,7 @@ class DatabaseFitStore:
         model, fit = self.db.add_fitted_model(
             record.params, label, record.patient, record.algorithm, record.seed,
             int(report["n_evals"]), float(report["time_s"]), float(report["cost"]), report,
-            list(record.map_ids))
+            [int(m) for m in record.map_ids])
         return SavedFit(fit.id, model.id)
 
     def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]:
@@ -68,9 +68,4 @@ class DatabaseFitStore:
 
 def open_fit_store(db_url: str | None) -> DatabaseFitStore:
     """Open the field database (``db_url`` or the default) as a FitStore."""
-    try:
-        from fieldbank.storage import Database
-    except ImportError as exc:
-        raise FitError(f"the field database is not available in this installation ({exc}).") \
-            from None
     return DatabaseFitStore(Database.open(db_url))

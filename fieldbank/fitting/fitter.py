@@ -15,7 +15,6 @@ Example::
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -38,6 +37,7 @@ from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
 from fieldbank.maps import FRAMES, FieldMap
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
+from fieldbank.severity import classify
 
 #: Metadata keys that may state a map's value unit, and the unit each kind must have.
 UNIT_KEYS = ("unit", "units", "value_unit", "values_unit", "force_unit", "stiffness_unit")
@@ -328,21 +328,9 @@ class ArmFitter:
         }
 
 
-def _severity(params: ArmParams) -> dict[str, Any] | None:
-    """Severity per joint group from :mod:`fieldbank.severity`, when that module exists."""
-    try:
-        severity: Any = importlib.import_module("fieldbank.severity")
-    except ImportError:
-        return None
-    result = severity.classify(params)
-    out: dict[str, Any] = {}
-    for group, gs in result.items():
-        raw = (dataclasses.asdict(gs) if dataclasses.is_dataclass(gs) and not isinstance(gs, type)
-               else gs)
-        out[group] = ({k: (float(v) if isinstance(v, (int, float, np.floating))
-                           and not isinstance(v, bool) else v) for k, v in raw.items()}
-                      if isinstance(raw, dict) else raw)
-    return out
+def _severity(params: ArmParams) -> dict[str, Any]:
+    """Severity per joint group (:func:`fieldbank.severity.classify`) as plain values."""
+    return {group: gs.to_dict() for group, gs in classify(params).items()}
 
 
 @dataclasses.dataclass(frozen=True)

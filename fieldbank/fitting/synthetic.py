@@ -1,11 +1,8 @@
 """Synthetic patients: a known arm, its maps with measurement noise, and held-out maps.
 
 Used to show that the fitter recovers what it should. A patient has one joint group
-(``fieldbank.params.JOINT_GROUPS``) made hypertonic at a severity level. When
-:mod:`fieldbank.severity` is available its ``synthesize`` sets the parameters; otherwise the
-scale of BRIEF §5 is applied here: Km of the group's muscles × 10/1.6^k for severe (k = 0),
-moderate, mild, very mild; α scaled by the same factor; β raised linearly from its unimpaired
-value to 1 at severe (assumption).
+(``fieldbank.params.JOINT_GROUPS``) made hypertonic at a severity level of the one scale,
+:func:`fieldbank.severity.synthesize`.
 
 Maps: a postural map at ``n_postural`` positions and stiffness maps at ``n_stiffness``
 positions, each measured static and moving (at ``±speed`` along :data:`MOVE_DIRECTION`, so that
@@ -17,24 +14,21 @@ SD is stored in the map.
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, cast
 
 import numpy as np
 
+from fieldbank import severity
 from fieldbank.errors import ParameterError
 from fieldbank.fitting.problem import relative_scale
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import JOINT_GROUPS, ArmParams
 
-LEVELS: tuple[str, ...] = ("severe", "moderate", "mild", "very mild")
-#: Upper boundary (MAS 4) as a multiple of unimpaired stiffness, and the Weber fraction.
-SEVERE_FACTOR = 10.0
-WEBER_FRACTION = 0.6
+#: The impaired levels, most severe first.
+LEVELS: tuple[str, ...] = tuple(reversed(severity.LEVELS[1:]))
 #: Unit direction of the moving stiffness measurements (shoulder frame).
 MOVE_DIRECTION = (-0.6, 0.8)
 DEFAULT_SPEED_M_PER_S = 1.0
@@ -43,35 +37,12 @@ SHOULDER_DEG = (-10.0, 120.0)
 ELBOW_DEG = (20.0, 140.0)
 
 
-def level_factor(level: str) -> float:
-    """Km multiple of a severity level: 10 / 1.6^k, k = 0 (severe) … 3 (very mild)."""
-    if level not in LEVELS:
-        raise ParameterError(f"unknown severity level {level!r}; known: {', '.join(LEVELS)}.")
-    return SEVERE_FACTOR / (1.0 + WEBER_FRACTION) ** LEVELS.index(level)
-
-
 def impaired_params(group: str, level: str, base: ArmParams | None = None) -> ArmParams:
     """A patient with ``group`` (a joint group) hypertonic at ``level``."""
     if group not in JOINT_GROUPS:
         raise ParameterError(f"unknown joint group {group!r}; known: {', '.join(JOINT_GROUPS)}.")
     base = base or ArmParams.from_anthropometry()
-    try:
-        severity: Any = importlib.import_module("fieldbank.severity")
-    except ImportError:
-        severity = None
-    if severity is not None:
-        return cast(ArmParams, severity.synthesize({group: level}, base))
-    f = level_factor(level)
-    p = base
-    for g in JOINT_GROUPS[group]:
-        b0 = p.group_value("beta", g)
-        p = p.with_group(
-            g,
-            km_n_per_m=p.group_value("km_n_per_m", g) * f,
-            alpha_n=p.group_value("alpha_n", g) * f,
-            beta=b0 + (1.0 - b0) * (f - 1.0) / (SEVERE_FACTOR - 1.0),
-        )
-    return p
+    return severity.synthesize({group: level}, base)
 
 
 def scattered_positions(arm: Arm, n: int, rng: np.random.Generator) -> FloatArray:

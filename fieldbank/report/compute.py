@@ -17,6 +17,7 @@ from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.report import figures
 from fieldbank.report.select import CaseSpec
+from fieldbank.severity import LEVELS
 
 #: Weeks after the most recent injection at which the time course is evaluated.
 TIMECOURSE_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(0, 25))
@@ -24,7 +25,7 @@ TIMECOURSE_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(0, 25))
 FIGURE_GRID_N = 11
 #: Hand speed of the moving-field row (the metrics' moving speed), m/s toward the body.
 FIGURE_SPEED_M_PER_S = 0.3
-LEVELS = ("unimpaired", "very mild", "mild", "moderate", "severe")
+
 
 #: Columns of the metrics table (CSV header and HTML table), in order, with their headings.
 COLUMNS: tuple[tuple[str, str], ...] = (

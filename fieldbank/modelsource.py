@@ -1,0 +1,115 @@
+"""Where an arm model comes from: the one place that turns what a user names into parameters.
+
+A command names a model in one of four ways, and every command resolves it here:
+
+* a parameter file (``--params arm.json``, schema ``fieldbank.arm-params``);
+* a severity specification (``--severity elbow=severe``) on the scale of
+  :mod:`fieldbank.severity`, optionally on a synthetic body (mass, height, side);
+* a stored model by id (``--model-id 5``);
+* a patient code: that patient's latest fitted model, else the latest synthetic one.
+
+The result, :class:`ModelSource`, carries the parameters with a description for read-outs and,
+for stored models, the model id and patient, so lineage (plans, haptic sessions) can point at
+them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from fieldbank.errors import ParameterError, StorageError
+from fieldbank.params import ArmParams
+from fieldbank.severity import parse_severity_options, synthesize
+from fieldbank.storage import Database
+
+#: Opens the database only when a stored model is asked for.
+DatabaseOpener = Callable[[], Database]
+
+
+@dataclass(frozen=True)
+class ModelSource:
+    """A resolved model: parameters, what it is in words, and its database identity if any."""
+
+    params: ArmParams
+    description: str
+    model_id: int | None = None
+    patient_code: str | None = None
+
+
+def from_file(path: str | Path) -> ModelSource:
+    return ModelSource(ArmParams.from_file(path), f"parameters {path}")
+
+
+def synthetic(severity: Sequence[str] = (), *, body_mass_kg: float | None = None,
+              height_m: float | None = None, side: str | None = None) -> ModelSource:
+    """A synthetic arm: unimpaired anthropometric defaults with the given severities."""
+    kw: dict[str, float | str] = {}
+    if body_mass_kg is not None:
+        kw["body_mass_kg"] = body_mass_kg
+    if height_m is not None:
+        kw["height_m"] = height_m
+    if side is not None:
+        kw["side"] = side
+    base = ArmParams.from_anthropometry(**kw)  # type: ignore[arg-type]
+    sev = parse_severity_options(list(severity))
+    if not sev:
+        return ModelSource(base, "synthetic arm (unimpaired)")
+    words = ", ".join(f"{g} {lvl}" for g, lvl in sev.items())
+    return ModelSource(synthesize(sev, base), f"synthetic arm ({words})")
+
+
+def stored(db: Database, model_id: int) -> ModelSource:
+    m = db.get_model(model_id)
+    return ModelSource(m.params, f"stored {m.origin} model {m.id}"
+                       + (f" of patient {m.patient_code}" if m.patient_code else ""),
+                       int(m.id), m.patient_code)
+
+
+def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
+    """The patient's latest fitted model, else the latest synthetic one."""
+    db.get_patient(patient_code)  # a clear error for an unknown patient
+    models = db.list_models(patient_code)
+    for origin in ("fitted", "synthetic"):
+        found = [m for m in models if m.origin == origin]
+        if found:
+            m = max(found, key=lambda r: r.id)
+            return ModelSource(m.params, f"patient {patient_code}, {origin} model {m.id}",
+                               int(m.id), patient_code)
+    raise StorageError(
+        f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
+        "first ('fieldbank fit'), or give the model with --params FILE.")
+
+
+def resolve(*, params_file: str | Path | None = None, severity: Sequence[str] = (),
+            model_id: int | None = None, patient: str | None = None,
+            open_db: DatabaseOpener | None = None, what: str = "model",
+            default: ModelSource | None = None) -> ModelSource:
+    """The one model named by exactly one of the arguments.
+
+    ``open_db`` is called (and the database closed again) only for ``model_id`` or
+    ``patient``. With nothing named, ``default`` is returned if given, else an error. ``what``
+    names the model in messages ("before model", ...).
+    """
+    named = [n for n, v in (("a parameter file", params_file), ("a severity", severity),
+                            ("a model id", model_id), ("a patient", patient))
+             if v not in (None, (), [], "")]
+    if len(named) > 1:
+        raise ParameterError(f"Give the {what} once: got {' and '.join(named)}.")
+    if not named:
+        if default is not None:
+            return default
+        raise ParameterError(f"Give the {what}: a patient, --params FILE, --severity "
+                             "GROUP=LEVEL or a stored model id.")
+    if params_file is not None:
+        return from_file(params_file)
+    if severity:
+        return synthetic(severity)
+    if open_db is None:
+        raise ParameterError(f"The {what} is in the database, but no database was given.")
+    with open_db() as db:
+        if model_id is not None:
+            return stored(db, model_id)
+        assert patient is not None
+        return latest_of_patient(db, patient)
