@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import MISSING, asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
 from fieldbank.errors import ParameterError
+from fieldbank.validation import Interval, check_number, check_tuple
 
 GROUPS: tuple[str, ...] = ("sf", "se", "ef", "ee", "bf", "be")
 GROUP_INDEX: dict[str, int] = {g: i for i, g in enumerate(GROUPS)}
@@ -87,37 +88,6 @@ DEFAULT_CIRCLE_FREQUENCY_HZ = 2.0
 DEFAULT_CIRCLE_CENTRE_DEG = (45.0, 90.0)
 
 
-@dataclass(frozen=True)
-class Interval:
-    """A closed or half-open numeric range with a unit, used to validate and to explain."""
-
-    low: float | None
-    high: float | None
-    unit: str = ""
-    low_closed: bool = True
-    high_closed: bool = True
-
-    def contains(self, value: float) -> bool:
-        if not math.isfinite(value):
-            return False
-        if self.low is not None and (
-            value < self.low or (value == self.low and not self.low_closed)
-        ):
-            return False
-        return not (
-            self.high is not None
-            and (value > self.high or (value == self.high and not self.high_closed))
-        )
-
-    def describe(self) -> str:
-        lo = "-inf" if self.low is None else f"{self.low:g}"
-        hi = "inf" if self.high is None else f"{self.high:g}"
-        lb = "[" if (self.low_closed and self.low is not None) else "("
-        hb = "]" if (self.high_closed and self.high is not None) else ")"
-        unit = f" {self.unit}" if self.unit else ""
-        return f"{lb}{lo}, {hi}{hb}{unit}"
-
-
 _PI = math.pi
 #: Every bound in one table. Keys are field names of ArmParams; a tuple field is checked
 #: element-wise against the same interval.
@@ -162,32 +132,12 @@ def _label(name: str, index: int | None) -> str:
 
 
 def _check_value(name: str, value: Any, index: int | None = None) -> float:
-    interval = BOUNDS[name]
-    label = _label(name, index)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(
-            f"The '{label}' parameter must be a number in {interval.describe()}; "
-            f"got {value!r} ({type(value).__name__}) instead."
-        )
-    v = float(value)
-    if not interval.contains(v):
-        raise ParameterError(
-            f"The '{label}' parameter must be a finite number in {interval.describe()}; "
-            f"got {value!r} instead."
-        )
-    return v
+    return check_number(_label(name, index), value, BOUNDS[name])
 
 
 def _check_tuple(name: str, value: Any, length: int) -> tuple[float, ...]:
-    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
-        raise ParameterError(
-            f"The '{name}' parameter must be a sequence of {length} numbers; got {value!r}."
-        )
-    if len(value) != length:
-        raise ParameterError(
-            f"The '{name}' parameter must have {length} entries; got {len(value)}."
-        )
-    return tuple(_check_value(name, v, i) for i, v in enumerate(value))
+    return check_tuple(name, value, length, BOUNDS[name],
+                       labels=[_label(name, i) for i in range(length)])
 
 
 @dataclass(frozen=True)

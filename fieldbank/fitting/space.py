@@ -26,7 +26,8 @@ import numpy as np
 
 from fieldbank.errors import FitError
 from fieldbank.model import FloatArray
-from fieldbank.params import GROUPS, ArmParams, Interval
+from fieldbank.params import GROUPS, ArmParams
+from fieldbank.validation import Interval
 
 FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest")
 #: ArmParams field behind each fitted kind.
