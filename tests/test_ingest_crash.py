@@ -20,7 +20,7 @@ from fieldbank.maps import postural_map
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database
-from fieldbank.storage.database import INLINE_MAX_BYTES
+from fieldbank.storage.mapstore import INLINE_MAX_BYTES
 
 ROOT = Path(__file__).resolve().parents[1]
 

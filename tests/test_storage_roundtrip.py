@@ -97,11 +97,11 @@ def test_map_round_trip(db: Database) -> None:
 
 
 def test_large_source_file_goes_to_array_store(db: Database) -> None:
-    from fieldbank.storage import database as dbmod
+    from fieldbank.storage import mapstore
 
     p = db.add_patient("P-003", 70, 1.7, "right")
     post, _ = _maps(p.arm_params())
-    text = post.to_csv() + "# padding\n" * (dbmod.INLINE_MAX_BYTES // 10 + 10)
+    text = post.to_csv() + "# padding\n" * (mapstore.INLINE_MAX_BYTES // 10 + 10)
     inc = _incoming("big.csv", [post], text)
     db.ingest_files("P-003", "s", [inc])
     assert db.source_file(inc.sha256).in_array_store
