@@ -156,10 +156,10 @@ def ingest_paths(
         return IngestReport(patient.code, session_label, True, tuple(outcomes))
     done = [total]
 
-    def stored(name: str) -> None:
+    def stored(outcome: IngestOutcome) -> None:
         done[0] += 1
         if progress is not None:
-            progress(done[0], 2 * total, name)
+            progress(done[0], 2 * total, outcome.file_name)
 
     outcomes = db.ingest_files(patient.code, session_label, files, session_date,
                                progress=stored)

@@ -12,8 +12,8 @@ leave this package)::
     db.ensure_session(patient_code, label, session_date=None) -> SessionInfo
     db.list_sessions(patient_code=None)
     # measured maps and source files (written by fieldbank.ingest)              mapstore.py
-    db.ingest_files(patient_code, session_label, files, session_date=None, progress=None)
-        -> [IngestOutcome]
+    db.ingest_files(patient_code, session_label, files, session_date=None,
+                    progress: IngestProgress | None = None) -> [IngestOutcome]
     db.has_source(sha256) -> bool
     db.list_maps(patient_code=None, session_label=None, kind=None, since=None, until=None)
     db.get_map(map_id) -> FieldMap   db.get_maps(map_ids) -> [FieldMap]
@@ -63,7 +63,7 @@ Modules::
     __init__.py    this face: Database, the records, the configuration helpers
     database.py    Database: open/close, patients, sessions, audit, check (the mixins' design)
     core.py        DatabaseCore: engine, store, actor, transactions, audit, patient/session rows
-    mapstore.py    MapStore mixin: ingest, maps, source files
+    mapstore.py    MapStore mixin: ingest, maps, source files (IngestProgress)
     lineage.py     Lineage mixin: models, fits, plans
     traces.py      Traces mixin: haptic sessions and traces
     check.py       check(db) -> CheckReport: every reference and checksum, orphans
@@ -77,6 +77,7 @@ See ``docs/storage.md`` for the schema and the durability guarantees.
 
 from fieldbank.storage.config import data_home, make_engine, mask_url, resolve_url
 from fieldbank.storage.database import Database
+from fieldbank.storage.mapstore import IngestProgress
 from fieldbank.storage.records import (
     AuditEntry,
     CheckReport,
@@ -101,6 +102,7 @@ __all__ = [
     "HapticSessionRecord",
     "IncomingFile",
     "IngestOutcome",
+    "IngestProgress",
     "PatientInfo",
     "PlanRecord",
     "SessionInfo",

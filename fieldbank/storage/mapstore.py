@@ -7,15 +7,14 @@ up to :data:`INLINE_MAX_BYTES` and in the array store above that.
 An ingest batch is one transaction: every file and every map of the batch lands, or none does.
 Large source files go to the write-once array store *before* the transaction, so a crash in
 between leaves only complete, unreferenced store files (orphans that ``fieldbank db check``
-reports and a new ingest of the same file adopts).
+reports and a new ingest of the same file adopts). ``progress`` is called after each file is
+written, inside the transaction, with its :class:`~fieldbank.storage.records.IngestOutcome`.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
-import time
 from collections.abc import Callable, Sequence
 from datetime import date, datetime
 from typing import TypeAlias
@@ -37,12 +36,8 @@ INLINE_MAX_BYTES = 1 << 20
 #: Arbitrary constant key of the PostgreSQL advisory lock held by an ingest transaction.
 PG_INGEST_LOCK_KEY = 0x696E676573  # "inges"
 
-#: Test hook: seconds to sleep after writing each file of an ingest batch, inside the
-#: transaction (lets tests kill an ingest in the middle of a batch). Unset in normal use.
-ENV_TEST_INGEST_SLEEP = "FIELDBANK_TEST_INGEST_SLEEP_S"
-#: Test hook: a file to which a line is appended after each file is written, inside the
-#: transaction (tests wait for it to know the batch is half written). Unset in normal use.
-ENV_TEST_INGEST_MARK = "FIELDBANK_TEST_INGEST_MARK"
+#: Called after each file of an ingest batch is written, inside the transaction.
+IngestProgress: TypeAlias = Callable[[IngestOutcome], None]
 
 #: The columns of a map listing, in :meth:`MapStore._map_query` order.
 _MapListing: TypeAlias = tuple[int, str, str, date | None, str, str, str, float, float, int, str,
@@ -96,7 +91,7 @@ class MapStore(DatabaseCore):
 
     def ingest_files(self, patient_code: str, session_label: str,
                      files: Sequence[IncomingFile], session_date: date | None = None,
-                     progress: Callable[[str], None] | None = None) -> list[IngestOutcome]:
+                     progress: IngestProgress | None = None) -> list[IngestOutcome]:
         """Store validated files and their maps in ONE transaction: all or nothing.
 
         Large source files are written to the array store first (write-once; if the
@@ -113,15 +108,14 @@ class MapStore(DatabaseCore):
         files : sequence of IncomingFile
             Validated files (:func:`fieldbank.ingest.read_file`).
         progress : callable, optional
-            Called with each file name after it is written.
+            Called with the outcome of each file stored, right after it is written and before
+            the transaction commits.
 
         Returns
         -------
         list of IngestOutcome
             One per file, in order: 'stored' with the new map ids, or 'duplicate'.
         """
-        sleep_s = float(os.environ.get(ENV_TEST_INGEST_SLEEP, "0") or 0)
-        mark = os.environ.get(ENV_TEST_INGEST_MARK)
         refs: dict[str, ArrayRef] = {}
         for f in files:
             if len(f.content) > INLINE_MAX_BYTES and f.sha256 not in refs:
@@ -168,15 +162,10 @@ class MapStore(DatabaseCore):
                 self._audit(s, "ingest", "source_file", f.sha256,
                             {"file": f.file_name, "patient": p.code, "session": sess.label,
                              "maps": list(ids)})
-                outcomes.append(IngestOutcome(f.file_name, f.sha256, "stored", ids,
-                                              len(f.maps)))
+                outcome = IngestOutcome(f.file_name, f.sha256, "stored", ids, len(f.maps))
+                outcomes.append(outcome)
                 if progress is not None:
-                    progress(f.file_name)
-                if mark:
-                    with open(mark, "a", encoding="utf-8") as fh:
-                        fh.write(f.sha256 + "\n")
-                if sleep_s > 0:
-                    time.sleep(sleep_s)
+                    progress(outcome)
         return outcomes
 
     def _map_row(self, m: FieldMap, patient_id: int, session_id: int, sha: str, index: int,
