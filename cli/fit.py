@@ -15,7 +15,7 @@ import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option
 from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
-from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient
+from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
 
 StoreFactory = Callable[[str | None], FitStore]
@@ -122,16 +122,16 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
     """List models with their origin and parent."""
     rows = list(_store(ctx, db_url).list_models(patient))
     if as_json:
-        emit_json(rows)
+        emit_json([model_summary(m) for m in rows])
         return
     if not rows:
         click.echo("no models", err=True)
         return
     click.echo(f"{'id':>5}  {'patient':<12} {'origin':<13} {'parent':>6}  label")
-    for r in rows:
-        parent = "" if r.get("parent_id") is None else str(r["parent_id"])
-        click.echo(f"{r['id']!s:>5}  {r.get('patient') or '-':<12} {r.get('origin', ''):<13} "
-                   f"{parent:>6}  {r.get('label', '')}")
+    for m in rows:
+        parent = "" if m.parent_id is None else str(m.parent_id)
+        click.echo(f"{m.id!s:>5}  {m.patient_code or '-':<12} {m.origin:<13} "
+                   f"{parent:>6}  {m.label}")
 
 
 @models.command("show")
@@ -142,13 +142,13 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
 def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | None) -> None:
     """Show a model's parameters, lineage and the fit that produced it."""
     key: int | str = int(model_id) if model_id.isdigit() else model_id
-    row = dict(_store(ctx, db_url).get_model(key))
+    detail = _store(ctx, db_url).get_model(key)
     if as_json:
-        emit_json(row)
+        emit_json(detail.to_json_dict())
         return
-    p = row["params"]
-    click.echo(f"model {row['id']} ({row.get('origin', '')}) patient {row.get('patient')}: "
-               f"{row.get('label', '')}")
+    m = detail.model
+    p = m.params
+    click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {m.label}")
     click.echo("  group        Km N/m    alpha N    beta")
     from fieldbank.params import GROUPS
 
@@ -157,11 +157,9 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
                    f"{p.beta[i]:>7.3f}")
     q = [math.degrees(v) for v in p.q_rest_rad]
     click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
-    lineage = row.get("lineage") or []
-    if lineage:
-        click.echo("  lineage: " + " <- ".join(
-            f"{a['id']} ({a.get('origin', '')})" for a in lineage))
-    fit_report = row.get("fit")
+    if detail.lineage:
+        click.echo("  lineage: " + " <- ".join(f"{a.id} ({a.origin})" for a in detail.lineage))
+    fit_report = detail.fit
     if fit_report:
         click.echo(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, cost "
                    f"{fit_report.get('cost'):.4g}, status {fit_report.get('status')}, maps "

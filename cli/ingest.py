@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.ingest import ingest_paths
+
+if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to show a bar
+    from tqdm import tqdm
 
 #: Show a progress bar from this many files on (on a terminal).
 PROGRESS_MIN_FILES = 20
@@ -32,7 +35,7 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
     Every file is validated first; any problem anywhere stores nothing. A file already
     stored (same SHA-256) is reported and not stored again.
     """
-    bar: Any = None
+    bar: tqdm | None = None
     if len(files) >= PROGRESS_MIN_FILES:
         from tqdm import tqdm
 

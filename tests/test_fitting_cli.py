@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -13,9 +14,10 @@ from click.testing import CliRunner
 
 from fieldbank.cli.fit import fit, models
 from fieldbank.errors import FieldbankError, FitError
-from fieldbank.fitting.records import FitSubmission, PatientMap, SavedFit
+from fieldbank.fitting.records import FitSubmission, ModelDetail, PatientMap, SavedFit
 from fieldbank.fitting.synthetic import impaired_params, synthetic_patient
 from fieldbank.params import ArmParams
+from fieldbank.storage import StoredModel
 
 BASE = ArmParams.from_anthropometry()
 
@@ -26,7 +28,7 @@ class MemoryStore:
     def __init__(self) -> None:
         self.patients: dict[str, ArmParams] = {}
         self.maps: list[PatientMap] = []
-        self.models: list[dict[str, Any]] = []
+        self.models: list[ModelDetail] = []
         self.fits: list[FitSubmission] = []
 
     def patient_params(self, patient: str) -> ArmParams:
@@ -40,20 +42,19 @@ class MemoryStore:
 
     def add_fit(self, record: FitSubmission) -> SavedFit:
         self.fits.append(record)
-        model = {"id": len(self.models) + 1, "patient": record.patient, "origin": "fitted",
-                 "label": f"fit {len(self.fits)}", "parent_id": None, "created_at": "now",
-                 "params": record.params, "fit": dict(record.report), "lineage": []}
-        self.models.append(model)
-        return SavedFit(len(self.fits), model["id"])
+        model = StoredModel(len(self.models) + 1, record.patient, None, "fitted",
+                            f"fit {len(self.fits)}", record.params, datetime.now(UTC))
+        self.models.append(ModelDetail(model, (), dict(record.report)))
+        return SavedFit(len(self.fits), model.id)
 
-    def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]:
-        return [{k: v for k, v in m.items() if k not in ("params", "fit", "lineage")}
-                for m in self.models if patient is None or m["patient"] == patient]
+    def list_models(self, patient: str | None = None) -> Sequence[StoredModel]:
+        return [d.model for d in self.models
+                if patient is None or d.model.patient_code == patient]
 
-    def get_model(self, model_id: int | str) -> Mapping[str, Any]:
-        for m in self.models:
-            if m["id"] == model_id:
-                return m
+    def get_model(self, model_id: int | str) -> ModelDetail:
+        for d in self.models:
+            if d.model.id == model_id:
+                return d
         raise FitError(f"no model {model_id}")
 
 
@@ -94,7 +95,7 @@ def test_fit_json_stores_fit_and_model(store: MemoryStore, tmp_path: Path) -> No
     report = json.loads(res.stdout)
     assert report["patient"] == "P1" and report["seed"] == 3
     assert report["map_ids"] == [100, 101, 102, 103]
-    assert report["model_id"] == store.models[-1]["id"]
+    assert report["model_id"] == store.models[-1].model.id
     assert store.fits[-1].params == ArmParams.from_dict(report["params"])
     assert plot.read_text().lstrip().startswith("<?xml")
     assert "evaluations" in res.stderr  # progress on stderr

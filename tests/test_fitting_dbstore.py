@@ -45,11 +45,12 @@ def test_fit_stored_patient_end_to_end(tmp_path: Path) -> None:
     db.ingest_files("P-1", "pre", files)
     store = DatabaseFitStore(db)
     out = fit_patient(store, "P-1", "pre", ArmFitter(seed=0))
-    model = store.get_model(out.saved.model_id)
-    assert model["origin"] == "fitted" and model["patient"] == "P-1"
-    assert model["params"] == out.fitter.params_
-    assert model["fit"]["map_ids"] == list(out.record.map_ids)
-    assert model["params"].km_n_per_m[2] == pytest.approx(
+    detail = store.get_model(out.saved.model_id)
+    model = detail.model
+    assert model.origin == "fitted" and model.patient_code == "P-1"
+    assert model.params == out.fitter.params_
+    assert detail.fit is not None and detail.fit["map_ids"] == list(out.record.map_ids)
+    assert model.params.km_n_per_m[2] == pytest.approx(
         pat.truth.km_n_per_m[2], rel=0.15)
 
     res = CliRunner().invoke(cli, ["fit", "P-1", "--db", url, "--json"])
@@ -58,6 +59,13 @@ def test_fit_stored_patient_end_to_end(tmp_path: Path) -> None:
     res = CliRunner().invoke(cli, ["models", "show", str(mid), "--db", url])
     assert res.exit_code == 0 and "fit: mlsl+lbfgs" in res.stdout
     res = CliRunner().invoke(cli, ["models", "list", "--db", url, "--json"])
-    assert len(json.loads(res.stdout)) == 2
+    rows = json.loads(res.stdout)
+    assert len(rows) == 2
+    assert list(rows[0]) == ["id", "patient", "origin", "label", "parent_id", "created_at"]
+    res = CliRunner().invoke(cli, ["models", "show", str(mid), "--db", url, "--json"])
+    shown = json.loads(res.stdout)
+    assert list(shown) == [*rows[0], "params", "lineage", "fit"]
+    assert shown["id"] == mid and shown["patient"] == "P-1" and shown["lineage"] == []
+    assert shown["fit"]["algorithm"] == "mlsl+lbfgs" and shown["fit"]["seed"] == 0
     res = CliRunner().invoke(cli, ["fit", "P-404", "--db", url])
     assert res.exit_code != 0 and "P-404" in str(res.exception)

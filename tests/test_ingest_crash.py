@@ -1,7 +1,8 @@
-"""A real ``kill -9`` in the middle of a batch, and two ingest processes at once on SQLite.
+"""A real ``kill -9`` in the middle of a batch (SQLite and PostgreSQL), and two ingest processes
+at once on SQLite.
 
-The ingest test hooks (``FIELDBANK_TEST_INGEST_SLEEP_S``, ``FIELDBANK_TEST_INGEST_MARK``) slow
-the write phase down and mark each file written inside the open transaction.
+The ingests run in ``tests/slow_ingest.py``, a program that calls the library with a progress
+callback which marks each file written inside the open transaction and slows the write phase.
 """
 
 from __future__ import annotations
@@ -20,9 +21,10 @@ from fieldbank.maps import postural_map
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database
-from fieldbank.storage.database import INLINE_MAX_BYTES
+from fieldbank.storage.mapstore import INLINE_MAX_BYTES
 
 ROOT = Path(__file__).resolve().parents[1]
+SLOW_INGEST = Path(__file__).resolve().with_name("slow_ingest.py")
 
 
 def _files(d: Path, n: int, seed: int, n_large: int = 0) -> list[Path]:
@@ -42,23 +44,31 @@ def _files(d: Path, n: int, seed: int, n_large: int = 0) -> list[Path]:
     return out
 
 
-def _env(url: str, **extra: str) -> dict[str, str]:
-    return {**os.environ, "PYTHONPATH": str(ROOT), "FIELDBANK_DB": url, **extra}
+def _env(url: str, arrays: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(ROOT), "FIELDBANK_DB": url,
+            "FIELDBANK_ARRAYS": str(arrays)}
+
+
+def _slow_ingest(url: str, arrays: Path, files: list[Path], patient: str, session: str,
+                 sleep_s: float, mark: Path | None = None) -> list[str]:
+    """The command line of the slow ingest program (see tests/slow_ingest.py)."""
+    return [sys.executable, str(SLOW_INGEST), "--db", url, "--arrays", str(arrays),
+            "--patient", patient, "--session", session, "--sleep-s", str(sleep_s),
+            *(["--mark", str(mark)] if mark is not None else []), *map(str, files)]
 
 
 @pytest.mark.slow
-def test_kill_9_mid_batch_leaves_database_and_store_consistent(tmp_path: Path) -> None:
-    url = f"sqlite:///{tmp_path / 'crash.sqlite3'}"
-    db = Database.open(url)
+def test_kill_9_mid_batch_leaves_database_and_store_consistent(any_db_url: str,
+                                                               tmp_path: Path) -> None:
+    url = any_db_url
+    arrays = tmp_path / "arrays"
+    db = Database.open(url, upgrade="always", store_root=arrays)
     db.add_patient("K-1", 75, 1.75, "right")
     files = _files(tmp_path / "in", 30, seed=1, n_large=2)
     mark = tmp_path / "mark.txt"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "fieldbank.cli", "ingest", *map(str, files), "--patient", "K-1",
-         "--session", "s1"],
-        cwd=ROOT, env=_env(url, FIELDBANK_TEST_INGEST_SLEEP_S="0.05",
-                           FIELDBANK_TEST_INGEST_MARK=str(mark)),
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        _slow_ingest(url, arrays, files, "K-1", "s1", sleep_s=0.05, mark=mark),
+        cwd=ROOT, env=_env(url, arrays), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         if mark.exists() and len(mark.read_text().splitlines()) >= 10:
@@ -74,16 +84,17 @@ def test_kill_9_mid_batch_leaves_database_and_store_consistent(tmp_path: Path) -
     written = len(mark.read_text().splitlines())
     assert 10 <= written < len(files)  # killed in the middle of the batch
     # the batch is absent; the check is clean apart from explained orphans
-    db2 = Database.open(url)
+    db2 = Database.open(url, store_root=arrays)
     assert db2.list_maps() == [] and db2.list_sessions() == []
     report = db2.check()
     assert report.ok, report.problems
     assert len(report.orphans) == 2
     assert all("not referenced by the database" in o for o in report.orphans)
-    # re-running the batch stores it whole and adopts the orphaned store files
+    # re-running the batch (with the command line) stores it whole and adopts the orphaned
+    # store files
     r = subprocess.run([sys.executable, "-m", "fieldbank.cli", "ingest", *map(str, files),
-                        "--patient", "K-1", "--session", "s1"], cwd=ROOT, env=_env(url), text=True,
-                       capture_output=True, timeout=120)
+                        "--patient", "K-1", "--session", "s1"], cwd=ROOT, env=_env(url, arrays),
+                       text=True, capture_output=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert len(db2.list_maps()) == len(files)
     final = db2.check()
@@ -95,16 +106,15 @@ def test_kill_9_mid_batch_leaves_database_and_store_consistent(tmp_path: Path) -
 @pytest.mark.slow
 def test_two_ingest_processes_at_once_on_sqlite(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'conc.sqlite3'}"
-    db = Database.open(url)
+    arrays = tmp_path / "arrays"
+    db = Database.open(url, store_root=arrays)
     db.add_patient("C-1", 75, 1.75, "right")
     db.add_patient("C-2", 75, 1.75, "right")
     batches = [_files(tmp_path / "a", 20, seed=2), _files(tmp_path / "b", 20, seed=3)]
     procs = [
-        subprocess.Popen(
-            [sys.executable, "-m", "fieldbank.cli", "ingest", *map(str, fs), "--patient", code,
-             "--session", "s"],
-            cwd=ROOT, env=_env(url, FIELDBANK_TEST_INGEST_SLEEP_S="0.02"),
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        subprocess.Popen(_slow_ingest(url, arrays, fs, code, "s", sleep_s=0.02),
+                         cwd=ROOT, env=_env(url, arrays),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         for code, fs in (("C-1", batches[0]), ("C-2", batches[1]))
     ]
     for p in procs:

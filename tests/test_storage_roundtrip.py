@@ -12,7 +12,7 @@ from fieldbank.errors import ParameterError, StorageError
 from fieldbank.maps import postural_map, stiffness_map
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from fieldbank.storage import Database, IncomingFile
+from fieldbank.storage import Database, IncomingFile, IngestOutcome
 
 
 @pytest.fixture
@@ -97,11 +97,11 @@ def test_map_round_trip(db: Database) -> None:
 
 
 def test_large_source_file_goes_to_array_store(db: Database) -> None:
-    from fieldbank.storage import database as dbmod
+    from fieldbank.storage import mapstore
 
     p = db.add_patient("P-003", 70, 1.7, "right")
     post, _ = _maps(p.arm_params())
-    text = post.to_csv() + "# padding\n" * (dbmod.INLINE_MAX_BYTES // 10 + 10)
+    text = post.to_csv() + "# padding\n" * (mapstore.INLINE_MAX_BYTES // 10 + 10)
     inc = _incoming("big.csv", [post], text)
     db.ingest_files("P-003", "s", [inc])
     assert db.source_file(inc.sha256).in_array_store
@@ -119,6 +119,26 @@ def test_duplicate_file_not_stored_twice(db: Database) -> None:
     assert second[0].status == "duplicate"
     assert [x.label for x in db.list_sessions("P-004")] == ["s"]  # no empty session "t"
     assert len(db.list_maps()) == 1
+
+
+def test_ingest_progress_reports_each_stored_file_inside_the_transaction(
+        db: Database, any_db_url: str, tmp_path) -> None:
+    p = db.add_patient("P-006", 70, 1.7, "right")
+    post, stiff = _maps(p.arm_params())
+    a, b = _incoming("a.csv", [post]), _incoming("b.csv", [post, stiff], post.to_csv() + "#\n")
+    db.ingest_files("P-006", "s", [a])
+    other = Database.open(any_db_url, store_root=tmp_path / "arrays")
+    seen = []
+
+    def progress(o: IngestOutcome) -> None:
+        # another connection does not see the batch yet: the callback runs before the commit
+        seen.append((o.file_name, o.status, o.n_maps, len(other.list_maps("P-006"))))
+
+    out = db.ingest_files("P-006", "t", [a, b], progress=progress)
+    other.close()
+    assert seen == [("b.csv", "stored", 2, 1)]  # the duplicate a.csv is not reported
+    assert [o.status for o in out] == ["duplicate", "stored"]
+    assert len(db.list_maps("P-006")) == 3
 
 
 def test_models_fits_plans_round_trip(db: Database) -> None:

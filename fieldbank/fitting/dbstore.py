@@ -1,36 +1,28 @@
 """The :class:`~fieldbank.fitting.records.FitStore` on the field database.
 
-An adapter over :class:`fieldbank.storage.Database`, using
-its ``get_patient``, ``list_maps``, ``get_maps``, ``add_fitted_model`` (model and fit in one
-transaction), ``list_models``, ``get_model``, ``model_lineage`` and ``list_fits``. The fitted
-model is stored with origin 'fitted' and the fit (report, algorithm, seed, evaluations, time,
-cost, map ids) refers to it.
+An adapter over :class:`fieldbank.storage.Database`, using its ``get_patient``, ``list_maps``,
+``get_maps``, ``add_fitted_model`` (model and fit in one transaction), ``list_models``,
+``get_model``, ``model_lineage`` and ``list_fits``. The fitted model is stored with origin
+'fitted' and the fit (report, algorithm, seed, evaluations, time, cost, map ids) refers to it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
 
-from fieldbank.fitting.records import FitSubmission, PatientMap, SavedFit
+from fieldbank.fitting.records import FitSubmission, ModelDetail, PatientMap, SavedFit
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database, StoredModel
 
 
-def _row(m: StoredModel) -> dict[str, Any]:
-    return {"id": m.id, "patient": m.patient_code, "origin": m.origin, "label": m.label,
-            "parent_id": m.parent_id, "created_at": m.created_at}
-
-
 class DatabaseFitStore:
-    """FitStore over a ``fieldbank.storage.Database``."""
+    """FitStore over a :class:`fieldbank.storage.Database`."""
 
     def __init__(self, db: Database) -> None:
         self.db = db
 
     def patient_params(self, patient: str) -> ArmParams:
-        params: ArmParams = self.db.get_patient(patient).arm_params()
-        return params
+        return self.db.get_patient(patient).arm_params()
 
     def maps_for(self, patient: str, session: str | None = None) -> Sequence[PatientMap]:
         self.db.get_patient(patient)  # unknown patient -> the storage layer's clear error
@@ -52,18 +44,15 @@ class DatabaseFitStore:
             [int(m) for m in record.map_ids])
         return SavedFit(fit.id, model.id)
 
-    def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]:
-        return [_row(m) for m in self.db.list_models(patient_code=patient)]
+    def list_models(self, patient: str | None = None) -> Sequence[StoredModel]:
+        return self.db.list_models(patient_code=patient)
 
-    def get_model(self, model_id: int | str) -> Mapping[str, Any]:
+    def get_model(self, model_id: int | str) -> ModelDetail:
         m = self.db.get_model(int(model_id))
-        row = _row(m)
-        row["params"] = m.params
-        row["lineage"] = [_row(a) for a in self.db.model_lineage(m.id)[1:]]
         fits = [f for f in self.db.list_fits(m.patient_code) if f.model_id == m.id] \
             if m.patient_code else []
-        row["fit"] = dict(fits[-1].result) if fits else None
-        return row
+        return ModelDetail(m, tuple(self.db.model_lineage(m.id)[1:]),
+                           dict(fits[-1].result) if fits else None)
 
 
 def open_fit_store(db_url: str | None) -> DatabaseFitStore:

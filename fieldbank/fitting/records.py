@@ -9,25 +9,26 @@ the storage layer (or a test double) can provide them:
   (all sessions when ``session`` is None; an unknown session -> a FieldbankError);
 * ``add_fit(record)`` - store the fit and the fitted model **in one transaction** and return
   their ids (:class:`SavedFit`); the record carries the lineage (patient, session, map ids);
-* ``list_models(patient)`` - rows (mappings with at least ``id``, ``patient``, ``origin``,
-  ``label``, ``parent_id``, ``created_at``) for ``fieldbank models list``;
-* ``get_model(model_id)`` - a mapping with those keys plus ``params`` (ArmParams), ``lineage``
-  (list of ancestor rows, newest first) and ``fit`` (the stored fit report, or None) for
-  ``fieldbank models show``.
+* ``list_models(patient)`` - the stored models as
+  :class:`~fieldbank.storage.records.StoredModel` records, for ``fieldbank models list``;
+* ``get_model(model_id)`` - a :class:`ModelDetail`: the model, its ancestors (newest first)
+  and the stored fit report that produced it, for ``fieldbank models show``.
 
-:func:`fit_patient` runs one fit for a stored patient and stores it.
+:func:`fit_patient` runs one fit for a stored patient and stores it. :func:`model_summary` and
+:meth:`ModelDetail.to_json_dict` give the JSON documents of ``models list`` and ``models show``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from fieldbank.errors import FitError
 from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.maps import FieldMap
 from fieldbank.params import ArmParams
+from fieldbank.storage.records import StoredModel
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,38 @@ class SavedFit:
     model_id: int | str
 
 
+def model_summary(m: StoredModel) -> dict[str, Any]:
+    """The JSON document of one model in ``fieldbank models list``."""
+    return {"id": m.id, "patient": m.patient_code, "origin": m.origin, "label": m.label,
+            "parent_id": m.parent_id, "created_at": m.created_at}
+
+
+@dataclass(frozen=True)
+class ModelDetail:
+    """A stored model with where it came from.
+
+    Attributes
+    ----------
+    model : StoredModel
+        The model and its parameters.
+    lineage : tuple of StoredModel
+        Its ancestors, newest first (the model itself not included).
+    fit : mapping or None
+        The stored report of the fit that produced it (:meth:`ArmFitter.report`, a JSON
+        document), or None when it was not fitted.
+    """
+
+    model: StoredModel
+    lineage: tuple[StoredModel, ...] = ()
+    fit: Mapping[str, Any] | None = None
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The JSON document of ``fieldbank models show``."""
+        return {**model_summary(self.model), "params": self.model.params,
+                "lineage": [model_summary(a) for a in self.lineage],
+                "fit": None if self.fit is None else dict(self.fit)}
+
+
 class FitStore(Protocol):
     """What :func:`fit_patient` and the ``fit``/``models`` commands need from storage."""
 
@@ -76,9 +109,9 @@ class FitStore(Protocol):
 
     def add_fit(self, record: FitSubmission) -> SavedFit: ...
 
-    def list_models(self, patient: str | None = None) -> Sequence[Mapping[str, Any]]: ...
+    def list_models(self, patient: str | None = None) -> Sequence[StoredModel]: ...
 
-    def get_model(self, model_id: int | str) -> Mapping[str, Any]: ...
+    def get_model(self, model_id: int | str) -> ModelDetail: ...
 
 
 @dataclass(frozen=True)
@@ -116,14 +149,11 @@ def fit_patient(
     if progress:
         progress(f"fitting {len(stored)} maps of {where} with {fitter.algorithm} "
                  f"(seed {fitter.seed})")
-    maps = []
+    maps: list[FieldMap] = []
     for s in stored:
         meta = dict(s.map.metadata)
         meta.setdefault("map_id", str(s.map_id))
-        maps.append(FieldMap(kind=s.map.kind, positions_m=s.map.positions_m,
-                             values=s.map.values, sd=s.map.sd, frame=s.map.frame,
-                             sign=s.map.sign, velocity_m_per_s=s.map.velocity_m_per_s,
-                             source=s.map.source, metadata=meta))
+        maps.append(replace(s.map, metadata=meta))
     fitter.fit(maps, base, patient=None)
     report = fitter.report()
     report["patient"] = patient

@@ -25,8 +25,7 @@ from fieldbank.ingest.hdf5fmt import read_hdf5
 from fieldbank.ingest.matfmt import read_mat5, read_mat73
 from fieldbank.ingest.parsed import ParsedMap, validate_map
 from fieldbank.model import Arm
-from fieldbank.storage.database import Database
-from fieldbank.storage.records import IncomingFile, IngestOutcome
+from fieldbank.storage import Database, IncomingFile, IngestOutcome
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 FORMATS = ("csv", "hdf5", "mat5", "mat73")
@@ -157,10 +156,10 @@ def ingest_paths(
         return IngestReport(patient.code, session_label, True, tuple(outcomes))
     done = [total]
 
-    def stored(name: str) -> None:
+    def stored(outcome: IngestOutcome) -> None:
         done[0] += 1
         if progress is not None:
-            progress(done[0], 2 * total, name)
+            progress(done[0], 2 * total, outcome.file_name)
 
     outcomes = db.ingest_files(patient.code, session_label, files, session_date,
                                progress=stored)

@@ -1,11 +1,83 @@
-"""The field database: schema, engine configuration, migrations and the :class:`Database` API.
+"""The field database: one class, :class:`Database`, that every other part of fieldbank uses.
 
-See :mod:`fieldbank.storage.database` for the API, :mod:`fieldbank.storage.config` for where
-the database lives, and ``docs/storage.md`` for the schema and durability guarantees.
+API (methods return frozen records from :mod:`fieldbank.storage.records` or domain objects such
+as :class:`~fieldbank.maps.FieldMap` and :class:`~fieldbank.params.ArmParams`; ORM rows never
+leave this package)::
+
+    db = Database.open(url=None)              # --db > FIELDBANK_DB > embedded SQLite file
+    db.close()   /   with Database.open(...) as db: ...
+    # patients and sessions                                                   database.py
+    db.add_patient(code, body_mass_kg, height_m, side, notes="") -> PatientInfo
+    db.get_patient(code) / db.list_patients() / db.patient_by_id(id)
+    db.ensure_session(patient_code, label, session_date=None) -> SessionInfo
+    db.list_sessions(patient_code=None)
+    # measured maps and source files (written by fieldbank.ingest)              mapstore.py
+    db.ingest_files(patient_code, session_label, files, session_date=None,
+                    progress: IngestProgress | None = None) -> [IngestOutcome]
+    db.has_source(sha256) -> bool
+    db.list_maps(patient_code=None, session_label=None, kind=None, since=None, until=None)
+    db.get_map(map_id) -> FieldMap   db.get_maps(map_ids) -> [FieldMap]
+    db.get_stored_map(map_id) -> StoredMap
+    db.source_file(sha256) -> SourceFileInfo   db.source_bytes(sha256) -> bytes
+    # models, fits, plans (fitting and what-if)                                 lineage.py
+    db.add_model(params, origin, label, patient_code=None, parent_id=None) -> StoredModel
+    db.get_model(id) / db.list_models(patient_code=None, origin=None) / db.model_lineage(id)
+    db.add_fit(patient_code, model_id, algorithm, seed, n_evals, time_s, cost, result, map_ids)
+    db.add_fitted_model(params, label, patient_code, algorithm, seed, n_evals, time_s, cost,
+                        result, map_ids) -> (StoredModel, FitRecord)   # one transaction
+    db.list_fits(patient_code=None) / db.get_fit(id)
+    db.add_plan(base_model_id, result_model_id, spec, label="", patient_code=None)
+    db.add_plan_result(after, spec, label, patient_code=None, base_model_id=None, before=None,
+                       before_label="") -> (base model id, after StoredModel, PlanRecord)
+    db.list_plans(patient_code=None) / db.get_plan(id)
+    # haptic sessions and traces (arrays go to the HDF5 array store)            traces.py
+    db.start_haptic_session(model_a_id, robot_url, model_b_id=None, patient_code=None)
+    db.end_haptic_session(id, stats) / db.get_haptic_session(id)
+    db.list_haptic_sessions(patient_code=None)
+    db.add_trace(haptic_session_id, name, array, unit, provenance) -> TraceRecord
+    db.list_traces(haptic_session_id) / db.get_trace_array(trace_id)
+    # audit and integrity                                          database.py, check.py
+    db.audit_entries(limit=None) -> [AuditEntry]
+    db.check() -> CheckReport      # check.check(db): reads db.engine and db.store only
+    db.engine / db.store / db.actor / db.url_masked
+
+Every write runs in one transaction together with its audit-log entry (``audit_log`` is
+append-only: the database refuses UPDATE and DELETE on it). On SQLite write transactions start
+with ``BEGIN IMMEDIATE`` so concurrent writers queue on the busy timeout instead of failing.
+
+Errors (the storage part of the tree in :mod:`fieldbank.errors`)::
+
+    FieldbankError
+    ├── ParameterError(ValueError)   refused input: a patient code that is not a pseudonym, a
+    │                                side, mass or height out of range, an unknown model origin,
+    │                                an empty session label
+    └── StorageError(RuntimeError)   the database or array store failed or refused: unknown
+        │                            patient/session/map/model/fit/plan/trace, a duplicate
+        │                            patient, a constraint, a schema behind head, an
+        │                            unreachable server (URL shown without its password)
+        └── IntegrityError           stored bytes or an array no longer match their SHA-256,
+                                     or a store file is missing or unreadable
+
+Modules::
+
+    __init__.py    this face: Database, the records, the configuration helpers
+    database.py    Database: open/close, patients, sessions, audit, check (the mixins' design)
+    core.py        DatabaseCore: engine, store, actor, transactions, audit, patient/session rows
+    mapstore.py    MapStore mixin: ingest, maps, source files (IngestProgress)
+    lineage.py     Lineage mixin: models, fits, plans
+    traces.py      Traces mixin: haptic sessions and traces
+    check.py       check(db) -> CheckReport: every reference and checksum, orphans
+    records.py     the frozen records returned by Database
+    orm.py         ORM rows and the schema (never leave this package)
+    config.py      where the database lives (data_home, URLs), engines, SQLite set-up
+    migrate.py     alembic driven from code; the migrations are the package fieldbank.migrations
+
+See ``docs/storage.md`` for the schema and the durability guarantees.
 """
 
 from fieldbank.storage.config import data_home, make_engine, mask_url, resolve_url
 from fieldbank.storage.database import Database
+from fieldbank.storage.mapstore import IngestProgress
 from fieldbank.storage.records import (
     AuditEntry,
     CheckReport,
@@ -30,6 +102,7 @@ __all__ = [
     "HapticSessionRecord",
     "IncomingFile",
     "IngestOutcome",
+    "IngestProgress",
     "PatientInfo",
     "PlanRecord",
     "SessionInfo",

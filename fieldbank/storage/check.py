@@ -20,14 +20,16 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
-from sqlalchemy import func, select, text
+from sqlalchemy import Engine, func, select, text
 
+from fieldbank.arraystore import ArrayStore
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.storage import migrate
+from fieldbank.storage.core import read_session
 from fieldbank.storage.orm import (
     ArrayRow,
     MapRow,
@@ -38,11 +40,26 @@ from fieldbank.storage.orm import (
 )
 from fieldbank.storage.records import CheckReport
 
-if TYPE_CHECKING:
-    from fieldbank.storage.database import Database
+
+class Checkable(Protocol):
+    """What :func:`check` reads: a database and its array store (a
+    :class:`~fieldbank.storage.Database` is one)."""
+
+    @property
+    def engine(self) -> Engine: ...
+
+    @property
+    def store(self) -> ArrayStore: ...
 
 
-def check(db: Database) -> CheckReport:
+def check(db: Checkable) -> CheckReport:
+    """Verify the database ``db`` and its array store; nothing is changed.
+
+    Returns
+    -------
+    CheckReport
+        Every problem and orphan found (see the module docstring), and row counts per table.
+    """
     problems: list[str] = []
     orphans: list[str] = []
     counts: dict[str, int] = {}
@@ -55,7 +72,7 @@ def check(db: Database) -> CheckReport:
             migrate.check_drift(db.engine)
         except StorageError as exc:
             problems.append(str(exc))
-    with db._read() as s:
+    with read_session(db.engine) as s:
         if db.engine.dialect.name == "sqlite":
             res = [r[0] for r in s.execute(text("PRAGMA quick_check"))]
             if res != ["ok"]:

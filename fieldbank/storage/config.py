@@ -20,13 +20,14 @@ A password in a URL is never printed or logged: use :func:`mask_url` for every m
 from __future__ import annotations
 
 import os
+import sqlite3
 from pathlib import Path
-from typing import Any
 
 import platformdirs
-from sqlalchemy import Engine, create_engine, event
+from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import ArgumentError
+from sqlalchemy.pool import ConnectionPoolEntry
 
 from fieldbank.errors import StorageError
 
@@ -81,7 +82,7 @@ def sqlite_path(url: URL) -> Path | None:
     return Path(url.database)
 
 
-def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
+def _sqlite_connect(dbapi_connection: sqlite3.Connection, _record: ConnectionPoolEntry) -> None:
     # fieldbank issues BEGIN itself (see _sqlite_begin); the driver must not.
     dbapi_connection.isolation_level = None
     cur = dbapi_connection.cursor()
@@ -92,7 +93,7 @@ def _sqlite_connect(dbapi_connection: Any, _record: Any) -> None:
     cur.close()
 
 
-def _sqlite_begin(conn: Any) -> None:
+def _sqlite_begin(conn: Connection) -> None:
     mode = conn.get_execution_options().get("fieldbank_begin", "DEFERRED")
     if mode not in ("DEFERRED", "IMMEDIATE", "EXCLUSIVE"):
         raise StorageError(f"Unknown SQLite transaction mode {mode!r}.")
@@ -102,7 +103,6 @@ def _sqlite_begin(conn: Any) -> None:
 def make_engine(url: URL | str | None = None) -> Engine:
     """An engine for ``url`` (resolved with :func:`resolve_url` when None or text)."""
     u = url if isinstance(url, URL) else resolve_url(url)
-    kwargs: dict[str, Any] = {}
     if is_sqlite(u):
         path = sqlite_path(u)
         if path is not None:
@@ -113,7 +113,7 @@ def make_engine(url: URL | str | None = None) -> Engine:
                     f"Cannot create the data directory {path.parent} ({exc.strerror})."
                 ) from None
     try:
-        engine = create_engine(u, **kwargs)
+        engine = create_engine(u)
     except (ArgumentError, ImportError) as exc:
         raise StorageError(f"Cannot open database {mask_url(u)}: {exc}") from None
     if is_sqlite(u):

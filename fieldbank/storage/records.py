@@ -10,6 +10,7 @@ from datetime import date, datetime
 from typing import Any
 
 from fieldbank.arraystore import ArrayRef
+from fieldbank.maps import FieldMap
 from fieldbank.params import ArmParams
 
 
@@ -177,7 +178,7 @@ class IncomingFile:
     sha256: str
     file_format: str
     content: bytes
-    maps: tuple[Any, ...]  # tuple[FieldMap, ...]; Any keeps this module free of maps imports
+    maps: tuple[FieldMap, ...]
 
 
 @dataclass(frozen=True)

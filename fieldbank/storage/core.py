@@ -1,0 +1,177 @@
+"""What every part of :class:`~fieldbank.storage.Database` shares: the engine, the array store,
+the actor, transactions, the audit log and the patient and session rows.
+
+:class:`DatabaseCore` is the base of the aggregate mixins (:mod:`~fieldbank.storage.mapstore`,
+:mod:`~fieldbank.storage.lineage`, :mod:`~fieldbank.storage.traces`); :func:`read_session` and
+:func:`write_session` are also what :func:`fieldbank.storage.check.check` reads through, so the
+checker needs nothing private of the database.
+
+Transactions: a read runs in one ORM session; a write runs in one session on one connection,
+committed with its audit-log entry or rolled back whole. On SQLite a write starts with ``BEGIN
+IMMEDIATE`` (see :mod:`fieldbank.storage.config`) so concurrent writers queue on the busy
+timeout instead of failing when they upgrade a read lock. Database failures become
+:class:`~fieldbank.errors.StorageError` naming the URL without its password.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator, Mapping
+from contextlib import AbstractContextManager, contextmanager
+from datetime import UTC, date, datetime
+from typing import Any
+
+from sqlalchemy import Engine, select
+from sqlalchemy import exc as sa_exc
+from sqlalchemy.orm import Session
+
+from fieldbank.arraystore import ArrayRef, ArrayStore
+from fieldbank.errors import ParameterError, StorageError
+from fieldbank.storage.config import mask_url
+from fieldbank.storage.orm import ArrayRow, AuditRow, PatientRow, SessionRow
+
+
+def now() -> datetime:
+    """The current time as stored: UTC without a zone."""
+    return datetime.now(UTC).replace(tzinfo=None)
+
+
+def to_utc(d: datetime) -> datetime:
+    """A stored timestamp (UTC without a zone) as a timezone-aware UTC datetime."""
+    return d.replace(tzinfo=UTC) if d.tzinfo is None else d.astimezone(UTC)
+
+
+def to_utc_opt(d: datetime | None) -> datetime | None:
+    return None if d is None else to_utc(d)
+
+
+@contextmanager
+def read_session(engine: Engine) -> Iterator[Session]:
+    """An ORM session for reading; database failures raise StorageError."""
+    try:
+        with Session(engine) as s:
+            yield s
+    except sa_exc.DBAPIError as exc:
+        raise StorageError(f"Database {mask_url(engine.url)} failed: {exc.orig}") from None
+
+
+@contextmanager
+def write_session(engine: Engine) -> Iterator[Session]:
+    """An ORM session in one write transaction: committed on success, else rolled back whole.
+
+    Raises
+    ------
+    StorageError
+        The database refused the change (a constraint) or failed.
+    """
+    try:
+        with engine.connect() as conn:
+            if engine.dialect.name == "sqlite":
+                conn.execution_options(fieldbank_begin="IMMEDIATE")
+            with Session(bind=conn) as s:
+                try:
+                    yield s
+                    s.commit()
+                except BaseException:
+                    s.rollback()
+                    raise
+    except sa_exc.IntegrityError as exc:
+        raise StorageError(f"The database refused the change: {exc.orig}") from None
+    except sa_exc.DBAPIError as exc:
+        raise StorageError(f"Database {mask_url(engine.url)} failed: {exc.orig}") from None
+
+
+def array_row(ref: ArrayRef) -> ArrayRow:
+    """The ``arrays`` row recording an array written to the store."""
+    return ArrayRow(sha256=ref.sha256, relpath=ref.relpath, nbytes=ref.nbytes,
+                    shape_json=json.dumps(list(ref.shape)), dtype=ref.dtype, unit=ref.unit,
+                    created_at=now())
+
+
+def array_ref(r: ArrayRow) -> ArrayRef:
+    """What an ``arrays`` row says of its array in the store."""
+    return ArrayRef(r.sha256, r.relpath, r.nbytes, tuple(json.loads(r.shape_json)), r.dtype,
+                    r.unit)
+
+
+class DatabaseCore:
+    """The engine, array store and actor, with the transactions and row look-ups that every
+    aggregate of the database uses. Not used alone: :class:`fieldbank.storage.Database`
+    combines it with the aggregates.
+
+    Parameters
+    ----------
+    engine : sqlalchemy.Engine
+        The database (see :func:`fieldbank.storage.config.make_engine`).
+    store : ArrayStore
+        Where large arrays go.
+    actor : str
+        Who writes; recorded with every write in the audit log.
+    """
+
+    def __init__(self, engine: Engine, store: ArrayStore, actor: str) -> None:
+        self.engine = engine
+        self.store = store
+        self.actor = actor
+
+    @property
+    def url_masked(self) -> str:
+        """The database URL with any password replaced by ``***``."""
+        return mask_url(self.engine.url)
+
+    # --- transactions -----------------------------------------------------------------------
+    def _read(self) -> AbstractContextManager[Session]:
+        return read_session(self.engine)
+
+    def _write(self) -> AbstractContextManager[Session]:
+        return write_session(self.engine)
+
+    def _audit(self, s: Session, action: str, entity: str, entity_id: object,
+               detail: Mapping[str, Any] | None = None) -> None:
+        """Append to the audit log inside the write transaction ``s`` (``detail``: JSON)."""
+        s.add(AuditRow(at=now(), actor=self.actor, action=action, entity=entity,
+                       entity_id=str(entity_id),
+                       detail_json=json.dumps(dict(detail or {}), sort_keys=True, default=str)))
+
+    # --- patient and session rows -----------------------------------------------------------
+    def _patient_row(self, s: Session, code: str) -> PatientRow:
+        row = s.scalar(select(PatientRow).where(PatientRow.code == code))
+        if row is None:
+            raise StorageError(f"No patient with code {code!r} in the database; add it with "
+                               "'fieldbank patient add'.")
+        return row
+
+    def _optional_patient_id(self, s: Session, code: str | None) -> int | None:
+        return None if code is None else self._patient_row(s, code).id
+
+    def _code_of(self, s: Session, patient_id: int | None) -> str | None:
+        if patient_id is None:
+            return None
+        return s.scalar(select(PatientRow.code).where(PatientRow.id == patient_id))
+
+    def _session_row(self, s: Session, patient: PatientRow, label: str,
+                     session_date: date | None, create: bool) -> SessionRow:
+        """The session ``label`` of ``patient``, dated if it was not, created if absent (and
+        ``create``); a different date than the stored one is refused."""
+        row = s.scalar(select(SessionRow).where(SessionRow.patient_id == patient.id,
+                                                SessionRow.label == label))
+        if row is not None:
+            if session_date is not None and row.session_date not in (None, session_date):
+                raise StorageError(
+                    f"Session {label!r} of patient {patient.code!r} is dated "
+                    f"{row.session_date}; got {session_date}."
+                )
+            if session_date is not None and row.session_date is None:
+                row.session_date = session_date
+                self._audit(s, "date", "session", row.id, {"date": session_date.isoformat()})
+            return row
+        if not create:
+            raise StorageError(f"Patient {patient.code!r} has no session {label!r}.")
+        if not label.strip():
+            raise ParameterError("A session label must not be empty.")
+        row = SessionRow(patient_id=patient.id, label=label, session_date=session_date,
+                         created_at=now())
+        s.add(row)
+        s.flush()
+        self._audit(s, "add", "session", row.id, {"patient": patient.code, "label": label})
+        return row

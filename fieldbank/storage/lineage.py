@@ -1,0 +1,225 @@
+"""Models, fits and plans: where each stored arm model came from.
+
+A model is a set of :class:`~fieldbank.params.ArmParams` with an origin ('synthetic', 'fitted'
+or 'intervention') and a parent: a model after an intervention has its base as parent, so
+:meth:`Lineage.model_lineage` walks back to the fitted or synthetic model it started from. A
+fit records how a fitted model was obtained (algorithm, seed, evaluations, time, cost, report
+and the maps used); a plan records which intervention turned a base model into a result model.
+
+The use cases that create two rows store them in one transaction - :meth:`add_fitted_model`
+(model and fit) and :meth:`add_plan_result` (result model, plan and, if needed, its base) -
+so a crash never leaves a fitted model without its fit or a plan without its result.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from fieldbank.errors import ParameterError, StorageError
+from fieldbank.params import ArmParams
+from fieldbank.storage.core import DatabaseCore, now, to_utc
+from fieldbank.storage.orm import FitRow, MapRow, ModelRow, PatientRow, PlanRow, fit_maps
+from fieldbank.storage.records import FitRecord, PlanRecord, StoredModel
+
+ORIGINS = ("synthetic", "fitted", "intervention")
+
+
+def _model(r: ModelRow, code: str | None) -> StoredModel:
+    return StoredModel(r.id, code, r.parent_id, r.origin, r.label,
+                       ArmParams.from_json(r.params_json, where=f"model {r.id}"),
+                       to_utc(r.created_at))
+
+
+class Lineage(DatabaseCore):
+    """Models, fits and plans of :class:`~fieldbank.storage.Database`."""
+
+    # --- models -----------------------------------------------------------------------------
+    def add_model(self, params: ArmParams, origin: str, label: str,
+                  patient_code: str | None = None, parent_id: int | None = None) -> StoredModel:
+        """Store arm parameters; ``origin`` is 'synthetic', 'fitted' or 'intervention'."""
+        with self._write() as s:
+            return self._add_model(s, params, origin, label, patient_code, parent_id)
+
+    def _add_model(self, s: Session, params: ArmParams, origin: str, label: str,
+                   patient_code: str | None, parent_id: int | None) -> StoredModel:
+        if origin not in ORIGINS:
+            raise ParameterError(f"origin must be one of {', '.join(ORIGINS)}; got {origin!r}.")
+        pid = self._optional_patient_id(s, patient_code)
+        if parent_id is not None and s.get(ModelRow, parent_id) is None:
+            raise StorageError(f"No model with id {parent_id} (the parent).")
+        row = ModelRow(patient_id=pid, parent_id=parent_id, origin=origin, label=label,
+                       params_json=params.to_json(), created_at=now())
+        s.add(row)
+        s.flush()
+        self._audit(s, "add", "model", row.id,
+                    {"origin": origin, "label": label, "parent": parent_id})
+        return _model(row, patient_code)
+
+    def get_model(self, model_id: int) -> StoredModel:
+        with self._read() as s:
+            r = s.get(ModelRow, model_id)
+            if r is None:
+                raise StorageError(f"No model with id {model_id}.")
+            return _model(r, self._code_of(s, r.patient_id))
+
+    def list_models(self, patient_code: str | None = None,
+                    origin: str | None = None) -> list[StoredModel]:
+        q = (select(ModelRow, PatientRow.code)
+             .outerjoin(PatientRow, ModelRow.patient_id == PatientRow.id).order_by(ModelRow.id))
+        if patient_code is not None:
+            q = q.where(PatientRow.code == patient_code)
+        if origin is not None:
+            q = q.where(ModelRow.origin == origin)
+        with self._read() as s:
+            return [_model(r, code) for r, code in s.execute(q)]
+
+    def model_lineage(self, model_id: int) -> list[StoredModel]:
+        """The model and its ancestors, newest first."""
+        out: list[StoredModel] = []
+        seen: set[int] = set()
+        current: int | None = model_id
+        while current is not None and current not in seen:
+            seen.add(current)
+            m = self.get_model(current)
+            out.append(m)
+            current = m.parent_id
+        return out
+
+    # --- fits -------------------------------------------------------------------------------
+    def add_fit(self, patient_code: str, model_id: int, algorithm: str, seed: int | None,
+                n_evals: int, time_s: float, cost: float, result: Mapping[str, Any],
+                map_ids: Sequence[int]) -> FitRecord:
+        """Record a fit: the fitted model (stored before, origin 'fitted') and the maps used.
+
+        ``result`` is the fit report, a JSON document; ``time_s`` in s.
+        """
+        with self._write() as s:
+            return self._add_fit(s, patient_code, model_id, algorithm, seed, n_evals, time_s,
+                                 cost, result, map_ids)
+
+    def add_fitted_model(self, params: ArmParams, label: str, patient_code: str,
+                         algorithm: str, seed: int | None, n_evals: int, time_s: float,
+                         cost: float, result: Mapping[str, Any],
+                         map_ids: Sequence[int]) -> tuple[StoredModel, FitRecord]:
+        """Store a fitted model and its fit record in one transaction: both or neither."""
+        with self._write() as s:
+            model = self._add_model(s, params, "fitted", label, patient_code, None)
+            fit = self._add_fit(s, patient_code, model.id, algorithm, seed, n_evals, time_s,
+                                cost, result, map_ids)
+            return model, fit
+
+    def _add_fit(self, s: Session, patient_code: str, model_id: int, algorithm: str,
+                 seed: int | None, n_evals: int, time_s: float, cost: float,
+                 result: Mapping[str, Any], map_ids: Sequence[int]) -> FitRecord:
+        p = self._patient_row(s, patient_code)
+        if s.get(ModelRow, model_id) is None:
+            raise StorageError(f"No model with id {model_id}.")
+        found = set(s.scalars(select(MapRow.id).where(MapRow.id.in_(list(map_ids)),
+                                                      MapRow.patient_id == p.id)))
+        missing = [m for m in map_ids if m not in found]
+        if missing:
+            raise StorageError(f"Maps {missing} are not maps of patient {patient_code!r}.")
+        row = FitRow(patient_id=p.id, model_id=model_id, algorithm=algorithm, seed=seed,
+                     n_evals=int(n_evals), time_s=float(time_s), cost=float(cost),
+                     result_json=json.dumps(dict(result), sort_keys=True),
+                     created_at=now())
+        s.add(row)
+        s.flush()
+        ids = tuple(dict.fromkeys(int(m) for m in map_ids))
+        if ids:
+            s.execute(fit_maps.insert(), [{"fit_id": row.id, "map_id": m} for m in ids])
+        self._audit(s, "add", "fit", row.id, {"model": model_id, "maps": list(ids)})
+        return FitRecord(row.id, p.code, model_id, algorithm, seed, row.n_evals,
+                         row.time_s, row.cost, json.loads(row.result_json), ids,
+                         to_utc(row.created_at))
+
+    def _fit(self, s: Session, r: FitRow) -> FitRecord:
+        ids = tuple(s.scalars(select(fit_maps.c.map_id).where(fit_maps.c.fit_id == r.id)
+                              .order_by(fit_maps.c.map_id)))
+        return FitRecord(r.id, str(self._code_of(s, r.patient_id)), r.model_id, r.algorithm,
+                         r.seed, r.n_evals, r.time_s, r.cost, json.loads(r.result_json), ids,
+                         to_utc(r.created_at))
+
+    def get_fit(self, fit_id: int) -> FitRecord:
+        with self._read() as s:
+            r = s.get(FitRow, fit_id)
+            if r is None:
+                raise StorageError(f"No fit with id {fit_id}.")
+            return self._fit(s, r)
+
+    def list_fits(self, patient_code: str | None = None) -> list[FitRecord]:
+        q = select(FitRow).join(PatientRow, FitRow.patient_id == PatientRow.id).order_by(FitRow.id)
+        if patient_code is not None:
+            q = q.where(PatientRow.code == patient_code)
+        with self._read() as s:
+            return [self._fit(s, r) for r in s.scalars(q)]
+
+    # --- plans ------------------------------------------------------------------------------
+    def add_plan(self, base_model_id: int, result_model_id: int, spec: Mapping[str, Any],
+                 label: str = "", patient_code: str | None = None) -> PlanRecord:
+        """Record a plan (``spec``: its JSON document) turning one stored model into another."""
+        with self._write() as s:
+            return self._add_plan(s, base_model_id, result_model_id, spec, label, patient_code)
+
+    def add_plan_result(self, after: ArmParams, spec: Mapping[str, Any], label: str,
+                        patient_code: str | None = None, base_model_id: int | None = None,
+                        before: ArmParams | None = None,
+                        before_label: str = "") -> tuple[int, StoredModel, PlanRecord]:
+        """Store a plan with its result model in one transaction: all or nothing.
+
+        The base is a stored model (``base_model_id``) or, when it is not stored yet, the
+        ``before`` parameters, stored first as a synthetic model. Returns (base model id,
+        the after model (origin 'intervention', parent = base), the plan record).
+        """
+        if (base_model_id is None) == (before is None):
+            raise ParameterError("Give exactly one of base_model_id and before.")
+        with self._write() as s:
+            if base_model_id is None:
+                assert before is not None
+                base_model_id = self._add_model(s, before, "synthetic", before_label,
+                                                patient_code, None).id
+            child = self._add_model(s, after, "intervention", label, patient_code,
+                                    base_model_id)
+            plan = self._add_plan(s, base_model_id, child.id, spec, label, patient_code)
+            return base_model_id, child, plan
+
+    def _add_plan(self, s: Session, base_model_id: int, result_model_id: int,
+                  spec: Mapping[str, Any], label: str, patient_code: str | None) -> PlanRecord:
+        pid = self._optional_patient_id(s, patient_code)
+        for mid in (base_model_id, result_model_id):
+            if s.get(ModelRow, mid) is None:
+                raise StorageError(f"No model with id {mid}.")
+        row = PlanRow(patient_id=pid, base_model_id=base_model_id,
+                      result_model_id=result_model_id, label=label,
+                      spec_json=json.dumps(dict(spec), sort_keys=True), created_at=now())
+        s.add(row)
+        s.flush()
+        self._audit(s, "add", "plan", row.id,
+                    {"base": base_model_id, "result": result_model_id})
+        return PlanRecord(row.id, patient_code, base_model_id, result_model_id, label,
+                          json.loads(row.spec_json), to_utc(row.created_at))
+
+    def _plan(self, s: Session, r: PlanRow) -> PlanRecord:
+        return PlanRecord(r.id, self._code_of(s, r.patient_id), r.base_model_id,
+                          r.result_model_id, r.label, json.loads(r.spec_json),
+                          to_utc(r.created_at))
+
+    def get_plan(self, plan_id: int) -> PlanRecord:
+        with self._read() as s:
+            r = s.get(PlanRow, plan_id)
+            if r is None:
+                raise StorageError(f"No plan with id {plan_id}.")
+            return self._plan(s, r)
+
+    def list_plans(self, patient_code: str | None = None) -> list[PlanRecord]:
+        q = (select(PlanRow).outerjoin(PatientRow, PlanRow.patient_id == PatientRow.id)
+             .order_by(PlanRow.id))
+        if patient_code is not None:
+            q = q.where(PatientRow.code == patient_code)
+        with self._read() as s:
+            return [self._plan(s, r) for r in s.scalars(q)]
