@@ -22,7 +22,7 @@ import click
 
 from fieldbank import modelsource
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.errors import FieldbankError, InterventionError
+from fieldbank.errors import FieldbankError
 from fieldbank.files import to_json, write_atomic
 from fieldbank.interventions.catalogue import (
     Baclofen,
@@ -34,6 +34,7 @@ from fieldbank.interventions.catalogue import (
     Tenotomy,
 )
 from fieldbank.interventions.defaults import value
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan, params_sha256
 from fieldbank.params import GROUPS, ArmParams
 

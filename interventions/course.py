@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fieldbank.errors import InterventionError
 from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.metrics import (
     Comparison,
     Conditions,

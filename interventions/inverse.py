@@ -30,9 +30,9 @@ from typing import Any
 import nlopt
 import numpy as np
 
-from fieldbank.errors import InterventionError
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.defaults import value
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.metrics import Conditions, fields_per_velocity
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray

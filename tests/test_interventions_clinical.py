@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from fieldbank.errors import InterventionError
 from fieldbank.interventions.catalogue import Botulinum, Lengthening, SerialCasting, Tenotomy
 from fieldbank.interventions.course import time_course
 from fieldbank.interventions.defaults import DEFAULTS
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.inverse import optimise_botulinum, unimpaired_reference
 from fieldbank.interventions.metrics import compare
 from fieldbank.interventions.plan import Plan, params_sha256
