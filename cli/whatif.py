@@ -200,9 +200,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     Results are model predictions, not treatment advice.
     """
     from fieldbank.cli.whatif_report import render_text
+    from fieldbank.evaluate import ArmCache, Conditions, compare
     from fieldbank.interventions.course import time_course
     from fieldbank.interventions.inverse import optimise_botulinum
-    from fieldbank.interventions.metrics import Conditions, compare
 
     try:
         if sum(bool(x) for x in (patient, params_file, severity)) != 1:
@@ -217,9 +217,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             raise click.UsageError(
                 "No intervention given: use --botox, --lengthen, --tenotomy, --cast, "
                 "--rhizotomy, --baclofen, --plan or --optimize.")
-        from fieldbank.model import Arm
-
-        cond = Conditions.standard(Arm.from_params(before))
+        arms = ArmCache()
+        arm_b = arms(before)
+        cond = Conditions.standard(arm_b)
         doc: dict[str, Any] = {"model": {"source": source, "sha256": params_sha256(before)}}
         inverse = None
         if optimize:
@@ -227,26 +227,27 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
                 raise click.UsageError("--optimize needs --total-units N.")
             gs = None if opt_groups is None else [g.strip() for g in opt_groups.split(",")]
             inverse = optimise_botulinum(
-                before, total_units, gs, conditions=cond,
+                arm_b, total_units, gs, conditions=cond, arms=arms,
                 weeks_since=value("botulinum.weeks_since") if weeks is None else weeks)
             doc["inverse"] = inverse.to_dict()
             if plan is None:
                 plan = inverse.plan
         assert plan is not None
         after, lineage = plan.derive(before)
-        comparison = compare(before, after, cond)
+        arm_a = arms(after)
+        comparison = compare(arm_b, arm_a, cond)
         doc["plan"] = plan.to_dict()
         doc["plan_steps"] = plan.describe()
         doc["lineage"] = lineage.to_dict()
         doc["comparison"] = comparison.to_dict()
         course = None
         if timecourse:
-            course = time_course(before, plan, conditions=cond)
+            course = time_course(arm_b, plan, conditions=cond, arms=arms)
             doc["timecourse"] = course.to_dict()
         if plot_path:
             from fieldbank.interventions.plot import plot_comparison
 
-            plot_comparison(before, after, plot_path, title=source)
+            plot_comparison(arm_b, arm_a, plot_path, title=source)
             doc["plot"] = plot_path
         if out_dir:
             d = Path(out_dir)

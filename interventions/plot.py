@@ -13,17 +13,15 @@ from pathlib import Path
 import numpy as np
 
 from fieldbank.errors import FieldbankError
-from fieldbank.interventions.metrics import Conditions
-from fieldbank.interventions.probing import profile
+from fieldbank.evaluate.compare import Conditions
+from fieldbank.evaluate.probing import profile
 from fieldbank.maps import ellipse
 from fieldbank.model import Arm
-from fieldbank.params import ArmParams
 
 PLOT_SPEED_M_PER_S = 0.3
 
 
-def plot_comparison(before: ArmParams, after: ArmParams, path: str | Path,
-                    title: str = "") -> Path:
+def plot_comparison(arm_b: Arm, arm_a: Arm, path: str | Path, title: str = "") -> Path:
     """Write the figure; returns the path. Refuses suffixes other than .png and .svg."""
     out = Path(path)
     if out.suffix.lower() not in (".png", ".svg"):
@@ -34,7 +32,6 @@ def plot_comparison(before: ArmParams, after: ArmParams, path: str | Path,
     import matplotlib.pyplot as plt
     from matplotlib.patches import Ellipse as EllipsePatch
 
-    arm_b, arm_a = Arm.from_params(before), Arm.from_params(after)
     cond = Conditions.standard(arm_b, grid_n=11)
     x = cond.grid_m
     v = np.array([0.0, -PLOT_SPEED_M_PER_S])

@@ -90,19 +90,20 @@ def _levels(sev: dict[str, Any]) -> str:
 
 def compute_case(spec: CaseSpec) -> CaseResult:
     """Metrics and figures of one stored plan (before = base model, after = result model)."""
+    from fieldbank.evaluate import ArmCache, Conditions, compare
     from fieldbank.interventions.catalogue import Botulinum
     from fieldbank.interventions.course import time_course
-    from fieldbank.interventions.metrics import Conditions, compare
 
     before = ArmParams.from_json(spec.base_params_json, where=f"model {spec.base_model_id}")
     after = ArmParams.from_json(spec.result_params_json, where=f"model {spec.result_model_id}")
     arm_b, arm_a = Arm.from_params(before), Arm.from_params(after)
     cond = Conditions.standard(arm_b)
-    c = compare(before, after, cond)
+    c = compare(arm_b, arm_a, cond)
     plan = _plan(spec)
     course = None
     if plan is not None and any(isinstance(s, Botulinum) for s in plan.steps):
-        course = time_course(before, plan, TIMECOURSE_WEEKS, conditions=cond)
+        course = time_course(arm_b, plan, TIMECOURSE_WEEKS, conditions=cond,
+                             arms=ArmCache(arm_b, arm_a))
 
     static, moving = c.fields[0], c.fields[min(1, len(c.fields) - 1)]
     probes = {n: (b, a) for n, b, a in c.probe_rows()}
