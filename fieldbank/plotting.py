@@ -58,15 +58,17 @@ def pyplot() -> ModuleType:
     return plt
 
 
-def new_figure(ncols: int = 1, size_in: tuple[float, float] = (5.5, 5.0)) -> tuple[Figure, Any]:
+def new_figure(ncols: int = 1, size_in: tuple[float, float] = (5.5, 5.0)
+               ) -> tuple[Figure, list[Axes]]:
     """A row of ``ncols`` equal-aspect panels in the shoulder frame; (figure, axes)."""
     fig, axes = pyplot().subplots(1, ncols, figsize=(size_in[0] * ncols, size_in[1]),
                                   squeeze=False)
-    for ax in axes[0]:
+    row: list[Axes] = list(axes[0])
+    for ax in row:
         ax.set_aspect("equal")
         ax.set_xlabel("x (m, +right)")
         ax.set_ylabel("y (m, +forward)")
-    return fig, axes[0]
+    return fig, row
 
 
 def spatial_axes(ax: Axes, title: str, fontsize: float = 9.0) -> None:

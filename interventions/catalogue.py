@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, cast
+from typing import Any, ClassVar, TypeVar, cast
 
 import numpy as np
 
@@ -455,15 +455,18 @@ class SerialCasting(Intervention):
                 f"Km × {self.km_factor:g})")
 
 
+_I = TypeVar("_I", bound=Intervention)
+
 KINDS: dict[str, type[Intervention]] = {
     c.kind: c for c in (Botulinum, Lengthening, Tenotomy, Rhizotomy, Baclofen, SerialCasting)
 }
 
 
-def _copy(obj: Intervention, **changes: Any) -> Any:
+def _copy(obj: _I, **changes: Any) -> _I:
+    """``obj`` with ``changes``, validated again through the JSON form."""
     d = obj.to_dict()
     d.update(changes)
-    return Intervention.from_dict(d)
+    return cast("_I", Intervention.from_dict(d))
 
 
 __all__ = [

@@ -10,7 +10,7 @@ the before and after panels, so they can be compared by eye.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from fieldbank import plotting
 from fieldbank.model import Arm, FloatArray
 
 if TYPE_CHECKING:  # typing only: matplotlib loads with the first figure
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 DPI = 72
@@ -30,7 +31,7 @@ def png_bytes(fig: Figure) -> bytes:
 
 
 def _panels(n: int, size_in: tuple[float, float] = PANEL_IN,
-            left_in: float = 0.5) -> tuple[Figure, list[Any]]:
+            left_in: float = 0.5) -> tuple[Figure, list[Axes]]:
     fig = plotting.pyplot().figure(figsize=(size_in[0] * n, size_in[1]))
     # Fixed margins instead of a layout engine: constrained layout doubled the drawing time.
     fig.subplots_adjust(left=left_in / (size_in[0] * n), right=1 - 0.15 / (size_in[0] * n),
