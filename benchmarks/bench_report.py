@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from fieldbank.interventions import Botulinum, Lengthening, Plan
+from fieldbank.interventions.report import Selection, build_report
 from fieldbank.params import ArmParams
-from fieldbank.report import Selection, build_report
 from fieldbank.severity import LEVELS, synthesize
 from fieldbank.storage import Database
 

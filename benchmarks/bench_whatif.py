@@ -1,6 +1,7 @@
 """Speed of the what-if module against its targets (issue: what-if).
 
-* all before/after metrics for one plan (``interventions.metrics.compare``): target ≤ 50 ms;
+* all before/after metrics for one plan (``fieldbank.evaluate.compare``, both arms compiled):
+  target ≤ 50 ms;
 * a 24-week botulinum time course (weeks 0..24, 25 evaluations): target ≤ 0.5 s.
 
 Baseline in the same process: one plain model field evaluation on the same grid
@@ -19,10 +20,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from fieldbank.evaluate import Conditions, compare
 from fieldbank.interventions.catalogue import Botulinum, Lengthening
 from fieldbank.interventions.course import time_course
 from fieldbank.interventions.inverse import optimise_botulinum
-from fieldbank.interventions.metrics import Conditions, compare
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm
 from fieldbank.severity import synthesize
@@ -42,7 +43,7 @@ def main() -> None:
     before = synthesize({"elbow": "severe", "shoulder": "mild"})
     plan = Plan.of(Lengthening(group="bf", delta_m=0.01), Botulinum({"ef": 200.0, "ee": 100.0}))
     after = plan.apply(before)
-    arm = Arm.from_params(before)
+    arm, arm_after = Arm.from_params(before), Arm.from_params(after)
     cond = Conditions.standard(arm)
 
     def fields_only() -> None:
@@ -51,9 +52,9 @@ def main() -> None:
             arm.field(x, v)
 
     base, _ = timeit(fields_only, 50)
-    one, one_max = timeit(lambda: compare(before, after), 30)
-    course, course_max = timeit(lambda: time_course(before, plan), 5)
-    inv, _ = timeit(lambda: optimise_botulinum(before, 300.0, groups=("ef", "ee", "sf")), 3)
+    one, one_max = timeit(lambda: compare(arm, arm_after), 30)
+    course, course_max = timeit(lambda: time_course(arm, plan), 5)
+    inv, _ = timeit(lambda: optimise_botulinum(arm, 300.0, groups=("ef", "ee", "sf")), 3)
     n = cond.grid_m.shape[0]
     pts = sum(v.shape[0] for v in cond.velocities) * n
     print(f"standard conditions: {n} grid points, {pts} field evaluations per model")

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from fieldbank import modelsource
+from fieldbank import modelsource, plotting
 from fieldbank.cli.options import json_option
 from fieldbank.errors import ParameterError
 from fieldbank.files import to_json, write_atomic
@@ -151,8 +151,6 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
 
 
 def _plot(arm: Arm, m: FieldMap, out: Path, fmt: str) -> None:
-    from fieldbank import plotting
-
     fig, axes = plotting.new_figure()
     ax = axes[0]
     if m.kind == "postural":

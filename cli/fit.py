@@ -15,6 +15,7 @@ import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option
 from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
+from fieldbank.fitting.plot import plot_fit
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
 
@@ -88,8 +89,6 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
     out = fit_patient(store, patient, session, fitter,
                       progress=lambda msg: click.echo(msg, err=True))
     if plot_path:
-        from fieldbank.fitting.plot import plot_fit
-
         f = out.fitter
         path = plot_fit(f.maps_, f.predict(f.maps_), plot_path, f.r2_,
                         title=f"patient {patient}: measured (black) and fitted (red)")

@@ -13,8 +13,8 @@ from datetime import datetime
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.report import Selection, build_report
-from fieldbank.report.build import default_jobs
+from fieldbank.interventions.catalogue import KINDS
+from fieldbank.interventions.report import Selection, build_report, default_jobs
 
 
 def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
@@ -49,8 +49,6 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
            until: datetime | None, kinds: tuple[str, ...], out_dir: str, jobs: int | None,
            stamp: bool, as_json: bool) -> None:
     """Report the field changes of stored intervention plans (HTML + CSV + JSON)."""
-    from fieldbank.interventions.catalogue import KINDS
-
     bad = [k for k in kinds if k not in KINDS]
     if bad:
         raise click.UsageError(f"--kind {bad[0]!r} is not an intervention kind "

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import math
 
+from fieldbank.evaluate.compare import Comparison
 from fieldbank.interventions.course import TimeCourse
 from fieldbank.interventions.inverse import DoseSplitResult
-from fieldbank.interventions.metrics import Comparison
 from fieldbank.interventions.plan import Plan
 
 
@@ -39,8 +39,8 @@ def render_text(source: str, plan: Plan, c: Comparison, course: TimeCourse | Non
         w(f"  {inverse.notice}")
     w("")
     w(f"  {'Severity (passive Km)':<28}{'before':>14}{'after':>14}")
-    for g, b, a in c.severity_rows():
-        w(f"  {g:<28}{b.level:>14}{a.level:>14}   score {b.score:.2f} → {a.score:.2f}")
+    for g, sb, sa in c.severity_rows():
+        w(f"  {g:<28}{sb.level:>14}{sa.level:>14}   score {sb.score:.2f} → {sa.score:.2f}")
     w("")
     n = c.before.conditions.grid_m.shape[0]
     w(f"Field change on {n} grid points (moving: {c.before.conditions.velocities[-1].shape[0]} "
@@ -72,10 +72,10 @@ def render_text(source: str, plan: Plan, c: Comparison, course: TimeCourse | Non
     speed = c.before.stretches[0].speed_deg_s
     w(f"  {f'Fast stretch ({speed:.0f}°/s)':<24}{'peak resisting torque N·m':>27}"
       f"{'reflex part N·m':>20}")
-    for name, b, a in c.stretch_rows():
-        w(f"  {name:<24}{b.peak_torque_n_m:9.2f} → {a.peak_torque_n_m:<8.2f}"
-          f"{_pct(b.peak_torque_n_m, a.peak_torque_n_m):>8}"
-          f"{b.reflex_torque_n_m:12.2f} → {a.reflex_torque_n_m:<8.2f}")
+    for name, jb, ja in c.stretch_rows():
+        w(f"  {name:<24}{jb.peak_torque_n_m:9.2f} → {ja.peak_torque_n_m:<8.2f}"
+          f"{_pct(jb.peak_torque_n_m, ja.peak_torque_n_m):>8}"
+          f"{jb.reflex_torque_n_m:12.2f} → {ja.reflex_torque_n_m:<8.2f}")
     if course is not None:
         w("")
         w("Week by week after the injection")

@@ -10,8 +10,11 @@ The whole tree, rooted in built-ins so callers may catch either::
     ├── StorageError(FieldbankError, RuntimeError)    the database or the array store failed
     │   └── IntegrityError(StorageError)              a stored reference or checksum is wrong
     ├── FitError(FieldbankError, RuntimeError)        a fit that cannot run or was refused
-    ├── InterventionError(FieldbankError, ValueError) an intervention plan that is invalid
+    ├── InterventionError(FieldbankError, ValueError) subtree in fieldbank.interventions.errors
     └── HapticError(FieldbankError, RuntimeError)     the renderer or the robot link failed
+
+The packages above the core keep their own subtrees next to their code (the core never imports
+them): ``fieldbank.interventions.errors`` holds InterventionError and SelectionError.
 
 Messages say what was expected, what arrived, and where (parameter, file, row, dataset).
 """
@@ -76,10 +79,6 @@ class IntegrityError(StorageError):
 
 class FitError(FieldbankError, RuntimeError):
     """A fit that cannot run (no data, wrong patient, inconsistent units) or failed."""
-
-
-class InterventionError(FieldbankError, ValueError):
-    """An intervention or plan with an invalid part."""
 
 
 class HapticError(FieldbankError, RuntimeError):

@@ -9,6 +9,11 @@ against its entry and raise the package's error with a message generated from th
 so the allowed range is written once and every message says what was expected and what
 arrived. :func:`problems_against` collects every problem of a mapping instead of stopping at the
 first, for messages that list them all.
+
+:func:`bound_problem` is the short form for messages that list several problems of one object
+in a line (an intervention, a plan step): it names only the bound that was broken::
+
+    'units[ef]' must be >= 0 U; got -3
 """
 
 from __future__ import annotations
@@ -103,3 +108,26 @@ def problems_against(values: Mapping[str, Any], bounds: Mapping[str, Interval],
             if msg is not None:
                 out.append(msg)
     return out
+
+
+def _broken_bound(value: float, interval: Interval) -> str | None:
+    lo, hi = interval.low, interval.high
+    if lo is not None and (value < lo or (value == lo and not interval.low_closed)):
+        return f"{'>=' if interval.low_closed else '>'} {lo:g}"
+    if hi is not None and (value > hi or (value == hi and not interval.high_closed)):
+        return f"{'<=' if interval.high_closed else '<'} {hi:g}"
+    return None
+
+
+def bound_problem(label: str, value: Any, interval: Interval) -> str | None:
+    """The short message for ``value`` outside ``interval`` (or not a number), else None.
+
+    Names the one bound that was broken, with its unit: ``'delta_m' must be > 0 m; got -0.01``.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return f"'{label}' must be a finite number; got {value!r}"
+    bound = _broken_bound(float(value), interval)
+    if bound is None:
+        return None
+    unit = f" {interval.unit}" if interval.unit else ""
+    return f"'{label}' must be {bound}{unit}; got {value:g}"

@@ -8,7 +8,9 @@ Every intervention is a frozen dataclass with
 * ``to_dict()`` / ``from_dict()`` - the JSON form, tagged with ``kind``;
 * ``targets()`` - the muscle groups it acts on;
 * ``EFFECTS`` - the documented direction of the change per parameter of a target group
-  ('down', 'up'); every other parameter stays as it was. The contract tests check this.
+  ('down', 'up'); every other parameter stays as it was. The contract tests check this;
+* ``BOUNDS`` - the allowed range of each numeric field (:class:`fieldbank.validation.Interval`),
+  the one table the messages are generated from.
 
 Mapping onto model parameters (defaults and sources in :mod:`interventions.defaults`):
 
@@ -22,8 +24,8 @@ baclofen        β of the chosen groups (default all) × factor
 casting         slack offset of the group + Δ, Km × factor
 ==============  =================================================================================
 
-Bad values raise :class:`fieldbank.errors.InterventionError` naming the intervention, the field
-and the reason; a plan adds the step number.
+Bad values raise :class:`fieldbank.interventions.errors.InterventionError` naming the
+intervention, every bad field and the reason; a plan adds the step number.
 """
 
 from __future__ import annotations
@@ -31,33 +33,36 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, cast
+from typing import Any, ClassVar, TypeVar, cast
 
 import numpy as np
 
-from fieldbank.errors import InterventionError, ParameterError
+from fieldbank.errors import ParameterError
 from fieldbank.interventions.defaults import value
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.timecourse import dose_effect, shape_exponent, time_shape
 from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
+from fieldbank.validation import Interval, bound_problem
 
 
 def _known_groups() -> str:
     return ", ".join(GROUPS)
 
 
-def _check_number(
-    problems: list[str], name: str, v: Any, lo: float | None, hi: float | None,
-    lo_open: bool = False, unit: str = "",
-) -> None:
-    u = f" {unit}" if unit else ""
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        problems.append(f"'{name}' must be a finite number; got {v!r}")
-        return
-    if lo is not None and (v < lo or (lo_open and v == lo)):
-        rel = ">" if lo_open else ">="
-        problems.append(f"'{name}' must be {rel} {lo:g}{u}; got {v:g}")
-    if hi is not None and v > hi:
-        problems.append(f"'{name}' must be <= {hi:g}{u}; got {v:g}")
+def _check_bounds(problems: list[str], obj: Intervention, skip: tuple[str, ...] = ()) -> None:
+    """Every field of ``obj``'s BOUNDS table outside its range, and every field at its
+    NO_CHANGE value (an optional field left at None is not checked)."""
+    optional = {f.name for f in fields(obj) if f.default is None}
+    for name, interval in obj.BOUNDS.items():
+        v = getattr(obj, name)
+        if name in skip or (v is None and name in optional):
+            continue
+        msg = bound_problem(name, v, interval)
+        if msg is None and name in obj.NO_CHANGE and v == obj.NO_CHANGE[name]:
+            n = obj.NO_CHANGE[name]
+            msg = f"'{name}' must be < {n:g} ({n:g} would change nothing)"
+        if msg is not None:
+            problems.append(msg)
 
 
 def _check_group(problems: list[str], name: str, g: Any) -> None:
@@ -97,6 +102,11 @@ class Intervention:
 
     kind: ClassVar[str] = ""
     EFFECTS: ClassVar[dict[str, str]] = {}
+    #: field -> allowed range (messages generated from it, :func:`_check_bounds`)
+    BOUNDS: ClassVar[dict[str, Interval]] = {}
+    #: field -> the value inside its range at which the intervention would change nothing
+    #: (refused: a plan step that does nothing is a mistake)
+    NO_CHANGE: ClassVar[dict[str, float]] = {}
 
     def apply(self, params: ArmParams) -> ArmParams:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -169,6 +179,16 @@ class Botulinum(Intervention):
 
     kind: ClassVar[str] = "botulinum"
     EFFECTS: ClassVar[dict[str, str]] = {"alpha_n": "down", "beta": "down"}
+    BOUNDS: ClassVar[dict[str, Interval]] = {
+        "units": Interval(0.0, value("botulinum.max_units_per_group"), "U"),  # per group
+        "weeks_since": Interval(0.0, value("botulinum.max_weeks"), "weeks"),
+        "emax": Interval(0.0, 0.99),
+        "ed50_units": Interval(0.0, None, "U", low_closed=False),
+        "hill": Interval(0.1, 10.0),
+        "peak_week": Interval(0.0, None, "weeks", low_closed=False),
+        "wearoff_week": Interval(0.0, None, "weeks", low_closed=False),
+        "wearoff_fraction": Interval(0.0, 1.0, low_closed=False),
+    }
 
     units: tuple[tuple[str, float], ...] | Mapping[str, float] = ()
     weeks_since: float = value("botulinum.weeks_since")
@@ -196,26 +216,17 @@ class Botulinum(Intervention):
         if not items and not problems:
             problems.append("'units' names no muscle group; inject at least one")
         seen: set[str] = set()
-        max_units = value("botulinum.max_units_per_group")
         for g, u in items:
             _check_group(problems, "units", g)
             if g in seen:
                 problems.append(f"muscle group {g!r} appears twice in 'units'")
             seen.add(g)
-            _check_number(problems, f"units[{g}]", u, 0.0, max_units, unit="U")
+            msg = bound_problem(f"units[{g}]", u, self.BOUNDS["units"])
+            if msg is not None:
+                problems.append(msg)
             if isinstance(g, str) and g in GROUP_INDEX and isinstance(u, (int, float)):
                 pairs.append((g, float(u)))
-        _check_number(problems, "weeks_since", self.weeks_since, 0.0,
-                      value("botulinum.max_weeks"), unit="weeks")
-        _check_number(problems, "emax", self.emax, 0.0, 0.99)
-        _check_number(problems, "ed50_units", self.ed50_units, 0.0, None, lo_open=True, unit="U")
-        _check_number(problems, "hill", self.hill, 0.1, 10.0)
-        _check_number(problems, "peak_week", self.peak_week, 0.0, None, lo_open=True,
-                      unit="weeks")
-        _check_number(problems, "wearoff_week", self.wearoff_week, 0.0, None, lo_open=True,
-                      unit="weeks")
-        _check_number(problems, "wearoff_fraction", self.wearoff_fraction, 0.0, 1.0,
-                      lo_open=True)
+        _check_bounds(problems, self, skip=("units",))
         if not isinstance(self.scale_beta, bool):
             problems.append(f"'scale_beta' must be true or false; got {self.scale_beta!r}")
         if not problems:
@@ -274,6 +285,12 @@ class Lengthening(Intervention):
 
     kind: ClassVar[str] = "lengthening"
     EFFECTS: ClassVar[dict[str, str]] = {"slack_offset_m": "up", "alpha_n": "down"}
+    BOUNDS: ClassVar[dict[str, Interval]] = {
+        "delta_m": Interval(0.0, value("lengthening.max_delta_m"), "m", low_closed=False),
+        "alpha_factor": Interval(0.0, 1.0),
+        "fibre_length_m": Interval(0.0, 0.5, "m", low_closed=False),
+        "width_factor": Interval(0.0, 10.0, low_closed=False),
+    }
 
     group: str = ""
     delta_m: float = 0.0
@@ -284,13 +301,7 @@ class Lengthening(Intervention):
     def __post_init__(self) -> None:
         problems: list[str] = []
         _check_group(problems, "group", self.group)
-        _check_number(problems, "delta_m", self.delta_m, 0.0, value("lengthening.max_delta_m"),
-                      lo_open=True, unit="m")
-        if self.alpha_factor is not None:
-            _check_number(problems, "alpha_factor", self.alpha_factor, 0.0, 1.0)
-        _check_number(problems, "fibre_length_m", self.fibre_length_m, 0.0, 0.5, lo_open=True,
-                      unit="m")
-        _check_number(problems, "width_factor", self.width_factor, 0.0, 10.0, lo_open=True)
+        _check_bounds(problems, self)
         _raise(self.kind, problems)
 
     def targets(self) -> tuple[str, ...]:
@@ -321,6 +332,10 @@ class Tenotomy(Intervention):
 
     kind: ClassVar[str] = "tenotomy"
     EFFECTS: ClassVar[dict[str, str]] = {"km_n_per_m": "down", "alpha_n": "down"}
+    BOUNDS: ClassVar[dict[str, Interval]] = {
+        "residual_fraction": Interval(0.0, 1.0),
+    }
+    NO_CHANGE: ClassVar[dict[str, float]] = {"residual_fraction": 1.0}
 
     group: str = ""
     residual_fraction: float = value("tenotomy.residual_fraction")
@@ -328,9 +343,7 @@ class Tenotomy(Intervention):
     def __post_init__(self) -> None:
         problems: list[str] = []
         _check_group(problems, "group", self.group)
-        _check_number(problems, "residual_fraction", self.residual_fraction, 0.0, 1.0)
-        if not problems and self.residual_fraction >= 1.0:
-            problems.append("'residual_fraction' must be < 1 (1 would change nothing)")
+        _check_bounds(problems, self)
         _raise(self.kind, problems)
 
     def targets(self) -> tuple[str, ...]:
@@ -351,6 +364,10 @@ class _ReflexReduction(Intervention):
     """β of the chosen groups (default: all six) × ``factor``."""
 
     EFFECTS: ClassVar[dict[str, str]] = {"beta": "down"}
+    BOUNDS: ClassVar[dict[str, Interval]] = {
+        "factor": Interval(0.0, 1.0),
+    }
+    NO_CHANGE: ClassVar[dict[str, float]] = {"factor": 1.0}
 
     groups: tuple[str, ...] = GROUPS
     factor: float = 0.5
@@ -367,9 +384,7 @@ class _ReflexReduction(Intervention):
             _check_group(problems, "groups", g)
         if len(set(groups)) != len(groups):
             problems.append("'groups' names a muscle group twice")
-        _check_number(problems, "factor", self.factor, 0.0, 1.0)
-        if not problems and self.factor >= 1.0:
-            problems.append("'factor' must be < 1 (1 would change nothing)")
+        _check_bounds(problems, self)
         _raise(self.kind, problems)
         object.__setattr__(self, "groups",
                            tuple(sorted(groups, key=lambda g: GROUP_INDEX[g])))
@@ -410,6 +425,10 @@ class SerialCasting(Intervention):
 
     kind: ClassVar[str] = "casting"
     EFFECTS: ClassVar[dict[str, str]] = {"slack_offset_m": "up", "km_n_per_m": "down"}
+    BOUNDS: ClassVar[dict[str, Interval]] = {
+        "delta_m": Interval(0.0, 0.02, "m", low_closed=False),
+        "km_factor": Interval(0.0, 1.0, low_closed=False),
+    }
 
     group: str = ""
     delta_m: float = value("casting.delta_m")
@@ -418,8 +437,7 @@ class SerialCasting(Intervention):
     def __post_init__(self) -> None:
         problems: list[str] = []
         _check_group(problems, "group", self.group)
-        _check_number(problems, "delta_m", self.delta_m, 0.0, 0.02, lo_open=True, unit="m")
-        _check_number(problems, "km_factor", self.km_factor, 0.0, 1.0, lo_open=True)
+        _check_bounds(problems, self)
         _raise(self.kind, problems)
 
     def targets(self) -> tuple[str, ...]:
@@ -437,15 +455,18 @@ class SerialCasting(Intervention):
                 f"Km × {self.km_factor:g})")
 
 
+_I = TypeVar("_I", bound=Intervention)
+
 KINDS: dict[str, type[Intervention]] = {
     c.kind: c for c in (Botulinum, Lengthening, Tenotomy, Rhizotomy, Baclofen, SerialCasting)
 }
 
 
-def _copy(obj: Intervention, **changes: Any) -> Any:
+def _copy(obj: _I, **changes: Any) -> _I:
+    """``obj`` with ``changes``, validated again through the JSON form."""
     d = obj.to_dict()
     d.update(changes)
-    return Intervention.from_dict(d)
+    return cast("_I", Intervention.from_dict(d))
 
 
 __all__ = [

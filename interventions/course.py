@@ -1,8 +1,11 @@
 """Metrics week by week after a botulinum injection (BRIEF §7 time course).
 
-:func:`time_course` evaluates the before model once and the plan's after model at each week
-(:meth:`interventions.plan.Plan.at_week`: weeks after the most recent injection), on the same
-standard conditions, and collects the headline figures per week.
+:func:`time_course` evaluates the compiled arm before once and the plan's after model at each
+week (:meth:`fieldbank.interventions.plan.Plan.at_week`: weeks after the most recent
+injection), on the same standard conditions, and collects the headline figures per week. The
+week models are compiled through the use case's :class:`fieldbank.evaluate.ArmCache`, so week 0
+(no effect yet: the model before) and the plan's own week (the model after) are not compiled
+again.
 """
 
 from __future__ import annotations
@@ -13,17 +16,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fieldbank.errors import InterventionError
-from fieldbank.interventions.catalogue import Botulinum
-from fieldbank.interventions.metrics import (
+from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.compare import (
     Comparison,
     Conditions,
     compare_evaluations,
-    evaluate_model,
+    evaluate_arm,
 )
+from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray
-from fieldbank.params import ArmParams
 
 DEFAULT_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(25))
 
@@ -68,16 +71,33 @@ class TimeCourse:
         }
 
 
-def time_course(params: ArmParams, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
-                conditions: Conditions | None = None) -> TimeCourse:
-    """Metrics of ``plan`` applied to ``params`` at each of ``weeks`` after the injection."""
+def time_course(arm: Arm, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
+                conditions: Conditions | None = None,
+                arms: ArmCache | None = None) -> TimeCourse:
+    """Metrics of ``plan`` applied to ``arm`` at each of ``weeks`` after the injection.
+
+    Parameters
+    ----------
+    arm : Arm
+        The compiled model before.
+    plan : Plan
+        Must hold at least one botulinum step.
+    weeks : array_like, shape (W,), weeks
+        Finite, >= 0, not empty.
+    conditions : Conditions, optional
+        Default: :meth:`Conditions.standard` of ``arm``.
+    arms : ArmCache, optional
+        The use case's compiled arms (default: a new cache holding ``arm``).
+    """
     w = np.asarray(weeks, dtype=float).reshape(-1)
     if not any(isinstance(s, Botulinum) for s in plan.steps):
         raise InterventionError("time course: the plan has no botulinum step to follow.")
     if w.size == 0 or np.any(w < 0) or np.any(~np.isfinite(w)):
         raise InterventionError("time course: weeks must be finite, >= 0, and not empty.")
-    cond = conditions if conditions is not None else Conditions.standard(Arm.from_params(params))
-    before = evaluate_model(params, cond)
+    compiled = arms if arms is not None else ArmCache()
+    compiled.add(arm)
+    cond = conditions if conditions is not None else Conditions.standard(arm)
+    before = evaluate_arm(arm, cond)
     groups = sorted({g for s in plan.steps if isinstance(s, Botulinum) for g in s.targets()})
     effect = {g: np.zeros(w.size) for g in groups}
     comps = []
@@ -90,7 +110,10 @@ def time_course(params: ArmParams, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
                     keep[g] *= 1.0 - e
         for g in groups:
             effect[g][i] = 1.0 - keep[g]
-        comps.append(compare_evaluations(before, evaluate_model(p_week.apply(params), cond)))
+        week_params = p_week.apply(arm.params)
+        after = (before if week_params == arm.params
+                 else evaluate_arm(compiled(week_params), cond))
+        comps.append(compare_evaluations(before, after))
     return TimeCourse(
         weeks=w,
         effect=effect,

@@ -9,12 +9,15 @@ Reference: the same arm (segments, moment arms, rest posture, range) with the un
 muscle values of :mod:`fieldbank.params` (Km 600 N/m, α 100 N, β 0.1, no slack offset), so
 only the muscles differ.
 
-Distance (on the standard conditions of :mod:`interventions.metrics`, all speeds and
+Distance (on the standard conditions of :mod:`fieldbank.evaluate.compare`, all speeds and
 directions)::
 
     D = RMS_x,v |F - F_ref|  +  L · RMS_x,v ‖K - K_ref‖_F,     L = 0.01 m (assumption)
 
 L turns stiffness into the force a 1 cm displacement would add, so both terms are in N.
+
+Every candidate model is compiled once through the use case's
+:class:`fieldbank.evaluate.ArmCache` and its distance computed once.
 
 The answer is a model result - what this model predicts for this family of plans - and is
 labelled so; it is not a treatment recommendation.
@@ -30,10 +33,11 @@ from typing import Any
 import nlopt
 import numpy as np
 
-from fieldbank.errors import InterventionError
+from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.compare import Conditions, fields_per_velocity
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.defaults import value
-from fieldbank.interventions.metrics import Conditions, fields_per_velocity
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import (
@@ -58,15 +62,16 @@ def unimpaired_reference(params: ArmParams) -> ArmParams:
     )
 
 
-def _fields(params: ArmParams, cond: Conditions) -> tuple[FloatArray, FloatArray]:
-    fs, ks = fields_per_velocity(Arm.from_params(params), cond)
+def _fields(arm: Arm, cond: Conditions) -> tuple[FloatArray, FloatArray]:
+    """Force (M, 2) N and stiffness (M, 2, 2) N/m over every point of every condition."""
+    fs, ks = fields_per_velocity(arm, cond)
     return np.concatenate(fs), np.concatenate(ks)
 
 
-def field_distance(params: ArmParams, reference: tuple[FloatArray, FloatArray],
+def field_distance(arm: Arm, reference: tuple[FloatArray, FloatArray],
                    cond: Conditions) -> float:
-    """D of the module docstring, N."""
-    f, k = _fields(params, cond)
+    """D of the module docstring, N, of ``arm`` from the reference fields (:func:`_fields`)."""
+    f, k = _fields(arm, cond)
     fr, kr = reference
     df = float(np.sqrt(np.mean(np.sum((f - fr) ** 2, axis=1))))
     dk = float(np.sqrt(np.mean(np.sum((k - kr) ** 2, axis=(1, 2)))))
@@ -113,16 +118,34 @@ class DoseSplitResult:
 
 
 def optimise_botulinum(
-    params: ArmParams,
+    arm: Arm,
     total_units: float,
     groups: Sequence[str] | None = None,
     weeks_since: float = value("botulinum.weeks_since"),
     max_evaluations: int = 300,
     conditions: Conditions | None = None,
+    arms: ArmCache | None = None,
 ) -> DoseSplitResult:
     """Best split of at most ``total_units`` U among ``groups`` (default: all six).
 
     Deterministic: a fixed start (even split) and a derivative-free local search.
+
+    Parameters
+    ----------
+    arm : Arm
+        The compiled model before.
+    total_units : float, U
+        Dose limit, > 0 and at most the per-group cap times the number of groups.
+    groups : sequence of str, optional
+        Muscle groups the search may inject (default all six).
+    weeks_since : float, weeks
+        When every candidate injection is seen.
+    max_evaluations : int
+        Objective evaluations allowed (>= 10).
+    conditions : Conditions, optional
+        Default: :meth:`Conditions.standard` of ``arm``.
+    arms : ArmCache, optional
+        The use case's compiled arms (default: a new cache holding ``arm``).
     """
     gs = tuple(groups) if groups is not None else GROUPS
     bad = [g for g in gs if g not in GROUP_INDEX]
@@ -139,9 +162,19 @@ def optimise_botulinum(
             f"({cap:g} U per group); got {total_units!r}.")
     if max_evaluations < 10:
         raise InterventionError("inverse what-if: max_evaluations must be at least 10.")
-    cond = conditions if conditions is not None else Conditions.standard(Arm.from_params(params))
-    ref = _fields(unimpaired_reference(params), cond)
+    params = arm.params
+    compiled = arms if arms is not None else ArmCache()
+    compiled.add(arm)
+    cond = conditions if conditions is not None else Conditions.standard(arm)
+    ref = _fields(compiled(unimpaired_reference(params)), cond)
     per_group = min(float(total_units), cap)
+    distances: dict[ArmParams, float] = {}
+
+    def distance(p: ArmParams) -> float:
+        d = distances.get(p)
+        if d is None:
+            d = distances[p] = field_distance(compiled(p), ref, cond)
+        return d
 
     def plan_for(x: FloatArray) -> Plan:
         units = {g: float(min(max(u, 0.0), per_group)) for g, u in zip(gs, x, strict=True)}
@@ -153,7 +186,7 @@ def optimise_botulinum(
     def objective(x: FloatArray, grad: FloatArray) -> float:
         nonlocal evals
         evals += 1
-        return field_distance(plan_for(x).apply(params), ref, cond)
+        return distance(plan_for(x).apply(params))
 
     def dose_limit(x: FloatArray, grad: FloatArray) -> float:
         return float(np.sum(x) - total_units)
@@ -177,9 +210,9 @@ def optimise_botulinum(
     x = np.floor(np.maximum(x, 0.0) * 10.0) / 10.0  # whole tenths of a unit, never above
     best = plan_for(x)
     after = best.apply(params)
-    dist = field_distance(after, ref, cond)
-    even = field_distance(plan_for(x0).apply(params), ref, cond)
-    untreated = field_distance(params, ref, cond)
+    dist = distance(after)
+    even = distance(plan_for(x0).apply(params))
+    untreated = distance(params)
     if even < dist:  # never report worse than the starting point
         best, after, dist, x = plan_for(x0), plan_for(x0).apply(params), even, x0
     return DoseSplitResult(

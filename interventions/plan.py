@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import InterventionError
 from fieldbank.interventions.catalogue import Botulinum, Intervention
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.params import ArmParams
 
 PLAN_SCHEMA = "fieldbank.intervention-plan"

@@ -29,7 +29,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fieldbank.errors import InterventionError
+from fieldbank.interventions.errors import InterventionError
 
 
 def shape_exponent(peak_week: float, wearoff_week: float, wearoff_fraction: float) -> float:

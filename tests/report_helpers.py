@@ -10,7 +10,7 @@ from click.testing import CliRunner, Result
 
 def build_batch(root: Path, patients: tuple[str, ...] = ("SYN-001", "SYN-002")) -> dict[str, Any]:
     """Samples → ingest → fit → botulinum and lengthening plans, on a SQLite file under root."""
-    from fieldbank.demo import populate
+    from fieldbank.cli.demo import populate
     from fieldbank.storage import Database
 
     url = f"sqlite:///{root / 'db' / 'fieldbank.sqlite3'}"

@@ -3,13 +3,20 @@
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
-from fieldbank.cli.whatif import parse_length, parse_units, whatif
+from fieldbank.cli.whatif import whatif
+from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.inverse import unimpaired_reference
 from fieldbank.interventions.plan import Plan, params_sha256
+from fieldbank.interventions.spec import parse_length, parse_units
+from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.severity import synthesize
 
 
 def run(*args: str) -> tuple[int, str, str]:
@@ -112,3 +119,40 @@ def test_option_parsers() -> None:
     assert parse_length("1cm", "--x") == 0.01
     assert parse_length("5 mm", "--x") == 0.005
     assert parse_length("0.02", "--x") == 0.02
+
+
+@pytest.fixture
+def compiled(monkeypatch: pytest.MonkeyPatch) -> Counter[ArmParams]:
+    """How often each distinct parameter set is compiled (Arm.from_params calls)."""
+    calls: Counter[ArmParams] = Counter()
+    real = Arm.from_params.__func__  # type: ignore[attr-defined]
+
+    def counting(cls: type[Arm], p: ArmParams) -> Arm:
+        calls[p] += 1
+        return real(cls, p)  # type: ignore[no-any-return]
+
+    monkeypatch.setattr(Arm, "from_params", classmethod(counting))
+    return calls
+
+
+def test_timecourse_compiles_each_model_once(compiled: Counter[ArmParams]) -> None:
+    code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=200U", "--timecourse",
+                       "--json")
+    assert code == 0, out
+    before = synthesize({"elbow": "severe"})
+    plan = Plan.of(Botulinum({"ef": 200.0}))
+    weeks = {plan.at_week(float(w)).apply(before) for w in range(25)}
+    # week 0 is the model before and week 5 (the default) the model after: 25 models in all
+    assert set(compiled) == weeks | {before, plan.apply(before)}
+    assert len(compiled) == 25
+    assert all(n == 1 for n in compiled.values()), compiled.most_common(1)
+
+
+def test_optimize_compiles_each_model_once(compiled: Counter[ArmParams]) -> None:
+    code, out, _ = run("--severity", "elbow=severe", "--optimize", "--total-units", "200",
+                       "--groups", "ef,ee", "--timecourse", "--json")
+    assert code == 0, out
+    before = synthesize({"elbow": "severe"})
+    after = Plan.from_dict(json.loads(out)["plan"]).apply(before)
+    assert {before, after, unimpaired_reference(before)} <= set(compiled)
+    assert all(n == 1 for n in compiled.values()), compiled.most_common(1)

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from fieldbank.errors import InterventionError
+from fieldbank.evaluate.compare import compare
+from fieldbank.evaluate.probing import joint_stretch
 from fieldbank.interventions.catalogue import Botulinum, Lengthening, SerialCasting, Tenotomy
 from fieldbank.interventions.course import time_course
 from fieldbank.interventions.defaults import DEFAULTS
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.inverse import optimise_botulinum, unimpaired_reference
-from fieldbank.interventions.metrics import compare
 from fieldbank.interventions.plan import Plan, params_sha256
-from fieldbank.interventions.probing import joint_stretch
 from fieldbank.interventions.timecourse import dose_effect, time_shape
 from fieldbank.model import Arm
 from fieldbank.params import GROUP_INDEX, PER_GROUP_FIELDS, ArmParams
@@ -90,7 +90,7 @@ def test_lengthening_default_force_factor_matches_delp_and_zajac() -> None:
 
 def test_time_course_peaks_in_window_and_returns_to_baseline(severe_elbow: ArmParams) -> None:
     plan = Plan.of(Botulinum({"ef": 200.0}))
-    tc = time_course(severe_elbow, plan, weeks=np.arange(0.0, 24.25, 0.25))
+    tc = time_course(Arm.from_params(severe_elbow), plan, weeks=np.arange(0.0, 24.25, 0.25))
     peak = tc.peak_week("ef")
     assert 4.0 <= peak <= 6.0
     e = tc.effect["ef"]
@@ -130,7 +130,8 @@ def test_repeated_injections_compound_toward_the_upper_bound(severe_elbow: ArmPa
 
 
 def test_metrics_of_identical_models_are_zero(severe_elbow: ArmParams) -> None:
-    c = compare(severe_elbow, severe_elbow)
+    arm = Arm.from_params(severe_elbow)
+    c = compare(arm, arm)
     for f in c.fields:
         assert f.diff_rms_n == 0.0 and f.diff_max_n == 0.0
         assert f.area_ratio_median == pytest.approx(1.0)
@@ -138,12 +139,13 @@ def test_metrics_of_identical_models_are_zero(severe_elbow: ArmParams) -> None:
 
 
 def test_metrics_see_each_intervention_where_it_acts(severe_elbow: ArmParams) -> None:
-    bot = compare(severe_elbow, Botulinum({"ef": 200.0}).apply(severe_elbow))
+    before = Arm.from_params(severe_elbow)
+    bot = compare(before, Arm.from_params(Botulinum({"ef": 200.0}).apply(severe_elbow)))
     assert bot.fields[0].diff_rms_n == 0.0  # reflex only: the static field is unchanged
     assert bot.fields[1].diff_rms_n > 1.0
     assert bot.fields[1].force_rms_after_n < bot.fields[1].force_rms_before_n
     assert all(b.level == a.level for _, b, a in bot.severity_rows())
-    ten = compare(severe_elbow, Tenotomy(group="ef").apply(severe_elbow))
+    ten = compare(before, Arm.from_params(Tenotomy(group="ef").apply(severe_elbow)))
     assert ten.fields[0].diff_rms_n > 1.0
     assert ten.potential.mean_j < 0.0  # less stored elastic energy everywhere on average
     assert ten.fields[0].area_ratio_median < 1.0
@@ -154,8 +156,9 @@ def test_metrics_see_each_intervention_where_it_acts(severe_elbow: ArmParams) ->
 def test_metrics_work_for_a_left_arm() -> None:
     left = synthesize({"elbow": "severe"}, ArmParams.from_anthropometry(side="left"))
     right = synthesize({"elbow": "severe"})
-    cl = compare(left, Botulinum({"ef": 200.0}).apply(left))
-    cr = compare(right, Botulinum({"ef": 200.0}).apply(right))
+    cl = compare(Arm.from_params(left), Arm.from_params(Botulinum({"ef": 200.0}).apply(left)))
+    cr = compare(Arm.from_params(right),
+                 Arm.from_params(Botulinum({"ef": 200.0}).apply(right)))
     assert cl.fields[1].diff_rms_n == pytest.approx(cr.fields[1].diff_rms_n, rel=1e-9)
     for (_, _, al), (_, _, ar) in zip(cl.probe_rows(), cr.probe_rows(), strict=True):
         assert al.peak_force_n == pytest.approx(ar.peak_force_n, rel=1e-9)
@@ -182,13 +185,13 @@ def test_at_week_keeps_spacing_between_injections() -> None:
 
 
 def test_inverse_finds_a_split_closer_to_unimpaired(severe_elbow: ArmParams) -> None:
-    r = optimise_botulinum(severe_elbow, 300.0, groups=("sf", "ef", "ee", "bf"),
-                           max_evaluations=120)
+    arm = Arm.from_params(severe_elbow)
+    r = optimise_botulinum(arm, 300.0, groups=("sf", "ef", "ee", "bf"), max_evaluations=120)
     assert sum(r.units.values()) <= 300.0 + 1e-9
     assert r.distance_n < r.distance_untreated_n
     assert r.distance_n <= r.distance_even_split_n
     assert "not a treatment recommendation" in r.notice
-    again = optimise_botulinum(severe_elbow, 300.0, groups=("sf", "ef", "ee", "bf"),
+    again = optimise_botulinum(arm, 300.0, groups=("sf", "ef", "ee", "bf"),
                                max_evaluations=120)
     assert again.units == r.units
     # the reference is the same arm with unimpaired muscles
@@ -199,6 +202,6 @@ def test_inverse_finds_a_split_closer_to_unimpaired(severe_elbow: ArmParams) -> 
 
 def test_inverse_refuses_bad_requests(severe_elbow: ArmParams) -> None:
     with pytest.raises(InterventionError, match="unknown muscle group"):
-        optimise_botulinum(severe_elbow, 100.0, groups=("ef", "zz"))
+        optimise_botulinum(Arm.from_params(severe_elbow), 100.0, groups=("ef", "zz"))
     with pytest.raises(InterventionError, match="total_units"):
-        optimise_botulinum(severe_elbow, -5.0)
+        optimise_botulinum(Arm.from_params(severe_elbow), -5.0)

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import pytest
 
-from fieldbank.errors import InterventionError
 from fieldbank.interventions.catalogue import (
     Baclofen,
     Botulinum,
@@ -17,6 +16,7 @@ from fieldbank.interventions.catalogue import (
     SerialCasting,
     Tenotomy,
 )
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.params import ArmParams
 
@@ -118,3 +118,21 @@ def test_docs_list_every_default_with_its_value_and_source() -> None:
         row = f"| `{name}` | {d.value:.6g} | {d.unit} | {d.source} |"
         assert row in text, f"docs/interventions.md is out of date for {name}"
         assert d.source.strip()
+
+
+@pytest.mark.parametrize("cls", [Botulinum, Lengthening, Tenotomy, Rhizotomy, Baclofen,
+                                 SerialCasting])
+def test_bounds_tables_name_fields_and_generate_the_messages(cls) -> None:  # type: ignore[no-untyped-def]
+    from dataclasses import fields
+
+    names = {f.name for f in fields(cls)}
+    assert cls.BOUNDS and set(cls.BOUNDS) <= names
+    assert set(cls.NO_CHANGE) <= set(cls.BOUNDS)
+    for name, interval in cls.BOUNDS.items():
+        if name == "units" or interval.high is None:
+            continue
+        kw = {"units": {"ef": 10.0}} if cls is Botulinum else (
+            {"group": "ef"} if "group" in names else {})
+        with pytest.raises(InterventionError) as info:
+            cls(**kw, **{name: interval.high + 1.0})
+        assert f"'{name}' must be <= {interval.high:g}" in str(info.value)

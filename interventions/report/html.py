@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from html import escape
 from typing import Any
 
-from fieldbank.report.compute import COLUMNS, CaseResult
+from fieldbank.interventions.report.compute import COLUMNS, CaseResult
 
 CSS = """
 body { font-family: system-ui, sans-serif; margin: 1.5em auto; padding: 0 1em; max-width: 1180px;

@@ -11,21 +11,22 @@ cases that match every filter given:
 * ``since`` / ``until`` - the case's date lies in [since, until];
 * ``kinds`` - the plan has a step of one of these intervention kinds.
 
-:func:`select_cases` reads everything a case needs into a picklable :class:`CaseSpec`, so the
-computation can run in other processes without the database.
+:func:`select_cases` reads everything a case needs into a picklable :class:`CaseSpec` - the
+two parameter sets and the plan, already read - so the computation can run in other processes
+without the database.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import date
 from typing import Any
 
-from fieldbank.errors import FieldbankError
-
-
-class SelectionError(FieldbankError):
-    """The selection is empty, or data a report needs is missing."""
+from fieldbank.interventions.errors import InterventionError, SelectionError
+from fieldbank.interventions.plan import Plan
+from fieldbank.params import ArmParams
+from fieldbank.storage import Database, FitRecord, PatientInfo, StoredMap, StoredModel
 
 
 @dataclass(frozen=True)
@@ -65,20 +66,25 @@ class Selection:
 
 @dataclass(frozen=True)
 class CaseSpec:
-    """Everything one case needs, read from the database (picklable, no database handle)."""
+    """Everything one case needs, read from the database (picklable, no database handle).
+
+    ``plan`` is the stored plan document read back (None when it cannot be read: the case is
+    then reported without its steps and time course); ``plan_doc`` the document as stored.
+    """
 
     plan_id: int
     patient_code: str | None
     patient: dict[str, Any]
     plan_label: str
     plan_doc: dict[str, Any]
+    plan: Plan | None
     kinds: tuple[str, ...]
     base_model_id: int
     base_origin: str
     base_label: str
-    base_params_json: str
+    before: ArmParams
     result_model_id: int
-    result_params_json: str
+    after: ArmParams
     sessions: tuple[tuple[str, str | None], ...]
     case_date: str
     fit_id: int | None = None
@@ -90,7 +96,7 @@ class CaseSpec:
         return f"{who} — plan {self.plan_id}: {self.plan_label or ', '.join(self.kinds)}"
 
 
-def plan_kinds(spec: dict[str, Any]) -> tuple[str, ...]:
+def plan_kinds(spec: Mapping[str, Any]) -> tuple[str, ...]:
     """Step kinds of a stored plan record's spec (the lineage document of ``whatif --save``)."""
     doc = spec.get("plan", spec)
     steps = doc.get("steps", []) if isinstance(doc, dict) else doc
@@ -99,14 +105,23 @@ def plan_kinds(spec: dict[str, Any]) -> tuple[str, ...]:
     return tuple(sorted({str(s.get("kind")) for s in steps if isinstance(s, dict)}))
 
 
-def _fitted_ancestor(db: Any, model_id: int) -> Any | None:
+def read_plan(spec: Mapping[str, Any], plan_id: int) -> Plan | None:
+    """The stored plan record's plan, or None if it cannot be read back."""
+    doc = spec.get("plan", spec)
+    try:
+        return Plan.from_dict(doc, where=f"plan {plan_id}")
+    except InterventionError:
+        return None
+
+
+def _fitted_ancestor(db: Database, model_id: int) -> StoredModel | None:
     for m in db.model_lineage(model_id):
         if m.origin == "fitted":
             return m
     return None
 
 
-def select_cases(db: Any, selection: Selection) -> list[CaseSpec]:
+def select_cases(db: Database, selection: Selection) -> list[CaseSpec]:
     """The cases matching ``selection``, ordered by patient code then plan id.
 
     Raises
@@ -115,32 +130,32 @@ def select_cases(db: Any, selection: Selection) -> list[CaseSpec]:
         Nothing matches (the message says which filter and what is stored), or a named patient
         or plan has no data to report (no plans; no fitted model).
     """
-    for code in selection.patients:
-        db.get_patient(code)  # an unknown patient: the storage layer's clear error
+    for named in selection.patients:
+        db.get_patient(named)  # an unknown patient: the storage layer's clear error
     plans = []
     if selection.plan_ids:
         plans = [db.get_plan(int(i)) for i in selection.plan_ids]
     elif selection.patients:
-        for code in selection.patients:
-            found = db.list_plans(code)
+        for named in selection.patients:
+            found = db.list_plans(named)
             if not found:
-                models = db.list_models(code)
+                models = db.list_models(named)
                 fitted = [m for m in models if m.origin == "fitted"]
                 what = ("no stored plans" if fitted else
                         "no fitted model and no stored plans")
                 raise SelectionError(
-                    f"Patient {code!r} has {what} in {db.url_masked}: "
-                    + ("" if fitted else f"fit one with 'fieldbank fit {code}', then ")
-                    + f"store a plan with 'fieldbank whatif {code} --botox ef=200U --save'.")
+                    f"Patient {named!r} has {what} in {db.url_masked}: "
+                    + ("" if fitted else f"fit one with 'fieldbank fit {named}', then ")
+                    + f"store a plan with 'fieldbank whatif {named} --botox ef=200U --save'.")
             plans.extend(found)
     else:
         plans = db.list_plans()
     if not plans:
         raise SelectionError(f"No stored plans in {db.url_masked}: store one with "
                              "'fieldbank whatif PATIENT --botox ef=200U --save'.")
-    fits_by_model: dict[int, Any] = {}
-    maps_by_id: dict[int, Any] = {}
-    patients: dict[str, Any] = {}
+    fits_by_model: dict[int, FitRecord] = {}
+    maps_by_id: dict[int, StoredMap] = {}
+    patients: dict[str, PatientInfo] = {}
     cases = []
     for plan in plans:
         code = plan.patient_code
@@ -150,8 +165,8 @@ def select_cases(db: Any, selection: Selection) -> list[CaseSpec]:
             patients[code] = db.get_patient(code)
             for f in db.list_fits(code):
                 fits_by_model[f.model_id] = f
-            for m in db.list_maps(code):
-                maps_by_id[m.id] = m
+            for stored_map in db.list_maps(code):
+                maps_by_id[stored_map.id] = stored_map
         kinds = plan_kinds(plan.spec)
         if selection.kinds and not set(kinds) & set(selection.kinds):
             continue
@@ -179,10 +194,10 @@ def select_cases(db: Any, selection: Selection) -> list[CaseSpec]:
             plan_id=plan.id, patient_code=code,
             patient=({"code": p.code, "body_mass_kg": p.body_mass_kg, "height_m": p.height_m,
                       "side": p.side} if p else {}),
-            plan_label=plan.label, plan_doc=dict(plan.spec), kinds=kinds,
+            plan_label=plan.label, plan_doc=dict(plan.spec),
+            plan=read_plan(plan.spec, plan.id), kinds=kinds,
             base_model_id=base.id, base_origin=base.origin, base_label=base.label,
-            base_params_json=base.params.to_json(), result_model_id=result.id,
-            result_params_json=result.params.to_json(),
+            before=base.params, result_model_id=result.id, after=result.params,
             sessions=tuple(sorted(sessions.items())), case_date=case_date,
             fit_id=fit.id if fit is not None else None))
     if not cases:

@@ -1,7 +1,9 @@
 """One case of a report: metrics, time course, probing profiles and figures of a stored plan.
 
-:func:`compute_case` is a pure function of a :class:`~fieldbank.report.select.CaseSpec`, so
-batches can run it in worker processes; it returns a picklable :class:`CaseResult`.
+:func:`compute_case` is a pure function of a
+:class:`~fieldbank.interventions.report.select.CaseSpec`, so batches can run it in worker
+processes; it returns a picklable :class:`CaseResult`. Each case compiles its two models once
+and shares them with its time course (:class:`fieldbank.evaluate.ArmCache`).
 """
 
 from __future__ import annotations
@@ -11,13 +13,14 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.errors import FieldbankError
+from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.files import json_finite
-from fieldbank.model import Arm
-from fieldbank.params import ArmParams
-from fieldbank.report import figures
-from fieldbank.report.select import CaseSpec
-from fieldbank.severity import LEVELS
+from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.course import time_course
+from fieldbank.interventions.report import figures
+from fieldbank.interventions.report.select import CaseSpec
+from fieldbank.severity import LEVELS, GroupSeverity
 
 #: Weeks after the most recent injection at which the time course is evaluated.
 TIMECOURSE_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(0, 25))
@@ -73,36 +76,20 @@ class CaseResult:
     figures: tuple[Figure, ...]
 
 
-def _plan(spec: CaseSpec) -> Any | None:
-    """The stored plan document as a Plan, or None if it cannot be read (no time course)."""
-    from fieldbank.interventions.plan import Plan
-
-    doc = spec.plan_doc.get("plan", spec.plan_doc)
-    try:
-        return Plan.from_dict(doc, where=f"plan {spec.plan_id}")
-    except FieldbankError:
-        return None
-
-
-def _levels(sev: dict[str, Any]) -> str:
+def _levels(sev: dict[str, GroupSeverity]) -> str:
     return "; ".join(f"{g} {s.level}" for g, s in sev.items())
 
 
 def compute_case(spec: CaseSpec) -> CaseResult:
     """Metrics and figures of one stored plan (before = base model, after = result model)."""
-    from fieldbank.interventions.catalogue import Botulinum
-    from fieldbank.interventions.course import time_course
-    from fieldbank.interventions.metrics import Conditions, compare
-
-    before = ArmParams.from_json(spec.base_params_json, where=f"model {spec.base_model_id}")
-    after = ArmParams.from_json(spec.result_params_json, where=f"model {spec.result_model_id}")
-    arm_b, arm_a = Arm.from_params(before), Arm.from_params(after)
+    arms = ArmCache()
+    arm_b, arm_a = arms(spec.before), arms(spec.after)
     cond = Conditions.standard(arm_b)
-    c = compare(before, after, cond)
-    plan = _plan(spec)
+    c = compare(arm_b, arm_a, cond)
+    plan = spec.plan
     course = None
     if plan is not None and any(isinstance(s, Botulinum) for s in plan.steps):
-        course = time_course(before, plan, TIMECOURSE_WEEKS, conditions=cond)
+        course = time_course(arm_b, plan, TIMECOURSE_WEEKS, conditions=cond, arms=arms)
 
     static, moving = c.fields[0], c.fields[min(1, len(c.fields) - 1)]
     probes = {n: (b, a) for n, b, a in c.probe_rows()}

@@ -1,6 +1,6 @@
-"""Field-change metrics between two models ("before" and "after" an intervention plan).
+"""Field-change metrics between two compiled arms ("before" and "after" an intervention plan).
 
-Both models are evaluated on the same standard conditions, set by the *before* model so the
+Both arms are evaluated on the same standard conditions, set by the *before* arm so the
 two are compared at identical positions and velocities:
 
 * a workspace grid, :func:`fieldbank.maps.workspace_grid` with n = :data:`GRID_N` (the
@@ -9,7 +9,8 @@ two are compared at identical positions and velocities:
 * endpoint velocities: static (0) and every speed of :data:`SPEEDS_M_PER_S` in
   :data:`N_DIRECTIONS` directions evenly spread around the circle (the reflex acts only on
   lengthening muscles, so one direction would see only some groups);
-* the seed's probing motions and the single-joint fast stretches (:mod:`interventions.probing`).
+* the seed's probing motions and the single-joint fast stretches
+  (:mod:`fieldbank.evaluate.probing`).
 
 Reported (:class:`Comparison`):
 
@@ -31,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.interventions.probing import (
+from fieldbank.evaluate.probing import (
     JointStretch,
     ProbeMotion,
     ProbeProfile,
@@ -42,6 +43,7 @@ from fieldbank.interventions.probing import (
 from fieldbank.maps import ellipse, workspace_grid
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
+from fieldbank.severity import GroupSeverity, classify
 
 GRID_N = 15
 #: Grid postures with the elbow within this angle of straight are left out: there the endpoint
@@ -81,16 +83,33 @@ class Conditions:
 
 @dataclass(frozen=True, eq=False)
 class Evaluation:
-    """One model on the standard conditions."""
+    """One compiled arm on the standard conditions.
 
-    params: ArmParams
+    Attributes
+    ----------
+    arm : Arm
+    conditions : Conditions
+    force_n : tuple of ndarray, each shape (N·D, 2), N
+        Endpoint force at each condition's points (:meth:`Conditions.points`).
+    stiffness_n_per_m : tuple of ndarray, each shape (N·D, 2, 2), N/m
+    potential_j : ndarray, shape (N,), J
+        Passive potential on the grid.
+    probes, stretches : probing-motion profiles and fast joint stretches
+    severity : dict joint group -> GroupSeverity
+    """
+
+    arm: Arm
     conditions: Conditions
     force_n: tuple[FloatArray, ...]
     stiffness_n_per_m: tuple[FloatArray, ...]
     potential_j: FloatArray
     probes: tuple[ProbeProfile, ...]
     stretches: tuple[JointStretch, ...]
-    severity: dict[str, Any]
+    severity: dict[str, GroupSeverity]
+
+    @property
+    def params(self) -> ArmParams:
+        return self.arm.params
 
 
 def fields_per_velocity(
@@ -106,22 +125,19 @@ def fields_per_velocity(
     return tuple(forces), tuple(stiff)
 
 
-def evaluate_model(params: ArmParams, conditions: Conditions | None = None) -> Evaluation:
-    """Evaluate a model on ``conditions`` (default: its own standard conditions)."""
-    from fieldbank.severity import classify
-
-    arm = Arm.from_params(params)
+def evaluate_arm(arm: Arm, conditions: Conditions | None = None) -> Evaluation:
+    """Evaluate ``arm`` on ``conditions`` (default: its own standard conditions)."""
     cond = conditions if conditions is not None else Conditions.standard(arm)
     forces, stiff = fields_per_velocity(arm, cond)
     return Evaluation(
-        params=params,
+        arm=arm,
         conditions=cond,
         force_n=forces,
         stiffness_n_per_m=stiff,
         potential_j=arm.potential(cond.grid_m),
         probes=tuple(profile(arm, m) for m in cond.probes),
         stretches=standard_stretches(arm),
-        severity=classify(params),
+        severity=classify(arm.params),
     )
 
 
@@ -173,7 +189,7 @@ class Comparison:
         return [(b.name, b, a) for b, a in zip(self.before.stretches, self.after.stretches,
                                                 strict=True)]
 
-    def severity_rows(self) -> list[tuple[str, Any, Any]]:
+    def severity_rows(self) -> list[tuple[str, GroupSeverity, GroupSeverity]]:
         return [(g, self.before.severity[g], self.after.severity[g])
                 for g in self.before.severity]
 
@@ -242,15 +258,15 @@ def compare_evaluations(before: Evaluation, after: Evaluation) -> Comparison:
     return Comparison(before, after, tuple(changes), pot)
 
 
-def compare(before: ArmParams, after: ArmParams, conditions: Conditions | None = None
+def compare(arm_before: Arm, arm_after: Arm, conditions: Conditions | None = None
             ) -> Comparison:
-    """All before/after metrics of two models on the standard conditions of ``before``.
+    """All before/after metrics of two compiled arms on the standard conditions of the first.
 
     Parameters
     ----------
-    before, after : ArmParams
+    arm_before, arm_after : Arm
     conditions : Conditions, optional
-        Default: :meth:`Conditions.standard` of the before model.
+        Default: :meth:`Conditions.standard` of ``arm_before``.
     """
-    cond = conditions if conditions is not None else Conditions.standard(Arm.from_params(before))
-    return compare_evaluations(evaluate_model(before, cond), evaluate_model(after, cond))
+    cond = conditions if conditions is not None else Conditions.standard(arm_before)
+    return compare_evaluations(evaluate_arm(arm_before, cond), evaluate_arm(arm_after, cond))

@@ -20,9 +20,10 @@ from pathlib import Path
 from typing import Any
 
 from fieldbank.files import write_atomic
-from fieldbank.report.compute import COLUMNS, CaseResult, compute_case
-from fieldbank.report.html import render
-from fieldbank.report.select import CaseSpec, Selection, select_cases
+from fieldbank.interventions.report.compute import COLUMNS, CaseResult, compute_case
+from fieldbank.interventions.report.html import render
+from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
+from fieldbank.storage import Database
 
 SCHEMA = "fieldbank.report"
 VERSION = 1
@@ -79,7 +80,7 @@ def metrics_json(results: Iterable[CaseResult], inputs: dict[str, Any]) -> str:
     return json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False) + "\n"
 
 
-def build_report(db: Any, selection: Selection, out_dir: str | Path, jobs: int = 1,
+def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
                  title: str | None = None) -> ReportOutput:
     """Select, compute and write the report; raises SelectionError for an empty selection."""

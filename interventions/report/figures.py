@@ -1,4 +1,4 @@
-"""Report figures as PNG bytes (matplotlib Agg; deterministic: fixed metadata, no dates).
+"""Report figures as PNG bytes (drawn through :mod:`fieldbank.plotting`; deterministic).
 
 Each function draws one figure from already computed arrays and returns the PNG bytes:
 postural fields before / after / difference over the passive potential, stiffness ellipses
@@ -9,89 +9,36 @@ the before and after panels, so they can be compared by eye.
 
 from __future__ import annotations
 
-import io
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
 
 from fieldbank import plotting
-from fieldbank.maps import ellipse
 from fieldbank.model import Arm, FloatArray
+
+if TYPE_CHECKING:  # typing only: matplotlib loads with the first figure
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 DPI = 72
 PANEL_IN = (3.6, 3.2)
 
 
 def png_bytes(fig: Figure) -> bytes:
-    """The figure as PNG bytes, without the software tag or any date (deterministic)."""
-    buf = io.BytesIO()
-    with plt.rc_context({"svg.hashsalt": "fieldbank"}):
-        fig.savefig(buf, format="png", metadata={"Software": None}, dpi=DPI)
-    plt.close(fig)
-    return buf.getvalue()
+    """The figure as PNG bytes at the report's resolution, with its fixed margins."""
+    return plotting.render(fig, "png", dpi=DPI, tight=False)
 
 
 def _panels(n: int, size_in: tuple[float, float] = PANEL_IN,
-            left_in: float = 0.5) -> tuple[Figure, list[Any]]:
-    fig = plt.figure(figsize=(size_in[0] * n, size_in[1]))
+            left_in: float = 0.5) -> tuple[Figure, list[Axes]]:
+    fig = plotting.pyplot().figure(figsize=(size_in[0] * n, size_in[1]))
     # Fixed margins instead of a layout engine: constrained layout doubled the drawing time.
     fig.subplots_adjust(left=left_in / (size_in[0] * n), right=1 - 0.15 / (size_in[0] * n),
                         bottom=0.55 / size_in[1], top=1 - 0.35 / size_in[1],
                         wspace=0.35 if n > 1 else 0.2)
     axes = list(fig.subplots(1, n, squeeze=False)[0])
     return fig, axes
-
-
-def _spatial(ax: Any, title: str) -> None:
-    ax.set_aspect("equal")
-    ax.set_title(title, fontsize=9)
-    ax.set_xlabel("x (m)", fontsize=8)
-    ax.set_ylabel("y (m)", fontsize=8)
-    ax.tick_params(labelsize=7)
-    ax.xaxis.set_major_locator(MaxNLocator(5))
-    ax.yaxis.set_major_locator(MaxNLocator(5))
-
-
-def _field_row(axes: Sequence[Any], fig: Figure, arm_b: Arm, grid_m: FloatArray,
-               fb: FloatArray, fa: FloatArray, ub: FloatArray | None, ua: FloatArray | None,
-               label: str) -> None:
-    spacing = float(np.min(np.ptp(grid_m, axis=0))) / 8.0
-
-    def arrow_scale(f: FloatArray, pct: float = 90.0) -> float:
-        # a high percentile: a few near-singular edge postures do not shrink every other arrow
-        return max(float(np.percentile(np.hypot(*f.T), pct)), 1e-9) / (0.8 * spacing)
-
-    d = fa - fb
-    scale = arrow_scale(np.vstack([fb, fa]))
-    panels = ((fb, ub, scale, f"before: {label}", "C0"), (fa, ua, scale, f"after: {label}", "C0"),
-              (d, None if ub is None or ua is None else ua - ub, arrow_scale(d, 98.0),
-               f"after − before: {label}", "C3"))
-    for ax, (f, u, sc, title, color) in zip(axes, panels, strict=True):
-        if u is not None and float(np.ptp(u)) > 1e-9:
-            cs = ax.tricontourf(grid_m[:, 0], grid_m[:, 1], u, levels=10, cmap="Greys",
-                                alpha=0.55)
-            cb = fig.colorbar(cs, ax=ax, shrink=0.8, pad=0.02, fraction=0.05)
-            cb.ax.tick_params(labelsize=6)
-            cb.set_label("U (J)" if color == "C0" else "ΔU (J)", fontsize=7)
-        if float(np.abs(f).max()) < 1e-9:
-            ax.text(0.5, 0.5, "no change", transform=ax.transAxes, ha="center", fontsize=10)
-            ax.set_xlim(float(grid_m[:, 0].min()), float(grid_m[:, 0].max()))
-            ax.set_ylim(float(grid_m[:, 1].min()), float(grid_m[:, 1].max()))
-        else:
-            q = ax.quiver(grid_m[:, 0], grid_m[:, 1], f[:, 0], f[:, 1], angles="xy",
-                          scale_units="xy", scale=sc, width=0.005, color=color)
-            key_n = float(f"{sc * 0.8 * spacing:.2g}")
-            ax.quiverkey(q, 0.82, -0.2, key_n, f"{key_n:g} N", labelpos="E",
-                         fontproperties={"size": 7})
-        ax.plot(*arm_b.rest_position(), "k+", ms=8)
-        _spatial(ax, title)
 
 
 def fields_figure(arm_b: Arm, arm_a: Arm, grid_m: FloatArray, speed_m_per_s: float,
@@ -104,12 +51,14 @@ def fields_figure(arm_b: Arm, arm_a: Arm, grid_m: FloatArray, speed_m_per_s: flo
     field changes most (the reflex acts on lengthening muscles only, so a flexor injection
     shows when the elbow extends and an extensor injection when it flexes).
     """
-    fig = plt.figure(figsize=(PANEL_IN[0] * 3, PANEL_IN[1] * 2))
+    fig = plotting.pyplot().figure(figsize=(PANEL_IN[0] * 3, PANEL_IN[1] * 2))
     fig.subplots_adjust(left=0.05, right=0.98, bottom=0.09, top=0.95, wspace=0.3, hspace=0.4)
     axes = fig.subplots(2, 3, squeeze=False)
-    _field_row(axes[0], fig, arm_b, grid_m, arm_b.endpoint_force(grid_m),
-               arm_a.endpoint_force(grid_m), arm_b.potential(grid_m), arm_a.potential(grid_m),
-               "static F, U")
+    rest = arm_b.rest_position()
+    plotting.field_row(axes[0], grid_m, arm_b.endpoint_force(grid_m),
+                       arm_a.endpoint_force(grid_m), "static F, U",
+                       potential_before_j=arm_b.potential(grid_m),
+                       potential_after_j=arm_a.potential(grid_m), mark_m=rest)
     best: tuple[float, int, FloatArray, FloatArray] | None = None
     for k in range(n_directions):
         th = 2.0 * np.pi * k / n_directions
@@ -121,22 +70,21 @@ def fields_figure(arm_b: Arm, arm_a: Arm, grid_m: FloatArray, speed_m_per_s: flo
             best = (rms, k, fb, fa)
     assert best is not None
     deg = 360.0 * best[1] / n_directions
-    _field_row(axes[1], fig, arm_b, grid_m, best[2], best[3], None, None,
-               f"F moving {speed_m_per_s:g} m/s at {deg:g}°")
+    plotting.field_row(axes[1], grid_m, best[2], best[3],
+                       f"F moving {speed_m_per_s:g} m/s at {deg:g}°", mark_m=rest)
     return png_bytes(fig)
 
 
 def ellipses_figure(grid_m: FloatArray, k_before: FloatArray, k_after: FloatArray) -> bytes:
     """Static stiffness ellipses before and after, on one scale."""
     fig, axes = _panels(2)
-    e = ellipse(np.concatenate([k_before, k_after]))
-    spacing = float(np.min(np.ptp(grid_m, axis=0))) / 8.0
-    scale = max(float(np.percentile(np.abs(e.major_n_per_m), 90)), 1e-9) / (0.9 * spacing)
+    scale = plotting.ellipse_scale(np.concatenate([k_before, k_after]),
+                                   plotting.grid_spacing(grid_m))
     for ax, k, title, color in ((axes[0], k_before, "stiffness before", "C0"),
                                 (axes[1], k_after, "stiffness after", "C1")):
         plotting.ellipses(ax, grid_m, k, color=color, scale_n_per_m=scale)
         ax.plot(grid_m[:, 0], grid_m[:, 1], ".", color="0.7", ms=2)
-        _spatial(ax, f"{title} (axis ∝ N/m)")
+        plotting.spatial_axes(ax, f"{title} (axis ∝ N/m)")
     return png_bytes(fig)
 
 

@@ -1,0 +1,203 @@
+"""The what-if use case: a model and a plan in, what the plan changes out.
+
+:func:`run_whatif` is what ``fieldbank whatif`` does, in order:
+
+1. optionally search the botulinum split closest to the unimpaired reference
+   (:class:`DoseSearch`, :func:`fieldbank.interventions.inverse.optimise_botulinum`); its plan is
+   the plan when none is given;
+2. apply the plan with its lineage (:meth:`fieldbank.interventions.plan.Plan.derive`) and
+   compare before with after on the standard conditions of the model before
+   (:func:`fieldbank.evaluate.compare`);
+3. optionally follow the metrics week by week after the injection
+   (:func:`fieldbank.interventions.course.time_course`);
+4. optionally draw the figure, write ``plan.json``, ``after.json`` and ``lineage.json``, and
+   store the after model and the plan with lineage (:func:`save_plan_result`).
+
+One :class:`fieldbank.evaluate.ArmCache` lives for the whole use case, so each distinct model
+(before, after, every week, every dose split tried, the unimpaired reference) is compiled
+exactly once. Everything here is a model prediction, not treatment advice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.compare import Comparison, Conditions, compare
+from fieldbank.files import to_json, write_atomic
+from fieldbank.interventions.course import TimeCourse, time_course
+from fieldbank.interventions.defaults import value
+from fieldbank.interventions.errors import InterventionError
+from fieldbank.interventions.inverse import DoseSplitResult, optimise_botulinum
+from fieldbank.interventions.plan import Derivation, Plan, params_sha256
+from fieldbank.interventions.plot import plot_comparison
+from fieldbank.model import Arm
+from fieldbank.modelsource import DatabaseOpener, ModelSource
+from fieldbank.params import ArmParams
+from fieldbank.storage import Database
+
+#: Files ``out_dir`` receives.
+OUT_FILES = ("plan.json", "after.json", "lineage.json")
+
+
+@dataclass(frozen=True)
+class DoseSearch:
+    """A request for the inverse what-if (``--optimize``).
+
+    Parameters
+    ----------
+    total_units : float, U
+        Dose limit over all groups.
+    groups : tuple of str, optional
+        Groups the search may inject (default all six).
+    weeks_since : float, weeks
+        When the injection is seen.
+    """
+
+    total_units: float
+    groups: tuple[str, ...] | None = None
+    weeks_since: float = value("botulinum.weeks_since")
+
+
+@dataclass(frozen=True)
+class SavedPlan:
+    """Database ids of a stored plan result: the model before, the model after, the plan."""
+
+    base_model_id: int
+    result_model_id: int
+    plan_id: int
+
+    def to_dict(self) -> dict[str, int]:
+        return {"base_model_id": self.base_model_id, "result_model_id": self.result_model_id,
+                "plan_id": self.plan_id}
+
+
+@dataclass(frozen=True, eq=False)
+class WhatIf:
+    """What :func:`run_whatif` computed and wrote.
+
+    ``plot`` and ``out_dir`` are the paths as given; ``saved`` the ids when stored.
+    """
+
+    source: ModelSource
+    plan: Plan
+    arm_before: Arm
+    arm_after: Arm
+    derivation: Derivation
+    comparison: Comparison
+    course: TimeCourse | None = None
+    inverse: DoseSplitResult | None = None
+    plot: str | None = None
+    out_dir: str | None = None
+    saved: SavedPlan | None = None
+
+    @property
+    def before(self) -> ArmParams:
+        return self.arm_before.params
+
+    @property
+    def after(self) -> ArmParams:
+        return self.arm_after.params
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``whatif --json`` document (without what the command line adds)."""
+        doc: dict[str, Any] = {"model": {"source": self.source.description,
+                                         "sha256": params_sha256(self.before)}}
+        if self.inverse is not None:
+            doc["inverse"] = self.inverse.to_dict()
+        doc["plan"] = self.plan.to_dict()
+        doc["plan_steps"] = self.plan.describe()
+        doc["lineage"] = self.derivation.to_dict()
+        doc["comparison"] = self.comparison.to_dict()
+        if self.course is not None:
+            doc["timecourse"] = self.course.to_dict()
+        if self.plot is not None:
+            doc["plot"] = self.plot
+        if self.out_dir is not None:
+            doc["out"] = str(Path(self.out_dir))
+        if self.saved is not None:
+            doc["saved"] = self.saved.to_dict()
+        return doc
+
+
+def plan_label(plan: Plan) -> str:
+    """The plan's label, else its steps described in one line (the stored label)."""
+    return plan.label or "; ".join(s.describe() for s in plan.steps)
+
+
+def save_plan_result(db: Database, source: ModelSource, after: ArmParams,
+                     derivation: Derivation) -> SavedPlan:
+    """Store the after model (origin 'intervention', parent = the model before) and the plan
+    with its lineage, in one transaction.
+
+    A model before that is not stored yet (a parameter file, a severity) is stored first as a
+    synthetic model named by ``source.description``, so the lineage always has both ends.
+    """
+    stored = source.model_id is not None
+    base_id, child, rec = db.add_plan_result(
+        after, derivation.to_dict(), plan_label(derivation.plan),
+        patient_code=source.patient_code, base_model_id=source.model_id,
+        before=None if stored else source.params, before_label=source.description)
+    return SavedPlan(int(base_id), int(child.id), int(rec.id))
+
+
+def save_plan(db: Database, source: ModelSource, plan: Plan) -> SavedPlan:
+    """Apply ``plan`` to the model of ``source`` and store the result (:func:`save_plan_result`)."""
+    after, derivation = plan.derive(source.params)
+    return save_plan_result(db, source, after, derivation)
+
+
+def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | None = None,
+               timecourse: bool = False, plot_path: str | None = None,
+               out_dir: str | None = None,
+               save_to: DatabaseOpener | None = None) -> WhatIf:
+    """Apply ``plan`` (or the plan ``search`` finds) to the model of ``source`` and compare.
+
+    Parameters
+    ----------
+    source : ModelSource
+        The model before (:mod:`fieldbank.modelsource`).
+    plan : Plan or None
+        None only with ``search``, whose best split becomes the plan.
+    search : DoseSearch, optional
+        Run the inverse what-if as well.
+    timecourse : bool
+        Add the metrics week by week (the plan needs a botulinum step).
+    plot_path : str, optional
+        Write the before / after / difference figure here (.png or .svg).
+    out_dir : str, optional
+        Write :data:`OUT_FILES` into this directory.
+    save_to : callable () -> Database, optional
+        Store the result in this database (:func:`save_plan_result`).
+    """
+    if plan is None and search is None:
+        raise InterventionError("what-if: give a plan or a dose search.")
+    arms = ArmCache()
+    arm_b = arms(source.params)
+    cond = Conditions.standard(arm_b)
+    inverse = None
+    if search is not None:
+        inverse = optimise_botulinum(arm_b, search.total_units, search.groups,
+                                     weeks_since=search.weeks_since, conditions=cond, arms=arms)
+        if plan is None:
+            plan = inverse.plan
+    assert plan is not None
+    after, derivation = plan.derive(source.params)
+    arm_a = arms(after)
+    comparison = compare(arm_b, arm_a, cond)
+    course = time_course(arm_b, plan, conditions=cond, arms=arms) if timecourse else None
+    if plot_path:
+        plot_comparison(arm_b, arm_a, plot_path, title=source.description)
+    if out_dir:
+        d = Path(out_dir)
+        write_atomic(d / "plan.json", plan.to_json() + "\n")
+        write_atomic(d / "after.json", after.to_json() + "\n")
+        write_atomic(d / "lineage.json", to_json(derivation) + "\n")
+    saved = None
+    if save_to is not None:
+        with save_to() as db:
+            saved = save_plan_result(db, source, after, derivation)
+    return WhatIf(source, plan, arm_b, arm_a, derivation, comparison, course, inverse,
+                  plot_path or None, out_dir or None, saved)
