@@ -18,8 +18,8 @@ import click
 
 from fieldbank import modelsource
 from fieldbank.cli.options import db_option, emit, json_option, open_db
-from fieldbank.errors import HapticError
 from fieldbank.files import write_atomic
+from fieldbank.haptic.errors import HapticError
 from fieldbank.params import ArmParams
 
 socket_option = click.option(

@@ -11,7 +11,8 @@ The whole tree, rooted in built-ins so callers may catch either::
     │   └── IntegrityError(StorageError)              a stored reference or checksum is wrong
     ├── FitError(FieldbankError, RuntimeError)        a fit that cannot run or was refused
     ├── InterventionError(FieldbankError, ValueError) an intervention plan that is invalid
-    └── HapticError(FieldbankError, RuntimeError)     the renderer or the robot link failed
+    └── HapticError(FieldbankError, RuntimeError)     the renderer or the robot link failed;
+                                                      its subtree lives in fieldbank.haptic.errors
 
 Messages say what was expected, what arrived, and where (parameter, file, row, dataset).
 """
@@ -80,7 +81,3 @@ class FitError(FieldbankError, RuntimeError):
 
 class InterventionError(FieldbankError, ValueError):
     """An intervention or plan with an invalid part."""
-
-
-class HapticError(FieldbankError, RuntimeError):
-    """The haptic renderer or the robot link failed."""

@@ -31,7 +31,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import FieldbankError, HapticError
+from fieldbank.errors import FieldbankError
+from fieldbank.haptic.errors import HapticError
 from fieldbank.params import ArmParams
 
 log = logging.getLogger("fieldbank.haptic.control")

@@ -40,9 +40,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from fieldbank.errors import HapticError, ParameterError, UnreachableError
+from fieldbank.errors import ParameterError, UnreachableError
 from fieldbank.haptic.abx import AbxSession
-from fieldbank.haptic.link import LinkDown, RobotLink
+from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
+from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.protocol import FLAG_WATCHDOG, FaultCode
 from fieldbank.haptic.recording import NCOL, Trace, TraceBuffer
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
@@ -360,7 +361,7 @@ class Renderer:
     def arm(self) -> None:
         """Arm (or re-arm after a fault): refused while the handle state is unsafe."""
         if self._link_down:
-            raise HapticError("cannot arm: the robot link is down")
+            raise CommandError("cannot arm: the robot link is down")
         if self.safety.latched & (1 << (FaultCode.MODEL - 1)):
             self._reset_arms()
         self.safety.rearm((self.link.x, self.link.y, self.link.vx, self.link.vy))
@@ -370,7 +371,7 @@ class Renderer:
             self.link.arm()
         except LinkDown as exc:
             self._trip(FaultCode.DISCONNECT, str(exc))
-            raise HapticError(f"cannot arm: {exc}") from None
+            raise CommandError(f"cannot arm: {exc}") from None
         self.gain.set(0.0)
         self.gain.go(1.0, round(self.safety.config.rearm_ramp_s / self.dt_s))
         self._event("arm")

@@ -30,7 +30,8 @@ import math
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from fieldbank.errors import HapticError, ParameterError
+from fieldbank.errors import ParameterError
+from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.protocol import FaultCode
 
 log = logging.getLogger("fieldbank.haptic.safety")
@@ -233,10 +234,10 @@ class Safety:
         log.warning("haptic fault %s at t=%.4f s: %s", FaultCode(code).name, t_s, message)
 
     def rearm(self, handle: tuple[float, float, float, float]) -> None:
-        """Clear latched faults and arm, if the handle state is safe now; else HapticError."""
+        """Clear latched faults and arm, if the handle state is safe now; else CommandError."""
         code, msg = self.check_handle(*handle)
         if code:
-            raise HapticError(f"cannot arm: {msg}")
+            raise CommandError(f"cannot arm: {msg}")
         self.latched = 0
         self.crc_bucket = 0.0
         self.limiter.zero()

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldbank.errors import HapticError
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.protocol import FaultCode
 from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock

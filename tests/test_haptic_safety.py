@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldbank.errors import HapticError, ParameterError
+from fieldbank.errors import ParameterError
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.protocol import FORCE_FMT, FaultCode
 from fieldbank.haptic.safety import ForceLimiter, Mode, PassivityController, Safety, SafetyConfig
 
