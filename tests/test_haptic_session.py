@@ -18,12 +18,13 @@ from fieldbank.cli.haptic import haptic
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.haptic import motions
 from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.control import ControlClient, ControlServer, push_models
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import probe, sim_url
 from fieldbank.haptic.recording import COLUMNS, Hdf5TraceSink, read_trace_h5, write_trace_h5
-from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.replay import rerun
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
