@@ -36,7 +36,7 @@ from fieldbank.haptic.client import (
     default_socket_path,
     push_models,
 )
-from fieldbank.haptic.commands import RendererCommand, Request, parse_request
+from fieldbank.haptic.commands import RendererCommand, Request, Result, parse_request
 from fieldbank.haptic.errors import CommandError, ControlError
 
 __all__ = [
@@ -171,7 +171,7 @@ class ControlServer:
         except (FieldbankError, ValueError, KeyError, TypeError) as exc:
             return {"ok": False, "error": str(exc) or type(exc).__name__}
 
-    def handle(self, req: Mapping[str, Any]) -> Any:
+    def handle(self, req: Mapping[str, Any]) -> Result:
         """The renderer's answer to one parsed request (raises its error)."""
         return self.renderer.submit(parse_request(req)).wait()
 
