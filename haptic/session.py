@@ -37,6 +37,7 @@ from fieldbank.haptic.recording import Hdf5TraceSink, Trace
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.params import ArmParams
+from fieldbank.validation import Interval, check_number
 
 #: One line of progress for the user.
 Say = Callable[[str], None]
@@ -66,10 +67,14 @@ def trace_name_now() -> str:
 @dataclass(frozen=True)
 class ScheduledSwitch:
     """Crossfade to ``to`` ('A'/'before' or 'B'/'after') ``at_s`` seconds after rendering
-    starts."""
+    starts; checked when made, so a bad schedule fails before the robot is opened."""
 
     at_s: float
     to: str
+
+    def __post_init__(self) -> None:
+        check_number("at_s", self.at_s, Interval(0.0, None, "s"), what="switch time")
+        Switch(self.to)
 
 
 @dataclass(frozen=True)

@@ -138,3 +138,12 @@ def test_session_into_an_open_database_with_the_control_channel(tmp_path: Path) 
         assert sess.model_a_id == m.id and sess.model_b_id == m.id
     assert res.trace.metadata["model_ids"] == {"A": m.id, "B": m.id}
     assert not sock.exists()
+
+
+def test_a_bad_schedule_fails_before_the_robot_is_opened() -> None:
+    from fieldbank.haptic.session import ScheduledSwitch
+
+    with pytest.raises(ParameterError, match="'at_s' switch time"):
+        ScheduledSwitch(-0.1, "A")
+    with pytest.raises(CommandError, match="switch to"):
+        ScheduledSwitch(0.5, "C")
