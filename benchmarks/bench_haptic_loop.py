@@ -19,8 +19,13 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+import numpy as np
+
+from fieldbank.haptic.clock import RealClock, realtime
+from fieldbank.haptic.commands import Arm as ArmCommand
+from fieldbank.haptic.commands import Switch
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.renderer import RealClock, Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
@@ -28,37 +33,24 @@ from fieldbank.severity import synthesize
 
 
 def empty_loop(seconds: float, rate_hz: int) -> dict[str, float]:
-    """Baseline: the same sleep-then-spin deadline loop with no work, same priority, so the
-    figures show what the machine itself adds (virtual-machine and host scheduling)."""
-    import gc
-
-    import numpy as np
-
-    old = None
-    try:
-        old = (os.sched_getscheduler(0), os.sched_getparam(0))
-        os.sched_setscheduler(0, os.SCHED_FIFO,
-                              os.sched_param(os.sched_get_priority_max(os.SCHED_FIFO) - 10))
-    except (OSError, AttributeError):
-        old = None
+    """Baseline: the same sleep-then-spin deadline loop with no work, prepared for real time
+    the same way (haptic.clock.realtime), so the figures show what the machine itself adds
+    (virtual-machine and host scheduling)."""
     clock = RealClock()
     period = round(1e9 / rate_hz)
     n = int(seconds * rate_hz)
     wake = np.empty(n, dtype=np.int64)
     late = np.empty(n, dtype=np.int64)
-    gc.disable()
-    deadline = clock.now_ns()
-    for i in range(n):
-        clock.sleep_until(deadline)
-        now = clock.now_ns()
-        wake[i] = now
-        late[i] = now - deadline
-        deadline += period
-        if now >= deadline:
-            deadline += ((now - deadline) // period + 1) * period
-    gc.enable()
-    if old is not None:
-        os.sched_setscheduler(0, old[0], old[1])
+    with realtime():
+        deadline = clock.now_ns()
+        for i in range(n):
+            clock.sleep_until(deadline)
+            now = clock.now_ns()
+            wake[i] = now
+            late[i] = now - deadline
+            deadline += period
+            if now >= deadline:
+                deadline += ((now - deadline) // period + 1) * period
     err = np.abs(np.diff(wake) - period) / 1e3
     return {"p50": float(np.percentile(err, 50)), "p99": float(np.percentile(err, 99)),
             "max": float(err.max()), "overruns": int((late > 1e6).sum())}
@@ -100,9 +92,9 @@ def main() -> int:
                 time.sleep(0.25)
                 k += 1
                 if rd.running and k % 20 == 0:
-                    rd.submit("switch", target="B" if (k // 20) % 2 else "A")
+                    rd.submit(Switch("B" if (k // 20) % 2 else "A"))
                 if rd.running and rd.safety.mode.name == "FAULT":
-                    rd.submit("arm")
+                    rd.submit(ArmCommand())
 
         threading.Thread(target=switcher, daemon=True).start()
         trace = rd.run(a.seconds)

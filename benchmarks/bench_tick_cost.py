@@ -20,10 +20,11 @@ import timeit
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from fieldbank.haptic import protocol as P
+from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import NCOL, TraceBuffer
-from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock, build_sim
+from fieldbank.haptic.renderer import Renderer, RendererConfig, build_sim
 from fieldbank.haptic.safety import Safety, SafetyConfig
 from fieldbank.params import ArmParams
 from fieldbank.severity import synthesize

@@ -11,10 +11,11 @@ The whole tree, rooted in built-ins so callers may catch either::
     │   └── IntegrityError(StorageError)              a stored reference or checksum is wrong
     ├── FitError(FieldbankError, RuntimeError)        a fit that cannot run or was refused
     ├── InterventionError(FieldbankError, ValueError) subtree in fieldbank.interventions.errors
-    └── HapticError(FieldbankError, RuntimeError)     the renderer or the robot link failed
+    └── HapticError(FieldbankError, RuntimeError)     subtree in fieldbank.haptic.errors
 
 The packages above the core keep their own subtrees next to their code (the core never imports
-them): ``fieldbank.interventions.errors`` holds InterventionError and SelectionError.
+them): ``fieldbank.interventions.errors`` holds InterventionError and SelectionError,
+``fieldbank.haptic.errors`` HapticError, LinkDown, FrameError and the control errors.
 
 Messages say what was expected, what arrived, and where (parameter, file, row, dataset).
 """
@@ -80,6 +81,3 @@ class IntegrityError(StorageError):
 class FitError(FieldbankError, RuntimeError):
     """A fit that cannot run (no data, wrong patient, inconsistent units) or failed."""
 
-
-class HapticError(FieldbankError, RuntimeError):
-    """The haptic renderer or the robot link failed."""

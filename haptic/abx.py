@@ -12,7 +12,7 @@ import random
 from dataclasses import dataclass, field
 from typing import Any
 
-from fieldbank.errors import HapticError
+from fieldbank.haptic.errors import CommandError
 
 
 @dataclass
@@ -35,7 +35,7 @@ class AbxSession:
 
     def __post_init__(self) -> None:
         if not isinstance(self.n_trials, int) or self.n_trials < 1:
-            raise HapticError(f"A/B/X needs n_trials >= 1; got {self.n_trials!r}")
+            raise CommandError(f"A/B/X needs n_trials >= 1; got {self.n_trials!r}")
         rng = random.Random(self.seed)
         a_model = rng.randrange(2) if self.hide_labels else 0
         self.label_model = {"A": a_model, "B": 1 - a_model}
@@ -56,17 +56,17 @@ class AbxSession:
             return self.label_model[label]
         if label == "X":
             if self.done:
-                raise HapticError("the A/B/X block is finished; no X to present")
+                raise CommandError("the A/B/X block is finished; no X to present")
             return self.label_model[self.x_labels[self.trial]]
-        raise HapticError(f"A/B/X presents 'A', 'B' or 'X'; got {label!r}")
+        raise CommandError(f"A/B/X presents 'A', 'B' or 'X'; got {label!r}")
 
     def answer(self, choice: str, t_s: float) -> dict[str, Any]:
         """Record that X sounded like ``choice`` ('A' or 'B'); advance to the next trial."""
         choice = choice.upper()
         if choice not in ("A", "B"):
-            raise HapticError(f"an A/B/X answer is 'A' or 'B'; got {choice!r}")
+            raise CommandError(f"an A/B/X answer is 'A' or 'B'; got {choice!r}")
         if self.done:
-            raise HapticError(f"the A/B/X block of {self.n_trials} trials is finished")
+            raise CommandError(f"the A/B/X block of {self.n_trials} trials is finished")
         x = self.x_labels[self.trial]
         rec = {"trial": self.trial, "answer": choice, "x_is": x, "correct": choice == x,
                "x_model": self.label_model[x], "t_s": t_s}

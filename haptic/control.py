@@ -1,22 +1,18 @@
-"""Local control channel of a running renderer: JSON lines over a Unix domain socket.
+"""Local control channel of a running renderer: JSON lines over a Unix domain socket (server).
 
 Only the same user on the same machine can talk to the renderer: the socket lives in a
 directory of mode 0700, is created with mode 0600, and every connection's peer credentials
 (``SO_PEERCRED``) must carry this process's user id. There is no network listener.
 
-One request per line, one response per line::
-
-    {"cmd": "push", "before": {<ArmParams dict>}, "after": {<ArmParams dict>}}
-    {"cmd": "switch", "to": "A" | "B" | "before" | "after"}
-    {"cmd": "abx", "action": "start", "n_trials": 10, "seed": 7, "hide_labels": true}
-    {"cmd": "abx", "action": "present", "label": "X"}
-    {"cmd": "abx", "action": "answer", "answer": "A"}
-    {"cmd": "status"} | {"cmd": "arm"} | {"cmd": "disarm"} | {"cmd": "stop"}
+One request per line, one response per line; the requests and the commands they become are
+listed in :mod:`haptic.commands`, which parses them (:func:`~haptic.commands.parse_request`)::
 
     -> {"ok": true, "result": {...}}  or  {"ok": false, "error": "message"}
 
-Models are compiled in the connection's thread, never in the loop; the loop swaps them in at
-a tick boundary behind a fade (:meth:`haptic.renderer.Renderer.push_params`).
+Pushed models are compiled in the connection's thread, never in the loop; the loop swaps them in
+at a tick boundary behind a fade. The client side is :mod:`haptic.client` (kept apart so the
+live commands load nothing heavy); :func:`push_models` and :class:`ControlClient` are re-exported
+here for callers of this module.
 """
 
 from __future__ import annotations
@@ -28,35 +24,37 @@ import socket
 import stat
 import struct
 import threading
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
-from fieldbank.errors import FieldbankError, HapticError
-from fieldbank.params import ArmParams
+from fieldbank.errors import FieldbankError
+from fieldbank.haptic.client import (
+    MAX_REQUEST_BYTES,
+    ControlClient,
+    data_home,
+    default_socket_path,
+    push_models,
+)
+from fieldbank.haptic.commands import RendererCommand, Request, Result, parse_request
+from fieldbank.haptic.errors import CommandError, ControlError
+
+__all__ = [
+    "CommandSink",
+    "ControlClient",
+    "ControlServer",
+    "data_home",
+    "default_socket_path",
+    "push_models",
+]
 
 log = logging.getLogger("fieldbank.haptic.control")
 
-MAX_REQUEST_BYTES = 1 << 20
-SOCKET_NAME = "haptic.sock"
 
+class CommandSink(Protocol):
+    """What the server serves: a renderer's :meth:`~haptic.renderer.Renderer.submit`."""
 
-def data_home() -> Path:
-    """fieldbank's data directory: ``$FIELDBANK_HOME``, else the platform's user data dir
-    (the same rule as the storage layer's ``fieldbank.storage.config.data_home``)."""
-    env = os.environ.get("FIELDBANK_HOME")
-    if env:
-        return Path(env).expanduser()
-    import platformdirs
-
-    return Path(platformdirs.user_data_dir("fieldbank", appauthor=False))
-
-
-def default_socket_path() -> Path:
-    """``$FIELDBANK_HAPTIC_SOCKET``, else ``haptic.sock`` in :func:`data_home`."""
-    env = os.environ.get("FIELDBANK_HAPTIC_SOCKET")
-    if env:
-        return Path(env)
-    return data_home() / SOCKET_NAME
+    def submit(self, command: RendererCommand, /) -> Request: ...
 
 
 def _peer_uid(conn: socket.socket) -> int | None:
@@ -68,9 +66,17 @@ def _peer_uid(conn: socket.socket) -> int | None:
 
 
 class ControlServer:
-    """Serves requests for ``renderer`` on a Unix socket at ``path`` in a daemon thread."""
+    """Serves requests for ``renderer`` on a Unix socket at ``path`` in a daemon thread.
 
-    def __init__(self, renderer: Any, path: str | Path | None = None) -> None:
+    Parameters
+    ----------
+    renderer : CommandSink
+        The running renderer.
+    path : str or Path, optional
+        The socket (default :func:`~haptic.client.default_socket_path`).
+    """
+
+    def __init__(self, renderer: CommandSink, path: str | Path | None = None) -> None:
         self.renderer = renderer
         self.path = Path(path) if path is not None else default_socket_path()
         self._sock: socket.socket | None = None
@@ -80,20 +86,20 @@ class ControlServer:
     def start(self) -> ControlServer:
         path = self.path
         if len(str(path).encode()) > 100:
-            raise HapticError(f"control socket path too long for a Unix socket: {path}")
+            raise ControlError(f"control socket path too long for a Unix socket: {path}")
         path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
         st = path.parent.stat()
         if st.st_uid == os.getuid() and stat.S_IMODE(st.st_mode) & 0o077:
             os.chmod(path.parent, 0o700)
             st = path.parent.stat()
         if st.st_uid != os.getuid() or stat.S_IMODE(st.st_mode) & 0o077:
-            raise HapticError(
+            raise ControlError(
                 f"control socket directory {path.parent} must belong to this user with "
                 f"mode 0700; it has uid {st.st_uid}, mode {oct(stat.S_IMODE(st.st_mode))}"
             )
         if path.exists() or path.is_symlink():
             if _alive(path):
-                raise HapticError(f"a renderer is already serving on {path}")
+                raise ControlError(f"a renderer is already serving on {path}")
             path.unlink()
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         old = os.umask(0o177)
@@ -159,41 +165,15 @@ class ControlServer:
         """Answer one request line (never raises)."""
         try:
             req = json.loads(line)
-            if not isinstance(req, dict) or not isinstance(req.get("cmd"), str):
-                raise HapticError('a request is a JSON object with a "cmd" string')
+            if not isinstance(req, dict):
+                raise CommandError('a request is a JSON object with a "cmd" string')
             return {"ok": True, "result": self.handle(req)}
         except (FieldbankError, ValueError, KeyError, TypeError) as exc:
             return {"ok": False, "error": str(exc) or type(exc).__name__}
 
-    def handle(self, req: dict[str, Any]) -> Any:
-        rd = self.renderer
-        cmd = req["cmd"]
-        if cmd == "push":
-            before = ArmParams.from_dict(req["before"], where="push: before")
-            after = ArmParams.from_dict(req["after"], where="push: after")
-            ids = req.get("model_ids")
-            if ids is not None and not (isinstance(ids, dict) and set(ids) <= {"A", "B"}):
-                raise HapticError('push: "model_ids" must be {"A": id, "B": id}')
-            return rd.push_params(before, after, ids).wait()
-        if cmd == "switch":
-            return rd.submit("switch", target=req["to"]).wait()
-        if cmd == "abx":
-            action = req.get("action")
-            if action == "start":
-                return rd.submit("abx_start", n_trials=int(req.get("n_trials", 10)),
-                                 seed=int(req.get("seed", 0)),
-                                 hide_labels=bool(req.get("hide_labels", True))).wait()
-            if action == "present":
-                return rd.submit("abx_present", label=str(req["label"])).wait()
-            if action == "answer":
-                return rd.submit("abx_answer", answer=str(req["answer"])).wait()
-            raise HapticError(f"abx action must be start, present or answer; got {action!r}")
-        if cmd in ("arm", "disarm", "stop"):
-            return rd.submit(cmd).wait()
-        if cmd == "status":
-            return rd.status()
-        raise HapticError(f"unknown control command {cmd!r}; known: push, switch, abx, status, "
-                          f"arm, disarm, stop")
+    def handle(self, req: Mapping[str, Any]) -> Result:
+        """The renderer's answer to one parsed request (raises its error)."""
+        return self.renderer.submit(parse_request(req)).wait()
 
 
 def _alive(path: Path) -> bool:
@@ -205,50 +185,3 @@ def _alive(path: Path) -> bool:
         return False
     finally:
         s.close()
-
-
-class ControlClient:
-    """Talks to a renderer's control socket."""
-
-    def __init__(self, path: str | Path | None = None, timeout_s: float = 10.0) -> None:
-        self.path = Path(path) if path is not None else default_socket_path()
-        self.timeout_s = timeout_s
-
-    def request(self, cmd: str, **args: Any) -> Any:
-        """Send one request; return its result or raise HapticError with the server's message."""
-        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        s.settimeout(self.timeout_s)
-        try:
-            try:
-                s.connect(str(self.path))
-            except OSError as exc:
-                raise HapticError(
-                    f"no renderer on {self.path} ({exc.strerror or exc}); start one with "
-                    f"'fieldbank haptic serve'"
-                ) from None
-            s.sendall((json.dumps({"cmd": cmd, **args}) + "\n").encode())
-            f = s.makefile("rb")
-            line = f.readline(MAX_REQUEST_BYTES)
-        except OSError as exc:
-            raise HapticError(f"control channel {self.path}: {exc}") from None
-        finally:
-            s.close()
-        if not line:
-            raise HapticError(f"the renderer on {self.path} closed the connection")
-        resp = json.loads(line)
-        if not resp.get("ok"):
-            raise HapticError(f"renderer refused {cmd!r}: {resp.get('error')}")
-        return resp.get("result")
-
-
-def push_models(before: ArmParams, after: ArmParams, path: str | Path | None = None,
-                model_ids: tuple[int | None, int | None] | None = None) -> Any:
-    """Push a before/after pair to a running renderer (used by ``whatif … --render``).
-
-    ``model_ids``: the pair's ids in the field database, if stored, so the session's trace
-    refers to them.
-    """
-    args: dict[str, Any] = {"before": before.to_dict(), "after": after.to_dict()}
-    if model_ids is not None:
-        args["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
-    return ControlClient(path).request("push", **args)

@@ -7,27 +7,65 @@ and every per-tick column of :data:`haptic.recording.COLUMNS`, each an array in 
 store with its unit, checksummed by the storage layer. Models rendered without a database id
 are stored first (origin 'synthetic', labelled as haptic-session models).
 
-The storage layer is imported only by whoever builds a ``Database``; this module needs nothing
-from it at import time.
+The sink is typed against :class:`HapticStore`, the part of the ``Database`` API it uses, so the
+storage layer (SQLAlchemy) is loaded by whoever opens a database, not by this module.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fieldbank.errors import StorageError
 from fieldbank.haptic.recording import COLUMNS, NCOL, Trace
 from fieldbank.params import ArmParams
 
+if TYPE_CHECKING:  # typing only: the records come with whatever database is passed in
+    from fieldbank.storage.records import HapticSessionRecord, StoredModel, TraceRecord
+
 SESSION_PREFIX = "haptic_session:"
 
 
-class DatabaseTraceSink:
-    """Records traces in ``db`` (a :class:`fieldbank.storage.Database`)."""
+class HapticStore(Protocol):
+    """The methods of :class:`fieldbank.storage.Database` that haptic sessions use."""
 
-    def __init__(self, db: Any, patient_code: str | None = None) -> None:
+    def add_model(self, params: ArmParams, origin: str, label: str,
+                  patient_code: str | None = None, parent_id: int | None = None) -> StoredModel:
+        ...
+
+    def get_model(self, model_id: int) -> StoredModel: ...
+
+    def start_haptic_session(self, model_a_id: int, robot_url: str,
+                             model_b_id: int | None = None,
+                             patient_code: str | None = None) -> HapticSessionRecord: ...
+
+    def end_haptic_session(self, haptic_session_id: int,
+                           stats: Mapping[str, Any]) -> HapticSessionRecord: ...
+
+    def get_haptic_session(self, haptic_session_id: int) -> HapticSessionRecord: ...
+
+    def add_trace(self, haptic_session_id: int, name: str, array: ArrayLike, unit: str,
+                  provenance: Mapping[str, Any] | None = None) -> TraceRecord: ...
+
+    def list_traces(self, haptic_session_id: int) -> list[TraceRecord]: ...
+
+    def get_trace_array(self, trace_id: int) -> np.ndarray: ...
+
+
+class DatabaseTraceSink:
+    """Records traces in ``db`` (a :class:`fieldbank.storage.Database`).
+
+    Parameters
+    ----------
+    db : HapticStore
+    patient_code : str, optional
+        The patient the sessions belong to.
+    """
+
+    def __init__(self, db: HapticStore, patient_code: str | None = None) -> None:
         self.db = db
         self.patient_code = patient_code
 
@@ -58,7 +96,7 @@ class DatabaseTraceSink:
         return f"{SESSION_PREFIX}{sess.id}"
 
 
-def read_trace_db(db: Any, haptic_session_id: int) -> Trace:
+def read_trace_db(db: HapticStore, haptic_session_id: int) -> Trace:
     """Rebuild a :class:`Trace` from a recorded haptic session; StorageError if incomplete."""
     sess = db.get_haptic_session(haptic_session_id)
     arrays = {t.name: t for t in db.list_traces(haptic_session_id)}

@@ -16,8 +16,8 @@ import time
 
 import serial
 
-from fieldbank.errors import HapticError
 from fieldbank.haptic import protocol as P
+from fieldbank.haptic.errors import HandshakeError, HapticError, LinkDown
 
 # pyserial resolves a URL scheme X to the module <package>.protocol_X: sim:// -> protocol_sim
 if "fieldbank.haptic" not in serial.protocol_handler_packages:
@@ -25,10 +25,6 @@ if "fieldbank.haptic" not in serial.protocol_handler_packages:
 
 #: Baud rate asked of real USB serial adapters (ignored by ptys and sim://).
 DEFAULT_BAUDRATE = 1_000_000
-
-
-class LinkDown(HapticError):
-    """The port failed (unplugged, closed, I/O error)."""
 
 
 class RobotLink:
@@ -227,7 +223,7 @@ class RobotLink:
     # --- session ----------------------------------------------------------------------------
     def handshake(self, rate_hz: int, watchdog_ms: int, timeout_s: float = 1.0,
                   attempts: int = 3) -> P.DeviceInfo:
-        """HELLO → HELLO_ACK; checks version and rate. Raises HapticError on failure."""
+        """HELLO → HELLO_ACK; checks version and rate. Raises HandshakeError on failure."""
         for _ in range(attempts):
             self._send(P.MsgType.HELLO, P.HELLO_FMT.pack(P.PROTOCOL_VERSION, rate_hz, watchdog_ms))
             deadline = time.perf_counter() + timeout_s / attempts
@@ -236,7 +232,7 @@ class RobotLink:
                 if self.device is not None:
                     break
                 if self.device_faults:
-                    raise HapticError(
+                    raise HandshakeError(
                         f"the robot refused HELLO (protocol {P.PROTOCOL_VERSION}, {rate_hz} Hz): "
                         f"fault code {self.last_device_fault}"
                     )
@@ -244,13 +240,13 @@ class RobotLink:
                 break
         info = self.device
         if info is None:
-            raise HapticError(f"no HELLO_ACK from the robot within {timeout_s:g} s")
+            raise HandshakeError(f"no HELLO_ACK from the robot within {timeout_s:g} s")
         if info.protocol_version != P.PROTOCOL_VERSION:
-            raise HapticError(
+            raise HandshakeError(
                 f"robot speaks protocol {info.protocol_version}, host {P.PROTOCOL_VERSION}"
             )
         if rate_hz > info.max_rate_hz:
-            raise HapticError(f"robot accepts at most {info.max_rate_hz} Hz; asked {rate_hz} Hz")
+            raise HandshakeError(f"robot accepts at most {info.max_rate_hz} Hz; asked {rate_hz} Hz")
         return info
 
     def close(self) -> None:

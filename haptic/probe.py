@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import MOTIONS, motion_duration_s
 from fieldbank.haptic.recording import Trace
-from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams

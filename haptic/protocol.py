@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import NamedTuple
 
+from fieldbank.haptic.errors import FrameError
+
 PROTOCOL_VERSION = 1
 #: Largest encoded frame accepted by a decoder (bytes, before the delimiter).
 MAX_FRAME_BYTES = 64
@@ -82,14 +84,6 @@ PAYLOAD_SIZES: dict[int, int] = {
 }
 
 _SIZES = {int(k): v for k, v in PAYLOAD_SIZES.items()}
-
-
-class FrameError(ValueError):
-    """A frame that cannot be decoded; ``kind`` is 'cobs', 'crc', 'length', 'version', 'type'."""
-
-    def __init__(self, kind: str, message: str) -> None:
-        super().__init__(message)
-        self.kind = kind
 
 
 class Frame(NamedTuple):

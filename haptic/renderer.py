@@ -12,56 +12,84 @@ Each tick (default 1 kHz, 500 Hz–4 kHz):
 5. pass F through the passivity controller, rate limit and saturation; send it;
 6. record the row.
 
-Timing: absolute deadlines on :func:`time.perf_counter_ns`; sleep until ``spin_us`` before the
-deadline, then spin; the garbage collector is frozen and disabled inside the loop; SCHED_FIFO is
-requested and a warning logged when the OS refuses. The period of every tick is kept; p50, p99,
-max of the period error and the overruns (ticks that woke more than ``overrun_ms`` late) are
-reported with a per-phase breakdown of the tick's cost. A :class:`VirtualClock` replaces the
+Timing (:mod:`haptic.clock`): absolute deadlines on a :class:`~haptic.clock.Clock`; the loop
+runs inside :func:`~haptic.clock.realtime` (garbage collector frozen and off, SCHED_FIFO, short
+thread switch interval). The wake time and cost of every tick are kept (:mod:`haptic.loopstats`:
+period error, overruns, per-phase cost). A :class:`~haptic.clock.VirtualClock` replaces the
 wall clock in tests so a minute of rendering takes a fraction of that.
 
-Commands (switch, push, arm, disarm, A/B/X, stop) come from other threads through
-:meth:`Renderer.submit` and are applied at the start of a tick, so the loop's state has one
-owner.
+Commands (:mod:`haptic.commands`: switch, push, arm, disarm, A/B/X, stop, status) come from
+other threads through :meth:`Renderer.submit` and are applied at the start of a tick, so the
+loop's state has one owner.
 """
 
 from __future__ import annotations
 
-import array
-import gc
 import logging
 import math
-import os
 import queue
-import sys
-import threading
 import time
 from dataclasses import asdict, dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
-from fieldbank.errors import HapticError, ParameterError, UnreachableError
+from fieldbank.errors import ParameterError, UnreachableError
+from fieldbank.haptic import commands
 from fieldbank.haptic.abx import AbxSession
-from fieldbank.haptic.link import LinkDown, RobotLink
+from fieldbank.haptic.clock import Clock, RealClock, realtime
+from fieldbank.haptic.commands import ModelIds, RendererCommand, Request, Result, SimPair
+from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.loopstats import LoopTimes, loop_stats, status_figures
 from fieldbank.haptic.protocol import FLAG_WATCHDOG, FaultCode
 from fieldbank.haptic.recording import NCOL, Trace, TraceBuffer
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig
+from fieldbank.validation import Interval, check_number, check_tuple
 
 log = logging.getLogger("fieldbank.haptic.renderer")
 
-#: GIL switch interval while the loop runs (default 5 ms would let another thread hold the
-#: interpreter for several ticks).
-SWITCH_INTERVAL_S = 1e-4
-
-PHASES = ("link_in", "checks", "models", "safety", "link_out", "record")
+#: Allowed range of each numeric setting of :class:`RendererConfig` (messages are generated).
+RENDERER_BOUNDS: dict[str, Interval] = {
+    "rate_hz": Interval(500, 4000, "Hz"),
+    "crossfade_s": Interval(0.0, None, "s"),
+    "push_fade_s": Interval(0.0, None, "s"),
+    "state_wait_s": Interval(0.0, None, "s"),
+    "spin_us": Interval(0.0, None, "µs"),
+    "overrun_ms": Interval(0.0, None, "ms"),
+}
 
 
 @dataclass(frozen=True)
 class RendererConfig:
-    """Loop settings, SI."""
+    """Loop settings, SI; ranges in :data:`RENDERER_BOUNDS`.
+
+    Attributes
+    ----------
+    rate_hz : int, Hz
+        Tick rate, 500–4000.
+    crossfade_s : float, s
+        Raised-cosine ramp of an A↔B switch.
+    push_fade_s : float, s
+        Fade out before and in after swapping pushed models.
+    shoulder_offset_m : tuple of 2 float, m
+        The shoulder's position in robot coordinates (robot frame − offset = shoulder frame).
+    state_wait_s : float, s
+        > 0: block up to this long for each STATE (lockstep devices); 0: never block.
+    spin_us : float, µs
+        The real clock spins (instead of sleeping) this long before each deadline.
+    overrun_ms : float, ms
+        A tick waking later than this is counted as an overrun.
+    realtime_priority : bool
+        Ask for SCHED_FIFO.
+    record : bool
+        Keep a trace row per tick.
+    arm_on_start : bool
+        Arm as soon as the first STATE arrives.
+    """
 
     rate_hz: int = 1000
     crossfade_s: float = 0.5            # A↔B switch ramp
@@ -75,50 +103,13 @@ class RendererConfig:
     arm_on_start: bool = True
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.rate_hz, int) and 500 <= self.rate_hz <= 4000):
-            raise ParameterError(f"The 'rate_hz' parameter must be an integer in [500, 4000] Hz; "
-                                 f"got {self.rate_hz!r}.")
-        for name in ("crossfade_s", "push_fade_s", "state_wait_s", "spin_us", "overrun_ms"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ParameterError(f"The '{name}' parameter must be finite and >= 0; got {v!r}.")
-
-
-class Clock(Protocol):
-    def now_ns(self) -> int: ...
-    def sleep_until(self, deadline_ns: int) -> None: ...
-
-
-class RealClock:
-    """Wall clock: sleep to ``spin_ns`` before the deadline, then spin."""
-
-    def __init__(self, spin_us: float = 200.0) -> None:
-        self.spin_ns = int(spin_us * 1000)
-
-    def now_ns(self) -> int:
-        return time.perf_counter_ns()
-
-    def sleep_until(self, deadline_ns: int) -> None:
-        pc = time.perf_counter_ns
-        rem = deadline_ns - pc()
-        if rem > self.spin_ns:
-            time.sleep((rem - self.spin_ns) * 1e-9)
-        while pc() < deadline_ns:
-            pass
-
-
-class VirtualClock:
-    """Simulated time: sleeping jumps to the deadline at once."""
-
-    def __init__(self) -> None:
-        self.t_ns = 0
-
-    def now_ns(self) -> int:
-        return self.t_ns
-
-    def sleep_until(self, deadline_ns: int) -> None:
-        if deadline_ns > self.t_ns:
-            self.t_ns = deadline_ns
+        for name, interval in RENDERER_BOUNDS.items():
+            check_number(name, getattr(self, name), interval, what="renderer parameter")
+        if not isinstance(self.rate_hz, int):
+            raise ParameterError(f"The 'rate_hz' renderer parameter must be an integer number "
+                                 f"of Hz; got {self.rate_hz!r} instead.")
+        check_tuple("shoulder_offset_m", self.shoulder_offset_m, 2, Interval(None, None, "m"),
+                    what="renderer parameter")
 
 
 class _Ramp:
@@ -152,26 +143,6 @@ class _Ramp:
         self.k = self.n = 0
 
 
-class Command:
-    """A request to the loop; ``wait`` returns its result or raises its error."""
-
-    __slots__ = ("args", "done", "error", "name", "result")
-
-    def __init__(self, name: str, **args: Any) -> None:
-        self.name = name
-        self.args = args
-        self.done = threading.Event()
-        self.result: Any = None
-        self.error: Exception | None = None
-
-    def wait(self, timeout_s: float = 2.0) -> Any:
-        if not self.done.wait(timeout_s):
-            raise HapticError(f"the renderer did not answer {self.name!r} within {timeout_s} s")
-        if self.error is not None:
-            raise self.error
-        return self.result
-
-
 def build_sim(params: ArmParams, dt_s: float, coupling: CouplingConfig | None = None) -> ArmSim:
     """Compile a model for the loop (slow part, done outside the loop)."""
     return ArmSim(Arm.from_params(params), dt_s=dt_s, coupling=coupling)
@@ -188,7 +159,8 @@ class Renderer:
     config : RendererConfig, optional
     safety : SafetyConfig, optional
     clock : Clock, optional
-        :class:`RealClock` by default; :class:`VirtualClock` to run faster than real time.
+        :class:`~haptic.clock.RealClock` by default; :class:`~haptic.clock.VirtualClock` to run
+        faster than real time.
     coupling : CouplingConfig, optional
     """
 
@@ -203,15 +175,15 @@ class Renderer:
         self.clock: Clock = clock or RealClock(self.config.spin_us)
         self.coupling = coupling
         self.params = (before, after)
-        self.sims = (build_sim(before, self.dt_s, coupling), build_sim(after, self.dt_s, coupling))
+        self.sims = self.compile_pair(before, after)
         self.blend = _Ramp(0.0)
         self.gain = _Ramp(0.0)
-        self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
+        self.commands: queue.SimpleQueue[Request] = queue.SimpleQueue()
         self.events: list[dict[str, Any]] = []
         self.abx: AbxSession | None = None
         self.abx_results: list[dict[str, Any]] = []
-        self._pending: tuple[tuple[ArmSim, ArmSim], tuple[ArmParams, ArmParams]] | None = None
-        self._pending_ids: dict[str, int | None] | None = None
+        self._pending: tuple[SimPair, tuple[ArmParams, ArmParams]] | None = None
+        self._pending_ids: ModelIds | None = None
         self._link_down = False
         self._stale = 0
         self._awaiting = False
@@ -225,112 +197,93 @@ class Renderer:
         self.fx = self.fy = 0.0
         self.trace: Trace | None = None
         self._buf: TraceBuffer | None = None
-        self._wake = array.array("q")
-        self._late = array.array("q")
-        self._cost = [0] * len(PHASES)
-        self._tick_ns = array.array("q")
+        self.times = LoopTimes()
+        # the tick appends to these two directly (never replaced, unlike the wake records)
+        self._cost = self.times.phase_ns
+        self._tick_ns = self.times.tick_ns
         self.realtime_scheduling: bool | None = None
-        self.skipped_ticks = 0
         self.metadata: dict[str, Any] = {}
 
+    @property
+    def skipped_ticks(self) -> int:
+        """Ticks skipped because the loop woke a whole period late."""
+        return self.times.skipped_ticks
+
+    @property
+    def mode_name(self) -> str:
+        """The safety state machine's mode: DISARMED, ARMED or FAULT."""
+        return self.safety.mode.name
+
     # --- thread-safe requests ---------------------------------------------------------------
-    def submit(self, name: str, **args: Any) -> Command:
-        """Queue a command for the loop (``switch``, ``push``, ``arm``, ``disarm``, ``stop``,
-        ``abx_start``, ``abx_present``, ``abx_answer``, ``status``)."""
-        cmd = Command(name, **args)
-        if not self.running and name not in ("push", "switch", "stop", "status"):
-            cmd.error = HapticError("the renderer is not running")
-            cmd.done.set()
-            return cmd
-        self.commands.put(cmd)
+    def submit(self, command: RendererCommand | str, /, **args: Any) -> Request:
+        """Queue a command for the loop; its :class:`~haptic.commands.Request` answers.
+
+        ``command`` is a :mod:`haptic.commands` value, or its name with keywords
+        (``submit("switch", target="B")``). A command that cannot be built, or needs the loop
+        while it is not running, is answered with its error; nothing raises here.
+        """
+        name = command if isinstance(command, str) else command.name
+        req = Request(name)
+        try:
+            cmd = command if not isinstance(command, str) else commands.from_name(command, args)
+            if cmd.needs_running and not self.running:
+                raise CommandError("the renderer is not running")
+            req.command = cmd.prepare(self)
+        except Exception as exc:  # answered like an error applying it
+            return req.fail(exc)
+        if not req.command.in_loop:
+            req.run(self)
+            return req
+        self.commands.put(req)
         if not self.running:
             self._drain()
-        return cmd
+        return req
 
     def push_params(self, before: ArmParams, after: ArmParams,
-                    model_ids: dict[str, int | None] | None = None) -> Command:
+                    model_ids: ModelIds | None = None) -> Request:
         """Compile two models here (outside the loop) and queue them for a faded swap.
 
         ``model_ids``: database ids of the two models ({'A': id, 'B': id}), kept in the trace.
         """
-        sims = (build_sim(before, self.dt_s, self.coupling),
-                build_sim(after, self.dt_s, self.coupling))
-        return self.submit("push", sims=sims, params=(before, after), model_ids=model_ids)
+        return self.submit(commands.Push(before, after, model_ids))
 
-    # --- command handling (loop thread) -----------------------------------------------------
+    # --- what commands do (loop thread; see haptic.commands) --------------------------------
     def _drain(self) -> None:
         while True:
             try:
-                cmd = self.commands.get_nowait()
+                req = self.commands.get_nowait()
             except queue.Empty:
                 return
-            try:
-                cmd.result = self._apply(cmd)
-            except Exception as exc:  # a bad command must never stop the loop
-                cmd.error = exc
-            cmd.done.set()
+            req.run(self)
 
-    def _event(self, kind: str, **data: Any) -> dict[str, Any]:
+    def log_event(self, kind: str, **data: Any) -> dict[str, Any]:
+        """Record an event at the current session time (kept in the trace)."""
         ev = {"t_s": self.t_s, "event": kind, **data}
         self.events.append(ev)
         return ev
 
-    def _apply(self, cmd: Command) -> Any:
-        a = cmd.args
-        n_fade = round(self.config.crossfade_s / self.dt_s)
-        if cmd.name == "switch":
-            target = a["target"]
-            w = {"A": 0.0, "B": 1.0, "before": 0.0, "after": 1.0, 0: 0.0, 1: 1.0}.get(target)
-            if w is None:
-                raise HapticError(f"switch to 'before'/'A' or 'after'/'B'; got {target!r}")
-            self.blend.go(w, n_fade)
-            self._event("switch", to=w)
-            return {"blend_target": w}
-        if cmd.name == "push":
-            self._pending = (a["sims"], a["params"])
-            self._pending_ids = a.get("model_ids")
-            if not self.running:
-                self._swap()
-            else:
-                self.gain.go(0.0, round(self.config.push_fade_s / self.dt_s))
-            self._event("push")
-            return {"pushed": True}
-        if cmd.name == "arm":
-            self.arm()
-            return {"mode": self.safety.mode.name}
-        if cmd.name == "disarm":
-            self.disarm()
-            return {"mode": self.safety.mode.name}
-        if cmd.name == "stop":
-            self._stop = True
-            self._event("stop")
-            return {"stopping": True}
-        if cmd.name == "status":
-            return self.status()
-        if cmd.name == "abx_start":
-            self.abx = AbxSession(int(a.get("n_trials", 10)), int(a.get("seed", 0)),
-                                  bool(a.get("hide_labels", True)))
-            self._event("abx_start", n_trials=self.abx.n_trials, seed=self.abx.seed)
-            return {"trial": 0, "n_trials": self.abx.n_trials}
-        if cmd.name == "abx_present":
-            if self.abx is None:
-                raise HapticError("no A/B/X block running; start one with abx_start")
-            label = str(a["label"]).upper()
-            self.blend.go(float(self.abx.model_for(label)), n_fade)
-            self._event("abx_present", label=label, trial=self.abx.trial)
-            return {"presenting": label, "trial": self.abx.trial}
-        if cmd.name == "abx_answer":
-            if self.abx is None:
-                raise HapticError("no A/B/X block running; start one with abx_start")
-            rec = self.abx.answer(str(a["answer"]), self.t_s)
-            self._event("abx_answer", trial=rec["trial"], answer=rec["answer"])
-            out = {"trial": rec["trial"] + 1, "done": self.abx.done}
-            if self.abx.done:
-                self.abx_results.append(self.abx.result())
-                out["result"] = self.abx.result()
-                self.abx = None
-            return out
-        raise HapticError(f"unknown renderer command {cmd.name!r}")
+    def crossfade(self, weight: float) -> None:
+        """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""
+        self.blend.go(weight, round(self.config.crossfade_s / self.dt_s))
+
+    def compile_pair(self, before: ArmParams, after: ArmParams) -> SimPair:
+        """Both models compiled for this loop's period (slow: call outside the loop)."""
+        return (build_sim(before, self.dt_s, self.coupling),
+                build_sim(after, self.dt_s, self.coupling))
+
+    def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
+                     model_ids: ModelIds | None) -> None:
+        """Swap in compiled models: at once when idle, else behind a fade out and in."""
+        self._pending = (sims, params)
+        self._pending_ids = model_ids
+        if not self.running:
+            self._swap()
+        else:
+            self.gain.go(0.0, round(self.config.push_fade_s / self.dt_s))
+
+    def request_stop(self) -> None:
+        """End the run after the current tick."""
+        self._stop = True
 
     def _swap(self) -> None:
         assert self._pending is not None
@@ -347,7 +300,7 @@ class Renderer:
     def _reset_arms(self) -> None:
         ox, oy = self.config.shoulder_offset_m
         hx, hy = self.link.x - ox, self.link.y - oy
-        self._event("reset_arms", at_m=[hx, hy])
+        self.log_event("reset_arms", at_m=[hx, hy])
         for sim in self.sims:
             try:
                 if math.isfinite(hx) and math.isfinite(hy):
@@ -360,7 +313,7 @@ class Renderer:
     def arm(self) -> None:
         """Arm (or re-arm after a fault): refused while the handle state is unsafe."""
         if self._link_down:
-            raise HapticError("cannot arm: the robot link is down")
+            raise CommandError("cannot arm: the robot link is down")
         if self.safety.latched & (1 << (FaultCode.MODEL - 1)):
             self._reset_arms()
         self.safety.rearm((self.link.x, self.link.y, self.link.vx, self.link.vy))
@@ -370,10 +323,10 @@ class Renderer:
             self.link.arm()
         except LinkDown as exc:
             self._trip(FaultCode.DISCONNECT, str(exc))
-            raise HapticError(f"cannot arm: {exc}") from None
+            raise CommandError(f"cannot arm: {exc}") from None
         self.gain.set(0.0)
         self.gain.go(1.0, round(self.safety.config.rearm_ramp_s / self.dt_s))
-        self._event("arm")
+        self.log_event("arm")
 
     def disarm(self) -> None:
         self.safety.disarm()
@@ -383,14 +336,14 @@ class Renderer:
                 self.link.disarm()
             except LinkDown as exc:
                 self._trip(FaultCode.DISCONNECT, str(exc))
-        self._event("disarm")
+        self.log_event("disarm")
 
     def _trip(self, code: int, message: str) -> None:
         first = not (self.safety.latched & (1 << (code - 1)))
         self.safety.trip(code, self.t_s, message)
         self.gain.set(0.0)
         if first:
-            self._event("fault", code=int(code), name=FaultCode(code).name)
+            self.log_event("fault", code=int(code), name=FaultCode(code).name)
         if not self._link_down:
             try:
                 self.link.disarm()
@@ -502,30 +455,6 @@ class Renderer:
         self.t_s += self.dt_s
 
     # --- the loop ---------------------------------------------------------------------------
-    def _enter_realtime(self) -> Any:
-        if not self.config.realtime_priority or not hasattr(os, "sched_setscheduler"):
-            self.realtime_scheduling = False
-            return None
-        try:
-            old = (os.sched_getscheduler(0), os.sched_getparam(0))
-            prio = max(1, min(80, os.sched_get_priority_max(os.SCHED_FIFO) - 10))
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
-            self.realtime_scheduling = True
-            return old
-        except (PermissionError, OSError) as exc:
-            self.realtime_scheduling = False
-            log.warning("real-time scheduling (SCHED_FIFO) refused by the OS (%s); the loop runs "
-                        "with normal priority and its timing will show more jitter", exc)
-            return None
-
-    @staticmethod
-    def _leave_realtime(old: Any) -> None:
-        if old is not None:
-            try:
-                os.sched_setscheduler(0, old[0], old[1])
-            except OSError:
-                pass
-
     def start(self, first_state_timeout_s: float = 1.0, expected_ticks: int | None = None) -> None:
         """Wait for the first STATE, put both arms at the handle, arm (``arm_on_start``)."""
         cfg = self.config
@@ -533,8 +462,7 @@ class Renderer:
             raise HapticError(f"no STATE from the robot within {first_state_timeout_s} s")
         self._reset_arms()
         self._buf = TraceBuffer(expected_ticks or 60 * cfg.rate_hz) if cfg.record else None
-        self._wake = array.array("q")
-        self._late = array.array("q")
+        self.times.restart()
         self.running = True
         self._stop = False
         if cfg.arm_on_start:
@@ -557,112 +485,67 @@ class Renderer:
         return self.trace
 
     def run(self, duration_s: float | None = None, first_state_timeout_s: float = 1.0) -> Trace:
-        """Render until ``duration_s`` passes or a ``stop`` command; return the session trace."""
+        """Render until ``duration_s`` passes or a ``stop`` command; return the session trace.
+
+        Parameters
+        ----------
+        duration_s : float, s, optional
+            How long to render (None: until a ``stop`` command or Ctrl-C).
+        first_state_timeout_s : float, s
+            How long to wait for the robot's first STATE.
+        """
         cfg = self.config
         n_ticks = None if duration_s is None else max(1, round(duration_s * cfg.rate_hz))
-        # collect and freeze before arming: a full collection can take longer than the device
-        # watchdog, and nothing may stand between the ARM frame and the first FORCE
-        gc.collect()
-        gc.freeze()
-        gc_was_enabled = gc.isenabled()
-        gc.disable()
-        old_sched = self._enter_realtime()
-        try:
-            self.start(first_state_timeout_s, n_ticks)
-        except BaseException:
-            if gc_was_enabled:
-                gc.enable()
-            gc.unfreeze()
-            self._leave_realtime(old_sched)
-            raise
+        # the process is prepared before arming: nothing may stand between the ARM frame and
+        # the first FORCE (haptic.clock.realtime)
+        with realtime(cfg.realtime_priority) as granted:
+            self.realtime_scheduling = granted
+            try:
+                self.start(first_state_timeout_s, n_ticks)
+                with np.errstate(over="ignore", invalid="ignore"):  # diverging arms are faults
+                    self._loop(n_ticks)
+            except KeyboardInterrupt:
+                if not self.running:
+                    raise
+                self.log_event("interrupted")
+            finally:
+                self.running = False
+        return self.finish()
+
+    def _loop(self, n_ticks: int | None) -> None:
         clock = self.clock
         period = self.period_ns
-        wake = self._wake
-        late = self._late
+        times = self.times
+        wake = times.wake_ns
+        late = times.late_ns
         end = None if n_ticks is None else self.ticks + n_ticks
-        errstate = np.errstate(over="ignore", invalid="ignore")  # diverging arms are faults
-        errstate.__enter__()
-        # other threads (control channel) must hand the interpreter back quickly
-        old_switch = sys.getswitchinterval()
-        sys.setswitchinterval(SWITCH_INTERVAL_S)
-        try:
-            deadline = clock.now_ns()
-            while not self._stop and (end is None or self.ticks < end):
-                clock.sleep_until(deadline)
-                now = clock.now_ns()
-                wake.append(now)
-                late.append(now - deadline)
-                self.tick()
-                deadline += period
-                if now >= deadline:
-                    # a whole period late: skip the missed ticks instead of bursting through
-                    # them back to back (which would read no new state and command stale forces)
-                    skipped = (now - deadline) // period + 1
-                    self.skipped_ticks += skipped
-                    deadline += skipped * period
-        except KeyboardInterrupt:
-            self._event("interrupted")
-        finally:
-            sys.setswitchinterval(old_switch)
-            errstate.__exit__(None, None, None)
-            if gc_was_enabled:
-                gc.enable()
-            gc.unfreeze()
-            self._leave_realtime(old_sched)
-            self.running = False
-        return self.finish()
+        deadline = clock.now_ns()
+        while not self._stop and (end is None or self.ticks < end):
+            clock.sleep_until(deadline)
+            now = clock.now_ns()
+            wake.append(now)
+            late.append(now - deadline)
+            self.tick()
+            deadline += period
+            if now >= deadline:
+                # a whole period late: skip the missed ticks instead of bursting through
+                # them back to back (which would read no new state and command stale forces)
+                skipped = (now - deadline) // period + 1
+                times.skipped_ticks += skipped
+                deadline += skipped * period
 
     # --- reporting --------------------------------------------------------------------------
     def loop_stats(self, last: int | None = None) -> dict[str, Any]:
-        """Period error (ns → µs) percentiles, overruns, tick cost breakdown; over the whole
-        session or its ``last`` ticks. Safe to call from another thread while the loop runs
-        (it works on copies: a numpy view would stop the loop's arrays from growing)."""
-        k = -last if last else 0
-        wake = np.array(self._wake[k:], dtype=np.float64)
-        late = np.array(self._late[k:], dtype=np.float64)
-        tick_ns = np.array(self._tick_ns[k:], dtype=np.float64)
-        out: dict[str, Any] = {"ticks": self.ticks, "rate_hz": self.config.rate_hz,
-                               "realtime_scheduling": self.realtime_scheduling}
-        if late.size >= 2:
-            # period error: actual period between wakes minus nominal
-            periods_ns = np.diff(wake)
-            per_err = np.abs(periods_ns - self.period_ns)
-            out["period_error_us"] = {
-                "p50": float(np.percentile(per_err, 50) / 1e3),
-                "p99": float(np.percentile(per_err, 99) / 1e3),
-                "max": float(per_err.max() / 1e3),
-            }
-            periods = periods_ns / 1e3
-            out["period_us"] = {"p50": float(np.percentile(periods, 50)),
-                                "p99": float(np.percentile(periods, 99)),
-                                "max": float(periods.max())}
-            out["wake_late_us"] = {"p50": float(np.percentile(late, 50) / 1e3),
-                                   "p99": float(np.percentile(late, 99) / 1e3),
-                                   "max": float(late.max() / 1e3)}
-            thr = self.config.overrun_ms * 1e6
-            over = late > thr
-            out["overruns"] = int(over.sum())
-            out["overrun_threshold_ms"] = self.config.overrun_ms
-            out["skipped_ticks"] = self.skipped_ticks
-            out["overrun_times_s"] = [float((wake[i] - wake[0]) / 1e9)
-                                      for i in np.flatnonzero(over)[:100]]
-        n = max(1, self.ticks)
-        out["tick_cost_us"] = {name: self._cost[i] / n / 1e3 for i, name in enumerate(PHASES)}
-        out["tick_cost_us"]["total"] = sum(self._cost) / n / 1e3
-        if tick_ns.size:
-            tc = tick_ns / 1e3
-            # percentiles are robust to the few ticks preempted mid-way (the mean is not)
-            out["tick_total_us"] = {"p50": float(np.percentile(tc, 50)),
-                                    "p99": float(np.percentile(tc, 99)),
-                                    "max": float(tc.max())}
-        out["passivity_active_ticks"] = self.safety.passivity.active_ticks
-        out["link"] = {"crc_errors": self.link.crc_errors,
-                       "decode_errors": dict(self.link.reader.errors),
-                       "frames_lost": self.link.frames_lost, "duplicates": self.link.duplicates,
-                       "states": self.link.states, "frames_tx": self.link.frames_tx}
-        return out
+        """Period error, overruns, tick cost (:func:`haptic.loopstats.loop_stats`) over the
+        whole session or its ``last`` ticks; safe to call while the loop runs."""
+        return loop_stats(self.times, ticks=self.ticks, rate_hz=self.config.rate_hz,
+                          overrun_ms=self.config.overrun_ms,
+                          realtime_scheduling=self.realtime_scheduling,
+                          passivity_active_ticks=self.safety.passivity.active_ticks,
+                          link=self.link, last=last)
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> Result:
+        """What ``fieldbank haptic status`` shows (the blend is hidden during A/B/X)."""
         s = self.safety
         return {
             "running": self.running, "mode": s.mode.name, "t_s": round(self.t_s, 4),
@@ -673,9 +556,7 @@ class Renderer:
             "handle_m": [self.link.x, self.link.y],
             "latched_faults": [c.name for c in FaultCode if s.latched & (1 << (c - 1))],
             "faults_logged": len(s.log_records),
-            "loop_last_10s": {k: v for k, v in self.loop_stats(last=10 * self.config.rate_hz)
-                              .items() if k in ("period_error_us", "overruns", "skipped_ticks",
-                                                "tick_total_us", "realtime_scheduling")},
+            "loop_last_10s": status_figures(self.loop_stats(last=10 * self.config.rate_hz)),
             "abx_trial": None if self.abx is None else self.abx.trial,
         }
 

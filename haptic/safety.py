@@ -30,8 +30,10 @@ import math
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from fieldbank.errors import HapticError, ParameterError
+from fieldbank.errors import ParameterError
+from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.protocol import FaultCode
+from fieldbank.validation import Interval, check_number, check_tuple
 
 log = logging.getLogger("fieldbank.haptic.safety")
 
@@ -47,9 +49,53 @@ class Mode(IntEnum):
     FAULT = 2      # latched fault, zero force, waiting for re-arm
 
 
+#: Allowed range of every numeric limit of :class:`SafetyConfig` (messages are generated).
+SAFETY_BOUNDS: dict[str, Interval] = {
+    "force_limit_n": Interval(0.0, None, "N", low_closed=False),
+    "force_rate_n_per_s": Interval(0.0, None, "N/s", low_closed=False),
+    "speed_limit_m_per_s": Interval(0.0, None, "m/s", low_closed=False),
+    "passivity_max_damping_n_s_per_m": Interval(0.0, None, "N·s/m"),
+    "state_timeout_ms": Interval(0.0, None, "ms", low_closed=False),
+    "crc_error_limit": Interval(0.0, None, "errors"),
+    "crc_leak_per_s": Interval(0.0, None, "errors/s"),
+    "max_seq_gap": Interval(0.0, None, "frames"),
+    "rearm_ramp_s": Interval(0.0, None, "s"),
+}
+#: Each coordinate of the workspace box, robot frame.
+WORKSPACE_BOUNDS = Interval(None, None, "m")
+WORKSPACE_LABELS = ("workspace_m[0] (xmin)", "workspace_m[1] (xmax)", "workspace_m[2] (ymin)",
+                    "workspace_m[3] (ymax)")
+
+
 @dataclass(frozen=True)
 class SafetyConfig:
-    """Limits and thresholds, SI. Defaults are assumptions sized for a clinical planar robot."""
+    """Limits and thresholds, SI; ranges in :data:`SAFETY_BOUNDS`. Defaults are assumptions
+    sized for a clinical planar robot.
+
+    Attributes
+    ----------
+    force_limit_n : float, N
+        Saturation of the commanded force's norm.
+    force_rate_n_per_s : float, N/s
+        Largest change of the force per second (per tick: times the period).
+    workspace_m : tuple of 4 float, m
+        (xmin, xmax, ymin, ymax) of the box the handle must stay in, robot frame.
+    speed_limit_m_per_s : float, m/s
+    passivity : bool
+        Whether the passivity controller runs.
+    passivity_max_damping_n_s_per_m : float, N·s/m
+        Cap of the damping the passivity controller may add.
+    state_timeout_ms : float, ms
+        Longest time without a STATE frame before a TIMEOUT fault.
+    crc_error_limit : float
+        CRC leaky bucket: trips above this many errors.
+    crc_leak_per_s : float
+        Errors forgiven per second.
+    max_seq_gap : int
+        Frames lost in one gap before a SEQ_GAP fault.
+    rearm_ramp_s : float, s
+        Raised-cosine ramp-in after arming.
+    """
 
     force_limit_n: float = 40.0
     force_rate_n_per_s: float = 10_000.0          # 10 N per ms
@@ -64,26 +110,14 @@ class SafetyConfig:
     rearm_ramp_s: float = 0.3                     # raised-cosine ramp-in after arming
 
     def __post_init__(self) -> None:
-        checks = {
-            "force_limit_n": self.force_limit_n > 0,
-            "force_rate_n_per_s": self.force_rate_n_per_s > 0,
-            "speed_limit_m_per_s": self.speed_limit_m_per_s > 0,
-            "passivity_max_damping_n_s_per_m": self.passivity_max_damping_n_s_per_m >= 0,
-            "state_timeout_ms": self.state_timeout_ms > 0,
-            "crc_error_limit": self.crc_error_limit >= 0,
-            "crc_leak_per_s": self.crc_leak_per_s >= 0,
-            "max_seq_gap": self.max_seq_gap >= 0,
-            "rearm_ramp_s": self.rearm_ramp_s >= 0,
-        }
-        for name, ok in checks.items():
-            v = getattr(self, name)
-            if not ok or not math.isfinite(float(v)):
-                raise ParameterError(f"The safety parameter '{name}' is out of range; got {v!r}.")
-        x0, x1, y0, y1 = self.workspace_m
-        if not (x0 < x1 and y0 < y1) or not all(map(math.isfinite, self.workspace_m)):
+        for name, interval in SAFETY_BOUNDS.items():
+            check_number(name, getattr(self, name), interval, what="safety parameter")
+        x0, x1, y0, y1 = check_tuple("workspace_m", self.workspace_m, 4, WORKSPACE_BOUNDS,
+                                     labels=WORKSPACE_LABELS, what="safety parameter")
+        if not (x0 < x1 and y0 < y1):
             raise ParameterError(
-                f"The safety parameter 'workspace_m' must be (xmin, xmax, ymin, ymax) with "
-                f"min < max; got {self.workspace_m!r}."
+                f"The 'workspace_m' safety parameter must be (xmin, xmax, ymin, ymax) with "
+                f"min < max; got {self.workspace_m!r} instead."
             )
 
 
@@ -233,10 +267,10 @@ class Safety:
         log.warning("haptic fault %s at t=%.4f s: %s", FaultCode(code).name, t_s, message)
 
     def rearm(self, handle: tuple[float, float, float, float]) -> None:
-        """Clear latched faults and arm, if the handle state is safe now; else HapticError."""
+        """Clear latched faults and arm, if the handle state is safe now; else CommandError."""
         code, msg = self.check_handle(*handle)
         if code:
-            raise HapticError(f"cannot arm: {msg}")
+            raise CommandError(f"cannot arm: {msg}")
         self.latched = 0
         self.crc_bucket = 0.0
         self.limiter.zero()

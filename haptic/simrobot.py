@@ -41,13 +41,34 @@ import tty
 from dataclasses import asdict, dataclass, fields
 from urllib.parse import parse_qsl
 
+from fieldbank.errors import ParameterError
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.motions import MOTIONS, MotionFn, make_motion
+from fieldbank.validation import Interval, check_number
+
+#: Allowed range of every numeric field of :class:`SimRobotConfig` (messages are generated).
+SIM_BOUNDS: dict[str, Interval] = {
+    "x0_m": Interval(None, None, "m"),
+    "y0_m": Interval(None, None, "m"),
+    "motion_duration_s": Interval(None, None, "s"),
+    "motion_distance_m": Interval(None, None, "m"),
+    "handle_mass_kg": Interval(0.0, None, "kg", low_closed=False),
+    "viscous_n_s_per_m": Interval(None, None, "N·s/m"),
+    "coulomb_n": Interval(None, None, "N"),
+    "coulomb_v_m_per_s": Interval(None, None, "m/s"),
+    "operator_k_n_per_m": Interval(None, None, "N/m"),
+    "operator_b_n_s_per_m": Interval(None, None, "N·s/m"),
+    "force_limit_n": Interval(None, None, "N"),
+    "watchdog_ms": Interval(0.0, None, "ms", low_closed=False),
+    "max_rate_hz": Interval(None, None, "Hz"),
+    "substep_s": Interval(0.0, None, "s", low_closed=False),
+}
 
 
 @dataclass(frozen=True)
 class SimRobotConfig:
-    """Simulated device and operator, SI. Every field can be set from a ``sim://`` query."""
+    """Simulated device and operator, SI; ranges in :data:`SIM_BOUNDS`. Every field can be set
+    from a ``sim://`` query."""
 
     mode: str = "lockstep"              # 'lockstep' | 'realtime'
     motion: str = "hold"                # see haptic.motions.MOTIONS
@@ -70,15 +91,12 @@ class SimRobotConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in ("lockstep", "realtime"):
-            raise ValueError(f"sim mode must be 'lockstep' or 'realtime'; got {self.mode!r}")
+            raise ParameterError(f"sim mode must be 'lockstep' or 'realtime'; got {self.mode!r}")
         if self.motion not in MOTIONS:
-            raise ValueError(f"sim motion must be one of {', '.join(MOTIONS)}; got {self.motion!r}")
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, float) and not math.isfinite(v):
-                raise ValueError(f"sim parameter {f.name} must be finite; got {v!r}")
-        if self.handle_mass_kg <= 0 or self.substep_s <= 0 or self.watchdog_ms <= 0:
-            raise ValueError("sim handle_mass_kg, substep_s and watchdog_ms must be > 0")
+            raise ParameterError(f"sim motion must be one of {', '.join(MOTIONS)}; "
+                                 f"got {self.motion!r}")
+        for name, interval in SIM_BOUNDS.items():
+            check_number(name, getattr(self, name), interval, what="sim parameter")
 
     @classmethod
     def from_query(cls, query: str) -> SimRobotConfig:

@@ -5,8 +5,9 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator
 
+from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm

@@ -12,10 +12,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldbank.errors import HapticError
+from fieldbank.haptic.clock import VirtualClock
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.protocol import FaultCode
-from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimDevice
 from fieldbank.params import ArmParams

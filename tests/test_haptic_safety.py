@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldbank.errors import HapticError, ParameterError
+from fieldbank.errors import ParameterError
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.protocol import FORCE_FMT, FaultCode
 from fieldbank.haptic.safety import ForceLimiter, Mode, PassivityController, Safety, SafetyConfig
 
@@ -131,3 +132,28 @@ def test_config_validation_names_the_field() -> None:
         SafetyConfig(force_limit_n=-1)
     with pytest.raises(ParameterError, match="workspace_m"):
         SafetyConfig(workspace_m=(1, 0, 0, 1))
+
+
+@pytest.mark.parametrize("field,value,expected", [
+    ("force_limit_n", 0.0, r"'force_limit_n' safety parameter must be a finite number in "
+                           r"\(0, inf\) N; got 0\.0"),
+    ("state_timeout_ms", float("nan"), r"'state_timeout_ms' .* \(0, inf\) ms; got nan"),
+    ("crc_error_limit", -1, r"'crc_error_limit' .* \[0, inf\) errors"),
+    ("max_seq_gap", "3", r"'max_seq_gap' safety parameter must be a number .* got '3' \(str\)"),
+    ("workspace_m", (0.0, 1.0, float("inf"), 1.0), r"'workspace_m\[2\] \(ymin\)'"),
+    ("workspace_m", (0.0, 1.0), r"'workspace_m' .* must have 4 entries"),
+])
+def test_safety_bounds_table_generates_the_message(field: str, value: object,
+                                                   expected: str) -> None:
+    with pytest.raises(ParameterError, match=expected):
+        SafetyConfig(**{field: value})  # type: ignore[arg-type]
+
+
+def test_simulated_robot_config_bounds() -> None:
+    from fieldbank.haptic.simrobot import SIM_BOUNDS, SimRobotConfig
+
+    with pytest.raises(ParameterError, match=r"'substep_s' sim parameter .* \(0, inf\) s"):
+        SimRobotConfig(substep_s=0.0)
+    with pytest.raises(ParameterError, match=r"'x0_m' sim parameter .* got nan"):
+        SimRobotConfig(x0_m=float("nan"))
+    assert set(SIM_BOUNDS) <= {f for f in SimRobotConfig.__dataclass_fields__}

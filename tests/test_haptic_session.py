@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import os
 import stat
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -15,14 +17,16 @@ import serial
 from click.testing import CliRunner
 
 from fieldbank.cli.haptic import haptic
-from fieldbank.errors import HapticError, ParameterError, StorageError
+from fieldbank.errors import ParameterError, StorageError
 from fieldbank.haptic import motions
 from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.control import ControlClient, ControlServer, push_models
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import probe, sim_url
 from fieldbank.haptic.recording import COLUMNS, Hdf5TraceSink, read_trace_h5, write_trace_h5
-from fieldbank.haptic.renderer import Renderer, RendererConfig, VirtualClock
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.replay import rerun
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
@@ -451,3 +455,38 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
                                     "--render", "--socket", str(tmp_path / "none.sock")])
     assert r.exit_code == 1 and "no renderer on" in r.output
+
+
+#: Modules a live command must not load (they take a large part of a second to import).
+HEAVY = ("numpy", "sqlalchemy", "matplotlib", "h5py")
+#: Runs ``python -m fieldbank.cli ARGS`` and, at exit, reports the heavy modules it loaded.
+_LOADED_AT_EXIT = """
+import atexit, json, runpy, sys
+heavy = set(json.loads(sys.argv[2]))
+atexit.register(lambda: print("LOADED " + json.dumps(sorted(
+    m for m in sys.modules if m.split(".")[0] in heavy)), file=sys.stderr))
+sys.argv = ["fieldbank", *json.loads(sys.argv[1])]
+runpy.run_module("fieldbank.cli", run_name="__main__")
+"""
+
+
+@pytest.mark.parametrize("argv", [
+    ["switch", "B"], ["status", "--json"], ["arm"], ["abx", "start", "--trials", "2"],
+    ["switch", "--help"], ["push", "--help"], ["--help"],
+])
+def test_live_commands_load_nothing_heavy(served, argv: list[str]) -> None:  # type: ignore[no-untyped-def]
+    _rd, sock = served
+    args = ["haptic", *argv] + ([] if "--help" in argv else ["--socket", str(sock)])
+    r = subprocess.run([sys.executable, "-c", _LOADED_AT_EXIT, json.dumps(args),
+                        json.dumps(HEAVY)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stderr.rsplit("LOADED ", 1)[1]) == []
+
+
+def test_registered_help_lines_are_the_commands_own() -> None:
+    from fieldbank.cli.haptic import COMMANDS
+
+    for name, lazy in COMMANDS.items():
+        cmd = lazy.load()
+        assert cmd.name == name
+        assert lazy.help == cmd.get_short_help_str(limit=10_000), name

@@ -1,0 +1,202 @@
+"""The ``fieldbank haptic`` commands that run the loop or read traces: ``serve``, ``probe``,
+``replay``, ``sim-robot`` (numpy and the renderer load with this module; the database layer only
+when a command opens it)."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+import click
+
+from fieldbank import modelsource
+from fieldbank.cli.haptic import resolve_models, socket_option
+from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.files import write_atomic
+from fieldbank.haptic import session
+from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
+from fieldbank.haptic.errors import HapticError
+from fieldbank.haptic.probe import probe
+from fieldbank.haptic.recording import read_trace_h5
+from fieldbank.haptic.renderer import RendererConfig
+from fieldbank.haptic.replay import rerun as do_rerun
+from fieldbank.haptic.safety import SafetyConfig
+from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
+from fieldbank.model import Arm
+from fieldbank.params import ArmParams
+
+
+def _pair(x: str | None, name: str) -> tuple[float, float]:
+    if x is None:
+        return (0.0, 0.0)
+    try:
+        a, b = (float(v) for v in x.split(","))
+    except ValueError:
+        raise click.BadParameter(f"{name} must read X,Y in metres; got {x!r}") from None
+    return (a, b)
+
+
+def _say(msg: str) -> None:
+    click.echo(msg, err=True)
+
+
+@click.command("serve")
+@click.option("--robot", required=True, help="Robot port URL: /dev/ttyUSB0, a pty path, "
+              "socket://host:port, or sim://?mode=realtime&motion=explore for the simulation.")
+@click.option("--rate-hz", type=click.IntRange(500, 4000), default=1000, show_default=True)
+@click.option("--duration-s", type=click.FloatRange(min=0.001), default=None,
+              help="Stop after this long (default: until 'fieldbank haptic stop' or Ctrl-C).")
+@click.option("--before", "before_file", type=click.Path(exists=True, path_type=Path),
+              help="ArmParams JSON of the model before (A).")
+@click.option("--after", "after_file", type=click.Path(exists=True, path_type=Path),
+              help="ArmParams JSON of the model after (B).")
+@click.option("--before-severity", help="Model A from a severity, e.g. elbow=severe.")
+@click.option("--after-severity", help="Model B from a severity, e.g. elbow=mild.")
+@click.option("--before-id", type=int, help="Model A by its id in the field database.")
+@click.option("--after-id", type=int, help="Model B by its id in the field database.")
+@click.option("--force-limit-n", type=click.FloatRange(min=0.1, max=200.0), default=40.0,
+              show_default=True)
+@click.option("--shoulder-offset", help="Shoulder position in robot coordinates, X,Y in m.")
+@click.option("--crossfade-s", type=click.FloatRange(min=0.0, max=5.0), default=0.5,
+              show_default=True)
+@click.option("--arm/--no-arm", "arm_on_start", default=True, show_default=True,
+              help="Arm at once (else wait for 'fieldbank haptic arm').")
+@click.option("--trace-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Where the session trace goes (default: traces/ in the data dir).")
+@socket_option
+@db_option
+@click.option("--patient", help="Patient code the session belongs to (in the database).")
+@click.option("--no-db", is_flag=True, help="Write the trace file only, not the database.")
+@json_option
+def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path | None,
+          after_file: Path | None, before_severity: str | None, after_severity: str | None,
+          before_id: int | None, after_id: int | None, force_limit_n: float,
+          shoulder_offset: str | None, crossfade_s: float, arm_on_start: bool,
+          trace_dir: Path | None, socket_path: Path | None, db_url: str | None,
+          patient: str | None, no_db: bool, as_json: bool) -> None:
+    """Run the real-time renderer on ROBOT with models A (before) and B (after).
+
+    The session's trace is written to an HDF5 file in --trace-dir and recorded in the field
+    database (unless --no-db).
+    """
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
+    before, after, ids = resolve_models(db_url, (before_file, after_file),
+                                        (before_severity, after_severity), (before_id, after_id))
+    cfg = RendererConfig(rate_hz=rate_hz, crossfade_s=crossfade_s,
+                         shoulder_offset_m=_pair(shoulder_offset, "--shoulder-offset"),
+                         arm_on_start=arm_on_start)
+    res = session.serve(
+        robot, before, after, model_ids=ids, patient_code=patient, duration_s=duration_s,
+        config=cfg, safety=SafetyConfig(force_limit_n=force_limit_n), socket_path=socket_path,
+        trace_dir=trace_dir or session.default_trace_dir(),
+        db=None if no_db else (lambda: open_db(db_url)), say=_say)
+    summary, trace = res.summary(), res.trace
+    st = trace.stats.get("period_error_us", {})
+    emit(summary, as_json,
+         f"session: {len(trace)} ticks, max force {summary['max_force_n']:.2f} N, "
+         f"{len(trace.faults)} fault(s), period error p50 {st.get('p50', 0):.1f} µs p99 "
+         f"{st.get('p99', 0):.1f} µs max {st.get('max', 0):.1f} µs, "
+         f"overruns >{trace.stats.get('overrun_threshold_ms', 1)} ms: "
+         f"{trace.stats.get('overruns', 0)}\ntrace: {res.trace_file}"
+         + (f"\ndatabase: {res.database}" if res.database else ""))
+
+
+@click.command("probe")
+@click.option("--motion", type=click.Choice(["pull", "fastpull", "ellipse", "circle", "explore",
+                                             "hold"]), default="pull", show_default=True)
+@click.option("--robot", default="sim://", show_default=True,
+              help="sim:// (simulated, faster than real time) or a real robot's port.")
+@click.option("--model", "model_file", type=click.Path(exists=True, path_type=Path))
+@click.option("--severity", help="e.g. shoulder=severe,elbow=mild")
+@click.option("--rate-hz", type=click.IntRange(500, 4000), default=1000, show_default=True)
+@click.option("--duration-s", type=click.FloatRange(min=0.01), default=None)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the full profile as CSV.")
+@json_option
+def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | None,
+              rate_hz: int, duration_s: float | None, seed: int, out: Path | None,
+              as_json: bool) -> None:
+    """Run a scripted probing motion and report the force profile felt at the handle."""
+    params = modelsource.resolve(params_file=model_file, severity=[severity] if severity else [],
+                                 default=modelsource.synthetic()).params
+    res = probe(params, motion, robot, rate_hz, duration_s, seed)
+    if out is not None:
+        write_atomic(out, res.to_csv())
+    s = res.summary()
+    if as_json:
+        s["profile"] = res.table(every=max(1, rate_hz // 100))
+    emit(s, as_json,
+         f"{motion}: peak {s['peak_force_n']:.2f} N at {s['peak_at_s']:.3f} s, direction "
+         f"{s['peak_direction_deg']:.0f}°, path {s['path_length_m'] * 100:.1f} cm, RMS "
+         f"difference to the static field {s['rms_error_vs_static_n']:.2f} N"
+         + (f"\nprofile: {out}" if out else ""))
+
+
+@click.command("replay")
+@click.argument("trace_ref", metavar="TRACE")
+@click.option("--csv", "csv_out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Export the trace as CSV.")
+@click.option("--rerun", is_flag=True, help="Recompute the model forces from the recorded "
+              "handle motion and compare.")
+@db_option
+@json_option
+def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None,
+           as_json: bool) -> None:
+    """Summarise a recorded session; export it; re-run it offline.
+
+    TRACE is a trace file (.h5) or a database session, haptic_session:ID.
+    """
+    if trace_ref.startswith(SESSION_PREFIX):
+        try:
+            sid = int(trace_ref[len(SESSION_PREFIX):])
+        except ValueError:
+            raise click.BadParameter(f"expected {SESSION_PREFIX}ID; got {trace_ref!r}") from None
+        with open_db(db_url) as db:
+            trace = read_trace_db(db, sid)
+    else:
+        if not Path(trace_ref).is_file():
+            raise click.BadParameter(f"no trace file {trace_ref!r} (nor {SESSION_PREFIX}ID)")
+        trace = read_trace_h5(trace_ref)
+    s = trace.summary()
+    if csv_out is not None:
+        write_atomic(csv_out, trace.to_csv())
+    if rerun:
+        s["rerun"] = do_rerun(trace)
+    lines = [f"{trace_ref}: {s['ticks']} ticks at {s['rate_hz']:g} Hz "
+             f"({s['duration_s']:.3f} s), max force {s['max_force_n']:.2f} N, "
+             f"{len(s['faults'])} fault(s), {s['events']} event(s)"]
+    for f in s["faults"]:
+        lines.append(f"  fault {f['name']} at {f['t_s']:.4f} s: {f['message']}")
+    if rerun:
+        lines.append(f"rerun: {s['rerun']['ticks']} ticks, max deviation "
+                     f"{s['rerun']['max_deviation_n']:.3g} N")
+    if csv_out:
+        lines.append(f"csv: {csv_out}")
+    emit(s, as_json, "\n".join(lines))
+
+
+@click.command("sim-robot")
+@click.option("--motion", type=click.Choice(["hold", "pull", "fastpull", "ellipse", "circle",
+                                             "explore"]), default="explore", show_default=True)
+@click.option("--mode", type=click.Choice(["realtime", "lockstep"]), default="realtime",
+              show_default=True)
+@click.option("--start", help="Start of the motion X,Y in m (robot frame).")
+def sim_robot(motion: str, mode: str, start: str | None) -> None:
+    """Run the simulated robot on a pty and print the port to give to 'serve --robot'."""
+    if start:
+        x0, y0 = _pair(start, "--start")
+    else:  # the rest hand position of the default (unimpaired) arm
+        x0, y0 = (float(v) for v in Arm.from_params(ArmParams.from_anthropometry())
+                  .rest_position())
+    robot = PtyRobot(SimRobotConfig(mode=mode, motion=motion, x0_m=x0, y0_m=y0))
+    click.echo(robot.port)
+    try:
+        serve_fd(robot.device, robot.master_fd)
+    except KeyboardInterrupt:
+        pass
+    except OSError as exc:
+        raise HapticError(f"simulated robot stopped: {exc}") from None
+    finally:
+        robot.close()

@@ -1,0 +1,226 @@
+"""A rendering session on a robot, start to finish: what ``fieldbank haptic serve`` and the
+product tour run.
+
+:func:`serve`
+
+1. opens the robot's port (a ``sim://`` URL gets a simulated operator who starts at model A's
+   rest hand position) and handshakes at the loop's rate;
+2. renders model A (before) and B (after) — with the control channel open (``fieldbank
+   haptic switch``, ``push``, ``abx`` …) and, for scripted demonstrations, a schedule of
+   switches — until the duration passes, a ``stop`` arrives, or Ctrl-C;
+3. closes the port, then writes the trace: first the HDF5 file (so it survives a database
+   failure), then the database record.
+
+Progress goes to a ``say`` callback, one line per step; the caller decides where lines go.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import threading
+import time
+from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fieldbank.haptic.client import data_home
+from fieldbank.haptic.commands import Switch
+from fieldbank.haptic.control import ControlServer
+from fieldbank.haptic.dbsink import DatabaseTraceSink, HapticStore
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.probe import sim_url
+from fieldbank.haptic.protocol import DeviceInfo
+from fieldbank.haptic.recording import Hdf5TraceSink, Trace
+from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.safety import SafetyConfig
+from fieldbank.params import ArmParams
+from fieldbank.validation import Interval, check_number
+
+#: One line of progress for the user.
+Say = Callable[[str], None]
+#: Opens the field database when the session is over (used as a context manager).
+StoreOpener = Callable[[], AbstractContextManager[HapticStore]]
+
+#: Device watchdog asked for in the handshake, ms: no FORCE for this long → zero and disarm.
+WATCHDOG_MS = 20
+#: The simulated operator's motion for ``sim://`` robots.
+SIM_MOTION = "explore"
+
+
+def _quiet(msg: str) -> None:
+    del msg
+
+
+def default_trace_dir() -> Path:
+    """``traces/`` in the fieldbank data directory."""
+    return data_home() / "traces"
+
+
+def trace_name_now() -> str:
+    """``haptic-<UTC time to the µs>``: a name no other session of this machine has."""
+    return "haptic-" + _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
+
+
+@dataclass(frozen=True)
+class ScheduledSwitch:
+    """Crossfade to ``to`` ('A'/'before' or 'B'/'after') ``at_s`` seconds after rendering
+    starts; checked when made, so a bad schedule fails before the robot is opened."""
+
+    at_s: float
+    to: str
+
+    def __post_init__(self) -> None:
+        check_number("at_s", self.at_s, Interval(0.0, None, "s"), what="switch time")
+        Switch(self.to)
+
+
+@dataclass(frozen=True)
+class SessionResult:
+    """What a session left behind.
+
+    Attributes
+    ----------
+    trace : Trace
+    robot : str
+        The port URL rendered on (for ``sim://``, with the operator's start filled in).
+    device : DeviceInfo
+        What the robot said about itself in the handshake.
+    name : str
+        The trace's name (file stem and database label).
+    trace_file : str or None
+        Path of the HDF5 trace file, if one was written.
+    sha256 : str or None
+        SHA-256 of the trace file.
+    database : str or None
+        ``haptic_session:ID`` of the database record, if one was written.
+    """
+
+    trace: Trace
+    robot: str
+    device: DeviceInfo
+    name: str
+    trace_file: str | None = None
+    sha256: str | None = None
+    database: str | None = None
+
+    def summary(self) -> dict[str, Any]:
+        """The trace's summary with where it was stored (``trace``, ``sha256``, ``database``)."""
+        out = self.trace.summary()
+        if self.trace_file is not None:
+            out["trace"] = self.trace_file
+            out["sha256"] = self.sha256
+        if self.database is not None:
+            out["database"] = self.database
+        return out
+
+
+def _run_schedule(rd: Renderer, switches: Sequence[ScheduledSwitch], over: threading.Event,
+                  crossfade_s: float, say: Say) -> None:
+    while not rd.running and not over.is_set():
+        time.sleep(1e-3)
+    t0 = time.monotonic()
+    for sw in sorted(switches, key=lambda s: s.at_s):
+        if over.wait(max(0.0, t0 + sw.at_s - time.monotonic())) or not rd.running:
+            return
+        cmd = Switch(sw.to)
+        rd.submit(cmd)
+        to = "after (B)" if cmd.weight else "before (A)"
+        say(f"  switch to {to}, {crossfade_s:g} s crossfade")
+
+
+def serve(robot: str, before: ArmParams, after: ArmParams, *,
+          model_ids: tuple[int | None, int | None] = (None, None),
+          patient_code: str | None = None, duration_s: float | None = None,
+          config: RendererConfig | None = None, safety: SafetyConfig | None = None,
+          control: bool = True, socket_path: str | Path | None = None,
+          switches: Sequence[ScheduledSwitch] = (),
+          trace_dir: str | Path | None = None, trace_name: str | None = None,
+          db: HapticStore | StoreOpener | None = None, say: Say = _quiet) -> SessionResult:
+    """Render ``before`` (A) and ``after`` (B) on ``robot``; store the trace.
+
+    Parameters
+    ----------
+    robot : str
+        Port URL: ``/dev/ttyUSB0``, a pty path, ``socket://host:port``, or ``sim://?…`` for the
+        simulated robot (``mode=realtime`` for a live session).
+    before, after : ArmParams
+        Models A and B.
+    model_ids : (int or None, int or None)
+        Their ids in the field database, if stored (the record refers to them; models without
+        an id are stored with the session).
+    patient_code : str, optional
+        The patient the session belongs to in the database.
+    duration_s : float, s, optional
+        How long to render; None: until a ``stop`` command or Ctrl-C.
+    config : RendererConfig, optional
+        Loop settings (rate, crossfade, shoulder offset, arming).
+    safety : SafetyConfig, optional
+        Limits and thresholds.
+    control : bool
+        Open the control channel while rendering.
+    socket_path : str or Path, optional
+        Its socket (default: ``haptic.sock`` in the data directory).
+    switches : sequence of ScheduledSwitch
+        Scripted switches, timed from the start of rendering.
+    trace_dir : str or Path, optional
+        Directory of the HDF5 trace file (:func:`default_trace_dir` is the usual choice);
+        None: no file.
+    trace_name : str, optional
+        The trace's name (default :func:`trace_name_now`).
+    db : HapticStore or StoreOpener, optional
+        Where the session is recorded: an open database, or a function that opens one, called
+        only once the file is written (a long session then holds no connection) and closed
+        again here. None: no record.
+    say : callable(str), optional
+        Receives one line of progress per step.
+
+    Returns
+    -------
+    SessionResult
+    """
+    cfg = config or RendererConfig()
+    name = trace_name or trace_name_now()
+    if robot.startswith("sim://"):
+        robot = sim_url(before, SIM_MOTION, cfg.shoulder_offset_m, robot)
+    link = RobotLink.open(robot)
+    try:
+        info = link.handshake(cfg.rate_hz, WATCHDOG_MS)
+        say(f"robot {info.device_id!r}: protocol {info.protocol_version}, up to "
+            f"{info.max_rate_hz} Hz, device force limit {info.force_limit_n:g} N, "
+            f"watchdog {info.watchdog_ms} ms")
+        rd = Renderer(link, before, after, cfg, safety=safety)
+        rd.metadata["robot"] = robot
+        if any(i is not None for i in model_ids):
+            rd.metadata["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
+        with contextlib.ExitStack() as stack:
+            where = ""
+            if control:
+                server = stack.enter_context(ControlServer(rd, socket_path))
+                where = f"; control socket {server.path}"
+            say(f"rendering at {cfg.rate_hz} Hz{where}")
+            over = threading.Event()
+            if switches:
+                th = threading.Thread(target=_run_schedule, name="haptic-schedule", daemon=True,
+                                      args=(rd, switches, over, cfg.crossfade_s, say))
+                th.start()
+                stack.callback(th.join, 1.0)
+            stack.callback(over.set)
+            trace = rd.run(duration_s)
+    finally:
+        link.close()
+    trace_file = sha = ref = None
+    if trace_dir is not None:
+        sink = Hdf5TraceSink(trace_dir)
+        trace_file = sink.write_trace(trace, name)  # the file first: it survives the database
+        sha = sink.sha256[trace_file]
+        say(f"trace file: {trace_file}")
+    if db is not None:
+        if callable(db):
+            with db() as store:
+                ref = DatabaseTraceSink(store, patient_code).write_trace(trace, name)
+        else:
+            ref = DatabaseTraceSink(db, patient_code).write_trace(trace, name)
+    return SessionResult(trace, robot, info, name, trace_file, sha, ref)
