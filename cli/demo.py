@@ -19,7 +19,6 @@ Steps, each announced on stderr as it runs:
 from __future__ import annotations
 
 import shutil
-import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -34,10 +33,8 @@ from fieldbank.errors import FieldbankError
 from fieldbank.fitting import ArmFitter
 from fieldbank.fitting.dbstore import DatabaseFitStore
 from fieldbank.fitting.records import fit_patient
-from fieldbank.haptic.dbsink import DatabaseTraceSink
-from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.probe import sim_url
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic import session
+from fieldbank.haptic.renderer import RendererConfig
 from fieldbank.ingest import ingest_paths
 from fieldbank.interventions import Botulinum, Lengthening, Plan
 from fieldbank.interventions.report import Selection, build_report, default_jobs
@@ -180,33 +177,16 @@ def run_haptic(db: Database, patient: str, before_id: int, plan_id: int, duratio
     before = db.get_model(before_id).params
     plan = db.get_plan(plan_id)
     after = db.get_model(plan.result_model_id).params
-    robot = sim_url(before, "explore", (0.0, 0.0), "sim://?mode=realtime")
-    link = RobotLink.open(robot)
-    try:
-        info = link.handshake(1000, 20)
-        say(f"simulated robot {info.device_id!r} (protocol {info.protocol_version}); rendering "
-            f"{patient} before (A, model {before_id}) and after plan {plan_id} (B, model "
-            f"{plan.result_model_id}) for {duration_s:g} s at 1 kHz")
-        rd = Renderer(link, before, after, RendererConfig(rate_hz=1000, crossfade_s=0.5))
-        rd.metadata["robot"] = robot
-        rd.metadata["model_ids"] = {"A": before_id, "B": int(plan.result_model_id)}
-
-        def switches() -> None:
-            t0 = time.monotonic()
-            for at, to in ((0.4, "B"), (0.75, "A")):
-                time.sleep(max(0.0, t0 + at * duration_s - time.monotonic()))
-                if not rd.running:
-                    return
-                rd.submit("switch", target=to)
-                say(f"  switch to {'after' if to == 'B' else 'before'} ({to}), 0.5 s crossfade")
-
-        th = threading.Thread(target=switches, daemon=True)
-        th.start()
-        trace = rd.run(duration_s)
-        th.join(timeout=1.0)
-    finally:
-        link.close()
-    ref = DatabaseTraceSink(db, patient).write_trace(trace, f"demo-{patient}-plan-{plan_id}")
+    say(f"rendering {patient} before (A, model {before_id}) and after plan {plan_id} (B, model "
+        f"{plan.result_model_id}) for {duration_s:g} s at 1 kHz on the simulated robot")
+    res = session.serve(
+        "sim://?mode=realtime", before, after, model_ids=(before_id, plan.result_model_id),
+        patient_code=patient, duration_s=duration_s,
+        config=RendererConfig(rate_hz=1000, crossfade_s=0.5), control=False,
+        switches=(session.ScheduledSwitch(0.4 * duration_s, "B"),
+                  session.ScheduledSwitch(0.75 * duration_s, "A")),
+        trace_name=f"demo-{patient}-plan-{plan_id}", db=db, say=say)
+    trace, ref = res.trace, res.database
     summ = trace.summary()
     st = trace.stats.get("period_error_us", {})
     say(f"haptic session: {summ['ticks']} ticks, max force {summ['max_force_n']:.2f} N, "

@@ -17,7 +17,7 @@ from fieldbank import modelsource
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.errors import FieldbankError
-from fieldbank.haptic.control import push_models
+from fieldbank.haptic.client import push_models
 from fieldbank.interventions.defaults import value
 from fieldbank.interventions.spec import build_plan
 from fieldbank.interventions.whatif import DoseSearch, run_whatif

@@ -7,7 +7,7 @@ One request per connection: a JSON line out, a JSON line back (the requests are 
     -> {"ok": true, "result": {...}}  or  {"ok": false, "error": "..."}
 
 This module is what ``fieldbank haptic switch``, ``status``, ``arm``, ``abx …`` load: it
-imports the standard library, :mod:`platformdirs` and the exception modules only, so a live
+imports the standard library, :mod:`fieldbank.home` and the exception modules only, so a live
 command answers at once (no numpy, no database layer).
 """
 
@@ -19,9 +19,8 @@ import socket
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import platformdirs
-
 from fieldbank.haptic.errors import CommandError, ControlError
+from fieldbank.home import data_home
 
 if TYPE_CHECKING:  # typing only: push_models needs nothing of ArmParams but to_dict()
     from fieldbank.params import ArmParams
@@ -29,18 +28,6 @@ if TYPE_CHECKING:  # typing only: push_models needs nothing of ArmParams but to_
 #: Largest request or response line, bytes.
 MAX_REQUEST_BYTES = 1 << 20
 SOCKET_NAME = "haptic.sock"
-
-
-def data_home() -> Path:
-    """fieldbank's data directory: ``$FIELDBANK_HOME``, else the platform's user data dir.
-
-    The same rule as ``fieldbank.storage.config.data_home``, repeated here because importing
-    the storage layer would load SQLAlchemy into every live command.
-    """
-    env = os.environ.get("FIELDBANK_HOME")
-    if env:
-        return Path(env).expanduser()
-    return Path(platformdirs.user_data_dir("fieldbank", appauthor=False))
 
 
 def default_socket_path() -> Path:

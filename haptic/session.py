@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fieldbank.haptic.client import data_home
 from fieldbank.haptic.commands import Switch
 from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.dbsink import DatabaseTraceSink, HapticStore
@@ -36,6 +35,7 @@ from fieldbank.haptic.protocol import DeviceInfo
 from fieldbank.haptic.recording import Hdf5TraceSink, Trace
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
+from fieldbank.home import data_home
 from fieldbank.params import ArmParams
 from fieldbank.validation import Interval, check_number
 

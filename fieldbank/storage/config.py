@@ -23,27 +23,18 @@ import os
 import sqlite3
 from pathlib import Path
 
-import platformdirs
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import ArgumentError
 from sqlalchemy.pool import ConnectionPoolEntry
 
 from fieldbank.errors import StorageError
+from fieldbank.home import data_home
 
 ENV_DB = "FIELDBANK_DB"
-ENV_HOME = "FIELDBANK_HOME"
 DEFAULT_DB_FILE = "fieldbank.sqlite3"
 #: How long a SQLite connection waits for another writer before giving up, ms.
 SQLITE_BUSY_TIMEOUT_MS = 60_000
-
-
-def data_home() -> Path:
-    """The data directory: ``FIELDBANK_HOME`` or the platform's user data directory."""
-    env = os.environ.get(ENV_HOME)
-    if env:
-        return Path(env).expanduser()
-    return Path(platformdirs.user_data_dir("fieldbank", appauthor=False))
 
 
 def resolve_url(explicit: str | None = None) -> URL:

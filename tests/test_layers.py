@@ -1,0 +1,151 @@
+"""The layer rule (fieldbank/__init__.py), enforced on the source tree.
+
+    fieldbank (core)  <-  fieldbank.interventions, fieldbank.haptic  <-  fieldbank.cli
+
+Every import in every module counts - at module level, inside functions, under
+``TYPE_CHECKING`` - and so does ``importlib.import_module`` with a literal name. The library
+layers (core, interventions, haptic) may not import project modules inside functions at all:
+that is how cycles were dodged before, and a layer rule that looks only at module level could be
+dodged the same way. The last tests show the check failing on deliberately misplaced imports.
+"""
+
+from __future__ import annotations
+
+import ast
+import shutil
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: repository folder -> (installed package, layer)
+FOLDERS = {"fieldbank": ("fieldbank", "core"), "migrations": ("fieldbank.migrations", "core"),
+           "interventions": ("fieldbank.interventions", "interventions"),
+           "haptic": ("fieldbank.haptic", "haptic"), "cli": ("fieldbank.cli", "cli")}
+#: layer -> layers it may import from
+ALLOWED = {"core": {"core"}, "interventions": {"core", "interventions"},
+           "haptic": {"core", "haptic"}, "cli": {"core", "interventions", "haptic", "cli"}}
+#: top-level names that exist only as repository folders, never as installed modules
+GENERIC = {"cli", "haptic", "interventions", "migrations"}
+
+
+def layer_of(module: str) -> str | None:
+    """The layer of an installed module name, None for third-party and standard modules."""
+    parts = module.split(".")
+    if parts[0] != "fieldbank":
+        return None
+    if len(parts) > 1 and parts[1] in ("interventions", "haptic", "cli"):
+        return parts[1]
+    return "core"
+
+
+def _module_name(path: Path, root: Path) -> tuple[str, str]:
+    rel = path.relative_to(root)
+    package, layer = FOLDERS[rel.parts[0]]
+    inner = [p for p in rel.with_suffix("").parts[1:] if p != "__init__"]
+    return ".".join([package, *inner]), layer
+
+
+def _imported(node: ast.AST, module: str, is_package: bool) -> list[str]:
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if isinstance(node, ast.ImportFrom):
+        if node.level:  # relative: resolve against this module's package
+            base = module.split(".") if is_package else module.split(".")[:-1]
+            base = base[: len(base) - (node.level - 1)]
+            target = ".".join([*base, node.module] if node.module else base)
+        else:
+            target = node.module or ""
+        return [target] + [f"{target}.{a.name}" for a in node.names]
+    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "import_module" and node.args
+            and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)):
+        return [node.args[0].value]
+    return []
+
+
+def violations(source: str, module: str, layer: str, where: str,
+               is_package: bool = False) -> list[str]:
+    """Every import in ``source`` (the module ``module`` of ``layer``) that breaks the rule."""
+    out: list[str] = []
+    tree = ast.parse(source)
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for name in _imported(node, module, is_package):
+            top = name.split(".")[0]
+            target = layer_of(name)
+            line = getattr(node, "lineno", 0)
+            if top in GENERIC:
+                out.append(f"{where}:{line}: imports {name!r}, which is not installed; "
+                           f"use 'fieldbank.{name}'")
+            elif target is not None and target not in ALLOWED[layer]:
+                out.append(f"{where}:{line}: {layer} module imports {name} ({target} layer)")
+            elif target is not None and in_function and layer != "cli":
+                out.append(f"{where}:{line}: imports {name} inside a function "
+                           "(library layers import project modules at module level)")
+            if target is not None:
+                break  # one finding per statement is enough
+        inner = in_function or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef,
+                                                 ast.Lambda))
+        for child in ast.iter_child_nodes(node):
+            visit(child, inner)
+
+    visit(tree, False)
+    return out
+
+
+def check_tree(root: Path) -> list[str]:
+    out: list[str] = []
+    for folder in FOLDERS:
+        for path in sorted((root / folder).rglob("*.py")):
+            module, layer = _module_name(path, root)
+            out += violations(path.read_text(encoding="utf-8"), module, layer,
+                              str(path.relative_to(root)), path.name == "__init__.py")
+    return out
+
+
+def test_the_source_tree_keeps_the_layer_rule() -> None:
+    found = check_tree(ROOT)
+    assert not found, "\n".join(found)
+
+
+def test_the_rule_is_written_where_the_package_starts() -> None:
+    doc = ast.get_docstring(ast.parse((ROOT / "fieldbank" / "__init__.py").read_text()))
+    assert doc and "interventions" in doc and "haptic" in doc and "never" in doc
+
+
+# --- the check fails on misplaced imports -----------------------------------------------------
+
+def test_a_misplaced_import_in_a_copy_of_the_tree_is_caught(tmp_path: Path) -> None:
+    for folder in FOLDERS:
+        shutil.copytree(ROOT / folder, tmp_path / folder,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    assert check_tree(tmp_path) == []
+    target = tmp_path / "haptic" / "__init__.py"
+    target.write_text(target.read_text() + "\nfrom fieldbank.interventions import Plan\n")
+    found = check_tree(tmp_path)
+    assert len(found) == 1
+    assert found[0].startswith("haptic/__init__.py:") and "haptic module imports" in found[0]
+
+
+def test_each_kind_of_misplaced_import_is_caught() -> None:
+    def v(src: str, module: str = "fieldbank.maps", layer: str = "core") -> list[str]:
+        return violations(src, module, layer, "x.py")
+
+    assert v("import numpy\nfrom fieldbank.model import Arm\n") == []
+    assert v("from fieldbank.interventions.plan import Plan\n")  # core -> interventions
+    assert v("from fieldbank.cli.options import db_option\n")  # core -> cli
+    assert v("def f():\n    from fieldbank.haptic import renderer\n")  # hidden in a function
+    assert v("def f():\n    from fieldbank.model import Arm\n")  # core, but inside a function
+    assert v("def f():\n    import matplotlib\n") == []  # heavy third party: allowed
+    assert v("if TYPE_CHECKING:\n    from fieldbank.haptic.renderer import Renderer\n")
+    assert v("import importlib\nimportlib.import_module('fieldbank.haptic.control')\n")
+    assert v("from interventions import Plan\n")  # the repository folder name
+    hap = "fieldbank.haptic.renderer"
+    assert v("from fieldbank.interventions import Plan\n", hap, "haptic")
+    assert v("from ..interventions import plan\n", hap, "haptic")  # relative, same target
+    assert v("from . import safety\n", hap, "haptic") == []
+    assert v("from fieldbank.haptic import control\n", "fieldbank.interventions.x",
+             "interventions")
+    cli = "fieldbank.cli.demo"
+    assert v("from fieldbank.haptic import session\nfrom fieldbank.interventions import "
+             "whatif\n", cli, "cli") == []
+    assert v("def f():\n    from fieldbank.storage import Database\n", cli, "cli") == []
