@@ -20,7 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fieldbank.evaluate import Conditions, compare
+from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.interventions.catalogue import Botulinum, Lengthening
 from fieldbank.interventions.course import time_course
 from fieldbank.interventions.inverse import optimise_botulinum

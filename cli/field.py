@@ -14,7 +14,13 @@ from fieldbank.errors import ParameterError
 from fieldbank.files import to_json, write_atomic
 from fieldbank.maps import FieldMap, ellipse, postural_map, stiffness_map, workspace_grid
 from fieldbank.model import Arm
-from fieldbank.severity import classify, parse_severity_options, synthesize
+from fieldbank.severity import (
+    classify,
+    parse_severity_options,
+    severity_dict,
+    summary,
+    synthesize,
+)
 
 
 def _parse_pairs(text: str, what: str) -> np.ndarray:
@@ -54,9 +60,11 @@ def _read_positions(path: Path) -> np.ndarray:
 @click.argument("kind", type=click.Choice(["postural", "stiffness"]))
 @click.option("--params", "params_file", type=click.Path(exists=True, dir_okay=False,
               path_type=Path), help="Arm parameter file (JSON, schema fieldbank.arm-params).")
-@click.option("--severity", multiple=True, metavar="GROUP=LEVEL",
-              help="Synthetic hypertonia, e.g. elbow=severe (groups shoulder, elbow, "
-                   "biarticular; levels very-mild, mild, moderate, severe). Repeatable.")
+@click.option("--severity", multiple=True, metavar="TARGET=LEVEL",
+              help="Synthetic hypertonia, e.g. elbow=severe or elbow-flexors:dynamic=mild "
+                   "(TARGET[:passive|dynamic]=LEVEL; targets shoulder, elbow, biarticular or a "
+                   "muscle group sf..be / elbow-flexors; levels very-mild, mild, moderate, "
+                   "severe). Repeatable.")
 @click.option("--mass", type=float, help="Body mass, kg (synthetic arm; default 75).")
 @click.option("--height", type=float, help="Height, m (synthetic arm; default 1.75).")
 @click.option("--side", type=click.Choice(["right", "left"]), help="Arm side (default right).")
@@ -109,9 +117,8 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     if fmt is None:
         suffix = out.suffix.lower().lstrip(".") if out else ""
         fmt = suffix if suffix in ("csv", "json", "png", "svg") else "csv"
-    severity_note = {g: s.level for g, s in classify(p).items()}
-    source = "fieldbank model (synthetic): " + ", ".join(f"{g}={lvl}" for g, lvl in
-                                                         severity_note.items())
+    grades = classify(arm)
+    source = f"fieldbank model (synthetic): {summary(grades)}"
     if kind == "postural":
         if np.any(vel != 0):
             raise ParameterError("A postural map is static; --velocity applies to stiffness.")
@@ -126,7 +133,7 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
         return
     if fmt == "json":
         doc = m.to_json_dict()
-        doc["severity"] = {g: s.to_dict() for g, s in classify(p).items()}
+        doc["severity"] = severity_dict(grades)
         if kind == "postural":
             doc["potential_j"] = arm.potential(pos).tolist()
         else:

@@ -53,10 +53,23 @@ def _summary(out: FitOutcome) -> str:
         lines.append("  not identified by these maps:")
         lines += [f"    {u.name}: {u.reason}" for u in f.unidentified_]
     if f.severity_:
-        lines.append("  severity: " + ", ".join(
-            f"{g}: {v.get('level', v) if isinstance(v, Mapping) else v}"
-            for g, v in f.severity_.items()))
+        lines += _severity_lines(f.severity_)
     return "\n".join(lines)
+
+
+def _grade_text(grade: Mapping[str, object]) -> str:
+    return (f"{grade['level']}{'+' if grade.get('beyond_scale') else ''}"
+            f"{'*' if grade.get('unidentified') else ''}")
+
+
+def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) -> list[str]:
+    """The fit report's severity as a table: one muscle group per line."""
+    out = [f"  {'severity':<24} {'passive (contracture)':<23} dynamic (spasticity)",
+           "  (+ beyond severe; * rests on a parameter these maps did not identify)"]
+    for g, v in severity.items():
+        out.append(f"  {v.get('name', g)!s:<24} {_grade_text(v['passive']):<23} "
+                   f"{_grade_text(v['dynamic'])}")
+    return out
 
 
 @click.command("fit")

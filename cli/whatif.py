@@ -2,7 +2,7 @@
 
 Options → :func:`fieldbank.interventions.whatif.run_whatif` → tables on stdout (or one JSON
 document with ``--json``). The model is a stored patient's latest fitted model (``--db URL``),
-``--params FILE`` or ``--severity GROUP=LEVEL`` (:mod:`fieldbank.modelsource`); the plan comes
+``--params FILE`` or ``--severity TARGET=LEVEL`` (:mod:`fieldbank.modelsource`); the plan comes
 from ``--plan FILE`` and the intervention options (:mod:`fieldbank.interventions.spec`).
 ``--render`` pushes before and after to a running renderer.
 """
@@ -18,7 +18,7 @@ from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.errors import FieldbankError
 from fieldbank.haptic.client import push_models
-from fieldbank.interventions.defaults import value
+from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.spec import build_plan
 from fieldbank.interventions.whatif import DoseSearch, run_whatif
 
@@ -27,12 +27,18 @@ from fieldbank.interventions.whatif import DoseSearch, run_whatif
 @click.argument("patient", required=False)
 @click.option("--params", "params_file", type=click.Path(dir_okay=False),
               help="Model to start from: an ArmParams JSON file.")
-@click.option("--severity", multiple=True, metavar="GROUP=LEVEL",
-              help="Start from a synthetic arm, e.g. elbow=severe (repeatable).")
+@click.option("--severity", multiple=True, metavar="TARGET=LEVEL",
+              help="Start from a synthetic arm, e.g. elbow=severe or "
+                   "elbow-flexors:dynamic=moderate (repeatable).")
 @click.option("--plan", "plan_file", type=click.Path(dir_okay=False),
               help="Intervention plan JSON file (steps applied first).")
 @click.option("--botox", multiple=True, metavar="GROUP=UNITS",
-              help="Botulinum toxin A, e.g. ef=200U,ee=100U (one injection session).")
+              help=f"Botulinum toxin A in {DOSE_UNIT}, e.g. ef=200U,ee=100U (one injection "
+                   "session).")
+@click.option("--session-limit", "session_limit", type=float,
+              default=value("botulinum.session_warning_units"), show_default=True,
+              help=f"Warn when a botulinum session exceeds this many {DOSE_UNIT} (adult "
+                   "upper-limb label maximum 400).")
 @click.option("--weeks", type=float, default=None,
               help=f"Weeks since the injection (default {value('botulinum.weeks_since'):g}, "
                    "the peak).")
@@ -48,7 +54,8 @@ from fieldbank.interventions.whatif import DoseSearch, run_whatif
 @click.option("--timecourse", is_flag=True, help="Also show the metrics week by week (0-24).")
 @click.option("--optimize", is_flag=True,
               help="Search the botulinum split closest to unimpaired (model result).")
-@click.option("--total-units", type=float, default=None, help="Dose limit for --optimize, U.")
+@click.option("--total-units", type=float, default=None,
+              help=f"Dose limit for --optimize, {DOSE_UNIT}.")
 @click.option("--groups", "opt_groups", default=None, metavar="G1,G2",
               help="Groups --optimize may inject (default all six).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
@@ -66,7 +73,8 @@ from fieldbank.interventions.whatif import DoseSearch, run_whatif
                    "'fieldbank haptic serve' uses).")
 @json_option
 def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ...],
-           plan_file: str | None, botox: tuple[str, ...], weeks: float | None,
+           plan_file: str | None, botox: tuple[str, ...], session_limit: float,
+           weeks: float | None,
            lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
            rhizotomy: str | None, baclofen: str | None, timecourse: bool, optimize: bool,
            total_units: float | None, opt_groups: str | None, plot_path: str | None,
@@ -79,7 +87,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     try:
         if sum(bool(x) for x in (patient, params_file, severity)) != 1:
             raise click.UsageError(
-                "Give exactly one model: PATIENT, --params FILE or --severity GROUP=LEVEL.")
+                "Give exactly one model: PATIENT, --params FILE or --severity TARGET=LEVEL.")
         source = modelsource.resolve(params_file=params_file, severity=severity,
                                      patient=patient, open_db=lambda: open_db(db_url))
         plan = build_plan(plan_file=plan_file, botox=botox, weeks=weeks, lengthen=lengthen,
@@ -98,7 +106,8 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
                 value("botulinum.weeks_since") if weeks is None else weeks)
         res = run_whatif(source, plan, search=search, timecourse=timecourse,
                          plot_path=plot_path, out_dir=out_dir,
-                         save_to=(lambda: open_db(db_url)) if save else None)
+                         save_to=(lambda: open_db(db_url)) if save else None,
+                         session_limit_units=session_limit)
         doc: dict[str, Any] = res.to_dict()
         if render:
             ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
@@ -110,7 +119,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
         emit_json(doc)
         return
     click.echo(render_text(source.description, res.plan, res.comparison, res.course,
-                           res.inverse))
+                           res.inverse, res.warnings))
     if plot_path:
         click.echo(f"plot written to {plot_path}", err=True)
     if out_dir:

@@ -5,9 +5,12 @@ from __future__ import annotations
 import math
 
 from fieldbank.evaluate.compare import Comparison
+from fieldbank.evaluate.probing import JointStretch
 from fieldbank.interventions.course import TimeCourse
+from fieldbank.interventions.defaults import DOSE_UNIT
 from fieldbank.interventions.inverse import DoseSplitResult
 from fieldbank.interventions.plan import Plan
+from fieldbank.severity import ComponentGrade
 
 
 def _pct(before: float, after: float) -> str:
@@ -20,27 +23,76 @@ def _deg(rad: float) -> str:
     return f"{math.degrees(rad):6.0f}°"
 
 
+def _angle(deg: float | None) -> str:
+    return "—" if deg is None else f"{deg:.0f}"
+
+
+def _stretch_lines(c: Comparison) -> list[str]:
+    """Per joint and direction: slow and fast resisting torque, velocity-dependent part, catch."""
+    first: JointStretch = c.before.stretches[0]
+    slow = f"slow {first.slow_speed_deg_s:.0f}°/s N·m"
+    fast = f"fast {first.speed_deg_s:.0f}°/s N·m"
+    out = [f"  {'Joint stretch':<20}{slow:<17}{fast:<25}{'velocity-dependent N·m':<25}"
+           f"{'catch at':>8}{'R1 °':>11}{'R2 °':>12}{'R2−R1 °':>12}"]
+    for name, b, a in c.stretch_rows():
+        out.append(
+            f"  {name:<20}{b.slow_torque_n_m:5.2f} → {a.slow_torque_n_m:<6.2f}   "
+            f"{b.peak_torque_n_m:5.2f} → {a.peak_torque_n_m:<6.2f}"
+            f"{_pct(b.peak_torque_n_m, a.peak_torque_n_m):>8}   "
+            f"{b.reflex_torque_n_m:5.2f} → {a.reflex_torque_n_m:<6.2f}"
+            f"{_pct(b.reflex_torque_n_m, a.reflex_torque_n_m):>8}   "
+            f"{b.catch_threshold_n_m:5.2f} N·m"
+            f"{_angle(b.catch_angle_deg):>5} → {_angle(a.catch_angle_deg):<4}"
+            f"{_angle(b.slow_stop_angle_deg):>5} → {_angle(a.slow_stop_angle_deg):<4}"
+            f"{b.dynamic_range_deg:5.0f} → {a.dynamic_range_deg:<4.0f}")
+    out.append("  Tardieu-style catch: R1 where the fast stretch, R2 where the slow one first "
+               "meets twice the unimpaired arm's largest slow-stretch torque (— never within the "
+               "range); R2−R1 is the velocity-dependent part. Angles: elbow 0° straight, "
+               "shoulder from +x, flexion positive.")
+    return out
+
+
+def _grade_cell(b: ComponentGrade, a: ComponentGrade) -> str:
+    return f"{b.text()} → {a.text()} ({b.score:.1f} → {a.score:.1f})"
+
+
+def _severity_lines(c: Comparison) -> list[str]:
+    """Per muscle group: passive and dynamic grade before → after (score 0 … 4)."""
+    out = [f"  {'Severity':<29}{'graded on':<19}{'passive (contracture)':<36}"
+           "dynamic (spasticity)",
+           f"  {'':<29}{'':<19}{'before → after (score)':<36}before → after (score)"]
+    for g, sb, sa in c.severity_rows():
+        out.append(f"  {f'{sb.name} ({g})':<29}{sb.stretch:<19}"
+                   f"{_grade_cell(sb.passive, sa.passive):<36}"
+                   f"{_grade_cell(sb.dynamic, sa.dynamic)}")
+    flagged = sorted({n for _, sb, _ in c.severity_rows() for k in ("passive", "dynamic")
+                      for n in sb.component(k).unidentified})
+    out.append("  score 0 unimpaired … 4 severe; + beyond severe; * rests on a parameter the "
+               "fit did not identify" + (f" ({', '.join(flagged)})" if flagged else ""))
+    return out
+
+
 def render_text(source: str, plan: Plan, c: Comparison, course: TimeCourse | None = None,
-                inverse: DoseSplitResult | None = None) -> str:
+                inverse: DoseSplitResult | None = None,
+                warnings: tuple[str, ...] = ()) -> str:
     out: list[str] = []
     w = out.append
     w(f"Model:  {source}")
     w("Plan:")
     out.extend(f"  {line}" for line in plan.describe())
+    out.extend(f"Warning: {msg}." for msg in warnings)
     w("Model predictions, not treatment advice.")
     if inverse is not None:
         w("")
         w("Inverse what-if (botulinum split under a total of "
-          f"{inverse.total_units_limit:g} U, week {inverse.weeks_since:g}):")
+          f"{inverse.total_units_limit:g} U, week {inverse.weeks_since:g}; {DOSE_UNIT}):")
         w("  " + ", ".join(f"{g} {u:g} U" for g, u in inverse.units.items()))
         w(f"  distance to unimpaired: untreated {inverse.distance_untreated_n:.2f} N, even split "
           f"{inverse.distance_even_split_n:.2f} N, best {inverse.distance_n:.2f} N "
           f"({inverse.evaluations} evaluations)")
         w(f"  {inverse.notice}")
     w("")
-    w(f"  {'Severity (passive Km)':<28}{'before':>14}{'after':>14}")
-    for g, sb, sa in c.severity_rows():
-        w(f"  {g:<28}{sb.level:>14}{sa.level:>14}   score {sb.score:.2f} → {sa.score:.2f}")
+    out.extend(_severity_lines(c))
     w("")
     n = c.before.conditions.grid_m.shape[0]
     w(f"Field change on {n} grid points (moving: {c.before.conditions.velocities[-1].shape[0]} "
@@ -69,16 +121,10 @@ def render_text(source: str, plan: Plan, c: Comparison, course: TimeCourse | Non
           f"{_deg(a.peak_direction_rad)}   {_deg(b.mean_direction_rad)} → "
           f"{_deg(a.mean_direction_rad)}")
     w("")
-    speed = c.before.stretches[0].speed_deg_s
-    w(f"  {f'Fast stretch ({speed:.0f}°/s)':<24}{'peak resisting torque N·m':>27}"
-      f"{'reflex part N·m':>20}")
-    for name, jb, ja in c.stretch_rows():
-        w(f"  {name:<24}{jb.peak_torque_n_m:9.2f} → {ja.peak_torque_n_m:<8.2f}"
-          f"{_pct(jb.peak_torque_n_m, ja.peak_torque_n_m):>8}"
-          f"{jb.reflex_torque_n_m:12.2f} → {ja.reflex_torque_n_m:<8.2f}")
+    out.extend(_stretch_lines(c))
     if course is not None:
         w("")
-        w("Week by week after the injection")
+        w("Week by week after the injection (effect: drop of α; fast-stretch peak torque N·m)")
         names = list(course.stretch_peak_n_m)[:2]
         groups = list(course.effect)
         head = "".join(f"{'effect ' + g:>11}" for g in groups)

@@ -10,7 +10,9 @@ A command names a model in one of four ways, and every command resolves it here:
 
 The result, :class:`ModelSource`, carries the parameters with a description for read-outs and,
 for stored models, the model id and patient, so lineage (plans, haptic sessions) can point at
-them.
+them, and the parameters its fit did not identify (the fit of the model itself or, for a model
+derived by interventions, of its nearest fitted ancestor), so read-outs can say what is a
+guess.
 """
 
 from __future__ import annotations
@@ -36,6 +38,24 @@ class ModelSource:
     description: str
     model_id: int | None = None
     patient_code: str | None = None
+    unidentified: tuple[str, ...] = ()
+
+
+def fit_unidentified(db: Database, model_id: int) -> tuple[str, ...]:
+    """Names of the parameters the fit behind a stored model did not identify.
+
+    The fit is that of the model or of its nearest fitted ancestor (a model after an
+    intervention inherits its parent's guesses); a model with no fit behind it has none.
+    """
+    for m in db.model_lineage(model_id):
+        if m.origin != "fitted" or m.patient_code is None:
+            continue
+        fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id]
+        if not fits:
+            return ()
+        return tuple(str(u["name"]) for u in fits[-1].result.get("unidentified", ())
+                     if isinstance(u, dict) and "name" in u)
+    return ()
 
 
 def from_file(path: str | Path) -> ModelSource:
@@ -64,7 +84,7 @@ def stored(db: Database, model_id: int) -> ModelSource:
     m = db.get_model(model_id)
     return ModelSource(m.params, f"stored {m.origin} model {m.id}"
                        + (f" of patient {m.patient_code}" if m.patient_code else ""),
-                       int(m.id), m.patient_code)
+                       int(m.id), m.patient_code, fit_unidentified(db, int(m.id)))
 
 
 def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
@@ -76,7 +96,7 @@ def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
         if found:
             m = max(found, key=lambda r: r.id)
             return ModelSource(m.params, f"patient {patient_code}, {origin} model {m.id}",
-                               int(m.id), patient_code)
+                               int(m.id), patient_code, fit_unidentified(db, int(m.id)))
     raise StorageError(
         f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
         "first ('fieldbank fit'), or give the model with --params FILE.")

@@ -393,6 +393,18 @@ class ArmParams:
     def group_value(self, name: str, group: str) -> float:
         return float(getattr(self, name)[group_index(group)])
 
+    def with_unimpaired_muscles(self) -> ArmParams:
+        """The same arm (segments, moment arms, rest posture, range) with unimpaired muscles:
+        Km, α and β at their defaults and no slack offset.
+
+        The reference every severity grade and the inverse what-if measure against: only the
+        muscles differ from this arm.
+        """
+        return replace(
+            self, km_n_per_m=(DEFAULT_KM_N_PER_M,) * 6, alpha_n=(DEFAULT_ALPHA_N,) * 6,
+            beta=(DEFAULT_BETA,) * 6, slack_offset_m=(0.0,) * 6,
+        )
+
 
 PER_GROUP_FIELDS: tuple[str, ...] = _SIX
 

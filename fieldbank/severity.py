@@ -1,40 +1,80 @@
-"""Severity scale of hypertonia per joint group (seed, "Haptic rendering of hypertonic-like
-forces"; BRIEF §5).
+"""Severity of hypertonia per muscle group and direction, passive and dynamic (BRIEF §5).
 
-A group (shoulder: sf+se, elbow: ef+ee, bi-articular: bf+be) is made hypertonic by raising its
-passive stiffness Km and reflex scale α between two boundaries set on passive *joint* stiffness:
+The seed ("Haptic rendering of hypertonic-like forces") renders hypertonia between two
+boundaries - the unimpaired arm below, MAS 4 above - with intermediate levels spaced by the
+Weber fraction w = 0.6 of stiffness discrimination in free exploration: counting down from
+severe (the upper boundary), each level is the one above divided by 1 + w (severe, moderate,
+mild, very mild). The seed sets the boundaries on passive stiffness only. Spasticity, though, is
+by definition velocity-dependent resistance (Lance 1980), and clinicians grade per muscle group
+and direction (MAS, Tardieu). So here every one of the six muscle groups gets two grades on that
+ladder:
 
-* lower boundary - the unimpaired arm's joint stiffness (default Km = 600 N/m: elbow
-  ≈ 1.1 N·m/rad, inside Wiegner & Watts' 0.4-1.8 N·m/rad);
-* upper boundary - MAS 4, :data:`UPPER_RATIO` = 10 × unimpaired (Pei et al. 2021: peak resistive
-  elbow torque 0.9 → 9.8 N·m from MAS 0 to 4; Liang et al. 2020: 1.3-6.7 N·m).
+* **passive** (position-dependent: contracture, stiffness) - the largest passive torque the
+  group puts against a slow stretch of the joint it is graded on (:data:`GRADED_STRETCH`),
+  over the same for the unimpaired arm (same segments and geometry, unimpaired muscles:
+  :meth:`fieldbank.params.ArmParams.with_unimpaired_muscles`). For a change of Km alone it is
+  the Km ratio, the seed's scale; a slack offset (lengthening, casting, contracture) moves it
+  too. MAS-4 boundary (:attr:`SeverityScale.passive_upper_ratio`, 10): peak resistive elbow
+  torque over the passive range rises ≈ 0.9 → 9.8 N·m from MAS 0 to 4 (Pei et al. 2021),
+  unimpaired elbow stiffness 0.4-1.8 N·m/rad (Wiegner & Watts 1986); the seed's
+  "≈ 10 × unimpaired".
+* **dynamic** (velocity-dependent: spasticity, the stretch reflex) - the resistance the group
+  puts against the fast stretch (180°/s) with its passive part held at the unimpaired value,
+  over the same for the unimpaired arm::
 
-Levels below severe are spaced by the Weber fraction w = 0.6 for stiffness discrimination in
-free exploration (seed): each level is the one above divided by 1 + w.
+      D = max_θ [P_ref(θ) + V(θ)] / max_θ [P_ref(θ) + V_ref(θ)]
 
-Joint stiffness here is the passive joint stiffness at the rest posture, the diagonal of
-J_λᵀ diag(Km/2) J_λ (with the smoothed ramp each muscle has stiffness Km/2 at rest length,
-so an agonist-antagonist pair gives the one-sided seed value). The measure of a group is the
-stiffness of the joint it crosses: shoulder → K_11, elbow → K_22, bi-articular → K_11 + K_22.
-The group's Km follows from the measure it must produce; α scales with Km; β rises from the
-unimpaired value to 1 at severe, geometrically in the stiffness ratio (assumption).
+  P_ref the unimpaired group's passive torque along the stretch, V the group's
+  velocity-dependent torque (fast minus slow stretch). D = 1 when the reflex is unimpaired, and
+  D = 10 when the fast stretch meets ten times the unimpaired resistance because of the reflex
+  alone. MAS-4 boundary (:attr:`SeverityScale.dynamic_upper_ratio`, 10; assumption): the same
+  "≈ 10 × unimpaired" as the passive scale, applied to the resistance felt at a fast stretch,
+  where MAS is graded (Liang et al. 2020: 1.3 → 6.7 N·m from MAS 0 to 4 at ≥ 150°/s, ≈ 5 ×;
+  Pei et al. 2021 ≈ 10 ×; McPherson 2018: the reflex needs stretches faster than 100°/s).
+
+The clinical read-outs the grades rest on (slow- and fast-stretch torque, the velocity-dependent
+part, the Tardieu catch) are computed per joint and direction in
+:mod:`fieldbank.evaluate.probing`.
+
+Synthesis runs the scale backwards (:func:`synthesize`): a passive level sets the group's Km
+(closed form: the passive torque is linear in Km); a dynamic level moves the group's α and β
+along the seed's path - α scales like the stiffness ratio r (α = 100 N · r), β rises
+geometrically from 0.1 to 1 at r = 10 (assumption) and stays at 1 beyond - to the point where
+D reaches the level (a one-dimensional root). Targets (:func:`parse_severity_options`)::
+
+    elbow=severe                 both groups of the joint, passive and dynamic
+    elbow-flexors=moderate       one muscle group (also 'ef'), both components
+    elbow-flexors:dynamic=severe reflex only ('dynamic', 'reflex', 'spasticity')
+    ef:passive=mild              passive only ('passive', 'contracture', 'stiffness')
+    elbow:dynamic=mild           both directions of the joint, reflex only
+
+Read-outs of a fitted model name the parameters behind each grade that the maps did not
+identify (``unidentified``): Km of the group for the passive grade, α and β for the dynamic one.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from fieldbank.errors import ParameterError
+from fieldbank.evaluate.probing import (
+    STRETCHES,
+    StretchProfile,
+    stretch_profile,
+    unimpaired_reference,
+)
+from fieldbank.model import Arm
 from fieldbank.params import (
     DEFAULT_ALPHA_N,
     DEFAULT_BETA,
-    DEFAULT_KM_N_PER_M,
     GROUP_INDEX,
-    GROUP_SIGN,
+    GROUPS,
     JOINT_GROUPS,
     ArmParams,
 )
@@ -43,11 +83,23 @@ WEBER_FRACTION = 0.6
 UPPER_RATIO = 10.0
 BETA_SEVERE = 1.0
 LEVELS: tuple[str, ...] = ("unimpaired", "very mild", "mild", "moderate", "severe")
-#: Stiffness ratio to unimpaired at each level: severe = upper boundary, each lower level is
-#: the one above / (1 + w); unimpaired = 1.
-LEVEL_RATIO: dict[str, float] = {"unimpaired": 1.0}
-for _k, _name in enumerate(("severe", "moderate", "mild", "very mild")):
-    LEVEL_RATIO[_name] = UPPER_RATIO / (1.0 + WEBER_FRACTION) ** _k
+COMPONENTS: tuple[str, ...] = ("passive", "dynamic")
+
+MUSCLE_GROUP_NAMES: dict[str, str] = {
+    "sf": "shoulder flexors", "se": "shoulder extensors", "ef": "elbow flexors",
+    "ee": "elbow extensors", "bf": "bi-articular flexors", "be": "bi-articular extensors",
+}
+#: The stretch each group is graded on: the single-joint stretch that lengthens it. The
+#: bi-articular groups (biceps short, triceps long) are graded at the elbow, where the clinic
+#: tests them and where their moment arm is the larger (BRIEF §3).
+GRADED_STRETCH: dict[str, tuple[str, str]] = {
+    "sf": ("shoulder", "extension"), "se": ("shoulder", "flexion"),
+    "ef": ("elbow", "extension"), "ee": ("elbow", "flexion"),
+    "bf": ("elbow", "extension"), "be": ("elbow", "flexion"),
+}
+#: The fitted parameters each component rests on, per group.
+COMPONENT_PARAMETERS: dict[str, tuple[str, ...]] = {"passive": ("km",),
+                                                    "dynamic": ("alpha", "beta")}
 
 _ALIASES = {
     "none": "unimpaired", "unimpaired": "unimpaired", "normal": "unimpaired",
@@ -58,8 +110,84 @@ _GROUP_ALIASES = {
     "shoulder": "shoulder", "elbow": "elbow", "biarticular": "biarticular",
     "bi-articular": "biarticular", "bi": "biarticular", "biart": "biarticular",
 }
+_COMPONENT_ALIASES = {
+    "passive": "passive", "contracture": "passive", "stiffness": "passive",
+    "position": "passive", "dynamic": "dynamic", "reflex": "dynamic",
+    "spasticity": "dynamic", "velocity": "dynamic",
+}
+_DIRECTION_ALIASES = {"flexors": 0, "flexor": 0, "extensors": 1, "extensor": 1}
+#: Largest path parameter of the dynamic synthesis (α = 100 N · 10^s; 10^4 reaches the
+#: ArmParams bound of α, 1e6 N).
+_S_MAX = 4.0
 
 
+@dataclass(frozen=True)
+class SeverityScale:
+    """The ladder of levels (documented, overridable defaults; module docstring).
+
+    Parameters
+    ----------
+    weber_fraction : float
+        Spacing of the levels below severe (seed: 0.6).
+    passive_upper_ratio, dynamic_upper_ratio : float
+        MAS-4 boundary of each component as a ratio to unimpaired.
+    """
+
+    weber_fraction: float = WEBER_FRACTION
+    passive_upper_ratio: float = UPPER_RATIO
+    dynamic_upper_ratio: float = UPPER_RATIO
+
+    def __post_init__(self) -> None:
+        if not self.weber_fraction > 0:
+            raise ParameterError(f"weber_fraction must be > 0; got {self.weber_fraction!r}.")
+        for name in ("passive_upper_ratio", "dynamic_upper_ratio"):
+            upper = getattr(self, name)
+            if not upper > (1.0 + self.weber_fraction) ** 3:
+                raise ParameterError(
+                    f"{name} must exceed (1 + weber_fraction)³ so that very mild lies above "
+                    f"unimpaired; got {upper!r}.")
+
+    def upper(self, component: str) -> float:
+        return self.passive_upper_ratio if component == "passive" else self.dynamic_upper_ratio
+
+    def level_ratio(self, level: str, component: str = "passive") -> float:
+        """Ratio to unimpaired at ``level``: severe = the upper boundary, each lower level the
+        one above / (1 + w), unimpaired = 1."""
+        if level == "unimpaired":
+            return 1.0
+        k = ("severe", "moderate", "mild", "very mild").index(level)
+        return self.upper(component) / (1.0 + self.weber_fraction) ** k
+
+    def score(self, ratio: float, component: str = "passive") -> float:
+        """Continuous score: 0 unimpaired, 1 very mild, … 4 severe (may exceed 4)."""
+        vm = self.level_ratio("very mild", component)
+        if ratio <= 1.0:
+            return 0.0
+        if ratio < vm:
+            return math.log(ratio) / math.log(vm)
+        return 1.0 + math.log(ratio / vm) / math.log(1.0 + self.weber_fraction)
+
+    def level(self, ratio: float, component: str = "passive") -> str:
+        """The nearest level in log-ratio distance."""
+        r = max(ratio, 1e-12)
+        return min(LEVELS, key=lambda lvl: abs(math.log(r / self.level_ratio(lvl, component))))
+
+    def beyond(self, ratio: float, component: str = "passive") -> bool:
+        """Above severe by more than half a Weber step."""
+        return ratio > self.upper(component) * math.sqrt(1.0 + self.weber_fraction)
+
+
+SCALE = SeverityScale()
+#: Ratio to unimpaired at each level of the default scale (both components).
+LEVEL_RATIO: dict[str, float] = {lvl: SCALE.level_ratio(lvl) for lvl in LEVELS}
+
+
+def score_from_ratio(ratio: float) -> float:
+    """Continuous score of a ratio on the default scale (0 unimpaired … 4 severe)."""
+    return SCALE.score(ratio)
+
+
+# --- names -----------------------------------------------------------------------------------
 def level_name(text: str) -> str:
     """Canonical level name for user text ('very-mild', 'Severe', …)."""
     key = text.strip().lower()
@@ -80,131 +208,55 @@ def group_name(text: str) -> str:
     return _GROUP_ALIASES[key]
 
 
-def _joint_stiffness(p: ArmParams, km: np.ndarray) -> np.ndarray:
-    jl = np.array(
-        [[s * a, s * b] for s, a, b in zip(GROUP_SIGN, p.moment_arm_shoulder_m,
-                                           p.moment_arm_elbow_m, strict=True)]
-    )
-    return np.einsum("ki,k,kj->ij", jl, 0.5 * km, jl)
+def _target_help() -> str:
+    return (f"joint groups {', '.join(JOINT_GROUPS)}; muscle groups {', '.join(GROUPS)} or "
+            "e.g. elbow-flexors, shoulder-extensors, biarticular-flexors; optional "
+            f":COMPONENT ({', '.join(COMPONENTS)})")
 
 
-def _measure(group: str, kj: np.ndarray) -> float:
-    if group == "shoulder":
-        return float(kj[0, 0])
-    if group == "elbow":
-        return float(kj[1, 1])
-    return float(kj[0, 0] + kj[1, 1])
+def target_name(text: str) -> str:
+    """Canonical target for user text: a joint group ('elbow') or a muscle group ('ef'),
+    with an optional component ('ef:dynamic').
 
-
-def joint_stiffness_n_m_per_rad(p: ArmParams) -> np.ndarray:
-    """Passive joint stiffness matrix at rest, shape (2, 2), N·m/rad."""
-    return _joint_stiffness(p, np.array(p.km_n_per_m))
-
-
-def _reference(p: ArmParams, group: str) -> float:
-    return _measure(group, _joint_stiffness(p, np.full(6, DEFAULT_KM_N_PER_M)))
-
-
-def _group_km_for(p: ArmParams, group: str, target: float, km: np.ndarray) -> float:
-    """Km of both muscles of ``group`` giving measure ``target``, other muscles as in km."""
-    idx = [GROUP_INDEX[m] for m in JOINT_GROUPS[group]]
-    k0 = km.copy()
-    k0[idx] = 0.0
-    base = _measure(group, _joint_stiffness(p, k0))
-    k1 = k0.copy()
-    k1[idx] = 1.0
-    slope = _measure(group, _joint_stiffness(p, k1)) - base
-    return (target - base) / slope
-
-
-def synthesize(
-    severities: Mapping[str, str], base: ArmParams | None = None
-) -> ArmParams:
-    """An arm with the given joint groups at the given levels, e.g. ``{'elbow': 'severe'}``.
-
-    Groups not named keep the base values (default: unimpaired, 75 kg, 1.75 m).
+    >>> target_name("Elbow-Flexors:reflex")
+    'ef:dynamic'
     """
-    p = base if base is not None else ArmParams.from_anthropometry()
-    km = np.array(p.km_n_per_m)
-    alpha = np.array(p.alpha_n)
-    beta = np.array(p.beta)
-    for g_text, lvl_text in severities.items():
-        g = group_name(g_text)
-        lvl = level_name(lvl_text)
-        ratio = LEVEL_RATIO[lvl]
-        target = ratio * _reference(p, g)
-        k = _group_km_for(p, g, target, np.full(6, DEFAULT_KM_N_PER_M))
-        frac = math.log(ratio) / math.log(UPPER_RATIO)
-        b = DEFAULT_BETA * (BETA_SEVERE / DEFAULT_BETA) ** frac
-        for m in JOINT_GROUPS[g]:
-            i = GROUP_INDEX[m]
-            km[i] = k
-            alpha[i] = DEFAULT_ALPHA_N * k / DEFAULT_KM_N_PER_M
-            beta[i] = b
-    return p.replace(
-        km_n_per_m=tuple(km.tolist()), alpha_n=tuple(alpha.tolist()), beta=tuple(beta.tolist())
-    )
+    where, _, comp = text.strip().lower().partition(":")
+    where = where.strip().replace("_", "-").replace(" ", "-")
+    if where in GROUP_INDEX:
+        base = where
+    elif where in _GROUP_ALIASES:
+        base = _GROUP_ALIASES[where]
+    else:
+        joint, _, side = where.rpartition("-")
+        if joint in _GROUP_ALIASES and side in _DIRECTION_ALIASES:
+            base = JOINT_GROUPS[_GROUP_ALIASES[joint]][_DIRECTION_ALIASES[side]]
+        else:
+            kind = "joint group" if "-" not in where else "muscle group"
+            raise ParameterError(f"Unknown {kind} {text.partition(':')[0].strip()!r}; known: "
+                                 f"{_target_help()}.")
+    if not comp:
+        return base
+    c = comp.strip()
+    if c not in _COMPONENT_ALIASES:
+        raise ParameterError(f"Unknown severity component {c!r} in {text.strip()!r}; known: "
+                             "passive (contracture, stiffness), dynamic (reflex, spasticity).")
+    return f"{base}:{_COMPONENT_ALIASES[c]}"
 
 
-@dataclass(frozen=True)
-class GroupSeverity:
-    """Where one joint group sits on the scale.
-
-    level : nearest level (log-stiffness distance)
-    score : continuous, 0 = unimpaired, 1 = very mild, … 4 = severe (may exceed 4)
-    stiffness_ratio : the group's joint-stiffness measure over the unimpaired one
-    km_n_per_m : mean Km of the group's two muscles
-    beyond_scale : above the severe level by more than half a Weber step
-    """
-
-    group: str
-    level: str
-    score: float
-    stiffness_ratio: float
-    km_n_per_m: float
-    beyond_scale: bool
-
-    def to_dict(self) -> dict[str, object]:
-        return {
-            "group": self.group, "level": self.level, "score": round(self.score, 4),
-            "stiffness_ratio": round(self.stiffness_ratio, 4),
-            "km_n_per_m": round(self.km_n_per_m, 3), "beyond_scale": self.beyond_scale,
-        }
+def expand_target(target: str) -> list[tuple[str, str]]:
+    """The (muscle group, component) pairs a target names (any text :func:`target_name` reads)."""
+    canon = target_name(target)
+    base, _, comp = canon.partition(":")
+    groups = JOINT_GROUPS[base] if base in JOINT_GROUPS else (base,)
+    comps = (comp,) if comp else COMPONENTS
+    return [(g, c) for g in groups for c in comps]
 
 
-def score_from_ratio(ratio: float) -> float:
-    """Continuous severity score for a stiffness ratio (0 unimpaired … 4 severe)."""
-    vm = LEVEL_RATIO["very mild"]
-    if ratio <= 1.0:
-        return 0.0
-    if ratio < vm:
-        return math.log(ratio) / math.log(vm)
-    return 1.0 + math.log(ratio / vm) / math.log(1.0 + WEBER_FRACTION)
-
-
-def classify(p: ArmParams) -> dict[str, GroupSeverity]:
-    """Place every joint group of an arm on the severity scale.
-
-    Each group is judged by its own muscles (mean Km of the pair), the other groups held at
-    unimpaired values, so one group's impairment does not leak into another's level.
-    """
-    out: dict[str, GroupSeverity] = {}
-    km_all = np.array(p.km_n_per_m)
-    for g, members in JOINT_GROUPS.items():
-        idx = [GROUP_INDEX[m] for m in members]
-        km = np.full(6, DEFAULT_KM_N_PER_M)
-        mean_km = float(km_all[idx].mean())
-        km[idx] = mean_km
-        ratio = _measure(g, _joint_stiffness(p, km)) / _reference(p, g)
-        logs = {lvl: abs(math.log(max(ratio, 1e-12) / r)) for lvl, r in LEVEL_RATIO.items()}
-        level = min(LEVELS, key=lambda lvl: logs[lvl])
-        beyond = ratio > UPPER_RATIO * math.sqrt(1.0 + WEBER_FRACTION)
-        out[g] = GroupSeverity(g, level, score_from_ratio(ratio), ratio, mean_km, beyond)
-    return out
-
-
-def parse_severity_options(items: list[str] | tuple[str, ...]) -> dict[str, str]:
-    """Parse CLI items like ``elbow=severe`` into {group: level}."""
+def parse_severity_options(items: Iterable[str]) -> dict[str, str]:
+    """Parse CLI items like ``elbow=severe`` or ``elbow-flexors:dynamic=mild`` (comma-separated
+    or repeated) into {canonical target: level}, in the order given; :func:`synthesize` applies
+    them in that order, so a later, narrower item refines an earlier one."""
     out: dict[str, str] = {}
     for item in items:
         for part in item.split(","):
@@ -213,9 +265,265 @@ def parse_severity_options(items: list[str] | tuple[str, ...]) -> dict[str, str]
                 continue
             if "=" not in part:
                 raise ParameterError(
-                    f"Severity {part!r} must look like GROUP=LEVEL, e.g. elbow=severe "
-                    f"(groups: {', '.join(JOINT_GROUPS)}; levels: {', '.join(LEVELS)})."
+                    f"Severity {part!r} must look like TARGET[:COMPONENT]=LEVEL, e.g. "
+                    f"elbow=severe or elbow-flexors:dynamic=moderate ({_target_help()}; "
+                    f"levels: {', '.join(LEVELS)})."
                 )
-            g, lvl = part.split("=", 1)
-            out[group_name(g)] = level_name(lvl)
+            t, lvl = part.split("=", 1)
+            key = target_name(t)
+            out.pop(key, None)  # a repeated target moves to its latest position
+            out[key] = level_name(lvl)
     return out
+
+
+# --- measures --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class GroupTone:
+    """The torques one group's grades rest on, along its graded stretch (N·m).
+
+    passive_n_m, passive_ref_n_m : largest passive torque against the slow stretch, this arm
+        and the unimpaired one
+    velocity_dependent_n_m, velocity_dependent_ref_n_m : largest velocity-dependent torque
+        (fast minus slow)
+    passive_ratio, dynamic_ratio : the grades' measures (module docstring)
+    """
+
+    group: str
+    passive_n_m: float
+    passive_ref_n_m: float
+    velocity_dependent_n_m: float
+    velocity_dependent_ref_n_m: float
+    passive_ratio: float
+    dynamic_ratio: float
+
+
+def _profiles(arm: Arm) -> dict[tuple[str, str], StretchProfile]:
+    return {(j, d): stretch_profile(arm, j, d) for j, d in STRETCHES}
+
+
+def _dynamic_ratio(v: np.ndarray, p_ref: np.ndarray, v_ref: np.ndarray) -> float:
+    return float(np.max(p_ref + v) / np.max(p_ref + v_ref))
+
+
+def group_tone(arm: Arm, reference: Arm | None = None) -> dict[str, GroupTone]:
+    """Per muscle group, the measures of its passive and dynamic grade (module docstring).
+
+    ``reference`` is the unimpaired arm (default: compiled from ``arm``).
+    """
+    ref = reference if reference is not None else unimpaired_reference(arm)
+    prof = _profiles(arm)
+    ref_prof = prof if ref is arm else _profiles(ref)
+    out: dict[str, GroupTone] = {}
+    for g in GROUPS:
+        i = GROUP_INDEX[g]
+        a, r = prof[GRADED_STRETCH[g]], ref_prof[GRADED_STRETCH[g]]
+        p, p_ref = a.passive_n_m[:, i], r.passive_n_m[:, i]
+        v, v_ref = a.velocity_dependent_n_m[:, i], r.velocity_dependent_n_m[:, i]
+        out[g] = GroupTone(g, float(p.max()), float(p_ref.max()), float(v.max()),
+                           float(v_ref.max()), float(p.max() / p_ref.max()),
+                           _dynamic_ratio(v, p_ref, v_ref))
+    return out
+
+
+# --- classification --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ComponentGrade:
+    """One component of one group on the scale.
+
+    level : nearest level; score : 0 unimpaired … 4 severe (continuous, may exceed 4);
+    ratio : the measure over unimpaired; beyond_scale : above severe by more than half a step;
+    unidentified : fitted parameters behind this grade that the maps did not identify
+    """
+
+    level: str
+    score: float
+    ratio: float
+    beyond_scale: bool
+    unidentified: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, object]:
+        return {"level": self.level, "score": round(self.score, 4),
+                "ratio": round(self.ratio, 4), "beyond_scale": self.beyond_scale,
+                "unidentified": list(self.unidentified)}
+
+    def text(self) -> str:
+        """The level, '+' beyond the scale, '*' when it rests on an unidentified parameter."""
+        return self.level + ("+" if self.beyond_scale else "") + ("*" if self.unidentified
+                                                                  else "")
+
+
+@dataclass(frozen=True)
+class GroupSeverity:
+    """Passive and dynamic grade of one muscle group, with the torques behind them."""
+
+    group: str
+    passive: ComponentGrade
+    dynamic: ComponentGrade
+    tone: GroupTone
+
+    @property
+    def name(self) -> str:
+        return MUSCLE_GROUP_NAMES[self.group]
+
+    @property
+    def stretch(self) -> str:
+        joint, direction = GRADED_STRETCH[self.group]
+        return f"{joint} {direction}"
+
+    def component(self, name: str) -> ComponentGrade:
+        return self.passive if name == "passive" else self.dynamic
+
+    def to_dict(self) -> dict[str, object]:
+        t = self.tone
+        return {
+            "group": self.group, "name": self.name, "graded_on": self.stretch,
+            "passive": {**self.passive.to_dict(),
+                        "peak_torque_n_m": t.passive_n_m,
+                        "unimpaired_peak_torque_n_m": t.passive_ref_n_m},
+            "dynamic": {**self.dynamic.to_dict(),
+                        "velocity_dependent_torque_n_m": t.velocity_dependent_n_m,
+                        "unimpaired_velocity_dependent_torque_n_m":
+                            t.velocity_dependent_ref_n_m},
+        }
+
+
+def _grade(ratio: float, component: str, scale: SeverityScale,
+           unidentified: tuple[str, ...]) -> ComponentGrade:
+    return ComponentGrade(scale.level(ratio, component), scale.score(ratio, component), ratio,
+                          scale.beyond(ratio, component), unidentified)
+
+
+def classify(arm: Arm, unidentified: Collection[str] = (), reference: Arm | None = None,
+             scale: SeverityScale = SCALE) -> dict[str, GroupSeverity]:
+    """Grade every muscle group of ``arm``: passive and dynamic level (module docstring).
+
+    Parameters
+    ----------
+    arm : Arm
+    unidentified : collection of str
+        Names of fitted parameters the maps did not identify (``km_ef``, ``alpha_ef``, …, as
+        :mod:`fieldbank.fitting.identify` reports them); each grade lists those it rests on.
+    reference : Arm, optional
+        The unimpaired arm (default: compiled from ``arm``).
+    scale : SeverityScale
+    """
+    flagged = set(unidentified)
+    out: dict[str, GroupSeverity] = {}
+    for g, t in group_tone(arm, reference).items():
+        grades = {}
+        for comp, ratio in (("passive", t.passive_ratio), ("dynamic", t.dynamic_ratio)):
+            names = tuple(f"{k}_{g}" for k in COMPONENT_PARAMETERS[comp]
+                          if f"{k}_{g}" in flagged)
+            grades[comp] = _grade(ratio, comp, scale, names)
+        out[g] = GroupSeverity(g, grades["passive"], grades["dynamic"], t)
+    return out
+
+
+def severity_dict(sev: Mapping[str, GroupSeverity]) -> dict[str, dict[str, object]]:
+    """JSON form of :func:`classify`'s result, keyed by muscle group."""
+    return {g: s.to_dict() for g, s in sev.items()}
+
+
+def summary(sev: Mapping[str, GroupSeverity]) -> str:
+    """One line: every impaired group and component, e.g. 'ef dynamic severe; ee passive mild'
+    ('unimpaired' when none is); '*' marks a grade resting on an unidentified parameter."""
+    parts = [f"{g} {c} {s.component(c).text()}" for g, s in sev.items() for c in COMPONENTS
+             if s.component(c).level != "unimpaired"]
+    flagged = [f"{g} {c} unimpaired*" for g, s in sev.items() for c in COMPONENTS
+               if s.component(c).level == "unimpaired" and s.component(c).unidentified]
+    return "; ".join(parts + flagged) or "unimpaired"
+
+
+# --- synthesis -------------------------------------------------------------------------------
+def _reflex_path(s: float) -> tuple[float, float]:
+    """α (N) and β on the seed's path at log10 stiffness ratio s (module docstring)."""
+    r = 10.0 ** s
+    beta = min(BETA_SEVERE, DEFAULT_BETA * (BETA_SEVERE / DEFAULT_BETA) ** (s / math.log10(
+        UPPER_RATIO)))
+    return DEFAULT_ALPHA_N * r, beta
+
+
+def _solve_dynamic(arm: Arm, ref_prof: StretchProfile, group: str, target: float) -> float:
+    """Path parameter s at which ``group``'s dynamic ratio reaches ``target`` (≥ 1)."""
+    i = GROUP_INDEX[group]
+    joint, direction = GRADED_STRETCH[group]
+    p_ref = ref_prof.passive_n_m[:, i]
+    v_ref = ref_prof.velocity_dependent_n_m[:, i]
+
+    def ratio(s: float) -> float:
+        a, b = _reflex_path(s)
+        alpha, beta = arm.alpha.copy(), arm.beta.copy()
+        alpha[i], beta[i] = a, b
+        trial = dataclasses.replace(arm, alpha=alpha, beta=beta)
+        v = stretch_profile(trial, joint, direction).velocity_dependent_n_m[:, i]
+        return _dynamic_ratio(v, p_ref, v_ref)
+
+    if target <= ratio(0.0) * (1 + 1e-12):
+        return 0.0
+    if ratio(_S_MAX) < target:
+        raise ParameterError(
+            f"{MUSCLE_GROUP_NAMES[group]}: no reflex on the synthesis path reaches a dynamic "
+            f"ratio of {target:g} (largest {ratio(_S_MAX):.3g}).")
+    return float(brentq(lambda s: math.log(ratio(s) / target), 0.0, _S_MAX, xtol=1e-10))
+
+
+def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
+               scale: SeverityScale = SCALE) -> ArmParams:
+    """An arm with the named targets at the named levels.
+
+    ``severities`` maps a target (``'elbow'``, ``'ef'``, ``'elbow-flexors:dynamic'``; see
+    :func:`target_name`) to a level; ``{'elbow': 'severe'}`` makes both elbow groups severe in
+    both components. Targets apply in order, a later one overriding an earlier one for the
+    same group and component. Groups and components not named keep the base values (default:
+    unimpaired, 75 kg, 1.75 m).
+    """
+    p = base if base is not None else ArmParams.from_anthropometry()
+    wanted: dict[tuple[str, str], str] = {}
+    for target, lvl in severities.items():
+        level = level_name(lvl)
+        for pair in expand_target(target):
+            wanted[pair] = level
+    if not wanted:
+        return p
+    km = np.array(p.km_n_per_m)
+    alpha = np.array(p.alpha_n)
+    beta = np.array(p.beta)
+    ref = Arm.from_params(p.with_unimpaired_muscles())
+    ref_prof = _profiles(ref)
+    if any(c == "passive" for _, c in wanted):
+        unit = _profiles(Arm.from_params(p.replace(km_n_per_m=(1.0,) * 6)))
+    base_arm = Arm.from_params(p) if any(c == "dynamic" for _, c in wanted) else ref
+    for (g, comp), level in wanted.items():
+        i = GROUP_INDEX[g]
+        ratio = scale.level_ratio(level, comp)
+        rp = ref_prof[GRADED_STRETCH[g]]
+        if comp == "passive":
+            per_newton_per_m = float(unit[GRADED_STRETCH[g]].passive_n_m[:, i].max())
+            km[i] = ratio * float(rp.passive_n_m[:, i].max()) / per_newton_per_m
+        else:
+            alpha[i], beta[i] = _reflex_path(_solve_dynamic(base_arm, rp, g, ratio))
+    return p.replace(km_n_per_m=tuple(km.tolist()), alpha_n=tuple(alpha.tolist()),
+                     beta=tuple(beta.tolist()))
+
+
+__all__ = [
+    "COMPONENTS",
+    "GRADED_STRETCH",
+    "LEVELS",
+    "LEVEL_RATIO",
+    "MUSCLE_GROUP_NAMES",
+    "SCALE",
+    "ComponentGrade",
+    "GroupSeverity",
+    "GroupTone",
+    "SeverityScale",
+    "classify",
+    "expand_target",
+    "group_tone",
+    "level_name",
+    "parse_severity_options",
+    "severity_dict",
+    "summary",
+    "synthesize",
+    "target_name",
+]

@@ -15,7 +15,9 @@ Every intervention is a frozen dataclass with
 Mapping onto model parameters (defaults and sources in :mod:`interventions.defaults`):
 
 ==============  =================================================================================
-botulinum       α and β of each injected group × (1 - e), e = E_peak(dose) · s(weeks since)
+botulinum       α of each injected group × (1 - e), e = E_peak(dose) · s(weeks since); β stays
+                (the toxin blocks the neuromuscular junction; the reflex gain is the spinal
+                circuit's). Doses in onabotulinumtoxinA (Botox®) units
 lengthening     slack offset of the group + Δ (passive onset moves by Δ); α × a force-length
                 factor exp(-(Δ / (c · L_f))²)
 tenotomy        Km and α of the group × residual fraction (default 0: force capacity 0)
@@ -38,7 +40,7 @@ from typing import Any, ClassVar, TypeVar, cast
 import numpy as np
 
 from fieldbank.errors import ParameterError
-from fieldbank.interventions.defaults import value
+from fieldbank.interventions.defaults import DOSE_UNIT, TOXIN, value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.timecourse import dose_effect, shape_exponent, time_shape
 from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
@@ -161,12 +163,16 @@ class Intervention:
 # --- botulinum toxin A -----------------------------------------------------------------------
 @dataclass(frozen=True)
 class Botulinum(Intervention):
-    """Botulinum toxin A into one or more groups.
+    """Botulinum toxin A into one or more groups (one injection session).
 
     Parameters
     ----------
-    units : mapping group -> dose, U
+    units : mapping group -> dose, onabotulinumtoxinA (Botox®) units
         Units injected into each muscle group (e.g. ``{'ef': 200}``); stored as sorted pairs.
+    toxin : str
+        The product the units count: only onabotulinumtoxinA. AbobotulinumtoxinA (Dysport®)
+        and other products' units are not interchangeable with it (≈ 2.5-3 : 1 is only an
+        assumption), so they are refused rather than converted.
     weeks_since : float, weeks
         Time from the injection to the moment the model describes.
     emax, ed50_units, hill : float
@@ -174,11 +180,13 @@ class Botulinum(Intervention):
     peak_week, wearoff_week, wearoff_fraction : float
         Time course (see :mod:`interventions.timecourse`).
     scale_beta : bool
-        Scale β as well as α (BRIEF §7 maps the toxin onto both).
+        Also scale the reflex gain β. Default false (BRIEF §7: the toxin acts on the muscle's
+        force, α; scaling β as well counts the effect twice). True only reproduces plans stored
+        before that recalibration, whose documents carry it.
     """
 
     kind: ClassVar[str] = "botulinum"
-    EFFECTS: ClassVar[dict[str, str]] = {"alpha_n": "down", "beta": "down"}
+    EFFECTS: ClassVar[dict[str, str]] = {"alpha_n": "down"}
     BOUNDS: ClassVar[dict[str, Interval]] = {
         "units": Interval(0.0, value("botulinum.max_units_per_group"), "U"),  # per group
         "weeks_since": Interval(0.0, value("botulinum.max_weeks"), "weeks"),
@@ -191,6 +199,7 @@ class Botulinum(Intervention):
     }
 
     units: tuple[tuple[str, float], ...] | Mapping[str, float] = ()
+    toxin: str = TOXIN
     weeks_since: float = value("botulinum.weeks_since")
     emax: float = value("botulinum.emax")
     ed50_units: float = value("botulinum.ed50_units")
@@ -198,7 +207,7 @@ class Botulinum(Intervention):
     peak_week: float = value("botulinum.peak_week")
     wearoff_week: float = value("botulinum.wearoff_week")
     wearoff_fraction: float = value("botulinum.wearoff_fraction")
-    scale_beta: bool = True
+    scale_beta: bool = False
 
     def __post_init__(self) -> None:
         problems: list[str] = []
@@ -227,6 +236,12 @@ class Botulinum(Intervention):
             if isinstance(g, str) and g in GROUP_INDEX and isinstance(u, (int, float)):
                 pairs.append((g, float(u)))
         _check_bounds(problems, self, skip=("units",))
+        if self.toxin != TOXIN:
+            problems.append(
+                f"'toxin' {self.toxin!r}: doses are {TOXIN} (Botox®) units only; "
+                "abobotulinumtoxinA (Dysport®) and other products' units are not "
+                "interchangeable with them (≈ 2.5-3 : 1 is an assumption, not a conversion "
+                "this program makes): give the dose in onabotulinumtoxinA units")
         if not isinstance(self.scale_beta, bool):
             problems.append(f"'scale_beta' must be true or false; got {self.scale_beta!r}")
         if not problems:
@@ -269,9 +284,14 @@ class Botulinum(Intervention):
             changes["beta"] = _scaled(params, "beta", keep)
         return _replace(self.kind, params, **changes)
 
+    def total_units(self) -> float:
+        """Units of the whole injection session, onabotulinumtoxinA (Botox®) units."""
+        return float(sum(self.doses.values()))
+
     def describe(self) -> str:
         doses = ", ".join(f"{g} {u:g} U" for g, u in self.doses.items())
-        return f"botulinum toxin A ({doses}), {self.weeks_since:g} weeks after injection"
+        return (f"botulinum toxin A ({doses}; {DOSE_UNIT}), {self.weeks_since:g} weeks after "
+                "injection")
 
 
 # --- lengthening -----------------------------------------------------------------------------

@@ -39,7 +39,7 @@ class TimeCourse:
     ----------
     weeks : ndarray, shape (W,)
     effect : dict group -> ndarray (W,)
-        Botulinum effect e (fractional drop of α, β) per injected group, compounded over
+        Botulinum effect e (fractional drop of α) per injected group, compounded over
         the plan's injections.
     moving_diff_rms_n : ndarray (W,)
         RMS force change at the first moving speed, N.

@@ -10,6 +10,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+#: The only botulinum product doses are given in (BRIEF §7).
+TOXIN = "onabotulinumtoxinA"
+#: How a dose's unit is named wherever a dose is shown.
+DOSE_UNIT = "onabotulinumtoxinA (Botox®) units"
+
 
 @dataclass(frozen=True)
 class Default:
@@ -42,36 +47,45 @@ DEFAULTS: dict[str, Default] = {
     # --- botulinum toxin A ------------------------------------------------------------------
     "botulinum.peak_week": Default(
         5.0, "week",
-        "Eek & Himmelmann 2016: effect peaks about 4-6 weeks after injection (centre of the "
-        "window)"),
+        "effect rises over days and peaks about 3-6 weeks after injection (Eek & Himmelmann "
+        "2016; Gäverth et al. 2014; Chen et al. 2022); 5 is the centre of the window"),
     "botulinum.wearoff_week": Default(
-        16.0, "week",
-        "assumption: effect down to wearoff_fraction of its peak at 16 weeks, the centre of the "
-        "12-20 week wear-off (Eek & Himmelmann 2016; Kaňovský et al. 2021: re-injection "
-        ">= 12 weeks)"),
+        14.0, "week",
+        "assumption: effect down to wearoff_fraction of its peak at 14 weeks, the centre of "
+        "'back near baseline by 12-16 weeks' (Eek & Himmelmann 2016; Chen et al. 2022; "
+        "Kaňovský et al. 2021: re-injection >= 12 weeks); the curve then leaves 21% at 12 "
+        "and 4.5% at 16 weeks"),
     "botulinum.wearoff_fraction": Default(
         0.1, "", "assumption: 'worn off' read as 10% of the peak effect"),
     "botulinum.emax": Default(
         0.7, "",
-        "assumption: largest fractional force drop one injection can give; with ed50 it yields "
-        "~50% at 150 U, the single-injection drop of Fortuna et al. 2011"),
+        "assumption: largest fractional drop of peak muscle force (α) one injection can give; "
+        "with ed50_units it yields 50% at 150 U, the single-injection peak force drop of "
+        "Fortuna et al. 2011 (animal data). Repeated injections compound (1 - e) per "
+        "session: 2 × 150 U -> 75%, 3 × 150 U -> 88%, 4 × 150 U -> 94%, within the 80-95% of "
+        "Fortuna et al. 2011, 2015"),
     "botulinum.ed50_units": Default(
-        60.0, "U", "assumption: dose giving half of emax (Emax curve, BRIEF §7)"),
+        60.0, "U",
+        "assumption: onabotulinumtoxinA dose giving half of emax (Emax dose curve, BRIEF §7)"),
     "botulinum.hill": Default(1.0, "", "assumption: Emax curve without a Hill exponent"),
     "botulinum.weeks_since": Default(
         5.0, "week", "the peak week: a what-if without --weeks shows the full effect"),
     "botulinum.max_units_per_group": Default(
         600.0, "U",
-        "assumption: refuse a single-group dose above 600 U, more than common whole-session "
-        "upper-limb totals"),
+        "assumption: refuse a single-group dose above 600 U, more than any labelled "
+        "upper-limb session total"),
+    "botulinum.session_warning_units": Default(
+        400.0, "U",
+        "onabotulinumtoxinA adult upper-limb spasticity label: at most 400 U per treatment "
+        "session (BRIEF §7); a session above it is a warning, not a refusal"),
     "botulinum.max_weeks": Default(
         52.0, "week", "assumption: the time-course model is not meant beyond a year"),
     # --- lengthening ------------------------------------------------------------------------
     "lengthening.width_factor": Default(
         _lengthening_width(), "",
         "calibrated: a 3 cm-fibre muscle loses 30% of peak moment at +1 cm (Delp & Zajac 1992, "
-        "soleus); the same width gives -3% / -12% for a 10 cm-fibre muscle (Delp & Zajac "
-        "report iliopsoas -4% / -9%)"),
+        "soleus); the same width gives -76% at +2 cm (Delp & Zajac: -85%) and -3% / -12% for "
+        "a 10 cm-fibre muscle at +1 / +2 cm (Delp & Zajac report iliopsoas -4% / -9%)"),
     "lengthening.fibre_length_m": Default(
         0.10, "m", "assumption: optimal fibre length of the arm groups, of the order of 10 cm"),
     "lengthening.max_delta_m": Default(

@@ -36,18 +36,11 @@ import numpy as np
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions, fields_per_velocity
 from fieldbank.interventions.catalogue import Botulinum
-from fieldbank.interventions.defaults import value
+from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray
-from fieldbank.params import (
-    DEFAULT_ALPHA_N,
-    DEFAULT_BETA,
-    DEFAULT_KM_N_PER_M,
-    GROUP_INDEX,
-    GROUPS,
-    ArmParams,
-)
+from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
 
 STIFFNESS_LENGTH_M = 0.01
 NOTICE = ("Model result: the dose split this model predicts brings the field closest to its "
@@ -55,11 +48,8 @@ NOTICE = ("Model result: the dose split this model predicts brings the field clo
 
 
 def unimpaired_reference(params: ArmParams) -> ArmParams:
-    """The same arm with unimpaired muscle values (Km, α, β defaults; no slack offset)."""
-    return params.replace(
-        km_n_per_m=(DEFAULT_KM_N_PER_M,) * 6, alpha_n=(DEFAULT_ALPHA_N,) * 6,
-        beta=(DEFAULT_BETA,) * 6, slack_offset_m=(0.0,) * 6,
-    )
+    """The same arm with unimpaired muscle values (:meth:`ArmParams.with_unimpaired_muscles`)."""
+    return params.with_unimpaired_muscles()
 
 
 def _fields(arm: Arm, cond: Conditions) -> tuple[FloatArray, FloatArray]:
@@ -105,6 +95,7 @@ class DoseSplitResult:
         return {
             "notice": self.notice,
             "units": self.units,
+            "dose_unit": DOSE_UNIT,
             "total_units_limit": self.total_units_limit,
             "weeks_since": self.weeks_since,
             "distance_n": self.distance_n,

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from fieldbank.interventions.catalogue import Botulinum, Intervention
+from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.params import ArmParams
 
@@ -215,6 +216,32 @@ def _strip_kind_text(msg: str, kind: str) -> str:
 
 def _strip_kind(exc: Exception, step: Intervention) -> str:
     return _strip_kind_text(str(exc), step.kind)
+
+
+def botulinum_sessions(plan: Plan) -> list[tuple[float, float]]:
+    """(weeks since the injection, total units) of each botulinum session of ``plan``, in
+    onabotulinumtoxinA (Botox®) units: steps seen the same number of weeks after their
+    injection were given on the same day and make one session."""
+    totals: dict[float, float] = {}
+    for s in plan.steps:
+        if isinstance(s, Botulinum):
+            totals[s.weeks_since] = totals.get(s.weeks_since, 0.0) + s.total_units()
+    return sorted(totals.items(), reverse=True)
+
+
+def dose_warnings(plan: Plan, session_limit_units: float | None = None) -> list[str]:
+    """A warning for each botulinum session of ``plan`` above ``session_limit_units`` (default
+    ``botulinum.session_warning_units``, 400 U: the adult upper-limb label maximum)."""
+    limit = (value("botulinum.session_warning_units") if session_limit_units is None
+             else float(session_limit_units))
+    out = []
+    for weeks, total in botulinum_sessions(plan):
+        if total > limit:
+            out.append(
+                f"botulinum session {weeks:g} weeks before the model: {total:g} U in total "
+                f"exceeds the session limit of {limit:g} U ({DOSE_UNIT}; the adult upper-limb "
+                "label maximum per session is 400 U)")
+    return out
 
 
 def plan_of(steps: Iterable[Intervention], label: str = "") -> Plan:

@@ -1,7 +1,8 @@
 """Botulinum toxin A: dose → peak effect, and effect over the weeks after an injection.
 
 Effect e ∈ [0, 1) is the fractional drop of the injected group's reflex force capacity
-(α and β × (1 - e), BRIEF §7). It is the product of two documented curves:
+(α × (1 - e); β, the spinal reflex gain, stays: BRIEF §7). Doses are onabotulinumtoxinA
+(Botox®) units. It is the product of two documented curves:
 
 * dose → peak effect, an Emax curve (assumption, BRIEF §7)::
 
@@ -12,14 +13,15 @@ Effect e ∈ [0, 1) is the fractional drop of the injected group's reflex force 
       s(t) = (t / t_p)^k · exp(k · (1 - t / t_p)),   t ≥ 0 weeks
 
   It starts at 0 on the day of injection, rises over the first days and weeks, peaks at
-  t_p (default 5 weeks; Eek & Himmelmann 2016: 4-6 weeks) and decays smoothly. The shape
-  k is not a free number: it follows from where the effect has worn off, s(t_off) = f_off
-  (default 10% at 16 weeks, the centre of the 12-20 week wear-off):
+  t_p (default 5 weeks; ≈ 3-6 weeks: Eek & Himmelmann 2016, Gäverth et al. 2014, Chen et al.
+  2022) and decays smoothly. The shape k is not a free number: it follows from where the
+  effect has worn off, s(t_off) = f_off (default 10% at 14 weeks: back near baseline by
+  ≈ 12-16 weeks):
   k = ln f_off / (ln(t_off / t_p) + 1 - t_off / t_p).
 
-Repeated injections compound through the plan: each botulinum step multiplies α and β by
-its own (1 - e), so three injections of 50% leave 12.5% (Fortuna et al. 2011, 2015: > 80-95%
-drop after repeated injections).
+Repeated injections compound through the plan: each botulinum step multiplies α by its own
+(1 - e), so three injections of 50% leave 12.5% (Fortuna et al. 2011, 2015: > 80-95% drop
+after repeated injections).
 """
 
 from __future__ import annotations

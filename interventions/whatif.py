@@ -7,7 +7,9 @@
    the plan when none is given;
 2. apply the plan with its lineage (:meth:`fieldbank.interventions.plan.Plan.derive`) and
    compare before with after on the standard conditions of the model before
-   (:func:`fieldbank.evaluate.compare`);
+   (:func:`fieldbank.evaluate.compare.compare`; severity grades name the parameters the
+   model's fit did not identify), and warn about a botulinum session above the session
+   limit (:func:`fieldbank.interventions.plan.dose_warnings`);
 3. optionally follow the metrics week by week after the injection
    (:func:`fieldbank.interventions.course.time_course`);
 4. optionally draw the figure, write ``plan.json``, ``after.json`` and ``lineage.json``, and
@@ -31,7 +33,7 @@ from fieldbank.interventions.course import TimeCourse, time_course
 from fieldbank.interventions.defaults import value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.inverse import DoseSplitResult, optimise_botulinum
-from fieldbank.interventions.plan import Derivation, Plan, params_sha256
+from fieldbank.interventions.plan import Derivation, Plan, dose_warnings, params_sha256
 from fieldbank.interventions.plot import plot_comparison
 from fieldbank.model import Arm
 from fieldbank.modelsource import DatabaseOpener, ModelSource
@@ -92,6 +94,7 @@ class WhatIf:
     plot: str | None = None
     out_dir: str | None = None
     saved: SavedPlan | None = None
+    warnings: tuple[str, ...] = ()
 
     @property
     def before(self) -> ArmParams:
@@ -109,6 +112,7 @@ class WhatIf:
             doc["inverse"] = self.inverse.to_dict()
         doc["plan"] = self.plan.to_dict()
         doc["plan_steps"] = self.plan.describe()
+        doc["warnings"] = list(self.warnings)
         doc["lineage"] = self.derivation.to_dict()
         doc["comparison"] = self.comparison.to_dict()
         if self.course is not None:
@@ -152,7 +156,8 @@ def save_plan(db: Database, source: ModelSource, plan: Plan) -> SavedPlan:
 def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | None = None,
                timecourse: bool = False, plot_path: str | None = None,
                out_dir: str | None = None,
-               save_to: DatabaseOpener | None = None) -> WhatIf:
+               save_to: DatabaseOpener | None = None,
+               session_limit_units: float | None = None) -> WhatIf:
     """Apply ``plan`` (or the plan ``search`` finds) to the model of ``source`` and compare.
 
     Parameters
@@ -171,6 +176,9 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
         Write :data:`OUT_FILES` into this directory.
     save_to : callable () -> Database, optional
         Store the result in this database (:func:`save_plan_result`).
+    session_limit_units : float, optional
+        Botulinum units (onabotulinumtoxinA) per session above which the result warns
+        (default ``botulinum.session_warning_units``, 400 U).
     """
     if plan is None and search is None:
         raise InterventionError("what-if: give a plan or a dose search.")
@@ -186,7 +194,7 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     assert plan is not None
     after, derivation = plan.derive(source.params)
     arm_a = arms(after)
-    comparison = compare(arm_b, arm_a, cond)
+    comparison = compare(arm_b, arm_a, cond, source.unidentified)
     course = time_course(arm_b, plan, conditions=cond, arms=arms) if timecourse else None
     if plot_path:
         plot_comparison(arm_b, arm_a, plot_path, title=source.description)
@@ -200,4 +208,5 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
         with save_to() as db:
             saved = save_plan_result(db, source, after, derivation)
     return WhatIf(source, plan, arm_b, arm_a, derivation, comparison, course, inverse,
-                  plot_path or None, out_dir or None, saved)
+                  plot_path or None, out_dir or None, saved,
+                  tuple(dose_warnings(plan, session_limit_units)))

@@ -8,49 +8,39 @@ so that fitting, interventions and haptics can all use them.
 
 Modules
 -------
-probing   the seed's probing motions, the force felt along them, fast single-joint stretches
+probing   the seed's probing motions, the force felt along them, the clinic's slow and fast
+          single-joint stretches (resisting torque, its velocity-dependent part, Tardieu catch)
 compare   standard conditions, one arm's evaluation on them, before/after comparison
 arms      ArmCache: each distinct parameter set compiled once per use case
+
+``compare`` grades severity (:mod:`fieldbank.severity`, which itself builds on ``probing``), so
+it is imported as ``fieldbank.evaluate.compare``, not re-exported here.
 """
 
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.compare import (
-    Comparison,
-    Conditions,
-    Evaluation,
-    FieldChange,
-    PotentialChange,
-    compare,
-    compare_evaluations,
-    evaluate_arm,
-    fields_per_velocity,
-)
 from fieldbank.evaluate.probing import (
     JointStretch,
     ProbeMotion,
     ProbeProfile,
+    StretchProfile,
     joint_stretch,
     profile,
     standard_probes,
     standard_stretches,
+    stretch_profile,
+    unimpaired_reference,
 )
 
 __all__ = [
     "ArmCache",
-    "Comparison",
-    "Conditions",
-    "Evaluation",
-    "FieldChange",
     "JointStretch",
-    "PotentialChange",
     "ProbeMotion",
     "ProbeProfile",
-    "compare",
-    "compare_evaluations",
-    "evaluate_arm",
-    "fields_per_velocity",
+    "StretchProfile",
     "joint_stretch",
     "profile",
     "standard_probes",
     "standard_stretches",
+    "stretch_profile",
+    "unimpaired_reference",
 ]

@@ -18,15 +18,18 @@ Reported (:class:`Comparison`):
   stiffness-ellipse changes (median area ratio, mean absolute orientation change, median shape
   ratio before and after; :func:`fieldbank.maps.ellipse`);
 * the passive potential U: mean, RMS and largest change over the grid;
-* severity level per joint group before and after (:func:`fieldbank.severity.classify`; it reads
-  passive stiffness Km only, so a reflex-only intervention leaves it unchanged);
+* severity per muscle group and direction before and after, passive (position-dependent) and
+  dynamic (velocity-dependent) (:func:`fieldbank.severity.classify`), each grade naming the
+  parameters it rests on that the model's fit did not identify;
 * probing-motion profiles: peak force, its direction, mean direction, before and after;
-* fast joint stretches: peak resisting torque and its velocity-dependent part.
+* the clinic's joint stretches per joint and direction: resisting torque at the slow and the
+  fast stretch, its velocity-dependent part, the Tardieu catch (R1, R2, R2 - R1).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,11 +42,12 @@ from fieldbank.evaluate.probing import (
     profile,
     standard_probes,
     standard_stretches,
+    unimpaired_reference,
 )
 from fieldbank.maps import ellipse, workspace_grid
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.severity import GroupSeverity, classify
+from fieldbank.severity import GroupSeverity, classify, severity_dict
 
 GRID_N = 15
 #: Grid postures with the elbow within this angle of straight are left out: there the endpoint
@@ -94,8 +98,8 @@ class Evaluation:
     stiffness_n_per_m : tuple of ndarray, each shape (N·D, 2, 2), N/m
     potential_j : ndarray, shape (N,), J
         Passive potential on the grid.
-    probes, stretches : probing-motion profiles and fast joint stretches
-    severity : dict joint group -> GroupSeverity
+    probes, stretches : probing-motion profiles and the slow/fast joint stretches
+    severity : dict muscle group -> GroupSeverity (passive and dynamic grade)
     """
 
     arm: Arm
@@ -125,10 +129,16 @@ def fields_per_velocity(
     return tuple(forces), tuple(stiff)
 
 
-def evaluate_arm(arm: Arm, conditions: Conditions | None = None) -> Evaluation:
-    """Evaluate ``arm`` on ``conditions`` (default: its own standard conditions)."""
+def evaluate_arm(arm: Arm, conditions: Conditions | None = None,
+                 unidentified: Collection[str] = ()) -> Evaluation:
+    """Evaluate ``arm`` on ``conditions`` (default: its own standard conditions).
+
+    ``unidentified`` names the fitted parameters the model's maps did not identify; the
+    severity grades that rest on them say so.
+    """
     cond = conditions if conditions is not None else Conditions.standard(arm)
     forces, stiff = fields_per_velocity(arm, cond)
+    reference = unimpaired_reference(arm)
     return Evaluation(
         arm=arm,
         conditions=cond,
@@ -136,8 +146,8 @@ def evaluate_arm(arm: Arm, conditions: Conditions | None = None) -> Evaluation:
         stiffness_n_per_m=stiff,
         potential_j=arm.potential(cond.grid_m),
         probes=tuple(profile(arm, m) for m in cond.probes),
-        stretches=standard_stretches(arm),
-        severity=classify(arm.params),
+        stretches=standard_stretches(arm, reference),
+        severity=classify(arm, unidentified, reference),
     )
 
 
@@ -199,8 +209,8 @@ class Comparison:
             "directions_per_speed": int(self.before.conditions.velocities[-1].shape[0]),
             "fields": [f.to_dict() for f in self.fields],
             "potential_change": self.potential.to_dict(),
-            "severity": {g: {"before": b.to_dict(), "after": a.to_dict()}
-                         for g, b, a in self.severity_rows()},
+            "severity": {"before": severity_dict(self.before.severity),
+                         "after": severity_dict(self.after.severity)},
             "probes": {n: {"before": b.to_dict(with_profiles), "after": a.to_dict(with_profiles)}
                        for n, b, a in self.probe_rows()},
             "stretches": {n: {"before": b.to_dict(), "after": a.to_dict()}
@@ -258,8 +268,8 @@ def compare_evaluations(before: Evaluation, after: Evaluation) -> Comparison:
     return Comparison(before, after, tuple(changes), pot)
 
 
-def compare(arm_before: Arm, arm_after: Arm, conditions: Conditions | None = None
-            ) -> Comparison:
+def compare(arm_before: Arm, arm_after: Arm, conditions: Conditions | None = None,
+            unidentified: Collection[str] = ()) -> Comparison:
     """All before/after metrics of two compiled arms on the standard conditions of the first.
 
     Parameters
@@ -267,6 +277,10 @@ def compare(arm_before: Arm, arm_after: Arm, conditions: Conditions | None = Non
     arm_before, arm_after : Arm
     conditions : Conditions, optional
         Default: :meth:`Conditions.standard` of ``arm_before``.
+    unidentified : collection of str
+        Parameters of the model before that its fit did not identify (they stay guesses in
+        the model after); the severity grades resting on them say so.
     """
     cond = conditions if conditions is not None else Conditions.standard(arm_before)
-    return compare_evaluations(evaluate_arm(arm_before, cond), evaluate_arm(arm_after, cond))
+    return compare_evaluations(evaluate_arm(arm_before, cond, unidentified),
+                               evaluate_arm(arm_after, cond, unidentified))

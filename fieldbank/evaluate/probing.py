@@ -15,9 +15,31 @@ The force felt is the model's endpoint force F(x, v) along the path with the pat
 a quasi-static kinematic probe (the handle imposes the motion; the reflex sees the velocity;
 the arm's inertia is left out, as the clinician's feel of tone is about the muscles).
 
-Joint stretches complement the strokes with the clinic's single-joint test (Tardieu): one joint
-swept through its range at 180°/s (fast stretch ≥ 150°/s in Liang et al. 2020) with the other at
-rest, reporting the peak torque resisting the motion and its velocity-dependent part.
+Joint stretches complement the strokes with the clinic's single-joint tests (Modified Ashworth,
+Tardieu): one joint swept through its whole range, the other held at the rest posture, once slowly
+(:data:`SLOW_STRETCH_SPEED_RAD_S`, 5°/s: BRIEF §5 "≈ 5-10°/s", Tardieu V1 "as slow as possible")
+and once fast (:data:`STRETCH_SPEED_RAD_S`, 180°/s: Tardieu V3 "as fast as possible" ≈ 180°/s;
+Liang et al. 2020 grade MAS at ≥ 150°/s; McPherson 2018: the reflex needs > 100°/s). The
+stretch is kinematic, like the probes: the joint angle and its speed are imposed, and the torque
+the muscles produce against the motion is read at each angle, per muscle group
+(:class:`StretchProfile`) and summed per joint (:class:`JointStretch`):
+
+* resisting torque at the slow and at the fast stretch (peaks over the range), N·m;
+* its velocity-dependent part, fast minus slow (peak over the range), N·m. In this model that
+  part is all stretch reflex (the muscles have no viscous term), where McPherson 2018 found the
+  reflex to be ≈ 74% of the speed-dependent resistance measured at the elbow;
+* a Tardieu-style catch (operational definition, assumption): travelling from the end of the
+  range where the stretched muscles are shortest, R1 is the first joint angle at which the fast
+  stretch meets a resisting torque of :data:`CATCH_FACTOR` × the unimpaired arm's largest
+  slow-stretch torque over the whole range (so an unimpaired arm never catches), and R2 the
+  first angle at which the slow stretch meets the same torque (the end of the slow passive
+  range; the range-of-motion end when it never does). The same threshold at both speeds makes
+  the distance R2 - R1 (degrees along the travel, ≥ 0) purely velocity-dependent: the
+  Tardieu scale's dynamic component. Contracture moves R2 (and R1 with it); spasticity opens a
+  gap between them.
+
+Angles are joint angles of this project's convention (BRIEF §3: elbow 0° straight, flexion
+positive), in degrees at the edge.
 """
 
 from __future__ import annotations
@@ -28,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.model import Arm, FloatArray
+from fieldbank.params import GROUPS
 
 PULL_DISTANCE_M = 0.15
 PULL_DURATION_S = 0.3
@@ -36,7 +59,13 @@ ELLIPSE_BULGE_M = 0.08
 ELLIPSE_DURATION_S = 0.6
 PROBE_SAMPLES = 61
 STRETCH_SPEED_RAD_S = math.radians(180.0)
+SLOW_STRETCH_SPEED_RAD_S = math.radians(5.0)
 STRETCH_SAMPLES = 121
+#: Catch threshold over the unimpaired arm's peak slow-stretch torque (assumption, above).
+CATCH_FACTOR = 2.0
+JOINTS: tuple[str, ...] = ("shoulder", "elbow")
+#: +1: the joint angle grows (flexion); -1: it falls (extension).
+DIRECTION_SIGN: dict[str, float] = {"flexion": 1.0, "extension": -1.0}
 
 
 def _min_jerk(samples: int) -> tuple[FloatArray, FloatArray]:
@@ -147,14 +176,96 @@ def profile(arm: Arm, motion: ProbeMotion) -> ProbeProfile:
     )
 
 
+@dataclass(frozen=True, eq=False)
+class StretchProfile:
+    """One joint swept through its range, slow and fast, torque against the motion per muscle.
+
+    Attributes
+    ----------
+    joint : 'shoulder' | 'elbow'; direction : 'extension' | 'flexion'
+    angles_rad : ndarray, shape (T,), rad
+        Joint angles in the order of travel (from the end where the stretched muscles are
+        shortest).
+    passive_n_m : ndarray, shape (T, 6), N·m
+        Each muscle group's passive (position-dependent) torque resisting the motion.
+    reflex_slow_n_m, reflex_fast_n_m : ndarray, shape (T, 6), N·m
+        Each group's reflex torque resisting the motion at the slow and at the fast speed.
+    slow_speed_rad_s, fast_speed_rad_s : float, rad/s
+    """
+
+    joint: str
+    direction: str
+    angles_rad: FloatArray
+    passive_n_m: FloatArray
+    reflex_slow_n_m: FloatArray
+    reflex_fast_n_m: FloatArray
+    slow_speed_rad_s: float
+    fast_speed_rad_s: float
+
+    @property
+    def slow_n_m(self) -> FloatArray:
+        """Joint torque resisting the slow stretch, shape (T,), N·m."""
+        return np.asarray((self.passive_n_m + self.reflex_slow_n_m).sum(axis=1))
+
+    @property
+    def fast_n_m(self) -> FloatArray:
+        """Joint torque resisting the fast stretch, shape (T,), N·m."""
+        return np.asarray((self.passive_n_m + self.reflex_fast_n_m).sum(axis=1))
+
+    @property
+    def velocity_dependent_n_m(self) -> FloatArray:
+        """Each group's velocity-dependent torque, fast minus slow, shape (T, 6), N·m."""
+        return np.asarray(self.reflex_fast_n_m - self.reflex_slow_n_m)
+
+
+def stretch_profile(arm: Arm, joint: str, direction: str,
+                    fast_speed_rad_s: float = STRETCH_SPEED_RAD_S,
+                    slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S,
+                    samples: int = STRETCH_SAMPLES) -> StretchProfile:
+    """Sweep ``joint`` of ``arm`` through its range in ``direction`` (the other at rest).
+
+    The torque muscle i exerts against the motion is s · J_λ[i, j] · f_i (s = +1 for flexion,
+    -1 for extension; τ = -J_λᵀ f): positive for a muscle the motion lengthens.
+    """
+    if joint not in JOINTS:
+        raise ValueError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
+    if direction not in DIRECTION_SIGN:
+        raise ValueError(f"direction must be 'flexion' or 'extension'; got {direction!r}.")
+    j = JOINTS.index(joint)
+    sign = DIRECTION_SIGN[direction]
+    lo, hi = (arm.params.shoulder_range_rad, arm.params.elbow_range_rad)[j]
+    angles = np.linspace(lo, hi, samples) if sign > 0 else np.linspace(hi, lo, samples)
+    q = np.tile(arm.q_rest, (samples, 1))
+    q[:, j] = angles
+    lam = arm.muscle_lengths(q)
+    lever = sign * arm.jl[:, j]  # (6,) torque per newton against the motion
+
+    def reflex(speed: float) -> FloatArray:
+        qdot = np.zeros((samples, 2))
+        qdot[:, j] = sign * speed
+        return np.asarray(arm.reflex_forces(lam, arm.muscle_velocities(qdot))[0] * lever)
+
+    psi, _ = arm.passive_forces(lam)
+    return StretchProfile(joint, direction, angles, psi * lever, reflex(slow_speed_rad_s),
+                          reflex(fast_speed_rad_s), slow_speed_rad_s, fast_speed_rad_s)
+
+
 @dataclass(frozen=True)
 class JointStretch:
-    """Resistance to one joint swept through its range (the other joint at rest).
+    """What a clinician measures on one joint stretch (module docstring), from the joint torque.
 
     joint : 'shoulder' | 'elbow'; direction : 'extension' | 'flexion'
-    peak_torque_n_m : largest torque opposing the motion at the fast speed, N·m
+    speed_deg_s, slow_speed_deg_s : the fast and the slow stretch speed, °/s
+    slow_torque_n_m : largest torque opposing the slow stretch, N·m
+    peak_torque_n_m : largest torque opposing the fast stretch, N·m
     peak_angle_deg : joint angle of that peak
-    reflex_torque_n_m : largest velocity-dependent part (fast minus static torque), N·m
+    reflex_torque_n_m : largest velocity-dependent part (fast minus slow), N·m
+    catch_threshold_n_m : the catch torque (CATCH_FACTOR × unimpaired slow peak), N·m
+    catch_angle_deg : R1, where the fast stretch meets the catch torque; None: it never does
+    slow_stop_angle_deg : R2, where the slow stretch meets it; None: it never does (the
+        range-of-motion end then stands for R2)
+    dynamic_range_deg : R2 - R1 along the travel, ≥ 0 (0 without a catch)
+    stretched : muscle groups the motion lengthens (whose parameters the read-out rests on)
     """
 
     joint: str
@@ -163,6 +274,13 @@ class JointStretch:
     peak_torque_n_m: float
     peak_angle_deg: float
     reflex_torque_n_m: float
+    slow_speed_deg_s: float = 0.0
+    slow_torque_n_m: float = 0.0
+    catch_threshold_n_m: float = 0.0
+    catch_angle_deg: float | None = None
+    slow_stop_angle_deg: float | None = None
+    dynamic_range_deg: float = 0.0
+    stretched: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -170,29 +288,77 @@ class JointStretch:
 
     def to_dict(self) -> dict[str, object]:
         return {
-            "joint": self.joint, "direction": self.direction, "speed_deg_s": self.speed_deg_s,
+            "joint": self.joint, "direction": self.direction,
+            "stretched": list(self.stretched),
+            "slow_speed_deg_s": self.slow_speed_deg_s, "speed_deg_s": self.speed_deg_s,
+            "slow_torque_n_m": self.slow_torque_n_m,
             "peak_torque_n_m": self.peak_torque_n_m, "peak_angle_deg": self.peak_angle_deg,
             "reflex_torque_n_m": self.reflex_torque_n_m,
+            "catch_threshold_n_m": self.catch_threshold_n_m,
+            "catch_angle_deg": self.catch_angle_deg,
+            "slow_stop_angle_deg": self.slow_stop_angle_deg,
+            "dynamic_range_deg": self.dynamic_range_deg,
         }
+
+
+def _first_reaching(torque: FloatArray, angles: FloatArray, threshold: float) -> float | None:
+    """First angle (rad, linear between samples) where ``torque`` reaches ``threshold``."""
+    hit = np.flatnonzero(torque >= threshold)
+    if hit.size == 0:
+        return None
+    k = int(hit[0])
+    if k == 0:
+        return float(angles[0])
+    t0, t1 = float(torque[k - 1]), float(torque[k])
+    frac = (threshold - t0) / (t1 - t0)
+    return float(angles[k - 1] + frac * (angles[k] - angles[k - 1]))
+
+
+def unimpaired_reference(arm: Arm) -> Arm:
+    """The same arm with unimpaired muscles (:meth:`ArmParams.with_unimpaired_muscles`),
+    compiled; ``arm`` itself when it already is that arm."""
+    ref = arm.params.with_unimpaired_muscles()
+    return arm if ref == arm.params else Arm.from_params(ref)
 
 
 def joint_stretch(arm: Arm, joint: str, direction: str,
                   speed_rad_s: float = STRETCH_SPEED_RAD_S,
-                  samples: int = STRETCH_SAMPLES) -> JointStretch:
-    """Sweep ``joint`` through its range at ``speed_rad_s``; torque opposing the motion."""
-    j = {"shoulder": 0, "elbow": 1}[joint]
-    sign = {"flexion": 1.0, "extension": -1.0}[direction]
-    lo, hi = (arm.params.shoulder_range_rad, arm.params.elbow_range_rad)[j]
-    angles = np.linspace(lo, hi, samples)
-    q = np.tile(arm.q_rest, (samples, 1))
-    q[:, j] = angles
-    qdot = np.zeros((samples, 2))
-    qdot[:, j] = sign * speed_rad_s
-    fast = -sign * arm.joint_torque(q, qdot)[:, j]  # torque against the motion
-    static = -sign * arm.joint_torque(q)[:, j]
+                  samples: int = STRETCH_SAMPLES, reference: Arm | None = None,
+                  slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S) -> JointStretch:
+    """The clinical read-outs of one joint stretch (module docstring).
+
+    ``reference`` is the unimpaired arm that sets the catch torque (default: compiled from
+    ``arm``, :func:`unimpaired_reference`).
+    """
+    ref = reference if reference is not None else unimpaired_reference(arm)
+    prof = stretch_profile(arm, joint, direction, speed_rad_s, slow_speed_rad_s, samples)
+    ref_prof = prof if ref is arm else stretch_profile(ref, joint, direction, speed_rad_s,
+                                                       slow_speed_rad_s, samples)
+    return _read_out(prof, float(ref_prof.slow_n_m.max()), arm)
+
+
+def _read_out(prof: StretchProfile, reference_slow_peak_n_m: float, arm: Arm) -> JointStretch:
+    fast, slow = prof.fast_n_m, prof.slow_n_m
     i = int(np.argmax(fast))
-    return JointStretch(joint, direction, math.degrees(speed_rad_s), float(fast[i]),
-                        math.degrees(float(angles[i])), float(np.max(fast - static)))
+    threshold = CATCH_FACTOR * reference_slow_peak_n_m
+    r1 = _first_reaching(fast, prof.angles_rad, threshold)
+    r2 = _first_reaching(slow, prof.angles_rad, threshold)
+    end = float(prof.angles_rad[-1])
+    dyn = 0.0 if r1 is None else abs((end if r2 is None else r2) - r1)
+    j = JOINTS.index(prof.joint)
+    lever = DIRECTION_SIGN[prof.direction] * arm.jl[:, j]
+    stretched = tuple(g for g, v in zip(GROUPS, lever, strict=True) if v > 0)
+    return JointStretch(
+        joint=prof.joint, direction=prof.direction,
+        speed_deg_s=math.degrees(prof.fast_speed_rad_s),
+        peak_torque_n_m=float(fast[i]), peak_angle_deg=math.degrees(float(prof.angles_rad[i])),
+        reflex_torque_n_m=float(np.max(fast - slow)),
+        slow_speed_deg_s=math.degrees(prof.slow_speed_rad_s),
+        slow_torque_n_m=float(slow.max()), catch_threshold_n_m=threshold,
+        catch_angle_deg=None if r1 is None else math.degrees(r1),
+        slow_stop_angle_deg=None if r2 is None else math.degrees(r2),
+        dynamic_range_deg=math.degrees(dyn), stretched=stretched,
+    )
 
 
 STRETCHES: tuple[tuple[str, str], ...] = (
@@ -201,5 +367,7 @@ STRETCHES: tuple[tuple[str, str], ...] = (
 )
 
 
-def standard_stretches(arm: Arm) -> tuple[JointStretch, ...]:
-    return tuple(joint_stretch(arm, j, d) for j, d in STRETCHES)
+def standard_stretches(arm: Arm, reference: Arm | None = None) -> tuple[JointStretch, ...]:
+    """The four single-joint stretches (:data:`STRETCHES`), one reference arm for all."""
+    ref = reference if reference is not None else unimpaired_reference(arm)
+    return tuple(joint_stretch(arm, j, d, reference=ref) for j, d in STRETCHES)

@@ -37,7 +37,7 @@ from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
 from fieldbank.maps import FRAMES, FieldMap
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.severity import classify
+from fieldbank.severity import classify, severity_dict
 
 #: Metadata keys that may state a map's value unit, and the unit each kind must have.
 UNIT_KEYS = ("unit", "units", "value_unit", "values_unit", "force_unit", "stiffness_unit")
@@ -268,7 +268,7 @@ class ArmFitter:
         self.stop_reason_ = stop_reason
         self.algorithm_ = self.algorithm
         self.seed_ = seed
-        self.severity_ = _severity(self.params_)
+        self.severity_ = _severity(self.params_, [u.name for u in self.unidentified_])
         return self
 
     # --- using a fit --------------------------------------------------------------------------
@@ -328,9 +328,10 @@ class ArmFitter:
         }
 
 
-def _severity(params: ArmParams) -> dict[str, Any]:
-    """Severity per joint group (:func:`fieldbank.severity.classify`) as plain values."""
-    return {group: gs.to_dict() for group, gs in classify(params).items()}
+def _severity(params: ArmParams, unidentified: Sequence[str]) -> dict[str, Any]:
+    """Severity per muscle group, passive and dynamic (:func:`fieldbank.severity.classify`), as
+    plain values; each grade lists the parameters behind it that the maps did not identify."""
+    return severity_dict(classify(Arm.from_params(params), unidentified))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from fieldbank.files import write_atomic
-from fieldbank.interventions.report.compute import COLUMNS, CaseResult, compute_case
+from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
 from fieldbank.interventions.report.html import render
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
 from fieldbank.storage import Database
@@ -66,16 +66,16 @@ def compute_all(cases: list[CaseSpec], jobs: int,
 def metrics_csv(results: Iterable[CaseResult]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow([k for k, _ in COLUMNS])
+    w.writerow([k for k, _ in ALL_COLUMNS])
     for r in results:
         w.writerow(["" if r.row.get(k) is None else repr(r.row[k])
-                    if isinstance(r.row[k], float) else r.row[k] for k, _ in COLUMNS])
+                    if isinstance(r.row[k], float) else r.row[k] for k, _ in ALL_COLUMNS])
     return buf.getvalue()
 
 
 def metrics_json(results: Iterable[CaseResult], inputs: dict[str, Any]) -> str:
     doc = {"schema": SCHEMA, "version": VERSION, "inputs": inputs,
-           "columns": [k for k, _ in COLUMNS],
+           "columns": [k for k, _ in ALL_COLUMNS],
            "cases": [{"metrics": r.row, **r.detail} for r in results]}
     return json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False) + "\n"
 

@@ -14,13 +14,16 @@ from typing import Any
 import numpy as np
 
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.compare import Conditions, compare
+from fieldbank.evaluate.compare import Comparison, Conditions, compare
+from fieldbank.evaluate.probing import STRETCHES
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import time_course
+from fieldbank.interventions.plan import dose_warnings
 from fieldbank.interventions.report import figures
 from fieldbank.interventions.report.select import CaseSpec
-from fieldbank.severity import LEVELS, GroupSeverity
+from fieldbank.params import GROUPS
+from fieldbank.severity import COMPONENTS, LEVELS, GroupSeverity, summary
 
 #: Weeks after the most recent injection at which the time course is evaluated.
 TIMECOURSE_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(0, 25))
@@ -52,11 +55,31 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("pull_peak_after_n", "pull peak after (N)"),
     ("semi_ellipse_peak_before_n", "semi-ellipse peak before (N)"),
     ("semi_ellipse_peak_after_n", "semi-ellipse peak after (N)"),
-    ("elbow_extension_reflex_before_n_m", "elbow ext. reflex before (N·m)"),
-    ("elbow_extension_reflex_after_n_m", "elbow ext. reflex after (N·m)"),
     ("severity_before", "severity before"),
     ("severity_after", "severity after"),
+    ("warnings", "warnings"),
 )
+#: The joint-stretch read-outs per joint and direction (:class:`JointStretch` attribute,
+#: column stem, heading); each gets a before and an after column.
+STRETCH_READOUTS: tuple[tuple[str, str, str], ...] = (
+    ("slow_torque_n_m", "slow_n_m", "slow-stretch torque (N·m)"),
+    ("peak_torque_n_m", "fast_n_m", "fast-stretch torque (N·m)"),
+    ("reflex_torque_n_m", "velocity_dependent_n_m", "velocity-dependent torque (N·m)"),
+    ("catch_angle_deg", "catch_r1_deg", "catch R1 (°)"),
+    ("slow_stop_angle_deg", "slow_r2_deg", "slow stop R2 (°)"),
+    ("dynamic_range_deg", "r2_minus_r1_deg", "R2 − R1 (°)"),
+)
+#: Columns of the clinical read-outs: every joint stretch and every muscle group's grades.
+CLINICAL_COLUMNS: tuple[tuple[str, str], ...] = tuple(
+    (f"{j}_{d}_{stem}_{when}", f"{j} {d} {head} {when}")
+    for j, d in STRETCHES for _, stem, head in STRETCH_READOUTS
+    for when in ("before", "after")
+) + tuple(
+    (f"severity_{g}_{c}_{when}", f"{g} {c} {when}")
+    for g in GROUPS for c in COMPONENTS for when in ("before", "after")
+)
+#: Every column of metrics.csv / metrics.json; the HTML overview shows :data:`COLUMNS`.
+ALL_COLUMNS: tuple[tuple[str, str], ...] = COLUMNS + CLINICAL_COLUMNS
 
 
 @dataclass(frozen=True)
@@ -76,8 +99,23 @@ class CaseResult:
     figures: tuple[Figure, ...]
 
 
+def _clinical(c: Comparison) -> dict[str, Any]:
+    """The :data:`CLINICAL_COLUMNS` of one comparison."""
+    out: dict[str, Any] = {}
+    for name, b, a in c.stretch_rows():
+        key = name.replace(" ", "_")
+        for attr, stem, _ in STRETCH_READOUTS:
+            out[f"{key}_{stem}_before"] = getattr(b, attr)
+            out[f"{key}_{stem}_after"] = getattr(a, attr)
+    for g, sb, sa in c.severity_rows():
+        for comp in COMPONENTS:
+            out[f"severity_{g}_{comp}_before"] = sb.component(comp).text()
+            out[f"severity_{g}_{comp}_after"] = sa.component(comp).text()
+    return out
+
+
 def _levels(sev: dict[str, GroupSeverity]) -> str:
-    return "; ".join(f"{g} {s.level}" for g, s in sev.items())
+    return summary(sev)
 
 
 def compute_case(spec: CaseSpec) -> CaseResult:
@@ -93,8 +131,8 @@ def compute_case(spec: CaseSpec) -> CaseResult:
 
     static, moving = c.fields[0], c.fields[min(1, len(c.fields) - 1)]
     probes = {n: (b, a) for n, b, a in c.probe_rows()}
-    stretches = {n: (b, a) for n, b, a in c.stretch_rows()}
     sev_b, sev_a = c.before.severity, c.after.severity
+    warnings = dose_warnings(plan) if plan is not None else []
     row: dict[str, Any] = {
         "patient": spec.patient_code or "",
         "plan_id": spec.plan_id,
@@ -116,10 +154,10 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "pull_peak_after_n": probes["pull"][1].peak_force_n,
         "semi_ellipse_peak_before_n": probes["semi-ellipse"][0].peak_force_n,
         "semi_ellipse_peak_after_n": probes["semi-ellipse"][1].peak_force_n,
-        "elbow_extension_reflex_before_n_m": stretches["elbow extension"][0].reflex_torque_n_m,
-        "elbow_extension_reflex_after_n_m": stretches["elbow extension"][1].reflex_torque_n_m,
         "severity_before": _levels(sev_b),
         "severity_after": _levels(sev_a),
+        "warnings": "; ".join(warnings),
+        **_clinical(c),
     }
     detail: dict[str, Any] = {
         "plan_id": spec.plan_id,
@@ -136,6 +174,7 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "comparison": c.to_dict(),
         "steps": plan.describe() if plan is not None else [],
         "timecourse": course.to_dict() if course is not None else None,
+        "warnings": warnings,
     }
 
     grid = Conditions.standard(arm_b, grid_n=FIGURE_GRID_N).grid_m
@@ -151,11 +190,15 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         Figure("ellipses", "Static endpoint stiffness ellipses before and after "
                "(symmetric part of K, one scale).",
                figures.ellipses_figure(grid, kb, ka)),
-        Figure("severity", "Severity per joint group before and after (scale reads passive "
-               "stiffness Km; reflex-only interventions leave it unchanged).",
+        Figure("severity", "Severity per muscle group before and after: passive "
+               "(position-dependent: contracture) and dynamic (velocity-dependent: "
+               "spasticity, the stretch reflex) grades, 0 unimpaired … 4 severe.",
                figures.severity_figure(
-                   list(sev_b), [min(s.score, 4.5) for s in sev_b.values()],
-                   [min(s.score, 4.5) for s in sev_a.values()], LEVELS)),
+                   list(sev_b),
+                   {k: [min(s.component(k).score, 4.5) for s in sev_b.values()]
+                    for k in COMPONENTS},
+                   {k: [min(s.component(k).score, 4.5) for s in sev_a.values()]
+                    for k in COMPONENTS}, LEVELS)),
         Figure("probes", "Force felt along the probing motions (seed Fig. 3b, 3c), before "
                "and after.",
                figures.probes_figure([

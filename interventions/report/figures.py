@@ -2,9 +2,9 @@
 
 Each function draws one figure from already computed arrays and returns the PNG bytes:
 postural fields before / after / difference over the passive potential, stiffness ellipses
-before and after, severity per joint group, probing force profiles and the botulinum time
-course. Sizes are small (the report holds several per case) and every scale is shared between
-the before and after panels, so they can be compared by eye.
+before and after, severity per muscle group (passive and dynamic), probing force profiles and
+the botulinum time course. Sizes are small (the report holds several per case) and every scale
+is shared between the before and after panels, so they can be compared by eye.
 """
 
 from __future__ import annotations
@@ -88,19 +88,28 @@ def ellipses_figure(grid_m: FloatArray, k_before: FloatArray, k_after: FloatArra
     return png_bytes(fig)
 
 
-def severity_figure(groups: Sequence[str], before: Sequence[float],
-                    after: Sequence[float], levels: Sequence[str]) -> bytes:
-    """Severity score per joint group before and after (0 unimpaired … 4 severe)."""
-    fig, axes = _panels(1, (5.2, 2.8), left_in=0.9)
+def severity_figure(groups: Sequence[str], before: Mapping[str, Sequence[float]],
+                    after: Mapping[str, Sequence[float]], levels: Sequence[str]) -> bytes:
+    """Severity score per muscle group before and after (0 unimpaired … 4 severe), passive
+    (solid) and dynamic (hatched); ``before`` and ``after`` map a component to the scores."""
+    fig, axes = _panels(1, (7.2, 2.9), left_in=0.9)
     ax = axes[0]
     x = np.arange(len(groups))
-    ax.bar(x - 0.18, before, 0.36, label="before", color="C0")
-    ax.bar(x + 0.18, after, 0.36, label="after", color="C1")
+    width = 0.2
+    bars = (("passive", "before", "C0", ""), ("passive", "after", "C1", ""),
+            ("dynamic", "before", "C0", "///"), ("dynamic", "after", "C1", "///"))
+    top = 0.0
+    for k, (comp, when, color, hatch) in enumerate(bars):
+        values = (before if when == "before" else after)[comp]
+        top = max(top, float(max(values, default=0.0)))
+        ax.bar(x + (k - 1.5) * width, values, width, color=color, hatch=hatch,
+               edgecolor="white" if not hatch else "0.2", linewidth=0.4,
+               label=f"{comp} {when}")
     ax.set_xticks(x, list(groups), fontsize=8)
     ax.set_yticks(range(len(levels)), list(levels), fontsize=7)
-    ax.set_ylim(0, max(len(levels) - 0.5, float(max([*before, *after], default=0)) + 0.3))
-    ax.set_title("severity per joint group (passive stiffness)", fontsize=9)
-    ax.legend(fontsize=7, loc="upper right")
+    ax.set_ylim(0, max(len(levels) - 0.5, top + 0.3))
+    ax.set_title("severity per muscle group: passive (solid), dynamic (hatched)", fontsize=9)
+    ax.legend(fontsize=6, loc="upper left", ncol=2, bbox_to_anchor=(1.0, 1.0))
     return png_bytes(fig)
 
 
@@ -124,7 +133,7 @@ def timecourse_figure(weeks: FloatArray, effect: Mapping[str, FloatArray],
     fig, axes = _panels(2, (3.8, 2.8))
     for g in sorted(effect):
         axes[0].plot(weeks, 100.0 * np.asarray(effect[g]), label=g)
-    axes[0].set_title("botulinum effect (drop of α, β)", fontsize=9)
+    axes[0].set_title("botulinum effect (drop of α)", fontsize=9)
     axes[0].set_ylabel("%", fontsize=8)
     for name in sorted(probe_peak_n):
         axes[1].plot(weeks, probe_peak_n[name], label=name)

@@ -13,7 +13,10 @@ from collections.abc import Mapping, Sequence
 from html import escape
 from typing import Any
 
-from fieldbank.interventions.report.compute import COLUMNS, CaseResult
+from fieldbank.evaluate.probing import STRETCHES
+from fieldbank.interventions.report.compute import COLUMNS, STRETCH_READOUTS, CaseResult
+from fieldbank.params import GROUPS
+from fieldbank.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES
 
 CSS = """
 body { font-family: system-ui, sans-serif; margin: 1.5em auto; padding: 0 1em; max-width: 1180px;
@@ -25,6 +28,9 @@ th, td { border: 1px solid #ccd; padding: 2px 6px; text-align: right; vertical-a
 th { background: #eef; }
 td.t, th.t { text-align: left; }
 .note { color: #844; font-size: 0.9em; }
+.warn { color: #a00; font-weight: bold; font-size: 0.95em; }
+.legend { color: #555; font-size: 0.8em; max-width: 60em; }
+table.clinical td { white-space: nowrap; }
 .inputs td, .inputs th { text-align: left; }
 .scroll { overflow-x: auto; }
 figure { margin: 0.6em 0 1em 0; }
@@ -43,7 +49,7 @@ window.addEventListener("load", function () {
 """
 
 TEXT_COLUMNS = {"patient", "plan_label", "kinds", "sessions", "case_date", "severity_before",
-                "severity_after"}
+                "severity_after", "warnings"}
 
 
 def fmt(v: Any) -> str:
@@ -99,6 +105,39 @@ def _case_table(row: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def _change(row: Mapping[str, Any], key: str) -> str:
+    return f"{fmt(row.get(key + '_before'))} → {fmt(row.get(key + '_after'))}"
+
+
+def _clinical_tables(row: Mapping[str, Any]) -> list[str]:
+    """Joint stretches per joint and direction, and grades per muscle group, before → after."""
+    out = ['<table class="clinical">', '<tr><th class="t">joint stretch</th>']
+    out += [f"<th>{escape(head)}</th>" for _, _, head in STRETCH_READOUTS]
+    out.append("</tr>")
+    for j, d in STRETCHES:
+        out.append(f'<tr><th class="t">{escape(f"{j} {d}")}</th>')
+        out += [f"<td>{escape(_change(row, f'{j}_{d}_{stem}'))}</td>"
+                for _, stem, _ in STRETCH_READOUTS]
+        out.append("</tr>")
+    out.append("</table>")
+    out.append('<table class="clinical"><tr><th class="t">muscle group</th>'
+               '<th class="t">graded on</th><th class="t">passive (contracture)</th>'
+               '<th class="t">dynamic (spasticity)</th></tr>')
+    for g in GROUPS:
+        joint, direction = GRADED_STRETCH[g]
+        out.append(f'<tr><th class="t">{escape(MUSCLE_GROUP_NAMES[g])} ({g})</th>'
+                   f'<td class="t">{escape(f"{joint} {direction}")}</td>'
+                   f'<td class="t">{escape(_change(row, f"severity_{g}_passive"))}</td>'
+                   f'<td class="t">{escape(_change(row, f"severity_{g}_dynamic"))}</td></tr>')
+    out.append("</table>")
+    out.append('<p class="legend">Slow stretch 5°/s, fast 180°/s, one joint through its range, '
+               "the other at rest. Catch (Tardieu-style): R1 where the fast stretch, R2 where "
+               "the slow one first meets twice the unimpaired arm's largest slow-stretch "
+               "torque (— never); R2 − R1 is the velocity-dependent part. Grades: + beyond "
+               "severe, * rests on a parameter the fit did not identify.</p>")
+    return out
+
+
 def render(results: Sequence[CaseResult], inputs: Mapping[str, Any]) -> str:
     """The whole page for ``results`` (in order); ``inputs`` are shown as generation inputs."""
     title = str(inputs.get("title", "fieldbank report"))
@@ -129,7 +168,10 @@ def render(results: Sequence[CaseResult], inputs: Mapping[str, Any]) -> str:
                    f"Sessions fitted: {escape(sess or 'none recorded')}. "
                    f"Case date {escape(s.case_date)}.</p>")
         out += _steps(r.detail.get("steps") or [])
+        out += [f'<p class="warn">Warning: {escape(w)}.</p>'
+                for w in r.detail.get("warnings") or []]
         out += _case_table(r.row)
+        out += _clinical_tables(r.row)
         for f in r.figures:
             out.append(f"<figure>{_png_tag(f.png, f.caption)}"
                        f"<figcaption>{escape(f.caption)}</figcaption></figure>")
