@@ -37,7 +37,7 @@ one-sided slopes, the value a central difference measures.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -166,6 +166,33 @@ class Arm:
             mirror=p.side == "left",
             **arrays,
         )
+
+    #: ArmParams fields an arm's compiled geometry does not depend on (:meth:`with_muscles`).
+    MUSCLE_FIELDS = ("km_n_per_m", "alpha_n", "beta", "slack_offset_m")
+
+    def with_muscles(self, p: ArmParams) -> Arm:
+        """The compiled arm of ``p``, which differs from this arm's parameters only in muscle
+        values (Km, α, β, slack offset): it shares every derived constant of the geometry
+        (J_λ, length extremes, λ̇_max, the potential's integrals), so nothing is compiled.
+
+        Raises
+        ------
+        ParameterError
+            ``p`` differs in anything else (segments, moment arms, rest posture, range, ...).
+        """
+        q = self.params
+        other = [f for f in q.to_dict() if f not in self.MUSCLE_FIELDS
+                 and f not in ("schema", "version") and getattr(p, f) != getattr(q, f)]
+        if other:
+            raise ParameterError(
+                f"with_muscles: the parameters differ in {', '.join(other)}, not only in "
+                "muscle values; compile them with Arm.from_params.")
+        arrays = {"lam_slack": self.lam_rest + np.array(p.slack_offset_m),
+                  "km": np.array(p.km_n_per_m), "alpha": np.array(p.alpha_n),
+                  "beta": np.array(p.beta)}
+        for a in arrays.values():
+            a.setflags(write=False)
+        return replace(self, params=p, **arrays)
 
     # --- frames ---------------------------------------------------------------------------
     def _in(self, x: ArrayLike, name: str = "positions") -> FloatArray:

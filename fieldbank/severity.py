@@ -54,7 +54,6 @@ identify (``unidentified``): Km of the group for the passive grade, α and β fo
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
@@ -452,9 +451,7 @@ def _solve_dynamic(arm: Arm, ref_prof: StretchProfile, group: str, target: float
 
     def ratio(s: float) -> float:
         a, b = _reflex_path(s)
-        alpha, beta = arm.alpha.copy(), arm.beta.copy()
-        alpha[i], beta[i] = a, b
-        trial = dataclasses.replace(arm, alpha=alpha, beta=beta)
+        trial = arm.with_muscles(arm.params.with_group(group, alpha_n=a, beta=b))
         v = stretch_profile(trial, joint, direction).velocity_dependent_n_m[:, i]
         return _dynamic_ratio(v, p_ref, v_ref)
 
@@ -488,11 +485,10 @@ def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
     km = np.array(p.km_n_per_m)
     alpha = np.array(p.alpha_n)
     beta = np.array(p.beta)
-    ref = Arm.from_params(p.with_unimpaired_muscles())
-    ref_prof = _profiles(ref)
+    base_arm = Arm.from_params(p)  # the one compilation: the variants share its geometry
+    ref_prof = _profiles(unimpaired_reference(base_arm))
     if any(c == "passive" for _, c in wanted):
-        unit = _profiles(Arm.from_params(p.replace(km_n_per_m=(1.0,) * 6)))
-    base_arm = Arm.from_params(p) if any(c == "dynamic" for _, c in wanted) else ref
+        unit = _profiles(base_arm.with_muscles(p.replace(km_n_per_m=(1.0,) * 6)))
     for (g, comp), level in wanted.items():
         i = GROUP_INDEX[g]
         ratio = scale.level_ratio(level, comp)

@@ -157,7 +157,7 @@ def optimise_botulinum(
     compiled = arms if arms is not None else ArmCache()
     compiled.add(arm)
     cond = conditions if conditions is not None else Conditions.standard(arm)
-    ref = _fields(compiled(unimpaired_reference(params)), cond)
+    ref = _fields(arm.with_muscles(unimpaired_reference(params)), cond)
     per_group = min(float(total_units), cap)
     distances: dict[ArmParams, float] = {}
 

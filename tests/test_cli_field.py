@@ -36,7 +36,7 @@ def test_postural_csv_matches_the_model():
     meta, header, data = _csv_rows(res.stdout)
     assert meta["kind"] == "postural" and meta["frame"] == "shoulder"
     assert meta["sign"] == "arm-on-handle" and meta["velocity_m_per_s"] == "0"
-    assert "elbow=severe" in meta["source"]
+    assert "ef passive severe; ef dynamic severe; ee passive severe" in meta["source"]
     assert header == ["x_m", "y_m", "fx_n", "fy_n"]
     arm = Arm.from_params(synthesize({"elbow": "severe"}))
     np.testing.assert_allclose(data[:, 2:], arm.endpoint_force(data[:, :2]), rtol=1e-6,
@@ -53,7 +53,9 @@ def test_stiffness_json_at_positions_and_velocity():
     np.testing.assert_allclose(doc["values"], k, rtol=1e-12)
     np.testing.assert_allclose(doc["damping_n_s_per_m"], b, rtol=1e-12)
     assert doc["velocity_m_per_s"] == [0.0, -1.5]
-    assert doc["severity"]["elbow"]["level"] == "severe"
+    assert doc["severity"]["ef"]["passive"]["level"] == "severe"
+    assert doc["severity"]["ee"]["dynamic"]["level"] == "severe"
+    assert doc["severity"]["sf"]["dynamic"]["level"] == "unimpaired"
     assert len(doc["ellipse"]["major_n_per_m"]) == 2
 
 

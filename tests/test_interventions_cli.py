@@ -11,12 +11,16 @@ from click.testing import CliRunner
 
 from fieldbank.cli.whatif import whatif
 from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.inverse import unimpaired_reference
 from fieldbank.interventions.plan import Plan, params_sha256
 from fieldbank.interventions.spec import parse_length, parse_units
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.severity import synthesize
+
+#: Built before any test counts compilations (synthesis compiles the arm it starts from).
+SEVERE_ELBOW = synthesize({"elbow": "severe"})
 
 
 def run(*args: str) -> tuple[int, str, str]:
@@ -27,11 +31,14 @@ def run(*args: str) -> tuple[int, str, str]:
 def test_table_shows_before_and_after() -> None:
     code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=200U", "--weeks", "5")
     assert code == 0, out
-    assert "botulinum toxin A (ef 200 U), 5 weeks after injection" in out
+    assert ("botulinum toxin A (ef 200 U; onabotulinumtoxinA (Botox®) units), 5 weeks after "
+            "injection") in out
     assert "elbow extension" in out and "Probing motion" in out and "Severity" in out
     line = next(x for x in out.splitlines() if x.strip().startswith("elbow extension"))
-    before, after = (float(v) for v in line.split()[2:5:2])
-    assert after < before
+    # slow stretch unchanged, fast stretch and its velocity-dependent part lower
+    cells = line.split()
+    assert float(cells[2]) == pytest.approx(float(cells[4]), rel=0.01)
+    assert float(cells[7]) < float(cells[5])
 
 
 def test_json_output_is_complete_and_parsable() -> None:
@@ -139,12 +146,14 @@ def test_timecourse_compiles_each_model_once(compiled: Counter[ArmParams]) -> No
     code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=200U", "--timecourse",
                        "--json")
     assert code == 0, out
-    before = synthesize({"elbow": "severe"})
+    before = SEVERE_ELBOW
     plan = Plan.of(Botulinum({"ef": 200.0}))
     weeks = {plan.at_week(float(w)).apply(before) for w in range(25)}
-    # week 0 is the model before and week 5 (the default) the model after: 25 models in all
-    assert set(compiled) == weeks | {before, plan.apply(before)}
-    assert len(compiled) == 25
+    # week 0 is the model before and week 5 (the default) the model after: 25 models in all,
+    # and the unimpaired arm the synthesis of the model before starts from
+    start = ArmParams.from_anthropometry()
+    assert set(compiled) == weeks | {before, plan.apply(before), start}
+    assert len(compiled) == 26
     assert all(n == 1 for n in compiled.values()), compiled.most_common(1)
 
 
@@ -152,7 +161,37 @@ def test_optimize_compiles_each_model_once(compiled: Counter[ArmParams]) -> None
     code, out, _ = run("--severity", "elbow=severe", "--optimize", "--total-units", "200",
                        "--groups", "ef,ee", "--timecourse", "--json")
     assert code == 0, out
-    before = synthesize({"elbow": "severe"})
+    before = SEVERE_ELBOW
     after = Plan.from_dict(json.loads(out)["plan"]).apply(before)
     assert {before, after, unimpaired_reference(before)} <= set(compiled)
     assert all(n == 1 for n in compiled.values()), compiled.most_common(1)
+
+
+def test_session_above_the_label_maximum_warns_in_text_and_json() -> None:
+    code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=300U,ee=200U")
+    assert code == 0, out
+    warning = next(x for x in out.splitlines() if x.startswith("Warning:"))
+    assert "500 U" in warning and "400 U" in warning and "onabotulinumtoxinA" in warning
+    code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=300U,ee=200U", "--json")
+    doc = json.loads(out)
+    assert len(doc["warnings"]) == 1 and "500 U" in doc["warnings"][0]
+    # a configurable limit; at or below it nothing is said
+    code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=300U,ee=200U",
+                       "--session-limit", "500", "--json")
+    assert json.loads(out)["warnings"] == []
+    code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=150U")
+    assert code == 0 and "Warning" not in out
+    # the doses name their unit wherever they are shown
+    assert "onabotulinumtoxinA (Botox®) units" in out
+
+
+def test_other_toxins_units_are_refused() -> None:
+    with pytest.raises(InterventionError, match="not interchangeable"):
+        Botulinum({"ef": 300.0}, toxin="abobotulinumtoxinA")
+    doc = Plan.of(Botulinum({"ef": 100.0})).to_dict()
+    assert doc["steps"][0]["toxin"] == "onabotulinumtoxinA"
+    # a plan stored before the toxin was named reads as onabotulinumtoxinA, and one stored
+    # with β scaled reproduces its after model
+    old = {"kind": "botulinum", "units": {"ef": 100.0}, "scale_beta": True}
+    step = Plan.from_dict({"steps": [old]}).steps[0]
+    assert isinstance(step, Botulinum) and step.toxin == "onabotulinumtoxinA" and step.scale_beta

@@ -144,13 +144,62 @@ def test_metrics_see_each_intervention_where_it_acts(severe_elbow: ArmParams) ->
     assert bot.fields[0].diff_rms_n == 0.0  # reflex only: the static field is unchanged
     assert bot.fields[1].diff_rms_n > 1.0
     assert bot.fields[1].force_rms_after_n < bot.fields[1].force_rms_before_n
-    assert all(b.level == a.level for _, b, a in bot.severity_rows())
+    # the toxin lowers the flexors' dynamic grade and leaves every passive grade
+    for g, b, a in bot.severity_rows():
+        assert a.passive == b.passive, g
+        if g == "ef":
+            assert a.dynamic.score < b.dynamic.score - 1.0
+        else:
+            assert a.dynamic == b.dynamic, g
     ten = compare(before, Arm.from_params(Tenotomy(group="ef").apply(severe_elbow)))
     assert ten.fields[0].diff_rms_n > 1.0
     assert ten.potential.mean_j < 0.0  # less stored elastic energy everywhere on average
     assert ten.fields[0].area_ratio_median < 1.0
     sev = dict((g, a) for g, _, a in ten.severity_rows())
-    assert sev["elbow"].score < 4.0
+    assert sev["ef"].passive.level == sev["ef"].dynamic.level == "unimpaired"
+    assert sev["ee"].passive.level == sev["ee"].dynamic.level == "severe"
+
+
+def test_150_units_into_the_elbow_flexors_halve_the_fast_stretch_reflex(
+        severe_elbow: ArmParams) -> None:
+    # BRIEF §7: one 150 U injection ≈ 50% peak force drop (Fortuna et al. 2011); the toxin
+    # acts on α only, so the reflex torque of a fast elbow extension (which stretches the
+    # flexors) drops by that much - not by ≈ 80% as when β was scaled too.
+    plan = Botulinum({"ef": 150.0})
+    after = plan.apply(severe_elbow)
+    assert after.beta == severe_elbow.beta
+    before_arm, after_arm = Arm.from_params(severe_elbow), Arm.from_params(after)
+    b = joint_stretch(before_arm, "elbow", "extension")
+    a = joint_stretch(after_arm, "elbow", "extension")
+    drop = 1.0 - a.reflex_torque_n_m / b.reflex_torque_n_m
+    assert 0.40 <= drop <= 0.60
+    # the passive (slow-stretch) torque stays: Gäverth et al. 2014
+    assert a.slow_torque_n_m == pytest.approx(b.slow_torque_n_m, rel=0.01)
+    # the double count the recalibration removed, for comparison
+    legacy = Botulinum({"ef": 150.0}, scale_beta=True).apply(severe_elbow)
+    c = joint_stretch(Arm.from_params(legacy), "elbow", "extension")
+    assert 1.0 - c.reflex_torque_n_m / b.reflex_torque_n_m > 0.7
+
+
+def test_lengthening_lowers_the_passive_grade_of_the_lengthened_group(
+        severe_elbow: ArmParams) -> None:
+    before = Arm.from_params(severe_elbow)
+    after = Arm.from_params(Lengthening(group="ef", delta_m=0.01).apply(severe_elbow))
+    c = compare(before, after)
+    sev = {g: (b, a) for g, b, a in c.severity_rows()}
+    b, a = sev["ef"]
+    assert a.passive.score < b.passive.score - 0.3
+    assert a.passive.level != "severe"
+    assert a.tone.passive_n_m < 0.9 * b.tone.passive_n_m
+    # the other groups keep their grades
+    for g in ("sf", "se", "ee", "bf", "be"):
+        assert sev[g][0].passive == sev[g][1].passive, g
+    # the elbow's slow-stretch torque in extension drops, in flexion it stays
+    stretches = {n: (x, y) for n, x, y in c.stretch_rows()}
+    x, y = stretches["elbow extension"]
+    assert y.slow_torque_n_m < x.slow_torque_n_m
+    x, y = stretches["elbow flexion"]
+    assert y.slow_torque_n_m == pytest.approx(x.slow_torque_n_m)
 
 
 def test_metrics_work_for_a_left_arm() -> None:

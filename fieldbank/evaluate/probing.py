@@ -315,10 +315,11 @@ def _first_reaching(torque: FloatArray, angles: FloatArray, threshold: float) ->
 
 
 def unimpaired_reference(arm: Arm) -> Arm:
-    """The same arm with unimpaired muscles (:meth:`ArmParams.with_unimpaired_muscles`),
-    compiled; ``arm`` itself when it already is that arm."""
+    """The same arm with unimpaired muscles (:meth:`ArmParams.with_unimpaired_muscles`), sharing
+    ``arm``'s compiled geometry (:meth:`Arm.with_muscles`); ``arm`` itself when it already is
+    that arm."""
     ref = arm.params.with_unimpaired_muscles()
-    return arm if ref == arm.params else Arm.from_params(ref)
+    return arm if ref == arm.params else arm.with_muscles(ref)
 
 
 def joint_stretch(arm: Arm, joint: str, direction: str,
