@@ -320,3 +320,18 @@ def test_fast_pull_directions_single_out_the_shoulder():
     sep_sb = np.abs(d["shoulder"] - d["biarticular"]).mean()
     sep_eb = np.abs(d["elbow"] - d["biarticular"]).mean()
     assert min(sep_se, sep_sb) > sep_eb
+
+
+def test_with_muscles_shares_the_geometry_and_equals_a_compilation():
+    arm = Arm.from_params(BASE)
+    q = synthesize({"elbow": "severe"}).replace(slack_offset_m=(0.0, 0.0, 0.01, 0.0, 0.0, 0.0))
+    fast, full = arm.with_muscles(q), Arm.from_params(q)
+    assert fast.params == q
+    for name in ("jl", "lam_rest", "lam_slack", "lam_min", "lam_max", "excursion", "ldot_max",
+                 "km", "alpha", "beta", "_pot_total", "_jl_products"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(full, name), err_msg=name)
+    x = np.array([[0.05, 0.45], [0.2, 0.35]])
+    for a, b in zip(fast.field(x, [0.3, -0.2]), full.field(x, [0.3, -0.2]), strict=True):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ParameterError, match="q_rest_rad"):
+        arm.with_muscles(q.replace(q_rest_rad=(0.8, 1.3)))

@@ -107,9 +107,10 @@ def severity_figure(groups: Sequence[str], before: Mapping[str, Sequence[float]]
                label=f"{comp} {when}")
     ax.set_xticks(x, list(groups), fontsize=8)
     ax.set_yticks(range(len(levels)), list(levels), fontsize=7)
-    ax.set_ylim(0, max(len(levels) - 0.5, top + 0.3))
+    # headroom above "severe" for the legend
+    ax.set_ylim(0, max(len(levels) + 0.4, top + 1.2))
     ax.set_title("severity per muscle group: passive (solid), dynamic (hatched)", fontsize=9)
-    ax.legend(fontsize=6, loc="upper left", ncol=2, bbox_to_anchor=(1.0, 1.0))
+    ax.legend(fontsize=6, loc="upper center", ncol=4, frameon=False)
     return png_bytes(fig)
 
 
