@@ -114,10 +114,10 @@ def test_fitted_model_gets_the_synthesized_severity(group: str) -> None:
     patient = synthetic_patient(truth, seed=1, n_stiffness=N_STIFFNESS)
     fit = ArmFitter(seed=0).fit(patient.maps, BASE)
     assert fit.severity_ is not None
-    assert fit.severity_[group]["level"] == "moderate"
-    for other in JOINT_GROUPS:
-        if other != group:
-            assert fit.severity_[other]["level"] == "unimpaired"
+    for g in GROUP_INDEX:
+        want = "moderate" if g in JOINT_GROUPS[group] else "unimpaired"
+        for component in ("passive", "dynamic"):
+            assert fit.severity_[g][component]["level"] == want, (g, component)
 
 
 def test_unidentified_parameters_are_held_at_unimpaired_unless_rejected() -> None:
