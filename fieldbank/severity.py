@@ -63,9 +63,10 @@ from scipy.optimize import brentq
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import (
-    STRETCHES,
+    Profiles,
     StretchProfile,
     stretch_profile,
+    stretch_profiles,
     unimpaired_reference,
 )
 from fieldbank.model import Arm
@@ -296,22 +297,23 @@ class GroupTone:
     dynamic_ratio: float
 
 
-def _profiles(arm: Arm) -> dict[tuple[str, str], StretchProfile]:
-    return {(j, d): stretch_profile(arm, j, d) for j, d in STRETCHES}
-
-
 def _dynamic_ratio(v: np.ndarray, p_ref: np.ndarray, v_ref: np.ndarray) -> float:
     return float(np.max(p_ref + v) / np.max(p_ref + v_ref))
 
 
-def group_tone(arm: Arm, reference: Arm | None = None) -> dict[str, GroupTone]:
+def group_tone(arm: Arm, reference: Arm | None = None, profiles: Profiles | None = None,
+               reference_profiles: Profiles | None = None) -> dict[str, GroupTone]:
     """Per muscle group, the measures of its passive and dynamic grade (module docstring).
 
-    ``reference`` is the unimpaired arm (default: compiled from ``arm``).
+    ``reference`` is the unimpaired arm (default: ``arm``'s,
+    :func:`fieldbank.evaluate.probing.unimpaired_reference`); ``profiles`` and
+    ``reference_profiles`` the stretch profiles of both when already computed.
     """
-    ref = reference if reference is not None else unimpaired_reference(arm)
-    prof = _profiles(arm)
-    ref_prof = prof if ref is arm else _profiles(ref)
+    prof = profiles if profiles is not None else stretch_profiles(arm)
+    ref_prof = reference_profiles
+    if ref_prof is None:
+        ref = reference if reference is not None else unimpaired_reference(arm)
+        ref_prof = prof if ref is arm else stretch_profiles(ref)
     out: dict[str, GroupTone] = {}
     for g in GROUPS:
         i = GROUP_INDEX[g]
@@ -393,7 +395,8 @@ def _grade(ratio: float, component: str, scale: SeverityScale,
 
 
 def classify(arm: Arm, unidentified: Collection[str] = (), reference: Arm | None = None,
-             scale: SeverityScale = SCALE) -> dict[str, GroupSeverity]:
+             scale: SeverityScale = SCALE, profiles: Profiles | None = None,
+             reference_profiles: Profiles | None = None) -> dict[str, GroupSeverity]:
     """Grade every muscle group of ``arm``: passive and dynamic level (module docstring).
 
     Parameters
@@ -403,12 +406,14 @@ def classify(arm: Arm, unidentified: Collection[str] = (), reference: Arm | None
         Names of fitted parameters the maps did not identify (``km_ef``, ``alpha_ef``, …, as
         :mod:`fieldbank.fitting.identify` reports them); each grade lists those it rests on.
     reference : Arm, optional
-        The unimpaired arm (default: compiled from ``arm``).
+        The unimpaired arm (default: ``arm``'s).
     scale : SeverityScale
+    profiles, reference_profiles : optional
+        Stretch profiles of ``arm`` and of the reference, when already computed.
     """
     flagged = set(unidentified)
     out: dict[str, GroupSeverity] = {}
-    for g, t in group_tone(arm, reference).items():
+    for g, t in group_tone(arm, reference, profiles, reference_profiles).items():
         grades = {}
         for comp, ratio in (("passive", t.passive_ratio), ("dynamic", t.dynamic_ratio)):
             names = tuple(f"{k}_{g}" for k in COMPONENT_PARAMETERS[comp]
@@ -486,9 +491,9 @@ def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
     alpha = np.array(p.alpha_n)
     beta = np.array(p.beta)
     base_arm = Arm.from_params(p)  # the one compilation: the variants share its geometry
-    ref_prof = _profiles(unimpaired_reference(base_arm))
+    ref_prof = stretch_profiles(unimpaired_reference(base_arm))
     if any(c == "passive" for _, c in wanted):
-        unit = _profiles(base_arm.with_muscles(p.replace(km_n_per_m=(1.0,) * 6)))
+        unit = stretch_profiles(base_arm.with_muscles(p.replace(km_n_per_m=(1.0,) * 6)))
     for (g, comp), level in wanted.items():
         i = GROUP_INDEX[g]
         ratio = scale.level_ratio(level, comp)

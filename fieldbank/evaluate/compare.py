@@ -39,9 +39,11 @@ from fieldbank.evaluate.probing import (
     JointStretch,
     ProbeMotion,
     ProbeProfile,
+    Profiles,
     profile,
     standard_probes,
     standard_stretches,
+    stretch_profiles,
     unimpaired_reference,
 )
 from fieldbank.maps import ellipse, workspace_grid
@@ -66,6 +68,10 @@ class Conditions:
     speeds_m_per_s: tuple[float, ...]
     velocities: tuple[FloatArray, ...]  # per condition, (D, 2) m/s; static is [[0, 0]]
     probes: tuple[ProbeMotion, ...]
+    #: The unimpaired arm of this geometry and its stretch profiles (severity and catch
+    #: reference), computed once for every arm evaluated on these conditions.
+    reference: Arm | None = None
+    reference_profiles: Profiles | None = None
 
     @classmethod
     def standard(cls, arm: Arm, grid_n: int = GRID_N,
@@ -76,7 +82,9 @@ class Conditions:
         vels = [np.zeros((1, 2))] + [s * dirs for s in speeds_m_per_s]
         grid = workspace_grid(arm, grid_n)
         grid = grid[arm.ik(grid)[:, 1] >= MIN_ELBOW_RAD]
-        return cls(grid, (0.0, *speeds_m_per_s), tuple(vels), standard_probes(arm))
+        ref = unimpaired_reference(arm)
+        return cls(grid, (0.0, *speeds_m_per_s), tuple(vels), standard_probes(arm), ref,
+                   stretch_profiles(ref))
 
     def points(self, k: int) -> tuple[FloatArray, FloatArray]:
         """Positions and velocities of condition k, each (N·D, 2)."""
@@ -138,7 +146,12 @@ def evaluate_arm(arm: Arm, conditions: Conditions | None = None,
     """
     cond = conditions if conditions is not None else Conditions.standard(arm)
     forces, stiff = fields_per_velocity(arm, cond)
-    reference = unimpaired_reference(arm)
+    reference, ref_profiles = cond.reference, cond.reference_profiles
+    if reference is None or ref_profiles is None or \
+            reference.params != arm.params.with_unimpaired_muscles():
+        reference = unimpaired_reference(arm)
+        ref_profiles = stretch_profiles(reference)
+    profiles = stretch_profiles(arm)
     return Evaluation(
         arm=arm,
         conditions=cond,
@@ -146,8 +159,9 @@ def evaluate_arm(arm: Arm, conditions: Conditions | None = None,
         stiffness_n_per_m=stiff,
         potential_j=arm.potential(cond.grid_m),
         probes=tuple(profile(arm, m) for m in cond.probes),
-        stretches=standard_stretches(arm, reference),
-        severity=classify(arm, unidentified, reference),
+        stretches=standard_stretches(arm, reference, profiles, ref_profiles),
+        severity=classify(arm, unidentified, reference, profiles=profiles,
+                          reference_profiles=ref_profiles),
     )
 
 

@@ -328,14 +328,23 @@ def joint_stretch(arm: Arm, joint: str, direction: str,
                   slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S) -> JointStretch:
     """The clinical read-outs of one joint stretch (module docstring).
 
-    ``reference`` is the unimpaired arm that sets the catch torque (default: compiled from
-    ``arm``, :func:`unimpaired_reference`).
+    ``reference`` is the unimpaired arm that sets the catch torque (default: ``arm``'s,
+    :func:`unimpaired_reference`).
     """
     ref = reference if reference is not None else unimpaired_reference(arm)
     prof = stretch_profile(arm, joint, direction, speed_rad_s, slow_speed_rad_s, samples)
     ref_prof = prof if ref is arm else stretch_profile(ref, joint, direction, speed_rad_s,
                                                        slow_speed_rad_s, samples)
     return _read_out(prof, float(ref_prof.slow_n_m.max()), arm)
+
+
+Profiles = dict[tuple[str, str], StretchProfile]
+
+
+def stretch_profiles(arm: Arm) -> Profiles:
+    """The profiles of the four standard stretches (:data:`STRETCHES`), keyed (joint,
+    direction): what the read-outs and the severity grades of one arm are computed from."""
+    return {(j, d): stretch_profile(arm, j, d) for j, d in STRETCHES}
 
 
 def _read_out(prof: StretchProfile, reference_slow_peak_n_m: float, arm: Arm) -> JointStretch:
@@ -368,7 +377,18 @@ STRETCHES: tuple[tuple[str, str], ...] = (
 )
 
 
-def standard_stretches(arm: Arm, reference: Arm | None = None) -> tuple[JointStretch, ...]:
-    """The four single-joint stretches (:data:`STRETCHES`), one reference arm for all."""
-    ref = reference if reference is not None else unimpaired_reference(arm)
-    return tuple(joint_stretch(arm, j, d, reference=ref) for j, d in STRETCHES)
+def standard_stretches(arm: Arm, reference: Arm | None = None,
+                       profiles: Profiles | None = None,
+                       reference_profiles: Profiles | None = None) -> tuple[JointStretch, ...]:
+    """The four single-joint stretches (:data:`STRETCHES`) of ``arm``.
+
+    ``profiles`` and ``reference_profiles`` (:func:`stretch_profiles` of ``arm`` and of its
+    unimpaired reference) are computed when not given; a use case that grades severity too
+    computes them once for both.
+    """
+    prof = profiles if profiles is not None else stretch_profiles(arm)
+    if reference_profiles is None:
+        ref = reference if reference is not None else unimpaired_reference(arm)
+        reference_profiles = prof if ref is arm else stretch_profiles(ref)
+    return tuple(_read_out(prof[key], float(reference_profiles[key].slow_n_m.max()), arm)
+                 for key in STRETCHES)
