@@ -171,9 +171,9 @@ def render(results: Sequence[CaseResult], inputs: Mapping[str, Any]) -> str:
         out += [f'<p class="warn">Warning: {escape(w)}.</p>'
                 for w in r.detail.get("warnings") or []]
         out += _case_table(r.row)
-        out += _clinical_tables(r.row)
         for f in r.figures:
             out.append(f"<figure>{_png_tag(f.png, f.caption)}"
                        f"<figcaption>{escape(f.caption)}</figcaption></figure>")
+        out += _clinical_tables(r.row)
     out += ["</body>", "</html>", ""]
     return "\n".join(out)
