@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # typing only: push_models needs nothing of ArmParams but to_
     from fieldbank.params import ArmParams
 
 #: Largest request or response line, bytes.
-MAX_REQUEST_BYTES = 1 << 20
+MAX_REQUEST_BYTES = 1 << 18
 SOCKET_NAME = "haptic.sock"
 
 
