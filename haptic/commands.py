@@ -269,7 +269,7 @@ class Push(RendererCommand):
             raise CommandError("push refused: a training protocol is running (stop it first)")
         target.queue_models(self.sims, (self.before, self.after), self.model_ids,
                             self.model_info)
-        target.log_event("push")
+        target.log_event("push", model_ids=dict(self.model_ids or {}))
         return {"pushed": True}
 
 

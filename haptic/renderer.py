@@ -226,6 +226,11 @@ class Renderer:
         return self.times.skipped_ticks
 
     @property
+    def swapping(self) -> bool:
+        """True while pushed models fade out, swap or fade in."""
+        return self._pending is not None or self.gain.moving
+
+    @property
     def mode_name(self) -> str:
         """The safety state machine's mode: DISARMED, ARMED or FAULT."""
         return self.safety.mode.name
@@ -634,6 +639,7 @@ class Renderer:
             "geometry": geometry,
             "shoulder_offset_m": list(self.config.shoulder_offset_m),
             "force_limit_n": self.safety.config.force_limit_n,
+            "safety_workspace_m": list(self.safety.config.workspace_m),
             "abx": None if abx is None else {"trial": abx.trial, "n_trials": abx.n_trials,
                                              "done": abx.done},
             "abx_last_result": self.abx_results[-1] if self.abx_results else None,
