@@ -589,8 +589,8 @@ class Renderer:
         return {
             "running": self.running, "mode": s.mode.name, "t_s": round(self.t_s, 4),
             "ticks": self.ticks, "gain": self.gain.value,
-            # while an A/B/X block runs, which model is rendered is hidden
-            "blend": "hidden" if self.abx is not None else self.blend.value,
+            # while an A/B/X block or an assessment runs, which model is rendered is hidden
+            "blend": "hidden" if self.blinded else self.blend.value,
             "force_n": [self.fx, self.fy],
             "handle_m": [self.link.x, self.link.y],
             "latched_faults": [c.name for c in FaultCode if s.latched & (1 << (c - 1))],

@@ -290,6 +290,13 @@ class TrainingProtocol:
         """The paper's protocol: 32 familiarisation trials, 108 assessment trials."""
         return cls(instruction=instruction, seed=seed)
 
+    @classmethod
+    def short(cls, instruction: str = "non-instructed", seed: int = 0) -> TrainingProtocol:
+        """A short session with the seed's structure: 1 familiarisation round (4 trials),
+        1 repetition of each group × severity (12 trials)."""
+        return cls(instruction=instruction, familiarisation_rounds=1, assessment_repetitions=1,
+                   seed=seed)
+
     @property
     def n_trials(self) -> int:
         return (4 * self.familiarisation_rounds
