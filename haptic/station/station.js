@@ -147,8 +147,12 @@ function drawPaths() {
     ctx.fillStyle = col; ctx.beginPath(); ctx.moveTo(ex, ey);
     ctx.lineTo(ex - 16 * Math.cos(a - 0.4), ey - 16 * Math.sin(a - 0.4));
     ctx.lineTo(ex - 16 * Math.cos(a + 0.4), ey - 16 * Math.sin(a + 0.4)); ctx.fill();
-    const [lx, ly] = P(pts[Math.floor(pts.length / 2)]);
-    ctx.font = "600 15px system-ui"; ctx.fillText(`${k + 1}. ${p.name}`, lx + 12, ly);
+    // labels stacked beside the common start, so paths that share it do not overwrite them
+    const [sx, sy] = P(pts[0]);
+    ctx.font = "600 15px system-ui"; ctx.textAlign = "right";
+    ctx.fillText(`${k + 1}. ${p.name}`, sx - 24, sy - 10 + 18 * k);
+    ctx.textAlign = "left";
+    disc(pts[0], 5, col);
   });
 }
 
@@ -184,7 +188,7 @@ function tensionColour(n) {
 }
 
 function drawMuscleLegend() {
-  const x = canvas.clientWidth - 150, y = canvas.clientHeight - 70;
+  const x = canvas.clientWidth - 185, y = canvas.clientHeight - 70;
   const grad = ctx.createLinearGradient(x, 0, x + 120, 0);
   grad.addColorStop(0, tensionColour(0)); grad.addColorStop(1, tensionColour(40));
   ctx.fillStyle = grad; ctx.fillRect(x, y, 120, 8);
@@ -207,7 +211,10 @@ function drawArm(f) {
   disc(S, 0.03 * view.s, "#4a5263");
   disc(E, 0.024 * view.s, "#4a5263");
   disc(H, 0.03 * view.s, "#39404f");
-  // the handle (robot) the hand holds: an orange ring with a solid centre
+}
+
+function drawHandle(f) {
+  // the handle (robot) the hand holds: an orange ring with a solid centre, drawn last
   const [hx, hy] = P(f.handle_m);
   ctx.lineWidth = 4; ctx.strokeStyle = "#ff7a00";
   ctx.beginPath(); ctx.arc(hx, hy, 15, 0, 2 * Math.PI); ctx.stroke();
@@ -256,8 +263,9 @@ function draw() {
   drawWorkspace();
   drawBody();
   drawPaths();
-  const [px, py] = drawArm(f);
+  drawArm(f);
   drawForce(f);
+  const [px, py] = drawHandle(f);
   drawScale();
   if (f.seq !== drawnSeq) {
     drawnSeq = f.seq; fpsCount++; fb.drawn++;
@@ -282,7 +290,11 @@ function updateBadges(f) {
   const words = { ARMED: "Armed", DISARMED: "Disarmed", FAULT: "Fault" };
   setState(f.mode, `${words[f.mode] || f.mode}${faults}`);
   const r = $("rendering");
-  if (f.blinded) {
+  const tr = info && info.training;
+  if (tr && !tr.done && !f.blinded) {
+    r.textContent = tr.phase ? `Training · ${tr.phase}` : "Training"; r.className = "badge";
+    $("btn-a").classList.remove("active"); $("btn-b").classList.remove("active");
+  } else if (f.blinded) {
     r.textContent = "Blinded: which arm is hidden"; r.className = "badge blinded";
   } else {
     const k = f.blend >= 0.5 ? "B" : "A";
