@@ -466,19 +466,19 @@ class Renderer:
         self.fx, self.fy = fx, fy
         c5 = pc()
         buf = self._buf
-        sa, sb = sim_a.state, sim_b.state
-        if buf is not None:
-            buf.add(self.t_s, (link.x, link.y, vx, vy, fx, fy, mx, my, w, g,
-                               sa.q1, sa.q2, sa.qd1, sa.qd2, sb.q1, sb.q2, sb.qd1, sb.qd2,
-                               float(safety.mode), float(safety.latched), float(new),
-                               safety.passivity.energy_j))
         snap = self.snapshot
-        if snap is not None:  # for a display in another process (haptic.snapshot: no waiting)
-            tr = self.training
-            snap.publish(self.t_s, self.ticks, x, y, vx, vy, fx, fy, w, g, safety.mode,
-                         safety.latched, sa.q1, sa.q2, sa.qd1, sa.qd2, sb.q1, sb.q2, sb.qd1,
-                         sb.qd2, len(self.events),
-                         self.abx is not None or (tr is not None and tr.blinded))
+        if buf is not None or snap is not None:
+            sa, sb = sim_a.state, sim_b.state
+            row = (link.x, link.y, vx, vy, fx, fy, mx, my, w, g,
+                   sa.q1, sa.q2, sa.qd1, sa.qd2, sb.q1, sb.q2, sb.qd1, sb.qd2,
+                   float(safety.mode), float(safety.latched), float(new),
+                   safety.passivity.energy_j)
+            if buf is not None:
+                buf.add(self.t_s, row)
+            if snap is not None:  # for a display in another process (no waiting, no lock)
+                tr = self.training
+                snap.publish_row(self.t_s, self.ticks, row, len(self.events),
+                                 self.abx is not None or (tr is not None and tr.blinded))
         c6 = pc()
         cost = self._cost
         cost[0] += c1 - c0

@@ -1,11 +1,13 @@
 """The loop's state for other processes: a seqlock over a small memory-mapped file.
 
-The 1 kHz loop publishes one fixed-size record per tick (:data:`FIELDS`: time, the handle, the
-force on it, the blend, both virtual arms' joint angles, mode and faults); a display in another
+The 1 kHz loop publishes one fixed-size record per tick (:data:`FIELDS`: time, then the tick's
+trace row - handle, force, blend, both virtual arms' joint angles, mode and faults, in the
+columns and units of :data:`haptic.recording.COLUMNS`, robot frame - then the count of
+renderer events and whether the model is hidden); a display in another
 process (:mod:`haptic.station`) reads the newest record whenever it draws. The loop never waits:
-publishing is three ``struct.pack_into`` calls into memory (≈ 1 µs, measured by
-``benchmarks/bench_tick_cost.py``), with no lock, no system call and no allocation that could
-block.
+publishing packs the row the trace already built, in three ``struct.pack_into`` calls into
+memory (about 2 µs, ``benchmarks/bench_tick_cost.py``), with no lock, no system call and no
+allocation that could block.
 
 Layout (little-endian)::
 
@@ -36,17 +38,15 @@ import time
 from pathlib import Path
 
 from fieldbank.haptic.errors import HapticError
+from fieldbank.haptic.recording import COLUMNS
 
 MAGIC = b"FBSNAP1\0"
-#: The record's fields, in order, each a float64 (units in the names; ``mode`` is
-#: haptic.safety.Mode, ``faults`` the latched bitmask, ``events`` the count of logged renderer
-#: events, which changes whenever a command changes what a display shows; ``blinded`` is 1 while
-#: an A/B/X block or a training assessment hides which model is rendered).
-FIELDS: tuple[str, ...] = (
-    "t_s", "ticks", "x_m", "y_m", "vx_m_per_s", "vy_m_per_s", "fx_n", "fy_n", "blend", "gain",
-    "mode", "faults", "a_q1_rad", "a_q2_rad", "a_qd1_rad_per_s", "a_qd2_rad_per_s",
-    "b_q1_rad", "b_q2_rad", "b_qd1_rad_per_s", "b_qd2_rad_per_s", "events", "blinded",
-)
+#: The record's fields, in order, each a float64: session time, tick count, the trace columns
+#: (:data:`haptic.recording.COLUMNS`: names carry units; robot frame; ``mode`` is
+#: haptic.safety.Mode, ``faults`` the latched bitmask), then ``events`` - the count of logged
+#: renderer events, which changes whenever a command changes what a display shows - and
+#: ``blinded`` - 1 while an A/B/X block or a training assessment hides which model is rendered.
+FIELDS: tuple[str, ...] = ("t_s", "ticks", *(name for name, _ in COLUMNS), "events", "blinded")
 _SEQ = struct.Struct("<Q")
 _RECORD = struct.Struct("<" + "d" * len(FIELDS))
 _SEQ_AT = len(MAGIC)
@@ -93,6 +93,16 @@ class SnapshotWriter:
         self._pack_record(mm, _RECORD_AT, *values)
         self._seq = seq + 1
         self._pack_seq(mm, _SEQ_AT, seq + 1)        # even: whole again
+
+    def publish_row(self, t_s: float, ticks: int, row: tuple[float, ...], events: int,
+                    blinded: bool) -> None:
+        """Write one record from a tick's trace row (the loop's call); never blocks."""
+        mm = self._mm
+        seq = self._seq + 1
+        self._pack_seq(mm, _SEQ_AT, seq)
+        self._pack_record(mm, _RECORD_AT, t_s, ticks, *row, events, blinded)
+        self._seq = seq + 1
+        self._pack_seq(mm, _SEQ_AT, seq + 1)
 
     def close(self) -> None:
         """Unmap and remove the file (and the directory this writer made)."""

@@ -177,6 +177,7 @@ class Station:
     # --- frames -------------------------------------------------------------------------------
     def make_frame(self, s: Mapping[str, float]) -> dict[str, Any]:
         blinded = s["blinded"] >= 0.5
+        ox, oy = self.info.get("shoulder_offset_m") or (0.0, 0.0)
         w = s["blend"]
         key = "B" if w >= 0.5 else "A"
         q = ((1.0 - w) * s["a_q1_rad"] + w * s["b_q1_rad"],
@@ -192,7 +193,7 @@ class Station:
         return {
             "type": "frame", "seq": s["seq"], "t_s": round(s["t_s"], 4),
             "ticks": int(s["ticks"]),
-            "handle_m": [round(s["x_m"], 5), round(s["y_m"], 5)],
+            "handle_m": [round(s["x_m"] - ox, 5), round(s["y_m"] - oy, 5)],
             "elbow_m": [round(v, 5) for v in elbow], "hand_m": [round(v, 5) for v in hand],
             "force_n": [round(s["fx_n"], 3), round(s["fy_n"], 3)],
             "mode": Mode(mode).name if mode in (0, 1, 2) else str(mode),
