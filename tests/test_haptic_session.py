@@ -472,7 +472,7 @@ runpy.run_module("fieldbank.cli", run_name="__main__")
 
 @pytest.mark.parametrize("argv", [
     ["switch", "B"], ["status", "--json"], ["status"], ["arm"],
-    ["abx", "start", "--trials", "2"], ["train", "start", "--short"], ["train", "next"],
+    ["abx", "start", "--trials", "2"], ["train", "start", "--short"], ["train", "next", "--help"],
     ["switch", "--help"], ["push", "--help"], ["train", "--help"], ["--help"],
 ])
 def test_live_commands_load_nothing_heavy(served, argv: list[str]) -> None:  # type: ignore[no-untyped-def]
