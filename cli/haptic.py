@@ -14,7 +14,7 @@ the loop or read traces (:mod:`fieldbank.cli.haptic_session`: ``serve``, ``probe
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -22,6 +22,7 @@ from fieldbank.cli.lazy import LazyCommand, LazyGroup
 from fieldbank.cli.options import open_db
 
 if TYPE_CHECKING:  # typing only: parameters load with the commands that need them
+    from fieldbank.modelsource import ModelSource
     from fieldbank.params import ArmParams
 
 _CONTROL = "fieldbank.cli.haptic_control"
@@ -47,6 +48,10 @@ COMMANDS: dict[str, LazyCommand] = {
     "disarm": C(_CONTROL, "disarm", "Zero the force and disarm."),
     "stop": C(_CONTROL, "stop", "End the session (the trace is written)."),
     "abx": C(_CONTROL, "abx", "Blinded A/B/X trials on the running renderer."),
+    "train": C("fieldbank.cli.haptic_train", "train",
+               "The seed's training protocol: run it live, simulate it, report its results."),
+    "sessions": C("fieldbank.cli.haptic_sessions", "sessions",
+                  "Recorded haptic sessions: when, which models, which patient, the answers."),
 }
 
 socket_option = click.option(
@@ -67,6 +72,17 @@ def resolve_models(db_url: str | None, files: tuple[Path | None, Path | None],
 
     Loads :mod:`fieldbank.modelsource` (numpy; SQLAlchemy for ids) only when called.
     """
+    a, b, out_ids, _ = resolve_sources(db_url, files, severities, ids)
+    return a, b, out_ids
+
+
+def resolve_sources(db_url: str | None, files: tuple[Path | None, Path | None],
+                    severities: tuple[str | None, str | None],
+                    ids: tuple[int | None, int | None]
+                    ) -> tuple[ArmParams, ArmParams, tuple[int | None, int | None],
+                               dict[str, dict[str, Any]]]:
+    """As :func:`resolve_models`, with what the station says about each model (its
+    description, id, patient, and for a stored what-if result the plan's label)."""
     from fieldbank import modelsource
     from fieldbank.params import ArmParams
 
@@ -82,4 +98,20 @@ def resolve_models(db_url: str | None, files: tuple[Path | None, Path | None],
             open_db=lambda: open_db(db_url), what=f"{label} model"))
     a = out[0].params if out[0] is not None else ArmParams.from_anthropometry()
     b = out[1].params if out[1] is not None else a
-    return a, b, (ids[0], ids[1] if out[1] is not None else ids[0])
+    srcs = (out[0], out[1] if out[1] is not None else out[0])
+    info = {k: _describe(db_url, s) for k, s in zip(("A", "B"), srcs, strict=True)}
+    return a, b, (ids[0], ids[1] if out[1] is not None else ids[0]), info
+
+
+def _describe(db_url: str | None, src: ModelSource | None) -> dict[str, Any]:
+    if src is None:
+        return {"label": "synthetic arm (unimpaired)", "model_id": None, "patient": None,
+                "plan": None}
+    plan = None
+    if src.model_id is not None:
+        with open_db(db_url) as db:
+            plans = [p for p in db.list_plans(src.patient_code)
+                     if p.result_model_id == src.model_id]
+            plan = plans[-1].label[:200] if plans else None
+    return {"label": src.description[:200], "model_id": src.model_id,
+            "patient": src.patient_code, "plan": plan}

@@ -61,7 +61,75 @@ def switch(to: str, socket_path: Path | None, as_json: bool) -> None:
 def status(socket_path: Path | None, as_json: bool) -> None:
     """Show the running renderer's mode, model blend, force and faults."""
     s = _request(socket_path, "status")
-    emit(s, as_json, "\n".join(f"{k}: {v}" for k, v in s.items()))
+    emit(s, as_json, status_table(s))
+
+
+def _model_line(which: str, m: Any) -> str:
+    if not isinstance(m, dict):
+        return "hidden (a blinded block is running)"
+    bits = [m.get("label") or "not described"]
+    ids = [f"model {m['model_id']}" if m.get("model_id") else "",
+           f"patient {m['patient']}" if m.get("patient") else "",
+           f'plan "{m["plan"]}"' if m.get("plan") else ""]
+    extra = ", ".join(b for b in ids if b)
+    return f"{which}: {bits[0]}" + (f" [{extra}]" if extra else "")
+
+
+def status_table(s: dict[str, Any]) -> str:
+    """The renderer's status as an aligned, readable table (``--json`` gives every field)."""
+    rows: list[tuple[str, str]] = []
+    run = "running" if s.get("running") else "not running"
+    rows.append(("renderer", f"{run} · {s.get('mode')} · t = {s.get('t_s', 0):.2f} s "
+                             f"({s.get('ticks', 0)} ticks)"))
+    models = s.get("models")
+    if isinstance(models, dict):
+        rows.append(("model A", _model_line("before", models.get("A"))))
+        rows.append(("model B", _model_line("after", models.get("B"))))
+    elif models is not None:
+        rows.append(("models", _model_line("", models)))
+    blend = s.get("blend")
+    if isinstance(blend, (int, float)):
+        felt = "A (before)" if blend < 0.5 else "B (after)"
+        moving = " crossfading" if 0.02 < blend < 0.98 else ""
+        rows.append(("felt now", f"{felt}{moving}; blend {blend:.2f}, gain "
+                                 f"{s.get('gain', 0):.2f}"))
+    else:
+        rows.append(("felt now", "hidden (blinded)"))
+    hx, hy = (s.get("handle_m") or [float("nan")] * 2)[:2]
+    fx, fy = (s.get("force_n") or [0.0, 0.0])[:2]
+    rows.append(("handle", f"x {hx:.3f} m, y {hy:.3f} m (robot frame); force "
+                           f"{(fx * fx + fy * fy) ** 0.5:.2f} N ({fx:+.2f}, {fy:+.2f})"))
+    latched = s.get("latched_faults") or []
+    rows.append(("faults", (", ".join(latched) + " latched" if latched else "none latched")
+                 + f"; {s.get('faults_logged', 0)} logged"))
+    loop = s.get("loop_last_10s") or {}
+    pe = loop.get("period_error_us") or {}
+    if pe:
+        tt = loop.get("tick_total_us") or {}
+        rows.append(("loop, 10 s", f"period error p50 {pe.get('p50', 0):.1f} µs, p99 "
+                                   f"{pe.get('p99', 0):.1f} µs, max {pe.get('max', 0):.1f} µs; "
+                                   f"overruns {loop.get('overruns', 0)}; tick p99 "
+                                   f"{tt.get('p99', 0):.1f} µs"))
+    rt = loop.get("realtime_scheduling")
+    if rt is not None:
+        rows.append(("scheduling", "SCHED_FIFO" if rt else "normal (SCHED_FIFO refused)"))
+    abx = s.get("abx_trial")
+    rows.append(("A/B/X", "none running" if abx is None else f"trial {abx + 1} running"))
+    tr = s.get("training")
+    if isinstance(tr, dict):
+        if tr.get("done"):
+            a = ((tr.get("result") or {}).get("summary") or {}).get("accuracy") or {}
+            text = f"done: {a.get('correct', 0)} of {a.get('n', 0)} correct"
+        elif tr.get("trial"):
+            text = (f"{tr.get('phase')} trial {tr['trial']} of {tr.get('n_trials')}"
+                    + (" (waiting for the answer)" if tr.get("awaiting_answer") else ""))
+        else:
+            text = f"started, {tr.get('n_trials')} trials"
+        rows.append(("training", f"{text} · {tr.get('instruction')}"))
+    else:
+        rows.append(("training", "none"))
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
 
 def _plain(name: str, help_text: str) -> click.Command:

@@ -4,6 +4,7 @@ when a command opens it)."""
 
 from __future__ import annotations
 
+import json
 import logging
 import sys
 from pathlib import Path
@@ -11,7 +12,7 @@ from pathlib import Path
 import click
 
 from fieldbank import modelsource
-from fieldbank.cli.haptic import resolve_models, socket_option
+from fieldbank.cli.haptic import resolve_sources, socket_option
 from fieldbank.cli.options import db_option, emit, json_option, open_db
 from fieldbank.files import write_atomic
 from fieldbank.haptic import session
@@ -23,6 +24,8 @@ from fieldbank.haptic.renderer import RendererConfig
 from fieldbank.haptic.replay import rerun as do_rerun
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
+from fieldbank.haptic.station.launch import StationOptions
+from fieldbank.haptic.training import TrainingProtocol, accuracy_text
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 
@@ -39,6 +42,22 @@ def _pair(x: str | None, name: str) -> tuple[float, float]:
 
 def _say(msg: str) -> None:
     click.echo(msg, err=True)
+
+
+def protocol_named(text: str) -> TrainingProtocol:
+    """'seed' (the paper's protocol), 'short', or a JSON file of a TrainingProtocol."""
+    if text == "seed":
+        return TrainingProtocol.seed_protocol()
+    if text == "short":
+        return TrainingProtocol.short()
+    path = Path(text)
+    if not path.is_file():
+        raise click.BadParameter(f"a training protocol is seed, short or a JSON file; got "
+                                 f"{text!r}", param_hint="--training-protocol")
+    try:
+        return TrainingProtocol.from_dict(json.loads(path.read_text(encoding="utf-8")))
+    except ValueError as exc:
+        raise click.BadParameter(f"{path}: {exc}", param_hint="--training-protocol") from None
 
 
 @click.command("serve")
@@ -66,30 +85,54 @@ def _say(msg: str) -> None:
               help="Where the session trace goes (default: traces/ in the data dir).")
 @socket_option
 @db_option
-@click.option("--patient", help="Patient code the session belongs to (in the database).")
+@click.option("--patient", help="Patient code the session belongs to (default: its models' "
+              "patient).")
+@click.option("--patient-note", help="Why the session's patient is not its models' patient "
+              "(required then).")
 @click.option("--no-db", is_flag=True, help="Write the trace file only, not the database.")
+@click.option("--station", is_flag=True, help="Serve the clinician's station page (prints its "
+              "address with the session's token).")
+@click.option("--station-host", default="127.0.0.1", show_default=True,
+              help="Address the station binds to.")
+@click.option("--station-port", type=click.IntRange(0, 65535), default=0,
+              help="Port of the station (default: any free port).")
+@click.option("--station-allow-remote", is_flag=True,
+              help="Allow a --station-host other machines can reach (unencrypted).")
+@click.option("--station-view", type=click.Choice(["opposite", "behind"]), default="opposite",
+              show_default=True, help="The patient faces the clinician (seed), or seen from "
+              "behind the patient.")
+@click.option("--training-protocol", default="seed", show_default=True,
+              help="What the station's 'Start training' runs: seed, short, or a JSON file.")
 @json_option
 def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path | None,
           after_file: Path | None, before_severity: str | None, after_severity: str | None,
           before_id: int | None, after_id: int | None, force_limit_n: float,
           shoulder_offset: str | None, crossfade_s: float, arm_on_start: bool,
           trace_dir: Path | None, socket_path: Path | None, db_url: str | None,
-          patient: str | None, no_db: bool, as_json: bool) -> None:
+          patient: str | None, patient_note: str | None, no_db: bool, station: bool,
+          station_host: str, station_port: int, station_allow_remote: bool,
+          station_view: str, training_protocol: str, as_json: bool) -> None:
     """Run the real-time renderer on ROBOT with models A (before) and B (after).
 
     The session's trace is written to an HDF5 file in --trace-dir and recorded in the field
-    database (unless --no-db).
+    database (unless --no-db). With --station, the clinician's station page is served.
     """
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
-    before, after, ids = resolve_models(db_url, (before_file, after_file),
-                                        (before_severity, after_severity), (before_id, after_id))
+    before, after, ids, info = resolve_sources(db_url, (before_file, after_file),
+                                               (before_severity, after_severity),
+                                               (before_id, after_id))
     cfg = RendererConfig(rate_hz=rate_hz, crossfade_s=crossfade_s,
                          shoulder_offset_m=_pair(shoulder_offset, "--shoulder-offset"),
                          arm_on_start=arm_on_start)
+    opts = None
+    if station:
+        opts = StationOptions(station_host, station_port, station_allow_remote, station_view,
+                              protocol_named(training_protocol).to_dict())
     res = session.serve(
-        robot, before, after, model_ids=ids, patient_code=patient, duration_s=duration_s,
-        config=cfg, safety=SafetyConfig(force_limit_n=force_limit_n), socket_path=socket_path,
-        trace_dir=trace_dir or session.default_trace_dir(),
+        robot, before, after, model_ids=ids, patient_code=patient, patient_note=patient_note,
+        model_info=info, duration_s=duration_s, config=cfg,
+        safety=SafetyConfig(force_limit_n=force_limit_n), socket_path=socket_path,
+        station=opts, trace_dir=trace_dir or session.default_trace_dir(),
         db=None if no_db else (lambda: open_db(db_url)), say=_say)
     summary, trace = res.summary(), res.trace
     st = trace.stats.get("period_error_us", {})
@@ -99,7 +142,9 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
          f"{st.get('p99', 0):.1f} µs max {st.get('max', 0):.1f} µs, "
          f"overruns >{trace.stats.get('overrun_threshold_ms', 1)} ms: "
          f"{trace.stats.get('overruns', 0)}\ntrace: {res.trace_file}"
-         + (f"\ndatabase: {res.database}" if res.database else ""))
+         + (f"\ndatabase: {res.database}" if res.database else "")
+         + "".join(f"\n{line}" for res_ in trace.metadata.get("training", [])
+                   for line in training_lines(res_)))
 
 
 @click.command("probe")
@@ -200,3 +245,12 @@ def sim_robot(motion: str, mode: str, start: str | None) -> None:
         raise HapticError(f"simulated robot stopped: {exc}") from None
     finally:
         robot.close()
+
+
+def training_lines(result: dict[str, object]) -> list[str]:
+    """A training session's result as terminal lines."""
+    summary = result.get("summary")
+    if not isinstance(summary, dict):
+        return []
+    head = "training (stopped early)" if result.get("abandoned") else "training"
+    return [f"{head}:", *accuracy_text(summary)]

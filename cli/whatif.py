@@ -20,7 +20,7 @@ from fieldbank.errors import FieldbankError
 from fieldbank.haptic.client import push_models
 from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.spec import build_plan
-from fieldbank.interventions.whatif import DoseSearch, run_whatif
+from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
 
 
 @click.command("whatif")
@@ -112,7 +112,13 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
         if render:
             ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
                    (source.model_id, None))
-            doc["rendered"] = push_models(res.before, res.after, control_path, model_ids=ids)
+            plan_text = plan_label(res.plan)
+            info = {"A": {"label": source.description, "model_id": ids[0],
+                          "patient": source.patient_code, "plan": None},
+                    "B": {"label": f"after: {plan_text}"[:200], "model_id": ids[1],
+                          "patient": source.patient_code, "plan": plan_text[:200]}}
+            doc["rendered"] = push_models(res.before, res.after, control_path, model_ids=ids,
+                                          model_info=info)
     except FieldbankError as exc:
         raise click.ClickException(str(exc)) from None
     if as_json:

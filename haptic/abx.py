@@ -14,6 +14,9 @@ from typing import Any
 
 from fieldbank.haptic.errors import CommandError
 
+#: Most trials in one block (a request cannot make the renderer hold more).
+MAX_ABX_TRIALS = 1000
+
 
 @dataclass
 class AbxSession:
@@ -34,8 +37,10 @@ class AbxSession:
     answers: list[dict[str, Any]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.n_trials, int) or self.n_trials < 1:
-            raise CommandError(f"A/B/X needs n_trials >= 1; got {self.n_trials!r}")
+        if (isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int)
+                or not 1 <= self.n_trials <= MAX_ABX_TRIALS):
+            raise CommandError(f"A/B/X needs 1 to {MAX_ABX_TRIALS} trials; got "
+                               f"{self.n_trials!r}")
         rng = random.Random(self.seed)
         a_model = rng.randrange(2) if self.hide_labels else 0
         self.label_model = {"A": a_model, "B": 1 - a_model}

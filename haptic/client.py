@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # typing only: push_models needs nothing of ArmParams but to_
     from fieldbank.params import ArmParams
 
 #: Largest request or response line, bytes.
-MAX_REQUEST_BYTES = 1 << 20
+MAX_REQUEST_BYTES = 1 << 18
 SOCKET_NAME = "haptic.sock"
 
 
@@ -89,13 +89,17 @@ class ControlClient:
 
 
 def push_models(before: ArmParams, after: ArmParams, path: str | Path | None = None,
-                model_ids: tuple[int | None, int | None] | None = None) -> Any:
+                model_ids: tuple[int | None, int | None] | None = None,
+                model_info: dict[str, dict[str, Any]] | None = None) -> Any:
     """Push a before/after pair to a running renderer (used by ``whatif … --render``).
 
     ``model_ids``: the pair's ids in the field database, if stored, so the session's trace
-    refers to them.
+    refers to them. ``model_info``: what the station says about each ({"A": {"label",
+    "model_id", "patient", "plan"}, "B": …}).
     """
     args: dict[str, Any] = {"before": before.to_dict(), "after": after.to_dict()}
     if model_ids is not None:
         args["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
+    if model_info is not None:
+        args["model_info"] = model_info
     return ControlClient(path).request("push", **args)

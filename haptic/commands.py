@@ -17,15 +17,24 @@ the command's error).
 
 Control-channel requests (JSON lines, :mod:`haptic.control`) and the command each becomes::
 
-    {"cmd": "push", "before": {ArmParams}, "after": {ArmParams}, "model_ids": {"A": id, "B": id}}
+    {"cmd": "push", "before": {ArmParams}, "after": {ArmParams}, "model_ids": {"A": id, "B": id},
+     "model_info": {"A": {"label": …, "model_id": …, "patient": …, "plan": …}, "B": {…}}}
                                                                         -> Push
     {"cmd": "switch", "to": "A" | "B" | "before" | "after"}              -> Switch
     {"cmd": "abx", "action": "start", "n_trials": 10, "seed": 7, "hide_labels": true}
                                                                         -> AbxStart
     {"cmd": "abx", "action": "present", "label": "A" | "B" | "X"}       -> AbxPresent
     {"cmd": "abx", "action": "answer", "answer": "A" | "B"}             -> AbxAnswer
-    {"cmd": "arm"} | {"cmd": "disarm"} | {"cmd": "stop"} | {"cmd": "status"}
-                                                                        -> Arm, Disarm, Stop, Status
+    {"cmd": "train", "action": "start", "protocol": {TrainingProtocol}} -> TrainStart
+    {"cmd": "train", "action": "next"}                                  -> TrainNext
+    {"cmd": "train", "action": "answer", "answer": "shoulder" | "elbow" | "both"}
+                                                                        -> TrainAnswer
+    {"cmd": "train", "action": "stop"}                                  -> TrainStop
+    {"cmd": "arm"} | {"cmd": "disarm"} | {"cmd": "stop"} | {"cmd": "status"} | {"cmd": "info"}
+                                                                  -> Arm, Disarm, Stop, Status, Info
+
+Every number that arrives is bounded (trial counts, seeds, model ids): a request can make the
+renderer do only a bounded amount of work.
 """
 
 from __future__ import annotations
@@ -35,11 +44,19 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
-from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
 from fieldbank.haptic.errors import CommandError, HapticError
+from fieldbank.haptic.training import (
+    ProbePath,
+    TrainingProtocol,
+    TrainingSession,
+    Trial,
+    probe_paths,
+)
+from fieldbank.model import Arm as CompiledArm
 from fieldbank.params import ArmParams
 
-if TYPE_CHECKING:  # typing only: compiled arms need numpy, which this table does not
+if TYPE_CHECKING:  # typing only
     from fieldbank.sim import ArmSim
 
 #: A command's answer: a JSON-able mapping.
@@ -48,6 +65,12 @@ Result = dict[str, Any]
 SimPair = tuple["ArmSim", "ArmSim"]
 #: Database ids of the rendered models, ``{"A": id, "B": id}`` (None: not stored).
 ModelIds = Mapping[str, "int | None"]
+#: What a display says about each model: ``{"A": {"label", "model_id", "patient", "plan"}, …}``.
+ModelInfo = Mapping[str, Mapping[str, Any]]
+#: Largest model id accepted from the wire (ids are database integers).
+MAX_MODEL_ID = 2**63 - 1
+#: Longest text of a model description field.
+MAX_LABEL_CHARS = 200
 
 
 class CommandTarget(Protocol):
@@ -57,6 +80,8 @@ class CommandTarget(Protocol):
     t_s: float
     abx: AbxSession | None
     abx_results: list[dict[str, Any]]
+    training: TrainingSession | None
+    training_results: list[dict[str, Any]]
 
     @property
     def mode_name(self) -> str: ...
@@ -64,11 +89,78 @@ class CommandTarget(Protocol):
     def log_event(self, kind: str, **data: Any) -> dict[str, Any]: ...
     def compile_pair(self, before: ArmParams, after: ArmParams) -> SimPair: ...
     def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None) -> None: ...
+                     model_ids: ModelIds | None, model_info: ModelInfo | None = None) -> None: ...
     def arm(self) -> None: ...
     def disarm(self) -> None: ...
     def request_stop(self) -> None: ...
     def status(self) -> Result: ...
+    def info(self) -> Result: ...
+
+
+def int_field(req: Mapping[str, Any], key: str, default: int, lo: int, hi: int,
+              where: str) -> int:
+    """An integer field of a request, ``lo`` ≤ value ≤ ``hi`` (an integer or its digits;
+    never a bool, a fraction, NaN or infinity)."""
+    v = req.get(key, default)
+    ok = not isinstance(v, bool) and isinstance(v, (int, str, float))
+    n = None
+    if ok:
+        try:
+            if isinstance(v, float):
+                n = int(v) if v.is_integer() else None
+            else:
+                n = int(v)
+        except (ValueError, OverflowError):
+            n = None
+    if n is None or not lo <= n <= hi:
+        raise CommandError(f'{where}: "{key}" must be an integer from {lo} to {hi}; got {v!r}')
+    return n
+
+
+def bool_field(req: Mapping[str, Any], key: str, default: bool, where: str) -> bool:
+    v = req.get(key, default)
+    if v not in (True, False):  # also 0 and 1
+        raise CommandError(f'{where}: "{key}" must be true or false; got {v!r}')
+    return bool(v)
+
+
+def check_model_ids(ids: object, where: str = "push") -> dict[str, int | None] | None:
+    """``{"A": id, "B": id}`` with positive integer ids or null; None stays None."""
+    if ids is None:
+        return None
+    if not (isinstance(ids, Mapping) and set(ids) <= {"A", "B"}):
+        raise CommandError(f'{where}: "model_ids" must be {{"A": id, "B": id}}')
+    out: dict[str, int | None] = {}
+    for k, v in ids.items():
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int)
+                              or not 1 <= v <= MAX_MODEL_ID):
+            raise CommandError(f'{where}: model id {k} must be a positive integer or null; '
+                               f'got {v!r}')
+        out[k] = v
+    return out
+
+
+def check_model_info(info: object, where: str = "push") -> dict[str, dict[str, Any]] | None:
+    """``{"A": {...}, "B": {...}}`` with short text labels and integer ids; None stays None."""
+    if info is None:
+        return None
+    if not (isinstance(info, Mapping) and set(info) <= {"A", "B"}):
+        raise CommandError(f'{where}: "model_info" must be {{"A": {{…}}, "B": {{…}}}}')
+    out: dict[str, dict[str, Any]] = {}
+    for k, d in info.items():
+        if not isinstance(d, Mapping) or not set(d) <= {"label", "model_id", "patient", "plan"}:
+            raise CommandError(f"{where}: model_info {k} has the keys label, model_id, "
+                               f"patient, plan")
+        entry: dict[str, Any] = {}
+        for f in ("label", "patient", "plan"):
+            v = d.get(f)
+            if v is not None and (not isinstance(v, str) or len(v) > MAX_LABEL_CHARS):
+                raise CommandError(f"{where}: model_info {k}.{f} must be text of at most "
+                                   f"{MAX_LABEL_CHARS} characters")
+            entry[f] = v
+        entry["model_id"] = (check_model_ids({k: d.get("model_id")}, where) or {}).get(k)
+        out[k] = entry
+    return out
 
 
 class RendererCommand:
@@ -131,7 +223,7 @@ class Switch(RendererCommand):
 
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> Switch:
-        return cls(req["to"])
+        return cls(req.get("to"))
 
     def apply(self, target: CommandTarget) -> Result:
         w = self.weight
@@ -149,18 +241,21 @@ class Push(RendererCommand):
     before: ArmParams
     after: ArmParams
     model_ids: ModelIds | None = None
+    model_info: ModelInfo | None = None
     sims: SimPair | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        ids = self.model_ids
-        if ids is not None and not (isinstance(ids, Mapping) and set(ids) <= {"A", "B"}):
-            raise CommandError('push: "model_ids" must be {"A": id, "B": id}')
+        check_model_ids(self.model_ids)
+        check_model_info(self.model_info)
 
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> Push:
+        for k in ("before", "after"):
+            if not isinstance(req.get(k), Mapping):
+                raise CommandError(f'push: "{k}" must be an arm-parameter object')
         return cls(ArmParams.from_dict(req["before"], where="push: before"),
                    ArmParams.from_dict(req["after"], where="push: after"),
-                   req.get("model_ids"))
+                   check_model_ids(req.get("model_ids")), check_model_info(req.get("model_info")))
 
     def prepare(self, target: CommandTarget) -> Push:
         if self.sims is not None:
@@ -170,8 +265,11 @@ class Push(RendererCommand):
     def apply(self, target: CommandTarget) -> Result:
         if self.sims is None:
             raise CommandError("push: the models were not compiled (submit it to the renderer)")
-        target.queue_models(self.sims, (self.before, self.after), self.model_ids)
-        target.log_event("push")
+        if target.training is not None and not target.training.done:
+            raise CommandError("push refused: a training protocol is running (stop it first)")
+        target.queue_models(self.sims, (self.before, self.after), self.model_ids,
+                            self.model_info)
+        target.log_event("push", model_ids=dict(self.model_ids or {}))
         return {"pushed": True}
 
 
@@ -222,6 +320,19 @@ class Status(RendererCommand):
         return target.status()
 
 
+@dataclass(frozen=True)
+class Info(RendererCommand):
+    """What a display shows besides the loop's snapshot: the models (unless blinded), the arm
+    geometry, the A/B/X block and the training protocol (read in the caller's thread, cheap)."""
+
+    name: ClassVar[str] = "info"
+    needs_running: ClassVar[bool] = False
+    in_loop: ClassVar[bool] = False
+
+    def apply(self, target: CommandTarget) -> Result:
+        return target.info()
+
+
 def _abx(target: CommandTarget) -> AbxSession:
     if target.abx is None:
         raise CommandError("no A/B/X block running; start one with abx_start")
@@ -237,12 +348,19 @@ class AbxStart(RendererCommand):
     seed: int = 0
     hide_labels: bool = True
 
+    def __post_init__(self) -> None:
+        int_field({"n_trials": self.n_trials}, "n_trials", 10, 1, MAX_ABX_TRIALS, "abx start")
+        int_field({"seed": self.seed}, "seed", 0, 0, 2**63 - 1, "abx start")
+
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> AbxStart:
-        return cls(int(req.get("n_trials", 10)), int(req.get("seed", 0)),
-                   bool(req.get("hide_labels", True)))
+        return cls(int_field(req, "n_trials", 10, 1, MAX_ABX_TRIALS, "abx start"),
+                   int_field(req, "seed", 0, 0, 2**63 - 1, "abx start"),
+                   bool_field(req, "hide_labels", True, "abx start"))
 
     def apply(self, target: CommandTarget) -> Result:
+        if target.training is not None and not target.training.done:
+            raise CommandError("an A/B/X block cannot start while a training protocol runs")
         abx = AbxSession(self.n_trials, self.seed, self.hide_labels)
         target.abx = abx
         target.log_event("abx_start", n_trials=abx.n_trials, seed=abx.seed)
@@ -256,9 +374,13 @@ class AbxPresent(RendererCommand):
     name: ClassVar[str] = "abx_present"
     label: str
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.label, str) or self.label.upper() not in ("A", "B", "X"):
+            raise CommandError(f"A/B/X presents 'A', 'B' or 'X'; got {self.label!r}")
+
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> AbxPresent:
-        return cls(str(req["label"]))
+        return cls(req.get("label"))  # type: ignore[arg-type]  # checked when made
 
     def apply(self, target: CommandTarget) -> Result:
         abx = _abx(target)
@@ -275,9 +397,13 @@ class AbxAnswer(RendererCommand):
     name: ClassVar[str] = "abx_answer"
     answer: str
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.answer, str) or self.answer.upper() not in ("A", "B"):
+            raise CommandError(f"an A/B/X answer is 'A' or 'B'; got {self.answer!r}")
+
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> AbxAnswer:
-        return cls(str(req["answer"]))
+        return cls(req.get("answer"))  # type: ignore[arg-type]  # checked when made
 
     def apply(self, target: CommandTarget) -> Result:
         abx = _abx(target)
@@ -291,16 +417,148 @@ class AbxAnswer(RendererCommand):
         return out
 
 
+def _training(target: CommandTarget) -> TrainingSession:
+    if target.training is None:
+        raise CommandError("no training protocol running; start one with train start")
+    return target.training
+
+
+def _record_training(target: CommandTarget, tr: TrainingSession) -> Result:
+    res = tr.result()
+    target.training_results.append(res)
+    target.log_event("train_end", abandoned=tr.abandoned, answered=len(
+        [r for r in tr.records if r["answer"] is not None]))
+    return res
+
+
+@dataclass(frozen=True)
+class TrainStart(RendererCommand):
+    """Start the seed's training protocol (:mod:`haptic.training`); ``train_next`` presents the
+    first trial."""
+
+    name: ClassVar[str] = "train_start"
+    protocol: TrainingProtocol = field(default_factory=TrainingProtocol)
+
+    @classmethod
+    def from_json(cls, req: Mapping[str, Any]) -> TrainStart:
+        return cls(TrainingProtocol.from_dict(req.get("protocol") or {}))
+
+    def apply(self, target: CommandTarget) -> Result:
+        if target.abx is not None:
+            raise CommandError("training cannot start while an A/B/X block runs")
+        if target.training is not None and not target.training.done:
+            raise CommandError("a training protocol is already running (train stop ends it)")
+        tr = TrainingSession(self.protocol)
+        target.training = tr
+        target.log_event("train_start", n_trials=len(tr.trials),
+                         instruction=self.protocol.instruction, seed=self.protocol.seed)
+        return tr.state(target.t_s)
+
+
+@dataclass(frozen=True)
+class TrainNext(RendererCommand):
+    """Present the next trial's arm (compiled in the caller's thread, swapped in behind the push
+    fade); after the last trial, close the protocol."""
+
+    name: ClassVar[str] = "train_next"
+    index: int | None = None
+    session: TrainingSession | None = field(default=None, compare=False, repr=False)
+    params: ArmParams | None = field(default=None, compare=False, repr=False)
+    sims: SimPair | None = field(default=None, compare=False, repr=False)
+    paths: tuple[ProbePath, ...] = field(default=(), compare=False, repr=False)
+
+    def prepare(self, target: CommandTarget) -> TrainNext:
+        tr = _training(target)
+        nxt: Trial | None = tr.next_trial
+        if nxt is None:
+            return replace(self, index=-1, session=tr)
+        if tr.awaiting_answer:
+            raise CommandError("training: answer this trial first (shoulder, elbow or both)")
+        p = nxt.params(tr.protocol.base())
+        paths: tuple[ProbePath, ...] = ()
+        if tr.protocol.instruction == "instructed":
+            paths = probe_paths(CompiledArm.from_params(p), tr.protocol.probes,
+                                tr.protocol.extra_probes)
+        return replace(self, index=nxt.index, session=tr, params=p,
+                       sims=target.compile_pair(p, p), paths=paths)
+
+    def apply(self, target: CommandTarget) -> Result:
+        tr = _training(target)
+        if self.session is not tr or self.index is None:
+            raise CommandError("train next: the training protocol changed; ask again")
+        if self.index == -1:
+            if not tr.done:
+                tr.finish(target.t_s)
+                if tr.done:
+                    _record_training(target, tr)
+            return tr.state(target.t_s)
+        assert self.sims is not None and self.params is not None
+        trial = tr.begin(self.index, target.t_s, self.paths)
+        label = (trial.legend if trial.phase == "familiarisation"
+                 else f"assessment trial {trial.index + 1}")
+        info = {k: {"label": f"training: {label}", "model_id": None, "patient": None,
+                    "plan": None} for k in ("A", "B")}
+        target.queue_models(self.sims, (self.params, self.params), None, info)
+        target.log_event("train_trial", trial=trial.index, phase=trial.phase,
+                         condition=trial.condition)
+        return tr.state(target.t_s)
+
+
+@dataclass(frozen=True)
+class TrainAnswer(RendererCommand):
+    """Record the answer to the current assessment trial: 'shoulder', 'elbow' or 'both'."""
+
+    name: ClassVar[str] = "train_answer"
+    answer: str
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.answer, str) or len(self.answer) > 16:
+            raise CommandError(f"a training answer is shoulder, elbow or both; got "
+                               f"{self.answer!r}")
+
+    @classmethod
+    def from_json(cls, req: Mapping[str, Any]) -> TrainAnswer:
+        return cls(req.get("answer"))  # type: ignore[arg-type]  # checked when made
+
+    def apply(self, target: CommandTarget) -> Result:
+        tr = _training(target)
+        rec = tr.answer(self.answer, target.t_s)
+        target.log_event("train_answer", trial=rec["trial"], answer=rec["answer"])
+        out: Result = {"trial": rec["trial"] + 1, "recorded": True, "done": tr.done}
+        if tr.done:
+            out["result"] = _record_training(target, tr)
+        return out
+
+
+@dataclass(frozen=True)
+class TrainStop(RendererCommand):
+    """End the training protocol early; the trials so far are kept (marked abandoned)."""
+
+    name: ClassVar[str] = "train_stop"
+
+    def apply(self, target: CommandTarget) -> Result:
+        tr = _training(target)
+        if not tr.done:
+            tr.finish(target.t_s, abandon=True)
+            _record_training(target, tr)
+        return tr.state(target.t_s)
+
+
 #: Every command by its name.
 COMMANDS: dict[str, type[RendererCommand]] = {
-    c.name: c for c in (Switch, Push, Arm, Disarm, Stop, Status, AbxStart, AbxPresent, AbxAnswer)
+    c.name: c for c in (Switch, Push, Arm, Disarm, Stop, Status, Info, AbxStart, AbxPresent,
+                        AbxAnswer, TrainStart, TrainNext, TrainAnswer, TrainStop)
 }
-#: Control-channel ``cmd`` -> command (``abx`` goes by its ``action``: :data:`ABX_ACTIONS`).
+#: Control-channel ``cmd`` -> command (``abx`` and ``train`` go by their ``action``).
 WIRE: dict[str, type[RendererCommand]] = {
-    "push": Push, "switch": Switch, "status": Status, "arm": Arm, "disarm": Disarm, "stop": Stop,
+    "push": Push, "switch": Switch, "status": Status, "info": Info, "arm": Arm,
+    "disarm": Disarm, "stop": Stop,
 }
 ABX_ACTIONS: dict[str, type[RendererCommand]] = {
     "start": AbxStart, "present": AbxPresent, "answer": AbxAnswer,
+}
+TRAIN_ACTIONS: dict[str, type[RendererCommand]] = {
+    "start": TrainStart, "next": TrainNext, "answer": TrainAnswer, "stop": TrainStop,
 }
 
 
@@ -317,16 +575,19 @@ def parse_request(req: Mapping[str, Any]) -> RendererCommand:
     cmd = req.get("cmd")
     if not isinstance(cmd, str):
         raise CommandError('a request is a JSON object with a "cmd" string')
-    if cmd == "abx":
-        action = req.get("action")
-        cls = ABX_ACTIONS.get(action) if isinstance(action, str) else None
-        if cls is None:
-            raise CommandError(f"abx action must be start, present or answer; got {action!r}")
-        return cls.from_json(req)
+    for group, actions in (("abx", ABX_ACTIONS), ("train", TRAIN_ACTIONS)):
+        if cmd == group:
+            action = req.get("action")
+            cls = actions.get(action) if isinstance(action, str) else None
+            if cls is None:
+                *first, last = actions
+                raise CommandError(f"{group} action must be {', '.join(first)} or {last}; got "
+                                   f"{action!r}")
+            return cls.from_json(req)
     wire = WIRE.get(cmd)
     if wire is None:
-        raise CommandError(f"unknown control command {cmd!r}; known: push, switch, abx, status, "
-                           f"arm, disarm, stop")
+        raise CommandError(f"unknown control command {cmd!r}; known: push, switch, abx, train, "
+                           f"status, info, arm, disarm, stop")
     return wire.from_json(req)
 
 

@@ -10,7 +10,8 @@ Each tick (default 1 kHz, 500 Hz–4 kHz):
 4. blend them, F = (1 − w) F_A + w F_B, where w follows a raised-cosine ramp on each switch so
    the force has no step; multiply by the arming/push gain (also raised-cosine);
 5. pass F through the passivity controller, rate limit and saturation; send it;
-6. record the row.
+6. record the row, and publish the tick's state for a display in another process
+   (:mod:`haptic.snapshot`: a seqlock in shared memory, never waited on).
 
 Timing (:mod:`haptic.clock`): absolute deadlines on a :class:`~haptic.clock.Clock`; the loop
 runs inside :func:`~haptic.clock.realtime` (garbage collector frozen and off, SCHED_FIFO, short
@@ -25,6 +26,7 @@ loop's state has one owner.
 
 from __future__ import annotations
 
+import datetime as _dt
 import logging
 import math
 import queue
@@ -38,13 +40,22 @@ from fieldbank.errors import ParameterError, UnreachableError
 from fieldbank.haptic import commands
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.clock import Clock, RealClock, realtime
-from fieldbank.haptic.commands import ModelIds, RendererCommand, Request, Result, SimPair
+from fieldbank.haptic.commands import (
+    ModelIds,
+    ModelInfo,
+    RendererCommand,
+    Request,
+    Result,
+    SimPair,
+)
 from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.loopstats import LoopTimes, loop_stats, status_figures
 from fieldbank.haptic.protocol import FLAG_WATCHDOG, FaultCode
 from fieldbank.haptic.recording import NCOL, Trace, TraceBuffer
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
+from fieldbank.haptic.snapshot import SnapshotWriter
+from fieldbank.haptic.training import TrainingSession
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig
@@ -182,8 +193,13 @@ class Renderer:
         self.events: list[dict[str, Any]] = []
         self.abx: AbxSession | None = None
         self.abx_results: list[dict[str, Any]] = []
+        self.training: TrainingSession | None = None
+        self.training_results: list[dict[str, Any]] = []
+        #: Publishes each tick's state for a display in another process (haptic.station).
+        self.snapshot: SnapshotWriter | None = None
         self._pending: tuple[SimPair, tuple[ArmParams, ArmParams]] | None = None
         self._pending_ids: ModelIds | None = None
+        self._pending_info: ModelInfo | None = None
         self._link_down = False
         self._stale = 0
         self._awaiting = False
@@ -208,6 +224,11 @@ class Renderer:
     def skipped_ticks(self) -> int:
         """Ticks skipped because the loop woke a whole period late."""
         return self.times.skipped_ticks
+
+    @property
+    def swapping(self) -> bool:
+        """True while pushed models fade out, swap or fade in."""
+        return self._pending is not None or self.gain.moving
 
     @property
     def mode_name(self) -> str:
@@ -272,10 +293,15 @@ class Renderer:
                 build_sim(after, self.dt_s, self.coupling))
 
     def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None) -> None:
-        """Swap in compiled models: at once when idle, else behind a fade out and in."""
+                     model_ids: ModelIds | None, model_info: ModelInfo | None = None) -> None:
+        """Swap in compiled models: at once when idle, else behind a fade out and in.
+
+        ``model_info``: what a display says about each ({'A': {'label', 'model_id', 'patient',
+        'plan'}, 'B': …}), kept in the trace's metadata from the swap on.
+        """
         self._pending = (sims, params)
         self._pending_ids = model_ids
+        self._pending_info = model_info
         if not self.running:
             self._swap()
         else:
@@ -295,6 +321,10 @@ class Renderer:
             self.metadata["model_ids"] = dict(self._pending_ids)
         else:
             self.metadata.pop("model_ids", None)
+        if self._pending_info:
+            self.metadata["model_info"] = {k: dict(v) for k, v in self._pending_info.items()}
+        else:
+            self.metadata.pop("model_info", None)
         self._reset_arms()
 
     def _reset_arms(self) -> None:
@@ -436,12 +466,19 @@ class Renderer:
         self.fx, self.fy = fx, fy
         c5 = pc()
         buf = self._buf
-        if buf is not None:
+        snap = self.snapshot
+        if buf is not None or snap is not None:
             sa, sb = sim_a.state, sim_b.state
-            buf.add(self.t_s, (link.x, link.y, vx, vy, fx, fy, mx, my, w, g,
-                               sa.q1, sa.q2, sa.qd1, sa.qd2, sb.q1, sb.q2, sb.qd1, sb.qd2,
-                               float(safety.mode), float(safety.latched), float(new),
-                               safety.passivity.energy_j))
+            row = (link.x, link.y, vx, vy, fx, fy, mx, my, w, g,
+                   sa.q1, sa.q2, sa.qd1, sa.qd2, sb.q1, sb.q2, sb.qd1, sb.qd2,
+                   float(safety.mode), float(safety.latched), float(new),
+                   safety.passivity.energy_j)
+            if buf is not None:
+                buf.add(self.t_s, row)
+            if snap is not None:  # for a display in another process (no waiting, no lock)
+                tr = self.training
+                snap.publish_row(self.t_s, self.ticks, row, len(self.events),
+                                 self.abx is not None or (tr is not None and tr.blinded))
         c6 = pc()
         cost = self._cost
         cost[0] += c1 - c0
@@ -461,6 +498,7 @@ class Renderer:
         if not self.link.wait_state(first_state_timeout_s) and self.link.states == 0:
             raise HapticError(f"no STATE from the robot within {first_state_timeout_s} s")
         self._reset_arms()
+        self.metadata.setdefault("started_at", _utc_now())
         self._buf = TraceBuffer(expected_ticks or 60 * cfg.rate_hz) if cfg.record else None
         self.times.restart()
         self.running = True
@@ -474,6 +512,7 @@ class Renderer:
     def finish(self) -> Trace:
         """Command zero force, disarm the device, answer pending commands; return the trace."""
         self.running = False
+        self.metadata["ended_at"] = _utc_now()
         try:
             if not self._link_down:
                 self.link.send_force(0.0, 0.0)
@@ -550,14 +589,61 @@ class Renderer:
         return {
             "running": self.running, "mode": s.mode.name, "t_s": round(self.t_s, 4),
             "ticks": self.ticks, "gain": self.gain.value,
-            # while an A/B/X block runs, which model is rendered is hidden
-            "blend": "hidden" if self.abx is not None else self.blend.value,
+            # while an A/B/X block or an assessment runs, which model is rendered is hidden
+            "blend": "hidden" if self.blinded else self.blend.value,
             "force_n": [self.fx, self.fy],
             "handle_m": [self.link.x, self.link.y],
             "latched_faults": [c.name for c in FaultCode if s.latched & (1 << (c - 1))],
             "faults_logged": len(s.log_records),
             "loop_last_10s": status_figures(self.loop_stats(last=10 * self.config.rate_hz)),
             "abx_trial": None if self.abx is None else self.abx.trial,
+            "models": self._model_info(),
+            "training": None if self.training is None else self.training.state(self.t_s),
+        }
+
+    @property
+    def blinded(self) -> bool:
+        """True while an A/B/X block or a training assessment hides which model is rendered."""
+        tr = self.training
+        return self.abx is not None or (tr is not None and tr.blinded)
+
+    def _model_info(self) -> dict[str, Any] | str:
+        if self.blinded:
+            return "hidden"
+        known = self.metadata.get("model_info") or {}
+        ids = self.metadata.get("model_ids") or {}
+        out: dict[str, Any] = {}
+        for k in ("A", "B"):
+            d = {"label": None, "model_id": ids.get(k), "patient": None, "plan": None}
+            d.update({f: v for f, v in dict(known.get(k) or {}).items() if v is not None})
+            out[k] = d
+        return out
+
+    def info(self) -> Result:
+        """What a display needs besides the snapshot (:class:`~haptic.commands.Info`): the
+        models and their parameters unless blinded, the arm geometry, the A/B/X block and the
+        training protocol. Read in the caller's thread; nothing is computed."""
+        blinded = self.blinded
+        geometry = {}
+        for k, p in zip(("A", "B"), self.params, strict=True):
+            geometry[k] = {"upper_arm_m": p.upper_arm_length_m, "forearm_m": p.forearm_length_m,
+                           "side": p.side, "shoulder_range_rad": list(p.shoulder_range_rad),
+                           "elbow_range_rad": list(p.elbow_range_rad)}
+        abx = self.abx
+        return {
+            "running": self.running, "mode": self.safety.mode.name, "t_s": self.t_s,
+            "events": len(self.events), "blinded": blinded,
+            "models": self._model_info(),
+            "params": None if blinded else {"A": self.params[0].to_dict(),
+                                            "B": self.params[1].to_dict()},
+            "geometry": geometry,
+            "shoulder_offset_m": list(self.config.shoulder_offset_m),
+            "force_limit_n": self.safety.config.force_limit_n,
+            "safety_workspace_m": list(self.safety.config.workspace_m),
+            "abx": None if abx is None else {"trial": abx.trial, "n_trials": abx.n_trials,
+                                             "done": abx.done},
+            "abx_last_result": self.abx_results[-1] if self.abx_results else None,
+            "training": None if self.training is None else self.training.state(self.t_s),
         }
 
     def _make_trace(self) -> Trace:
@@ -574,10 +660,20 @@ class Renderer:
             meta.setdefault("device", asdict(self.link.device))
         if self.abx is not None:
             self.abx_results.append(self.abx.result())
+        tr = self.training
+        if tr is not None and not tr.done:  # unfinished at the session's end: kept, marked
+            tr.finish(self.t_s, abandon=True)
+            self.training_results.append(tr.result())
         meta["abx"] = self.abx_results
+        meta["training"] = self.training_results
         return Trace(t_s=t, data=data.astype(np.float32, copy=False),
                      rate_hz=float(self.config.rate_hz),
                      models={"A": self.params[0].to_dict(), "B": self.params[1].to_dict()},
                      events=list(self.events),
                      faults=[r.to_dict() for r in self.safety.log_records],
                      stats=self.loop_stats(), metadata=meta)
+
+
+def _utc_now() -> str:
+    """The wall-clock time now, UTC, ISO 8601 to the microsecond."""
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="microseconds")

@@ -3,13 +3,19 @@ product tour run.
 
 :func:`serve`
 
-1. opens the robot's port (a ``sim://`` URL gets a simulated operator who starts at model A's
+1. with a database, checks the session's patient against its models' (a session rendering
+   another patient's models needs a stated reason) before anything moves;
+2. opens the robot's port (a ``sim://`` URL gets a simulated operator who starts at model A's
    rest hand position) and handshakes at the loop's rate;
-2. renders model A (before) and B (after) — with the control channel open (``fieldbank
-   haptic switch``, ``push``, ``abx`` …) and, for scripted demonstrations, a schedule of
-   switches — until the duration passes, a ``stop`` arrives, or Ctrl-C;
-3. closes the port, then writes the trace: first the HDF5 file (so it survives a database
-   failure), then the database record.
+3. renders model A (before) and B (after) — with the control channel open (``fieldbank
+   haptic switch``, ``push``, ``abx``, ``train`` …; pushed model ids are checked against the
+   database and the session's patient), optionally the clinician's station
+   (:mod:`haptic.station`, a page in its own process reading the loop's snapshot) and, for
+   scripted demonstrations, a schedule of switches — until the duration passes, a ``stop``
+   arrives, or Ctrl-C;
+4. closes the port, then writes the trace: first the HDF5 file (so it survives a database
+   failure), then the database record with the session's own start and end times and its
+   A/B/X and training trials.
 
 Progress goes to a ``say`` callback, one line per step; the caller decides where lines go.
 """
@@ -26,15 +32,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fieldbank.haptic.commands import Switch
+from fieldbank.haptic.commands import ModelInfo, Push, RendererCommand, Switch, check_model_info
 from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.dbsink import DatabaseTraceSink, HapticStore
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.protocol import DeviceInfo
 from fieldbank.haptic.recording import Hdf5TraceSink, Trace
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
+from fieldbank.haptic.snapshot import SnapshotWriter
+from fieldbank.haptic.station.launch import StationOptions, StationProcess
 from fieldbank.home import data_home
 from fieldbank.params import ArmParams
 from fieldbank.validation import Interval, check_number
@@ -96,6 +105,8 @@ class SessionResult:
         SHA-256 of the trace file.
     database : str or None
         ``haptic_session:ID`` of the database record, if one was written.
+    station_url : str or None
+        The station page's address (with its token), if one was served.
     """
 
     trace: Trace
@@ -105,6 +116,7 @@ class SessionResult:
     trace_file: str | None = None
     sha256: str | None = None
     database: str | None = None
+    station_url: str | None = None
 
     def summary(self) -> dict[str, Any]:
         """The trace's summary with where it was stored (``trace``, ``sha256``, ``database``)."""
@@ -131,11 +143,34 @@ def _run_schedule(rd: Renderer, switches: Sequence[ScheduledSwitch], over: threa
         say(f"  switch to {to}, {crossfade_s:g} s crossfade")
 
 
+def _with_store(db: HapticStore | StoreOpener, fn: Callable[[HapticStore], Any]) -> Any:
+    if callable(db):
+        with db() as store:
+            return fn(store)
+    return fn(db)
+
+
+def _push_vet(db: HapticStore | StoreOpener, patient_code: str | None,
+              patient_note: str | None) -> Callable[[RendererCommand], None]:
+    """Refuses a push whose model ids the database does not know, or that belong to another
+    patient than the session's (without a stated reason)."""
+
+    def vet(cmd: RendererCommand) -> None:
+        if isinstance(cmd, Push) and cmd.model_ids and any(
+                v is not None for v in cmd.model_ids.values()):
+            ids = [cmd.model_ids.get("A"), cmd.model_ids.get("B")]
+            _with_store(db, lambda s: s.session_patient(ids, patient_code, patient_note))
+
+    return vet
+
+
 def serve(robot: str, before: ArmParams, after: ArmParams, *,
           model_ids: tuple[int | None, int | None] = (None, None),
-          patient_code: str | None = None, duration_s: float | None = None,
+          patient_code: str | None = None, patient_note: str | None = None,
+          model_info: ModelInfo | None = None, duration_s: float | None = None,
           config: RendererConfig | None = None, safety: SafetyConfig | None = None,
           control: bool = True, socket_path: str | Path | None = None,
+          station: StationOptions | None = None,
           switches: Sequence[ScheduledSwitch] = (),
           trace_dir: str | Path | None = None, trace_name: str | None = None,
           db: HapticStore | StoreOpener | None = None, say: Say = _quiet) -> SessionResult:
@@ -152,7 +187,12 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         Their ids in the field database, if stored (the record refers to them; models without
         an id are stored with the session).
     patient_code : str, optional
-        The patient the session belongs to in the database.
+        The patient the session belongs to in the database (default: its models' patient).
+    patient_note : str, optional
+        Why the session's patient is not its models' patient (required then).
+    model_info : mapping, optional
+        What the station says about each model: ``{"A": {"label", "model_id", "patient",
+        "plan"}, "B": …}``.
     duration_s : float, s, optional
         How long to render; None: until a ``stop`` command or Ctrl-C.
     config : RendererConfig, optional
@@ -163,6 +203,9 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         Open the control channel while rendering.
     socket_path : str or Path, optional
         Its socket (default: ``haptic.sock`` in the data directory).
+    station : StationOptions, optional
+        Serve the clinician's station page (needs the control channel); its address, with
+        the session's token, goes to ``say`` and into the result.
     switches : sequence of ScheduledSwitch
         Scripted switches, timed from the start of rendering.
     trace_dir : str or Path, optional
@@ -183,23 +226,45 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
     """
     cfg = config or RendererConfig()
     name = trace_name or trace_name_now()
+    info = check_model_info(model_info, "serve")
+    if station is not None and not control:
+        raise HapticError("the station needs the control channel (control=True)")
+    vet = None
+    if db is not None:
+        # the patient rule first: nothing moves for a session that could not be recorded
+        patient_code = _with_store(db, lambda s: s.session_patient(model_ids, patient_code,
+                                                                    patient_note))
+        vet = _push_vet(db, patient_code, patient_note)
     if robot.startswith("sim://"):
         robot = sim_url(before, SIM_MOTION, cfg.shoulder_offset_m, robot)
     link = RobotLink.open(robot)
     try:
-        info = link.handshake(cfg.rate_hz, WATCHDOG_MS)
-        say(f"robot {info.device_id!r}: protocol {info.protocol_version}, up to "
-            f"{info.max_rate_hz} Hz, device force limit {info.force_limit_n:g} N, "
-            f"watchdog {info.watchdog_ms} ms")
+        device = link.handshake(cfg.rate_hz, WATCHDOG_MS)
+        say(f"robot {device.device_id!r}: protocol {device.protocol_version}, up to "
+            f"{device.max_rate_hz} Hz, device force limit {device.force_limit_n:g} N, "
+            f"watchdog {device.watchdog_ms} ms")
         rd = Renderer(link, before, after, cfg, safety=safety)
         rd.metadata["robot"] = robot
         if any(i is not None for i in model_ids):
             rd.metadata["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
+        if info:
+            rd.metadata["model_info"] = info
+        if patient_code is not None:
+            rd.metadata["patient"] = patient_code
+        station_url = None
         with contextlib.ExitStack() as stack:
             where = ""
             if control:
-                server = stack.enter_context(ControlServer(rd, socket_path))
+                server = stack.enter_context(ControlServer(rd, socket_path, vet=vet))
                 where = f"; control socket {server.path}"
+            if station is not None:
+                # started before the loop takes real-time priority, which a child would inherit
+                snap = stack.enter_context(SnapshotWriter())
+                rd.snapshot = snap
+                proc = stack.enter_context(StationProcess.for_session(
+                    str(snap.path), str(server.path), station))
+                station_url = proc.url
+                say(f"station: {station_url}")
             say(f"rendering at {cfg.rate_hz} Hz{where}")
             over = threading.Event()
             if switches:
@@ -218,9 +283,6 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         sha = sink.sha256[trace_file]
         say(f"trace file: {trace_file}")
     if db is not None:
-        if callable(db):
-            with db() as store:
-                ref = DatabaseTraceSink(store, patient_code).write_trace(trace, name)
-        else:
-            ref = DatabaseTraceSink(db, patient_code).write_trace(trace, name)
-    return SessionResult(trace, robot, info, name, trace_file, sha, ref)
+        ref = _with_store(db, lambda s: DatabaseTraceSink(s, patient_code, patient_note)
+                          .write_trace(trace, name))
+    return SessionResult(trace, robot, device, name, trace_file, sha, ref, station_url)

@@ -242,6 +242,11 @@ class SimDevice:
                                    self.last_force_seq)
         self._send(P.MsgType.STATE, payload)
 
+    def perform(self, motion: MotionFn) -> None:
+        """The simulated operator starts ``motion`` now: its time 0 is the device's present."""
+        t0 = self.t_s
+        self.motion = lambda t: motion(t - t0)
+
     # --- physics ----------------------------------------------------------------------------
     def step(self, dt_s: float) -> None:
         """Advance the handle by ``dt_s`` in substeps."""

@@ -58,10 +58,12 @@ def test_malformed_requests_say_what_is_wrong(req: dict[str, object], message: s
 
 
 def test_every_command_is_in_the_table_once() -> None:
-    assert set(C.COMMANDS) == {"switch", "push", "arm", "disarm", "stop", "status", "abx_start",
-                               "abx_present", "abx_answer"}
+    assert set(C.COMMANDS) == {"switch", "push", "arm", "disarm", "stop", "status", "info",
+                               "abx_start", "abx_present", "abx_answer", "train_start",
+                               "train_next", "train_answer", "train_stop"}
     assert all(cls.name == name for name, cls in C.COMMANDS.items())
-    assert set(C.WIRE.values()) | set(C.ABX_ACTIONS.values()) == set(C.COMMANDS.values())
+    assert (set(C.WIRE.values()) | set(C.ABX_ACTIONS.values()) | set(C.TRAIN_ACTIONS.values())
+            == set(C.COMMANDS.values()))
 
 
 def test_the_renderer_answers_every_submission() -> None:

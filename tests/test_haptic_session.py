@@ -471,8 +471,9 @@ runpy.run_module("fieldbank.cli", run_name="__main__")
 
 
 @pytest.mark.parametrize("argv", [
-    ["switch", "B"], ["status", "--json"], ["arm"], ["abx", "start", "--trials", "2"],
-    ["switch", "--help"], ["push", "--help"], ["--help"],
+    ["switch", "B"], ["status", "--json"], ["status"], ["arm"],
+    ["abx", "start", "--trials", "2"], ["train", "start", "--short"], ["train", "next", "--help"],
+    ["switch", "--help"], ["push", "--help"], ["train", "--help"], ["--help"],
 ])
 def test_live_commands_load_nothing_heavy(served, argv: list[str]) -> None:  # type: ignore[no-untyped-def]
     _rd, sock = served
@@ -485,8 +486,9 @@ def test_live_commands_load_nothing_heavy(served, argv: list[str]) -> None:  # t
 
 def test_registered_help_lines_are_the_commands_own() -> None:
     from fieldbank.cli.haptic import COMMANDS
+    from fieldbank.cli.haptic_train import HEAVY
 
-    for name, lazy in COMMANDS.items():
+    for name, lazy in {**COMMANDS, **HEAVY}.items():
         cmd = lazy.load()
         assert cmd.name == name
         assert lazy.help == cmd.get_short_help_str(limit=10_000), name

@@ -10,7 +10,8 @@ Tables::
               ├─ models (parent → models)
               ├─ fits ── fit_maps ── maps
               ├─ plans (base/result → models)
-              └─ haptic_sessions ── traces ── arrays
+              └─ haptic_sessions ─┬─ traces ── arrays
+                                  └─ haptic_trials  (A/B/X and training answers)
     audit_log  (append-only: UPDATE and DELETE are refused by triggers)
 
 Timestamps are UTC, stored without a zone. Arrays of a map are little-endian float64 blobs in
@@ -23,6 +24,7 @@ from datetime import date, datetime
 
 from sqlalchemy import (
     BigInteger,
+    Boolean,
     CheckConstraint,
     Column,
     Date,
@@ -210,6 +212,35 @@ class HapticSessionRow(Base):
     ended_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
     robot_url: Mapped[str] = mapped_column(String(255))
     stats_json: Mapped[str] = mapped_column(Text)
+    # why the session's patient is not its models' patient (None: they match)
+    patient_note: Mapped[str | None] = mapped_column(Text, nullable=True)
+
+
+class HapticTrialRow(Base):
+    """One trial of a session: an A/B/X trial or a training trial, with the answer given.
+
+    ``started_s``/``answered_s`` are session times (s), the trial's window in the session's
+    traces; the full record (protocol, labels, …) is ``detail_json``.
+    """
+
+    __tablename__ = "haptic_trials"
+    __table_args__ = (
+        UniqueConstraint("haptic_session_id", "block", "trial"),
+        CheckConstraint("kind IN ('abx', 'training')", name="kind"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    haptic_session_id: Mapped[int] = mapped_column(ForeignKey("haptic_sessions.id"), index=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    block: Mapped[int] = mapped_column(Integer)
+    trial: Mapped[int] = mapped_column(Integer)
+    phase: Mapped[str] = mapped_column(String(32))
+    condition: Mapped[str] = mapped_column(String(64))
+    answer: Mapped[str | None] = mapped_column(String(16), nullable=True)
+    correct: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
+    started_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    answered_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    response_time_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    detail_json: Mapped[str] = mapped_column(Text)
 
 
 class TraceRow(Base):

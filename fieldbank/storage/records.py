@@ -133,6 +133,38 @@ class HapticSessionRecord:
     ended_at: datetime | None
     robot_url: str
     stats: dict[str, Any]
+    patient_note: str | None = None
+    n_trials: int = 0
+
+
+@dataclass(frozen=True)
+class HapticTrialRecord:
+    """One A/B/X or training trial of a haptic session, with the answer given.
+
+    ``started_s``/``answered_s`` are session times, s: with the session's id they are the
+    trial's reference into its traces.
+    """
+
+    id: int
+    haptic_session_id: int
+    kind: str
+    block: int
+    trial: int
+    phase: str
+    condition: str
+    answer: str | None
+    correct: bool | None
+    started_s: float | None
+    answered_s: float | None
+    response_time_s: float | None
+    detail: dict[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"id": self.id, "haptic_session_id": self.haptic_session_id, "kind": self.kind,
+                "block": self.block, "trial": self.trial, "phase": self.phase,
+                "condition": self.condition, "answer": self.answer, "correct": self.correct,
+                "started_s": self.started_s, "answered_s": self.answered_s,
+                "response_time_s": self.response_time_s, **self.detail}
 
 
 @dataclass(frozen=True)

@@ -1,27 +1,48 @@
-"""Haptic sessions and their recorded traces.
+"""Haptic sessions, their recorded traces and their trials.
 
-A haptic session records which models a robot rendered (A, and B for a comparison), when, on
-which robot (URL stored with any password removed) and the session's statistics. Its traces are
-large arrays: each is written to the content-addressed HDF5 array store first (with unit and
-provenance beside the data), then recorded in the database; equal arrays share one file, and
-every read verifies the array against its SHA-256.
+A haptic session records which models a robot rendered (A, and B for a comparison), when the
+session itself started and ended, on which robot (URL stored with any password removed), the
+patient it belongs to, and the session's statistics. Its traces are large arrays: each is
+written to the content-addressed HDF5 array store first (with unit and provenance beside the
+data), then recorded in the database; equal arrays share one file, and every read verifies the
+array against its SHA-256. Its trials (A/B/X and training) are rows: condition, answer, whether
+it was right, response time, and the trial's time window in the traces.
+
+A session's patient is its models' patient. A session filed under another patient than a model
+it renders - or rendering two patients' models - needs a stated reason (``patient_note``);
+without one it is refused (:meth:`Traces.session_patient`, used before rendering and at every
+push, and again when the session is written). With no patient named, a session takes its
+models' patient.
 """
 
 from __future__ import annotations
 
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
 from typing import Any
 
 from numpy.typing import ArrayLike, NDArray
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from fieldbank.errors import StorageError
 from fieldbank.storage.core import DatabaseCore, array_ref, array_row, now, to_utc, to_utc_opt
-from fieldbank.storage.orm import ArrayRow, HapticSessionRow, ModelRow, PatientRow, TraceRow
-from fieldbank.storage.records import HapticSessionRecord, TraceRecord
+from fieldbank.storage.orm import (
+    ArrayRow,
+    HapticSessionRow,
+    HapticTrialRow,
+    ModelRow,
+    PatientRow,
+    TraceRow,
+)
+from fieldbank.storage.records import HapticSessionRecord, HapticTrialRecord, TraceRecord
+
+#: Longest stated reason for a session filed under another patient than its models'.
+MAX_PATIENT_NOTE_CHARS = 500
+_TRIAL_FIELDS = ("kind", "block", "trial", "phase", "condition", "answer", "correct",
+                 "started_s", "answered_s", "response_time_s")
 
 
 def strip_password(url: str) -> str:
@@ -33,38 +54,95 @@ class Traces(DatabaseCore):
     """Haptic sessions and traces of :class:`~fieldbank.storage.Database`."""
 
     def _haptic(self, s: Session, r: HapticSessionRow) -> HapticSessionRecord:
+        n = s.scalar(select(func.count()).select_from(HapticTrialRow)
+                     .where(HapticTrialRow.haptic_session_id == r.id)) or 0
         return HapticSessionRecord(r.id, self._code_of(s, r.patient_id), r.model_a_id,
                                    r.model_b_id, to_utc(r.started_at), to_utc_opt(r.ended_at),
-                                   r.robot_url, json.loads(r.stats_json))
+                                   r.robot_url, json.loads(r.stats_json), r.patient_note,
+                                   int(n))
+
+    def _session_patient(self, s: Session, model_ids: Sequence[int | None],
+                         patient_code: str | None, patient_note: str | None) -> str | None:
+        if patient_note is not None and (not patient_note.strip()
+                                         or len(patient_note) > MAX_PATIENT_NOTE_CHARS):
+            raise StorageError(f"The reason for a session's patient must be 1 to "
+                               f"{MAX_PATIENT_NOTE_CHARS} characters.")
+        owners: dict[int, str | None] = {}
+        for mid in model_ids:
+            if mid is None:
+                continue
+            row = s.get(ModelRow, mid)
+            if row is None:
+                raise StorageError(f"No model with id {mid}.")
+            owners[mid] = self._code_of(s, row.patient_id)
+        if patient_code is not None:
+            self._patient_row(s, patient_code)  # a clear error for an unknown patient
+        named = {c for c in owners.values() if c is not None}
+        if patient_code is None and len(named) == 1:
+            patient_code = next(iter(named))
+        other = {m: c for m, c in owners.items() if c is not None and c != patient_code}
+        if other and not patient_note:
+            whose = ", ".join(f"model {m} is patient {c}'s" for m, c in sorted(other.items()))
+            raise StorageError(
+                f"A haptic session filed under {patient_code or 'no patient'!s} renders another "
+                f"patient's model ({whose}); render that patient's own models, file the session "
+                f"under that patient, or state why (--patient-note).")
+        return patient_code
+
+    def session_patient(self, model_ids: Sequence[int | None], patient_code: str | None = None,
+                        patient_note: str | None = None) -> str | None:
+        """The patient a session rendering ``model_ids`` is filed under (the rule in the module
+        docstring); StorageError names the models of another patient when no reason is given.
+        """
+        with self._read() as s:
+            return self._session_patient(s, model_ids, patient_code, patient_note)
 
     def start_haptic_session(self, model_a_id: int, robot_url: str,
                              model_b_id: int | None = None,
-                             patient_code: str | None = None) -> HapticSessionRecord:
-        """Open a haptic session record; the robot URL is stored with any password removed."""
+                             patient_code: str | None = None, *,
+                             started_at: datetime | None = None,
+                             patient_note: str | None = None) -> HapticSessionRecord:
+        """Open a haptic session record; the robot URL is stored with any password removed.
+
+        Parameters
+        ----------
+        started_at : datetime, optional
+            When the session itself started (default: now); a naive time is taken as UTC.
+        patient_note : str, optional
+            Why the session's patient is not its models' patient (required then).
+        """
         safe_url = strip_password(robot_url)
         with self._write() as s:
-            pid = self._optional_patient_id(s, patient_code)
-            for mid in (model_a_id, model_b_id):
-                if mid is not None and s.get(ModelRow, mid) is None:
-                    raise StorageError(f"No model with id {mid}.")
+            code = self._session_patient(s, (model_a_id, model_b_id), patient_code,
+                                         patient_note)
+            pid = self._optional_patient_id(s, code)
             row = HapticSessionRow(patient_id=pid, model_a_id=model_a_id, model_b_id=model_b_id,
-                                   started_at=now(), ended_at=None, robot_url=safe_url,
-                                   stats_json="{}")
+                                   started_at=_stored_time(started_at), ended_at=None,
+                                   robot_url=safe_url, stats_json="{}",
+                                   patient_note=patient_note)
             s.add(row)
             s.flush()
             self._audit(s, "start", "haptic_session", row.id, {"robot": safe_url})
             return self._haptic(s, row)
 
-    def end_haptic_session(self, haptic_session_id: int,
-                           stats: Mapping[str, Any]) -> HapticSessionRecord:
-        """Close a haptic session with its statistics (a JSON document); once only."""
+    def end_haptic_session(self, haptic_session_id: int, stats: Mapping[str, Any],
+                           ended_at: datetime | None = None) -> HapticSessionRecord:
+        """Close a haptic session with its statistics (a JSON document); once only.
+
+        ``ended_at``: when the session itself ended (default: now).
+        """
         with self._write() as s:
             row = s.get(HapticSessionRow, haptic_session_id)
             if row is None:
                 raise StorageError(f"No haptic session with id {haptic_session_id}.")
             if row.ended_at is not None:
                 raise StorageError(f"Haptic session {haptic_session_id} has already ended.")
-            row.ended_at = now()
+            end = _stored_time(ended_at)
+            if end < row.started_at:
+                raise StorageError(f"Haptic session {haptic_session_id} cannot end "
+                                   f"({end:%Y-%m-%d %H:%M:%S}) before it started "
+                                   f"({row.started_at:%Y-%m-%d %H:%M:%S}).")
+            row.ended_at = end
             row.stats_json = json.dumps(dict(stats), sort_keys=True)
             self._audit(s, "end", "haptic_session", row.id, {})
             return self._haptic(s, row)
@@ -84,6 +162,50 @@ class Traces(DatabaseCore):
             q = q.where(PatientRow.code == patient_code)
         with self._read() as s:
             return [self._haptic(s, r) for r in s.scalars(q)]
+
+    def add_haptic_trials(self, haptic_session_id: int,
+                          trials: Sequence[Mapping[str, Any]]) -> int:
+        """Record a session's trials in one transaction; the number recorded.
+
+        Each trial is a mapping with ``kind`` ('abx' | 'training'), ``block``, ``trial``,
+        ``phase``, ``condition``, and optionally ``answer``, ``correct``, ``started_s``,
+        ``answered_s``, ``response_time_s``; any other key is kept as its detail.
+        """
+        with self._write() as s:
+            if s.get(HapticSessionRow, haptic_session_id) is None:
+                raise StorageError(f"No haptic session with id {haptic_session_id}.")
+            for i, t in enumerate(trials):
+                missing = [k for k in ("kind", "block", "trial", "phase", "condition")
+                           if t.get(k) is None]
+                if missing:
+                    raise StorageError(f"Haptic trial {i} of session {haptic_session_id} "
+                                       f"lacks {', '.join(missing)}.")
+                detail = {k: v for k, v in t.items() if k not in _TRIAL_FIELDS}
+                s.add(HapticTrialRow(
+                    haptic_session_id=haptic_session_id, kind=str(t["kind"]),
+                    block=int(t["block"]), trial=int(t["trial"]), phase=str(t["phase"]),
+                    condition=str(t["condition"]), answer=t.get("answer"),
+                    correct=t.get("correct"), started_s=t.get("started_s"),
+                    answered_s=t.get("answered_s"), response_time_s=t.get("response_time_s"),
+                    detail_json=json.dumps(detail, sort_keys=True, default=str)))
+            s.flush()
+            self._audit(s, "add", "haptic_trials", haptic_session_id, {"n": len(trials)})
+            return len(trials)
+
+    def list_haptic_trials(self, haptic_session_id: int | None = None,
+                           kind: str | None = None) -> list[HapticTrialRecord]:
+        """Trials of one session (or of all), in session, block and trial order."""
+        q = select(HapticTrialRow).order_by(HapticTrialRow.haptic_session_id,
+                                            HapticTrialRow.block, HapticTrialRow.trial)
+        if haptic_session_id is not None:
+            q = q.where(HapticTrialRow.haptic_session_id == haptic_session_id)
+        if kind is not None:
+            q = q.where(HapticTrialRow.kind == kind)
+        with self._read() as s:
+            return [HapticTrialRecord(r.id, r.haptic_session_id, r.kind, r.block, r.trial,
+                                      r.phase, r.condition, r.answer, r.correct, r.started_s,
+                                      r.answered_s, r.response_time_s, json.loads(r.detail_json))
+                    for r in s.scalars(q)]
 
     def add_trace(self, haptic_session_id: int, name: str, array: ArrayLike, unit: str,
                   provenance: Mapping[str, Any] | None = None) -> TraceRecord:
@@ -128,3 +250,10 @@ class Traces(DatabaseCore):
                 raise StorageError(f"No trace with id {trace_id}.")
             key = t.array_sha256
         return self.store.get(key)
+
+
+def _stored_time(t: datetime | None) -> datetime:
+    """A time as stored (UTC without a zone); now when None; a naive time is UTC already."""
+    if t is None:
+        return now()
+    return t if t.tzinfo is None else t.astimezone(UTC).replace(tzinfo=None)

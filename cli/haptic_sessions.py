@@ -1,0 +1,123 @@
+"""``fieldbank haptic sessions list|show``: the recorded haptic sessions, from the database."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.haptic.training import accuracy_text, summarise
+from fieldbank.storage import Database, HapticSessionRecord, HapticTrialRecord
+
+
+@click.group("sessions")
+def sessions() -> None:
+    """Recorded haptic sessions: when, which models, which patient, the answers."""
+
+
+def _duration(s: HapticSessionRecord) -> float | None:
+    return None if s.ended_at is None else (s.ended_at - s.started_at).total_seconds()
+
+
+def _model(db: Database, model_id: int | None) -> dict[str, Any] | None:
+    if model_id is None:
+        return None
+    m = db.get_model(model_id)
+    plans = [p for p in db.list_plans(m.patient_code) if p.result_model_id == m.id]
+    return {"id": m.id, "origin": m.origin, "label": m.label, "patient": m.patient_code,
+            "plan": plans[-1].label if plans else None}
+
+
+def _session_doc(db: Database, s: HapticSessionRecord) -> dict[str, Any]:
+    return {"id": s.id, "patient": s.patient_code, "patient_note": s.patient_note,
+            "started_at": s.started_at.isoformat(),
+            "ended_at": None if s.ended_at is None else s.ended_at.isoformat(),
+            "duration_s": _duration(s), "robot": s.robot_url,
+            "model_a": _model(db, s.model_a_id), "model_b": _model(db, s.model_b_id),
+            "trials": s.n_trials, "name": s.stats.get("name")}
+
+
+@sessions.command("list")
+@click.option("--patient", help="Only this patient's sessions.")
+@db_option
+@json_option
+def list_cmd(patient: str | None, db_url: str | None, as_json: bool) -> None:
+    """List recorded haptic sessions."""
+    with open_db(db_url) as db:
+        docs = [_session_doc(db, s) for s in db.list_haptic_sessions(patient)]
+    lines = [f"{'id':>4}  {'started (UTC)':19s}  {'length':>8s}  {'patient':10s}  "
+             f"{'model A':>7s}  {'model B':>7s}  {'trials':>6s}  robot"]
+    for d in docs:
+        dur = "open" if d["duration_s"] is None else f"{d['duration_s']:.1f} s"
+        a = d["model_a"]["id"] if d["model_a"] else "-"
+        b = d["model_b"]["id"] if d["model_b"] else "-"
+        lines.append(f"{d['id']:>4}  {d['started_at'][:19].replace('T', ' '):19s}  {dur:>8s}  "
+                     f"{d['patient'] or '-':10s}  {a!s:>7s}  {b!s:>7s}  {d['trials']:>6d}  "
+                     f"{d['robot']}")
+    if not docs:
+        lines = ["no haptic sessions recorded" + (f" for patient {patient}" if patient else "")]
+    emit(docs, as_json, "\n".join(lines))
+
+
+def _trial_line(t: HapticTrialRecord) -> str:
+    right = {True: "right", False: "wrong", None: ""}[t.correct]
+    rt = "" if t.response_time_s is None else f"{t.response_time_s:6.1f} s"
+    window = ("" if t.started_s is None else
+              f"t = {t.started_s:.2f}–{(t.answered_s or t.detail.get('ended_s') or 0):.2f} s")
+    return (f"  {t.kind:8s} {t.block:>2d} {t.trial + 1:>4d}  {t.phase:15s} {t.condition:22s} "
+            f"{t.answer or '-':9s} {right:5s} {rt:>8s}  {window}")
+
+
+@sessions.command("show")
+@click.argument("session_id", type=int)
+@db_option
+@json_option
+def show(session_id: int, db_url: str | None, as_json: bool) -> None:
+    """One session: times, models, patient, every trial's answer, the results."""
+    with open_db(db_url) as db:
+        s = db.get_haptic_session(session_id)
+        doc = _session_doc(db, s)
+        trials = db.list_haptic_trials(session_id)
+    doc["trial_records"] = [t.to_dict() for t in trials]
+    doc["trace"] = f"haptic_session:{s.id}"
+    loop = s.stats.get("loop") or {}
+    doc["loop"] = {k: loop.get(k) for k in ("period_error_us", "overruns", "realtime_scheduling")}
+    doc["faults"] = s.stats.get("faults") or []
+    abx = [t for t in trials if t.kind == "abx"]
+    training = [t.to_dict() for t in trials if t.kind == "training"]
+    if training:
+        doc["training_summary"] = summarise(training)
+    lines = [f"haptic session {s.id} ({doc['name'] or 'unnamed'})",
+             f"  started   {doc['started_at']}",
+             f"  ended     {doc['ended_at'] or 'not ended'}"
+             + (f" ({doc['duration_s']:.1f} s)" if doc["duration_s"] is not None else ""),
+             f"  patient   {s.patient_code or '-'}"
+             + (f" (note: {s.patient_note})" if s.patient_note else ""),
+             f"  robot     {s.robot_url}"]
+    for key, name in (("model_a", "model A"), ("model_b", "model B")):
+        m = doc[key]
+        if m:
+            lines.append(f"  {name}   {m['id']}: {m['label']} ({m['origin']}"
+                         + (f", patient {m['patient']}" if m["patient"] else "")
+                         + (f', plan "{m["plan"]}"' if m["plan"] else "") + ")")
+    pe = (loop.get("period_error_us") or {})
+    if pe:
+        lines.append(f"  loop      period error p99 {pe.get('p99', 0):.1f} µs, overruns "
+                     f"{loop.get('overruns', 0)}; {len(doc['faults'])} fault(s)")
+    lines.append(f"  traces    {doc['trace']} (each trial's window below)")
+    if trials:
+        lines.append(f"  {'kind':8s} {'bl':>2s} {'#':>4s}  {'phase':15s} {'condition':22s} "
+                     f"{'answer':9s} {'':5s} {'resp.':>8s}")
+        lines += [_trial_line(t) for t in trials]
+    else:
+        lines.append("  no trials")
+    if abx:
+        blocks = sorted({t.block for t in abx})
+        for b in blocks:
+            bt = [t for t in abx if t.block == b]
+            lines.append(f"  A/B/X block {b}: {sum(bool(t.correct) for t in bt)} of {len(bt)} "
+                         f"correct")
+    if training:
+        lines += ["  " + line for line in accuracy_text(doc["training_summary"])]
+    emit(doc, as_json, "\n".join(lines))

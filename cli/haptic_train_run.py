@@ -1,0 +1,112 @@
+"""``fieldbank haptic train simulate`` and ``results``: the heavy part of the training group
+(the loop and the simulated trainee; the database)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import click
+
+from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.files import write_atomic
+from fieldbank.haptic import trainee
+from fieldbank.haptic.dbsink import DatabaseTraceSink
+from fieldbank.haptic.session import trace_name_now
+from fieldbank.haptic.training import (
+    TrainingProtocol,
+    accuracy_text,
+    results_html,
+    results_page,
+    summarise,
+)
+
+
+def _say(msg: str) -> None:
+    click.echo(msg, err=True)
+
+
+@click.command("simulate")
+@click.option("--instructed/--non-instructed", default=True, show_default=True,
+              help="Follow the drawn probing paths, or explore freely.")
+@click.option("--short", is_flag=True, help="1 familiarisation round, 1 repetition (16 trials).")
+@click.option("--familiarisation-rounds", type=click.IntRange(0, 50), default=None)
+@click.option("--repetitions", type=click.IntRange(0, 50), default=None)
+@click.option("--noise-deg", type=click.FloatRange(0, 180), default=0.0, show_default=True,
+              help="Error of each perceived force direction, degrees (sd).")
+@click.option("--seed", type=click.IntRange(0, 2**31), default=0, show_default=True)
+@click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the results as a small HTML page.")
+@db_option
+@click.option("--no-db", is_flag=True, help="Do not record the session in the database.")
+@json_option
+def simulate(instructed: bool, short: bool, familiarisation_rounds: int | None,
+             repetitions: int | None, noise_deg: float, seed: int, html_out: Path | None,
+             db_url: str | None, no_db: bool, as_json: bool) -> None:
+    """Run the protocol with a simulated trainee on the simulated robot."""
+    kw: dict[str, Any] = {"instruction": "instructed" if instructed else "non-instructed",
+                          "seed": seed}
+    if short:
+        kw.update(familiarisation_rounds=1, assessment_repetitions=1)
+    if familiarisation_rounds is not None:
+        kw["familiarisation_rounds"] = familiarisation_rounds
+    if repetitions is not None:
+        kw["assessment_repetitions"] = repetitions
+    protocol = TrainingProtocol(**kw)
+    res = trainee.simulate(protocol, trainee.DirectionRule(noise_deg, seed), say=_say)
+    out: dict[str, Any] = {"simulated_s": res.simulated_s, **res.result}
+    if not no_db:
+        with open_db(db_url) as db:
+            out["database"] = DatabaseTraceSink(db).write_trace(res.trace,
+                                                                "train-sim-" + trace_name_now())
+    if html_out is not None:
+        write_atomic(html_out, results_page([results_html(
+            res.summary, f"Simulated trainee, {protocol.instruction}",
+            note="Simulated trainee: answers by the direction of the peak force along each "
+                 "probe, nearest to what it felt in familiarisation.")]))
+    lines = [f"simulated {res.simulated_s:.0f} s of training ({protocol.n_trials} trials, "
+             f"{protocol.instruction})", *accuracy_text(res.summary)]
+    if "database" in out:
+        lines.append(f"database: {out['database']}")
+    if html_out is not None:
+        lines.append(f"html: {html_out}")
+    emit(out, as_json, "\n".join(lines))
+
+
+@click.command("results")
+@click.argument("sessions", nargs=-1, type=int)
+@click.option("--patient", help="Only sessions of this patient.")
+@click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the results as a small HTML page.")
+@db_option
+@json_option
+def results(sessions: tuple[int, ...], patient: str | None, html_out: Path | None,
+            db_url: str | None, as_json: bool) -> None:
+    """Confusion matrix and accuracy per severity of stored training sessions.
+
+    SESSIONS are haptic session ids (default: every session with training trials).
+    """
+    with open_db(db_url) as db:
+        chosen = {s.id for s in db.list_haptic_sessions(patient)}
+        if sessions:
+            missing = sorted(set(sessions) - chosen)
+            if missing:
+                raise click.BadParameter(f"no haptic session {', '.join(map(str, missing))}"
+                                         + (f" of patient {patient}" if patient else ""))
+            chosen = set(sessions)
+        trials = [t for t in db.list_haptic_trials(kind="training")
+                  if t.haptic_session_id in chosen]
+    records = [t.to_dict() for t in trials]
+    used = sorted({t.haptic_session_id for t in trials})
+    if not used:
+        raise click.ClickException("no stored training trials"
+                                   + (f" in session(s) {', '.join(map(str, sessions))}"
+                                      if sessions else ""))
+    summary = summarise(records)
+    doc = {"sessions": used, "summary": summary}
+    if html_out is not None:
+        write_atomic(html_out, results_page([results_html(
+            summary, f"Training results, session(s) {', '.join(map(str, used))}")]))
+    emit(doc, as_json, "\n".join([f"sessions: {', '.join(map(str, used))}",
+                                  *accuracy_text(summary)]
+                                 + ([f"html: {html_out}"] if html_out else [])))

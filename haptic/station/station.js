@@ -1,0 +1,445 @@
+"use strict";
+// The clinician's station page: draws the virtual arm from the frames the station sends
+// (~60 per second), and sends the clinician's clicks and keys as commands. Positions arrive
+// in the shoulder frame (m, +x to the patient's right, +y forward); forces in N on the handle.
+
+const $ = (id) => document.getElementById(id);
+const token = new URLSearchParams(location.search).get("token") || "";
+const canvas = $("arm");
+const ctx = canvas.getContext("2d");
+
+// What tests and the benchmark read: the last frames drawn, where the handle was drawn.
+const fb = window.fb = { frames: [], info: null, fps: 0, drawn: 0, last: null, replies: [] };
+
+let ws = null;
+let frame = null;          // newest frame received
+let drawnSeq = null;       // seq of the frame last drawn
+let info = null;
+let infoAt = 0;            // frame t_s when the info arrived
+let nextId = 1;
+let view = null;           // world -> canvas transform
+const pending = new Map();
+
+// --- connection ------------------------------------------------------------------------------
+function connect() {
+  const proto = location.protocol === "https:" ? "wss:" : "ws:";
+  ws = new WebSocket(`${proto}//${location.host}/ws?token=${encodeURIComponent(token)}`);
+  ws.onopen = () => setMessage("");
+  ws.onmessage = (ev) => {
+    const msg = JSON.parse(ev.data);
+    if (msg.type === "frame") {
+      frame = msg;
+    } else if (msg.type === "info") {
+      info = msg; fb.info = msg; infoAt = frame ? frame.t_s : (msg.t_s || 0);
+      view = null; renderPanel();
+    } else if (msg.type === "reply") {
+      fb.replies.push(msg);
+      const done = pending.get(msg.id);
+      pending.delete(msg.id);
+      if (!msg.ok) setMessage(msg.error, true);
+      if (done) done(msg);
+    }
+  };
+  ws.onclose = () => {
+    setState("DISCONNECTED", "station connection lost; reconnecting…");
+    setTimeout(connect, 1000);
+  };
+}
+
+function send(cmd, args = {}) {
+  return new Promise((resolve) => {
+    if (!ws || ws.readyState !== WebSocket.OPEN) {
+      setMessage("not connected to the station", true); resolve(null); return;
+    }
+    const id = nextId++;
+    pending.set(id, resolve);
+    ws.send(JSON.stringify({ id, cmd, ...args }));
+  });
+}
+
+function setMessage(text, error = false) {
+  $("message").textContent = text || "";
+  $("message").className = "small" + (error ? " error" : "");
+}
+
+function setState(mode, text) {
+  const el = $("state");
+  el.dataset.mode = mode;
+  el.textContent = text;
+}
+
+// --- drawing -----------------------------------------------------------------------------------
+function fitView() {
+  const dpr = window.devicePixelRatio || 1;
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
+    canvas.width = Math.round(w * dpr); canvas.height = Math.round(h * dpr);
+  }
+  const pts = (info && info.workspace_m && info.workspace_m.length) ? info.workspace_m.slice()
+    : [[-0.4, -0.1], [0.6, 0.7]];
+  pts.push([0, 0], [trunkX() * 2.2, -0.15]);
+  const xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
+  const x0 = Math.min(...xs), x1 = Math.max(...xs), y0 = Math.min(...ys), y1 = Math.max(...ys);
+  const top = 96, margin = 28;
+  const s = Math.min((w - 2 * margin) / (x1 - x0), (h - top - margin) / (y1 - y0));
+  // 'opposite': the patient faces the clinician (seed): forward (+y) points down the screen,
+  // the patient's right (+x) is the clinician's left. 'behind': as seen over the shoulder.
+  const opposite = !STATION_CONFIG.view || STATION_CONFIG.view === "opposite";
+  const mx = opposite ? -1 : 1, my = opposite ? 1 : -1;
+  const cxw = (x0 + x1) / 2, cyw = (y0 + y1) / 2;
+  const cx = w / 2, cy = top + (h - top - margin) / 2;
+  view = { s, dpr, px: (x) => cx + mx * s * (x[0] - cxw), py: (x) => cy + my * s * (x[1] - cyw) };
+}
+
+function P(x) { return [view.px(x), view.py(x)]; }
+function side() { return info && info.side === "left" ? -1 : 1; }
+function trunkX() { return -0.19 * side(); }
+
+function line(a, b, width, color) {
+  ctx.lineWidth = width; ctx.strokeStyle = color; ctx.lineCap = "round";
+  ctx.beginPath(); ctx.moveTo(...P(a)); ctx.lineTo(...P(b)); ctx.stroke();
+}
+
+function disc(x, r, color) {
+  ctx.fillStyle = color; ctx.beginPath(); ctx.arc(...P(x), r, 0, 2 * Math.PI); ctx.fill();
+}
+
+function drawBody() {
+  // the patient's trunk and head seen from above, behind the shoulder
+  const c = [trunkX(), -0.07];
+  ctx.fillStyle = "#dfe3ea"; ctx.strokeStyle = "#aeb5c2"; ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.ellipse(...P(c), 0.21 * view.s, 0.11 * view.s, 0, 0, 2 * Math.PI);
+  ctx.fill(); ctx.stroke();
+  ctx.fillStyle = "#e9ecf1";
+  ctx.beginPath(); ctx.arc(...P([c[0], -0.06]), 0.085 * view.s, 0, 2 * Math.PI);
+  ctx.fill(); ctx.stroke();
+}
+
+function drawWorkspace() {
+  if (info && info.safety_box_m) {
+    const [a, b, c, d] = info.safety_box_m;
+    ctx.setLineDash([6, 6]); ctx.strokeStyle = "#b9c0cc"; ctx.lineWidth = 1.5;
+    ctx.beginPath();
+    [[a, c], [b, c], [b, d], [a, d]].forEach((p, i) => (i ? ctx.lineTo(...P(p)) : ctx.moveTo(...P(p))));
+    ctx.closePath(); ctx.stroke(); ctx.setLineDash([]);
+  }
+  const ws = info && info.workspace_m;
+  if (!ws || !ws.length) return;
+  ctx.fillStyle = "rgba(47,111,179,0.07)"; ctx.strokeStyle = "rgba(47,111,179,0.45)";
+  ctx.lineWidth = 1.5; ctx.beginPath();
+  ws.forEach((p, i) => (i ? ctx.lineTo(...P(p)) : ctx.moveTo(...P(p))));
+  ctx.closePath(); ctx.fill(); ctx.stroke();
+}
+
+function drawPaths() {
+  const tr = info && info.training;
+  const paths = (tr && tr.paths) || [];
+  const colours = ["#7b3fb0", "#138d75", "#a04000", "#1f618d"];
+  paths.forEach((p, k) => {
+    const col = colours[k % colours.length], pts = p.points_m;
+    if (!pts || pts.length < 2) return;
+    ctx.setLineDash([10, 7]); ctx.lineWidth = 4; ctx.strokeStyle = col; ctx.beginPath();
+    pts.forEach((q, i) => (i ? ctx.lineTo(...P(q)) : ctx.moveTo(...P(q))));
+    ctx.stroke(); ctx.setLineDash([]);
+    const [ex, ey] = P(pts[pts.length - 1]), [fx, fy] = P(pts[pts.length - 2]);
+    const a = Math.atan2(ey - fy, ex - fx);
+    ctx.fillStyle = col; ctx.beginPath(); ctx.moveTo(ex, ey);
+    ctx.lineTo(ex - 16 * Math.cos(a - 0.4), ey - 16 * Math.sin(a - 0.4));
+    ctx.lineTo(ex - 16 * Math.cos(a + 0.4), ey - 16 * Math.sin(a + 0.4)); ctx.fill();
+    // labels stacked beside the common start, so paths that share it do not overwrite them
+    const [sx, sy] = P(pts[0]);
+    ctx.font = "600 15px system-ui"; ctx.textAlign = "right";
+    ctx.fillText(`${k + 1}. ${p.name}`, sx - 24, sy - 10 + 18 * k);
+    ctx.textAlign = "left";
+    disc(pts[0], 5, col);
+  });
+}
+
+// muscle groups (sf, se, ef, ee, bf, be) as bands beside the bones, flexors on the side the
+// joint flexes toward; each is a quadratic curve from origin to insertion, bowed at the joint
+function muscleCurves(f) {
+  const e = f.elbow_m, h = f.hand_m, sd = side();
+  const unit = (a, b) => { const dx = b[0] - a[0], dy = b[1] - a[1], n = Math.hypot(dx, dy) || 1;
+    return [dx / n, dy / n]; };
+  const u1 = unit([0, 0], e), u2 = unit(e, h);
+  const n1 = [-u1[1] * sd, u1[0] * sd], n2 = [-u2[1] * sd, u2[0] * sd];
+  const at = (o, u, n, a, b) => [o[0] + a * u[0] + b * n[0], o[1] + a * u[1] + b * n[1]];
+  const l1 = Math.hypot(e[0], e[1]), l2 = Math.hypot(h[0] - e[0], h[1] - e[1]);
+  const mid = (a, b, k) => [(a[0] + b[0]) / 2 + k[0], (a[1] + b[1]) / 2 + k[1]];
+  const out = [];
+  for (const sg of [1, -1]) {
+    const sh = [at([0, 0], u1, n1, -0.04, sg * 0.035), at([0, 0], u1, n1, 0.4 * l1, sg * 0.024)];
+    const el = [at(e, u1, n1, -0.5 * l1, sg * 0.024), at(e, u2, n2, 0.28 * l2, sg * 0.022)];
+    const bi = [at([0, 0], u1, n1, 0.05, sg * 0.042), at(e, u2, n2, 0.2 * l2, sg * 0.04)];
+    const ej = [sg * (n1[0] + n2[0]) * 0.02, sg * (n1[1] + n2[1]) * 0.02];
+    out.push([sh[0], mid(sh[0], sh[1], [0, 0]), sh[1]],
+             [el[0], at(e, n1, n1, 0, sg * 0.03), el[1]],
+             [bi[0], [e[0] + ej[0] * 2.6, e[1] + ej[1] * 2.6], bi[1]]);
+  }
+  // order sf, se, ef, ee, bf, be
+  return [out[0], out[3], out[1], out[4], out[2], out[5]];
+}
+
+function tensionColour(n) {
+  const t = Math.max(0, Math.min(1, n / 40));
+  const r = Math.round(214 + 10 * t), g = Math.round(188 - 150 * t), b = Math.round(190 - 160 * t);
+  return `rgba(${r},${g},${b},${0.55 + 0.45 * t})`;
+}
+
+function drawMuscleLegend() {
+  const x = canvas.clientWidth - 185, y = canvas.clientHeight - 70;
+  const grad = ctx.createLinearGradient(x, 0, x + 120, 0);
+  grad.addColorStop(0, tensionColour(0)); grad.addColorStop(1, tensionColour(40));
+  ctx.fillStyle = grad; ctx.fillRect(x, y, 120, 8);
+  ctx.fillStyle = "#5d6678"; ctx.font = "12px system-ui";
+  ctx.fillText("muscle force 0", x - 84, y + 8); ctx.fillText("40 N", x + 126, y + 8);
+}
+
+function drawArm(f) {
+  const S = [0, 0], E = f.elbow_m, H = f.hand_m;
+  if (f.muscles_n) {
+    ctx.lineCap = "round";
+    muscleCurves(f).forEach(([a, c, b], i) => {
+      ctx.lineWidth = Math.max(5, 0.016 * view.s); ctx.strokeStyle = tensionColour(f.muscles_n[i]);
+      ctx.beginPath(); ctx.moveTo(...P(a)); ctx.quadraticCurveTo(...P(c), ...P(b)); ctx.stroke();
+    });
+    drawMuscleLegend();
+  }
+  line(S, E, 0.045 * view.s, "#6b7385");
+  line(E, H, 0.038 * view.s, "#6b7385");
+  disc(S, 0.03 * view.s, "#4a5263");
+  disc(E, 0.024 * view.s, "#4a5263");
+  disc(H, 0.03 * view.s, "#39404f");
+}
+
+function drawHandle(f) {
+  // the handle (robot) the hand holds: an orange ring with a solid centre, drawn last
+  const [hx, hy] = P(f.handle_m);
+  ctx.lineWidth = 4; ctx.strokeStyle = "#ff7a00";
+  ctx.beginPath(); ctx.arc(hx, hy, 15, 0, 2 * Math.PI); ctx.stroke();
+  ctx.fillStyle = "#ff7a00"; ctx.beginPath(); ctx.arc(hx, hy, 6, 0, 2 * Math.PI); ctx.fill();
+  return [hx, hy];
+}
+
+function drawForce(f) {
+  const [fx, fy] = f.force_n, n = Math.hypot(fx, fy);
+  const mPerN = 0.006;  // 10 N is drawn 6 cm long
+  const a = f.handle_m, b = [a[0] + mPerN * fx, a[1] + mPerN * fy];
+  const [ax, ay] = P(a), [bx, by] = P(b);
+  if (n > 0.05) {
+    ctx.lineWidth = 5; ctx.strokeStyle = "#c0392b"; ctx.lineCap = "round";
+    ctx.beginPath(); ctx.moveTo(ax, ay); ctx.lineTo(bx, by); ctx.stroke();
+    const ang = Math.atan2(by - ay, bx - ax);
+    ctx.fillStyle = "#c0392b"; ctx.beginPath(); ctx.moveTo(bx, by);
+    ctx.lineTo(bx - 16 * Math.cos(ang - 0.45), by - 16 * Math.sin(ang - 0.45));
+    ctx.lineTo(bx - 16 * Math.cos(ang + 0.45), by - 16 * Math.sin(ang + 0.45)); ctx.fill();
+  }
+  ctx.font = "600 16px system-ui"; ctx.fillStyle = "#c0392b";
+  const off = Math.hypot(bx - ax, by - ay) < 20 ? 22 : 12;
+  ctx.fillText(`${n.toFixed(1)} N`, bx + off, by + 5);
+}
+
+function drawScale() {
+  const y = canvas.clientHeight - 36, x = canvas.clientWidth - 150 - 0.1 * view.s;
+  ctx.strokeStyle = "#5d6678"; ctx.lineWidth = 2; ctx.beginPath();
+  ctx.moveTo(x, y); ctx.lineTo(x + 0.1 * view.s, y); ctx.stroke();
+  ctx.fillStyle = "#5d6678"; ctx.font = "12px system-ui";
+  ctx.fillText("10 cm", x + 0.05 * view.s - 15, y - 6);
+  ctx.fillText("force: 10 N = 6 cm", x + 0.1 * view.s + 12, y + 4);
+}
+
+let fpsCount = 0, fpsT0 = performance.now();
+
+function draw() {
+  requestAnimationFrame(draw);
+  if (!frame || !info) return;
+  if (!view || canvas.width !== Math.round(canvas.clientWidth * (window.devicePixelRatio || 1))) {
+    fitView();
+  }
+  const f = frame;
+  ctx.setTransform(view.dpr, 0, 0, view.dpr, 0, 0);
+  ctx.clearRect(0, 0, canvas.clientWidth, canvas.clientHeight);
+  drawWorkspace();
+  drawBody();
+  drawPaths();
+  drawArm(f);
+  drawForce(f);
+  const [px, py] = drawHandle(f);
+  drawScale();
+  if (f.seq !== drawnSeq) {
+    drawnSeq = f.seq; fpsCount++; fb.drawn++;
+    fb.last = { t_s: f.t_s, x: f.handle_m[0], y: f.handle_m[1], px, py };
+    fb.frames.push(fb.last);
+    if (fb.frames.length > 600) fb.frames.shift();
+  }
+  const now = performance.now();
+  if (now - fpsT0 >= 1000) {
+    fb.fps = fpsCount * 1000 / (now - fpsT0); fpsCount = 0; fpsT0 = now;
+    $("fps").textContent = `${fb.fps.toFixed(0)} frames/s · t = ${f.t_s.toFixed(1)} s`;
+    if (ws && ws.readyState === WebSocket.OPEN) {
+      ws.send(JSON.stringify({ cmd: "page_stats", fps: fb.fps }));
+    }
+  }
+  updateBadges(f);
+  tickClock(f);
+}
+
+function updateBadges(f) {
+  const faults = f.faults.length ? ` · ${f.faults.join(", ")}` : "";
+  const words = { ARMED: "Armed", DISARMED: "Disarmed", FAULT: "Fault" };
+  setState(f.mode, `${words[f.mode] || f.mode}${faults}`);
+  const r = $("rendering");
+  const tr = info && info.training;
+  if (tr && !tr.done && !f.blinded) {
+    r.textContent = tr.phase ? `Training · ${tr.phase}` : "Training"; r.className = "badge";
+    $("btn-a").classList.remove("active"); $("btn-b").classList.remove("active");
+  } else if (f.blinded) {
+    r.textContent = "Blinded: which arm is hidden"; r.className = "badge blinded";
+  } else {
+    const k = f.blend >= 0.5 ? "B" : "A";
+    const moving = f.blend > 0.02 && f.blend < 0.98 ? " (crossfading)" : "";
+    r.textContent = `Feeling ${k} · ${k === "A" ? "before" : "after"}${moving}`;
+    r.className = "badge";
+    $("btn-a").classList.toggle("active", k === "A");
+    $("btn-b").classList.toggle("active", k === "B");
+  }
+}
+
+// --- the panel ------------------------------------------------------------------------------
+const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" }[c]));
+const pct = (v) => (v === null || v === undefined ? "–" : `${Math.round(100 * v)}%`);
+
+function describe(m) {
+  if (!m) return "";
+  const bits = [];
+  if (m.label) bits.push(esc(m.label));
+  if (m.model_id) bits.push(`model ${esc(m.model_id)}`);
+  if (m.patient) bits.push(`patient ${esc(m.patient)}`);
+  if (m.plan) bits.push(`plan “${esc(m.plan)}”`);
+  return bits.join(" · ") || "not stored";
+}
+
+function renderPanel() {
+  const hidden = info.models === "hidden";
+  $("model-info").innerHTML = hidden
+    ? "<dt>Models</dt><dd>hidden while a blinded block runs</dd>"
+    : `<dt>A · before</dt><dd>${describe(info.models.A)}</dd>` +
+      `<dt>B · after</dt><dd>${describe(info.models.B)}</dd>`;
+  const abx = info.abx, tr = info.training;
+  const training = tr && !tr.done;
+  $("btn-a").disabled = $("btn-b").disabled = !!abx || !!training;
+  $("abx-idle").hidden = !!abx;
+  $("abx-start").disabled = !!training;
+  $("abx-run").hidden = !abx;
+  if (abx) $("abx-trial").textContent = `Trial ${Math.min(abx.trial + 1, abx.n_trials)} of ${abx.n_trials}: feel A, B and X as often as you like, then answer.`;
+  $("abx-result").innerHTML = info.abx_last_result && !abx ? abxResult(info.abx_last_result) : "";
+  // training
+  $("train-idle").hidden = training;
+  $("train-start").disabled = !!abx;
+  $("train-run").hidden = !training;
+  $("train-result").innerHTML = tr && tr.done && tr.result ? trainingResult(tr.result.summary, tr) : "";
+  // shading through the CSSOM: the page's policy allows no style attributes in markup
+  document.querySelectorAll("[data-shade]").forEach((td) => {
+    td.style.background = `rgba(47,111,179,${td.dataset.shade})`;
+  });
+  const legend = $("legend");
+  if (training && tr.legend) {
+    legend.hidden = false;
+    legend.innerHTML = `${esc(tr.legend)}<small>familiarisation · trial ${tr.trial} of ${tr.n_trials}</small>`;
+  } else {
+    legend.hidden = true;
+  }
+  if (training) {
+    const phase = tr.phase === "assessment" ? "Assessment" : tr.phase === "familiarisation" ? "Familiarisation" : "Ready";
+    const which = tr.trial ? `trial ${tr.trial} of ${tr.n_trials}` : `${tr.n_trials} trials`;
+    const instr = tr.instruction === "instructed" ? "follow the drawn paths" : "explore freely";
+    $("train-trial").textContent = `${phase}: ${which} (${instr}).` +
+      (tr.phase === "assessment" ? " Which muscles are hypertonic?" : "") +
+      (!tr.trial ? " Press Next trial to begin." : "");
+    $("train-answers").hidden = !tr.awaiting_answer;
+    $("train-next").disabled = tr.awaiting_answer;
+  }
+}
+
+function abxResult(r) {
+  const rows = r.answers.map((a) => `<tr><td>${a.trial + 1}</td><td>${a.answer}</td><td>${a.x_is}</td>` +
+    `<td>${a.correct ? "✓" : "✗"}</td></tr>`).join("");
+  return `<p class="result-title">Block: ${r.correct} of ${r.answered} correct</p>` +
+    `<table><tr><th>trial</th><th>answer</th><th>X was</th><th></th></tr>${rows}</table>` +
+    `<p class="small">A was the ${r.label_model.A === 0 ? "before" : "after"} model, B the ${r.label_model.B === 0 ? "before" : "after"} model.</p>`;
+}
+
+function trainingResult(s, tr) {
+  const conf = s.confusion, names = { shoulder: "shoulder", elbow: "elbow", biarticular: "bi-articular" };
+  const head = conf.columns.map((c) => `<th>${c}</th>`).join("");
+  const rows = conf.rows.map((g, i) => {
+    const n = conf.counts[i].reduce((a, b) => a + b, 0);
+    const cells = conf.counts[i].map((k, j) => {
+      const diag = ({ shoulder: 0, elbow: 1, biarticular: 2 })[g] === j;
+      const a = n ? k / n : 0;
+      return `<td class="${diag ? "diag" : ""}" data-shade="${(k ? 0.08 + 0.6 * a : 0).toFixed(2)}">${k}</td>`;
+    }).join("");
+    return `<tr><th>${names[g] || g}</th>${cells}</tr>`;
+  }).join("");
+  const sev = Object.entries(s.by_severity).map(([k, v]) =>
+    `<tr><th>${k}</th><td>${v.correct} / ${v.n}</td><td>${pct(v.accuracy)}</td></tr>`).join("");
+  return `<p class="result-title">${tr.abandoned ? "Stopped early: " : ""}${s.accuracy.correct} of ${s.accuracy.n} correct (${pct(s.accuracy.accuracy)}, chance ${pct(s.chance)})</p>` +
+    `<table><tr><th>true \\ answer</th>${head}</tr>${rows}</table>` +
+    `<table><tr><th>severity</th><th>correct</th><th>accuracy</th></tr>${sev}</table>`;
+}
+
+let autoNextSent = null;
+
+function tickClock(f) {
+  const tr = info && info.training;
+  const el = $("train-clock");
+  if (!tr || tr.done || !tr.trial || tr.elapsed_s === null || tr.elapsed_s === undefined) {
+    el.textContent = ""; return;
+  }
+  const left = tr.duration_s - (tr.elapsed_s + (f.t_s - (info.t_s || infoAt)));
+  el.textContent = left > 0 ? `${left.toFixed(0)} s` : (tr.awaiting_answer ? "time is up: answer" : "time is up");
+  el.classList.toggle("up", left <= 0);
+  if (left <= 0 && tr.phase === "familiarisation" && $("train-auto").checked && autoNextSent !== tr.trial) {
+    autoNextSent = tr.trial;
+    send("train", { action: "next" });
+  }
+}
+
+// --- controls -------------------------------------------------------------------------------
+function switchTo(k) { if (info && !info.abx && !(info.training && !info.training.done)) send("switch", { to: k }); }
+$("btn-a").onclick = () => switchTo("A");
+$("btn-b").onclick = () => switchTo("B");
+$("abx-start").onclick = () => send("abx", { action: "start", n_trials: Math.max(1, Math.min(100, parseInt($("abx-n").value, 10) || 10)) });
+document.querySelectorAll(".abx-present").forEach((b) => { b.onclick = () => send("abx", { action: "present", label: b.dataset.label }); });
+document.querySelectorAll(".abx-answer").forEach((b) => { b.onclick = () => send("abx", { action: "answer", answer: b.dataset.answer }); });
+$("train-start").onclick = () => send("train", { action: "start", instruction: $("train-instruction").value })
+  .then((r) => { if (r && r.ok) send("train", { action: "next" }); });
+$("train-next").onclick = () => send("train", { action: "next" });
+$("train-stop").onclick = () => send("train", { action: "stop" });
+document.querySelectorAll(".train-answer").forEach((b) => { b.onclick = () => send("train", { action: "answer", answer: b.dataset.answer }); });
+$("btn-arm").onclick = () => send("arm");
+$("btn-disarm").onclick = () => send("disarm");
+
+document.addEventListener("keydown", (ev) => {
+  if (ev.target && (ev.target.tagName === "INPUT" || ev.target.tagName === "SELECT")) return;
+  if (!info) return;
+  const k = ev.key.toLowerCase();
+  const tr = info.training, training = tr && !tr.done;
+  if (info.abx) {
+    if (k === "a" || k === "b" || k === "x") send("abx", { action: "present", label: k.toUpperCase() });
+  } else if (training) {
+    const ans = { 1: "shoulder", 2: "elbow", 3: "both" }[k];
+    if (ans && tr.awaiting_answer) send("train", { action: "answer", answer: ans });
+    if ((k === "n" || k === "enter") && !tr.awaiting_answer) send("train", { action: "next" });
+  } else if (k === "a" || k === "b") {
+    switchTo(k.toUpperCase());
+  } else if (k === " ") {
+    ev.preventDefault();
+    switchTo(frame && frame.blend >= 0.5 ? "A" : "B");
+  }
+});
+
+window.addEventListener("resize", () => { view = null; });
+connect();
+requestAnimationFrame(draw);
