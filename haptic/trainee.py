@@ -14,13 +14,22 @@ In each trial the trainee
   :func:`haptic.motions.explore`);
 
 and feels the force the robot puts on the handle. Its stated answering rule
-(:class:`DirectionRule`): for each probe, the *direction of the force at its peak magnitude*;
-during familiarisation it keeps the mean direction per probe for each maximally impaired group
+(:class:`DirectionRule`), per probe a direction:
+
+- *instructed*: the direction of the *extra* force - the mean force along the probe minus the
+  mean force the unimpaired arm of familiarisation gave along the same probe. The same probe on
+  every arm makes the arm's own inertia and the unimpaired tone cancel, so what is left points
+  where the hypertonic group pulls, at any severity (a trained hand learns the normal arm's
+  feel first, as in the seed's familiarisation);
+- *non-instructed*: every exploration differs, so nothing cancels; the direction of the force
+  at its peak magnitude.
+
+During familiarisation it keeps the mean direction per probe for each maximally impaired group
 (the legend names the group); in the assessment it answers the group whose directions are
 nearest (sum of the angles between them), with the perceived directions blurred by a seeded
 Gaussian error of ``direction_noise_deg`` (assumption: 0 by default; set it to model a hand's
-direction discrimination). Low severities push less hard and more like the unimpaired arm, so
-they are where such a trainee errs, as the seed's trainees did.
+direction discrimination). Low severities push less hard, so their extra force is small and
+the blur matters most there, as the seed's trainees found.
 """
 
 from __future__ import annotations
@@ -112,7 +121,8 @@ class DirectionTrainee:
         return [a + (self._rng.gauss(0.0, sd) if sd > 0 else 0.0) for a in directions]
 
     def learn(self, group: str | None, directions: Sequence[float]) -> None:
-        """Keep a familiarisation trial's directions under its (legend's) group."""
+        """Keep a familiarisation trial's directions under its (legend's) group; the
+        unimpaired arm (no group) names no answer."""
         if group is None:
             return
         self.templates.setdefault(group, []).append(
@@ -197,22 +207,39 @@ class _Driver:
             rd.tick()
 
     def follow(self, path: ProbePath, offset: tuple[float, float],
-               start_s: float, end_s: float) -> float:
-        """Perform ``path`` (times from 0); the direction (rad) of the largest force on the
-        handle between ``start_s`` and ``end_s`` of it."""
+               start_s: float, end_s: float) -> tuple[float, tuple[float, float]]:
+        """Perform ``path`` (times from 0); between ``start_s`` and ``end_s`` of it, the
+        direction (rad) of the largest force on the handle and the mean force (N, N)."""
         ox, oy = offset
         self.device.perform(lambda t: _robot(path.at(t), ox, oy))
         rd = self.rd
         n = max(1, round(path.duration_s / rd.dt_s))
         best, direction = -1.0, 0.0
+        sx = sy = 0.0
+        count = 0
         for k in range(n):
             rd.tick()
             t = k * rd.dt_s
             if start_s <= t <= end_s:
                 f = math.hypot(rd.fx, rd.fy)
+                sx += rd.fx
+                sy += rd.fy
+                count += 1
                 if f > best:
                     best, direction = f, math.atan2(rd.fy, rd.fx)
-        return direction
+        return direction, (sx / max(count, 1), sy / max(count, 1))
+
+
+def _extra_directions(means: Sequence[tuple[float, float]],
+                      normal: Sequence[Sequence[tuple[float, float]]]) -> list[float]:
+    """Per probe, the direction (rad) of the mean force minus the unimpaired arm's mean force
+    along the same probe (averaged over its familiarisation trials; none felt yet: zero)."""
+    out = []
+    for k, (fx, fy) in enumerate(means):
+        nx = sum(t[k][0] for t in normal) / len(normal) if normal else 0.0
+        ny = sum(t[k][1] for t in normal) / len(normal) if normal else 0.0
+        out.append(math.atan2(fy - ny, fx - nx))
+    return out
 
 
 def _robot(state: tuple[float, float, float, float], ox: float,
@@ -255,12 +282,17 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
                                      realtime_priority=False),
                       clock=VirtualClock())
         rd.metadata.update({"robot": url, "simulated_trainee": {
-            "rule": "nearest familiarisation template of peak-force directions",
+            "rule": "nearest familiarisation template of force directions (instructed: the "
+                    "mean force beyond the unimpaired arm's along each probe; free "
+                    "exploration: the force at its peak)",
             **asdict(rule), **asdict(m)}})
         device = link.port.device
         assert isinstance(device, SimDevice)
         drive = _Driver(rd, device)
         trainee = DirectionTrainee(rule)
+        normal: list[list[tuple[float, float]]] = []  # unimpaired arm's mean force per probe
+        felt: list[tuple[str | None, list[tuple[float, float]]]] = []
+        learned = False
         offset = rd.config.shoulder_offset_m
         rd.start()
         try:
@@ -273,13 +305,17 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
                 tr = rd.training
                 assert tr is not None and tr.current is not None
                 trial = tr.current
-                directions = []
+                directions: list[float] = []
+                means: list[tuple[float, float]] = []
                 if protocol.instruction == "instructed":
                     for p in tr.paths:
                         x, y = link.x - offset[0], link.y - offset[1]
                         ref = _approach(x, y, p, m)
                         t0 = m.approach_s + m.hold_s
-                        directions.append(drive.follow(ref, offset, t0, ref.duration_s))
+                        means.append(drive.follow(ref, offset, t0, ref.duration_s)[1])
+                    if trial.phase == "familiarisation" and trial.group is None:
+                        normal.append(means)
+                    directions = _extra_directions(means, normal)
                 else:
                     x, y = link.x - offset[0], link.y - offset[1]
                     wander = explore(x, y, m.explore_amplitude_m,
@@ -287,11 +323,20 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
                     n = round(m.explore_s * rate_hz)
                     ts = tuple(k / rate_hz for k in range(0, n + 1, 5))
                     path = ProbePath("explore", ts, tuple(wander(t)[:2] for t in ts))
-                    directions.append(drive.follow(path, offset, 0.0, path.duration_s))
+                    directions.append(drive.follow(path, offset, 0.0, path.duration_s)[0])
                 if trial.phase == "familiarisation":
-                    trainee.learn(trial.group, directions)
+                    if protocol.instruction == "instructed":
+                        felt.append((trial.group, means))
+                    else:
+                        trainee.learn(trial.group, directions)
                     say(f"trial {trial.index + 1}/{len(tr.trials)}: felt {trial.legend}")
                 else:
+                    if protocol.instruction == "instructed" and not learned:
+                        # the whole familiarisation is felt: templates relative to the
+                        # unimpaired arm, whatever order the arms came in
+                        for group, ms in felt:
+                            trainee.learn(group, _extra_directions(ms, normal))
+                        learned = True
                     reply = drive.run(C.TrainAnswer(trainee.answer(directions)))
                     rec = tr.records[-1]
                     say(f"trial {trial.index + 1}/{len(tr.trials)}: answered {rec['answer']} "

@@ -29,7 +29,7 @@ from fieldbank.haptic.training import (
     summarise,
 )
 from fieldbank.model import Arm
-from fieldbank.params import ArmParams
+from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.severity import classify
 
 
@@ -53,7 +53,10 @@ def test_the_seed_protocol_has_the_papers_counts_and_order() -> None:
     # the arms rendered are the severity scale's: the level reads back from the model
     base = p.base()
     for t in ass[:6]:
-        assert classify(t.params(base))[str(t.group)].level == t.severity
+        grades = classify(Arm.from_params(t.params(base)))
+        for muscles in JOINT_GROUPS[str(t.group)]:
+            assert grades[muscles].passive.level == t.severity
+            assert grades[muscles].dynamic.level == t.severity
 
 
 @pytest.mark.parametrize("kw,message", [
