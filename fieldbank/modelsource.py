@@ -10,7 +10,8 @@ A command names a model in one of four ways, and every command resolves it here:
 
 The result, :class:`ModelSource`, carries the parameters with a description for read-outs and,
 for stored models, the model id and patient, so lineage (plans, haptic sessions) can point at
-them.
+them, and what the model's fit could not identify (its predictions that depend on those
+parameters rest on guesses).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ class ModelSource:
     description: str
     model_id: int | None = None
     patient_code: str | None = None
+    guesses: tuple[str, ...] = ()
 
 
 def from_file(path: str | Path) -> ModelSource:
@@ -60,11 +62,23 @@ def synthetic(severity: Sequence[str] = (), *, body_mass_kg: float | None = None
     return ModelSource(synthesize(sev, base), f"synthetic arm ({words})")
 
 
+def fit_guesses(db: Database, model_id: int) -> tuple[str, ...]:
+    """The reasons the latest fit that produced a stored model gives for each parameter its
+    maps did not identify (empty for a model that was not fitted)."""
+    m = db.get_model(model_id)
+    fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id] \
+        if m.patient_code else []
+    if not fits:
+        return ()
+    found = fits[-1].result.get("unidentified", [])
+    return tuple(str(u.get("reason", u)) if isinstance(u, dict) else str(u) for u in found)
+
+
 def stored(db: Database, model_id: int) -> ModelSource:
     m = db.get_model(model_id)
     return ModelSource(m.params, f"stored {m.origin} model {m.id}"
                        + (f" of patient {m.patient_code}" if m.patient_code else ""),
-                       int(m.id), m.patient_code)
+                       int(m.id), m.patient_code, fit_guesses(db, int(m.id)))
 
 
 def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
