@@ -122,13 +122,13 @@ def test_paths_reports_both_paradigms() -> None:
     doc = json.loads(r.stdout)
     assert [p["name"] for p in doc["probes"]] == ["pull", "semi-ellipse", "circle 4 cm",
                                                   "circle 6 cm", "circle 8 cm"]
-    assert doc["orientation_set"] == {"paths": ["pull"], "separates_all": True}
+    assert doc["orientation_set"] == {"paths": ["semi-ellipse"], "separates_all": True}
     assert len(doc["minmax_set"]["paths"]) <= 2
     feats = doc["probes"][0]["features"]
     assert {f["candidate"] for f in feats} == {"shoulder severe", "elbow severe",
                                                "biarticular severe"}
     r = _run("probe", "paths")
-    assert "orientation paradigm: pull separates every pair" in r.stdout
+    assert "orientation paradigm: semi-ellipse separates every pair" in r.stdout
 
 
 def test_bad_options_are_clean_errors() -> None:

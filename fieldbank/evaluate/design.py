@@ -29,10 +29,14 @@ the workspace box and, for every candidate, the range of motion with a margin.
 
 Predicted force
 ---------------
-The force a candidate puts on the handle along a path is the model's endpoint force at the
-path's positions and velocities (:meth:`fieldbank.model.Arm.endpoint_force`: the reflex sees the
-velocity), saturated at the renderer's force limit: a kinematic probe, as in
-:mod:`fieldbank.evaluate.probing`.
+The force a candidate puts on the handle along a path is what a hand moving the rigid arm along
+it feels: the muscles' endpoint force at the path's positions and velocities
+(:meth:`fieldbank.model.Arm.endpoint_force`: the reflex sees the velocity) plus the arm's
+inertia, −J⁻ᵀ(H q̈ + C q̇) (:func:`fieldbank.dynamics.hand_inertial_force`), saturated at the
+renderer's force limit. The inertia matters: on a stroke of 0.2 s it is as large as a severe
+group's force, the same for every candidate, and hides their differences. The renderer's
+virtual coupling (a spring and damper between handle and hand) is left out; the classifier
+replays it (:mod:`fieldbank.evaluate.classify`).
 
 What a hand feels (:class:`Perception`)
 ---------------------------------------
@@ -84,6 +88,7 @@ import nlopt
 import numpy as np
 from scipy.special import erf, ndtr
 
+from fieldbank.dynamics import hand_inertial_force
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.probing import PROBE_SAMPLES, ProbeMotion, min_jerk, pull, semi_ellipse
@@ -623,17 +628,42 @@ def saturate(force_n: FloatArray, limit_n: float) -> FloatArray:
     return force_n * k[..., None]
 
 
+def path_accelerations(velocities_m_per_s: FloatArray, times_s: FloatArray) -> FloatArray:
+    """Accelerations (..., K, 2), m/s², of evenly sampled paths: velocities (..., K, 2), times
+    (..., K)."""
+    dt = times_s[..., 1] - times_s[..., 0]
+    acc = np.gradient(velocities_m_per_s, axis=-2, edge_order=2)
+    return np.asarray(acc / dt[..., None, None], dtype=float)
+
+
 def predict(candidates: Sequence[Candidate], positions_m: FloatArray,
-            velocities_m_per_s: FloatArray, force_limit_n: float | None) -> FloatArray:
-    """Force each candidate puts on the handle, shape (n, ..., 2), N (kinematic probe)."""
+            velocities_m_per_s: FloatArray, force_limit_n: float | None,
+            accelerations_m_per_s2: FloatArray | None = None) -> FloatArray:
+    """Force each candidate puts on the handle, shape (n, ..., 2), N: the muscles' endpoint
+    force, plus the rigid arm's inertia when the accelerations are given."""
     shape = positions_m.shape
     x = positions_m.reshape(-1, 2)
     v = velocities_m_per_s.reshape(-1, 2)
+    acc = None if accelerations_m_per_s2 is None else accelerations_m_per_s2.reshape(-1, 2)
     out = np.empty((len(candidates), *shape))
+    inertial: dict[tuple[object, ...], FloatArray] = {}
     for i, c in enumerate(candidates):
-        f = c.arm.endpoint_force(x, v).reshape(shape)
+        f = c.arm.endpoint_force(x, v)
+        if acc is not None:
+            key = _inertia_key(c.arm)
+            if key not in inertial:
+                inertial[key] = hand_inertial_force(c.arm, x, v, acc)
+            f = f + inertial[key]
+        f = f.reshape(shape)
         out[i] = f if force_limit_n is None else saturate(f, force_limit_n)
     return out
+
+
+def _inertia_key(arm: Arm) -> tuple[object, ...]:
+    p = arm.params
+    return (arm.l1, arm.l2, arm.mirror, p.upper_arm_mass_kg, p.forearm_mass_kg,
+            p.upper_arm_com_m, p.forearm_com_m, p.upper_arm_inertia_kg_m2,
+            p.forearm_inertia_kg_m2)
 
 
 def _geometry_key(arm: Arm) -> tuple[object, ...]:
@@ -874,7 +904,8 @@ class _Context:
             pe, ve, te = _execute(pos, vel, t, self.deltas, closed)
         else:
             pe, ve, te = pos[:, None], vel[:, None], t[:, None]
-        force = predict(self.candidates, pe, ve, self.limits.force_limit_n)
+        force = predict(self.candidates, pe, ve, self.limits.force_limit_n,
+                        path_accelerations(ve, te))
         self.evaluations += pos.shape[0]
         feats = _features(force, frac, self.perception)
         return _separations(feats, self.perception, closed), _kl(force, te, self.noise)
@@ -1136,7 +1167,8 @@ def score_probes(candidates: Sequence[Candidate], motions: Sequence[ProbeMotion]
         is_closed = closed[k] if closed is not None else isinstance(path, Circle)
         sep, kl = ctx.evaluate(m.positions_m[None], m.velocities_m_per_s[None],
                                m.times_s[None], is_closed, robust=True)
-        force = predict(cands, m.positions_m, m.velocities_m_per_s, ctx.limits.force_limit_n)
+        force = predict(cands, m.positions_m, m.velocities_m_per_s, ctx.limits.force_limit_n,
+                        m.accelerations_m_per_s2)
         n = len(cands)
         mats = {key: _full(v, n)[0] for key, v in sep.items()}
         mats["kl"] = _full(kl.mean(axis=-1), n)[0]

@@ -108,6 +108,12 @@ class ProbeMotion:
                          (float(ox), float(oy)))
 
     @property
+    def accelerations_m_per_s2(self) -> FloatArray:
+        """Hand accelerations (T, 2), m/s², differentiated from the velocities."""
+        return np.asarray(np.gradient(self.velocities_m_per_s, self.times_s, axis=0,
+                                      edge_order=2), dtype=float)
+
+    @property
     def peak_speed_m_per_s(self) -> float:
         v = self.velocities_m_per_s
         return float(np.hypot(v[:, 0], v[:, 1]).max()) if len(v) else 0.0
