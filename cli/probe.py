@@ -307,8 +307,11 @@ def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | N
 
 def _classification_text(cl: Classification) -> str:
     lines = [cl.verdict()]
-    lines.append("  groups: " + ", ".join(f"{g} {p:.3g}" for g, p in cl.group_posterior.items()))
-    lines.append("  levels: " + ", ".join(f"{g} {p:.3g}" for g, p in cl.level_posterior.items()))
+    if cl.knows_groups:
+        lines.append("  groups: " + ", ".join(f"{g} {p:.3g}"
+                                              for g, p in cl.group_posterior.items()))
+        lines.append("  levels: " + ", ".join(f"{g} {p:.3g}"
+                                              for g, p in cl.level_posterior.items()))
     order = sorted(range(len(cl.candidates)), key=lambda k: -cl.posterior[k])
     for k in order[:6]:
         lines.append(f"    {cl.candidates[k].name:<22} p = {cl.posterior[k]:.3g}   residual "
@@ -328,8 +331,9 @@ def _classification_text(cl: Classification) -> str:
 @noise_options
 @limit_options
 @click.option("--predictor", type=click.Choice(PREDICTORS), default="replay", show_default=True,
-              help="replay: the recorded motion drives each candidate's virtual arm; static: "
-                   "the endpoint force at the recorded position and velocity.")
+              help="replay: the recorded motion drives each candidate's virtual arm (rendered "
+                   "traces); rigid: muscles and inertia of a rigidly held arm (measured "
+                   "traces); static: the muscles' force at the recorded position and velocity.")
 @click.option("--model", type=click.Choice(["A", "B"]), default=None,
               help="In a session that rendered two models, the ticks of this one.")
 @click.option("--no-next", is_flag=True, help="Do not design the next probe.")

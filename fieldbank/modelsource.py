@@ -63,15 +63,20 @@ def synthetic(severity: Sequence[str] = (), *, body_mass_kg: float | None = None
 
 
 def fit_guesses(db: Database, model_id: int) -> tuple[str, ...]:
-    """The reasons the latest fit that produced a stored model gives for each parameter its
-    maps did not identify (empty for a model that was not fitted)."""
-    m = db.get_model(model_id)
-    fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id] \
-        if m.patient_code else []
-    if not fits:
+    """The reasons the fit behind a stored model gives for each parameter its maps did not
+    identify: the model's own latest fit, else that of its nearest fitted ancestor (an
+    intervention keeps what it does not change); empty when no fit is behind it."""
+    for m in db.model_lineage(model_id):
+        fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id] \
+            if m.patient_code else []
+        if fits:
+            break
+    else:
         return ()
     found = fits[-1].result.get("unidentified", [])
-    return tuple(str(u.get("reason", u)) if isinstance(u, dict) else str(u) for u in found)
+    # α and β of one group share a reason: say it once
+    return tuple(dict.fromkeys(str(u.get("reason", u)) if isinstance(u, dict) else str(u)
+                               for u in found))
 
 
 def stored(db: Database, model_id: int) -> ModelSource:

@@ -127,9 +127,14 @@ def test_classify_names_the_rendered_arm(rendered, all12) -> None:  # type: igno
     assert "elbow moderate" in cl.verdict()
     assert cl.next_probe is None and cl.next_reason == "not asked for"
     # the kinematic (static) predictor leaves the arm's inertia and the coupling out: on this
-    # fast stroke it is far off, and the read-out says so
+    # fast stroke it is far off, and the read-out says so; a rigidly held arm (muscles and
+    # inertia, the coupling left out) comes much closer
     st = classify([obs], all12, predictor="static", next_probe=False)
     assert not st.explains and "no candidate explains" in st.verdict()
+    rigid = classify([obs], all12, predictor="rigid", next_probe=False)
+    k = [c.name for c in all12].index("elbow moderate")
+    assert rigid.rms_residual_n[k] < 0.5 * st.rms_residual_n[k]
+    assert rigid.group == "elbow"
 
 
 def test_the_posterior_is_bayes_rule_on_the_stated_likelihood(all12) -> None:  # type: ignore[no-untyped-def]

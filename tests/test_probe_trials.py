@@ -13,10 +13,10 @@ from fieldbank.haptic.identify import designed_vs_seed
 
 GROUPS = ("shoulder", "elbow", "biarticular")
 LEVELS = ("very mild", "mild", "moderate", "severe")
-#: The stated noise of these trials: 8 N per axis, decorrelating over 50 ms - a hard setting in
+#: The stated noise of these trials: 6 N per axis, decorrelating over 50 ms - a hard setting in
 #: which the seed's probes start to lose the very mild arms; motion noise as the defaults
 #: (direction 10°, length 15 %, speed 20 % SD, hand wander 5 mm).
-TRIAL_NOISE = NoiseModel(force_sd_n=8.0, correlation_s=0.05)
+TRIAL_NOISE = NoiseModel(force_sd_n=6.0, correlation_s=0.05)
 #: One execution of each set per arm, met by ten draws of the sensor noise (CI time); the
 #: larger run (3 executions × 10 draws) is quoted in docs/probing.md.
 REPETITIONS, DRAWS = 1, 10

@@ -10,6 +10,10 @@ force *for the recorded motion* - with its velocity, so the stretch reflex count
   sample (or where a renderer put it): for a rendered trace this reproduces the force the
   renderer computed, arm inertia and coupling included; for a measured one it is the model of a
   hand holding the arm through a stiff, damped coupling;
+* ``rigid`` - a hand holding the rigid arm: the endpoint force at the recorded position and
+  velocity plus the arm's inertia (:func:`fieldbank.dynamics.hand_inertial_force`), the
+  acceleration from a Savitzky-Golay derivative of the recorded velocity over
+  :data:`ACCELERATION_WINDOW_S` - for traces measured on a patient;
 * ``static`` - the kinematic probe of :mod:`fieldbank.evaluate.probing`: the endpoint force at
   the recorded position and velocity (inertia left out).
 
@@ -38,7 +42,9 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.signal import savgol_filter
 
+from fieldbank.dynamics import hand_inertial_force
 from fieldbank.errors import ParameterError, Problem, UnreachableError, ValidationError
 from fieldbank.evaluate.design import (
     Candidate,
@@ -54,7 +60,9 @@ from fieldbank.evaluate.design import (
 from fieldbank.model import Arm, FloatArray
 from fieldbank.sim import ArmSim
 
-PREDICTORS = ("replay", "static")
+PREDICTORS = ("replay", "rigid", "static")
+#: Window of the Savitzky-Golay derivative giving the ``rigid`` predictor's accelerations, s.
+ACCELERATION_WINDOW_S = 0.025
 #: Stop suggesting probes when the most probable candidate has at least this probability.
 STOP_PROBABILITY = 0.99
 #: Candidates below this posterior are out of play for the next probe.
@@ -297,11 +305,29 @@ def with_force_noise(obs: Observation, noise: NoiseModel, rng: np.random.Generat
     return obs.replace_force(obs.force_n + out)
 
 
+def recorded_accelerations(obs: Observation) -> FloatArray:
+    """Hand accelerations (T, 2), m/s²: a Savitzky-Golay derivative (quadratic, window
+    :data:`ACCELERATION_WINDOW_S`) of the recorded velocity, which smooths what differencing
+    would amplify."""
+    dt = float(np.median(np.diff(obs.times_s)))
+    n = len(obs.times_s)
+    win = max(5, round(ACCELERATION_WINDOW_S / dt) | 1)
+    if win > n:
+        win = n if n % 2 else n - 1
+    if win < 3:
+        return np.asarray(np.gradient(obs.velocities_m_per_s, obs.times_s, axis=0), dtype=float)
+    return np.asarray(savgol_filter(obs.velocities_m_per_s, win, min(2, win - 1), deriv=1,
+                                    delta=dt, axis=0), dtype=float)
+
+
 def predict_observation(arm: Arm, obs: Observation, predictor: str = "replay") -> FloatArray:
     """The force (T, 2), N, the arm puts on the handle for the recorded motion of ``obs``."""
-    if predictor == "static":
+    if predictor in ("static", "rigid"):
         try:
             f = arm.endpoint_force(obs.positions_m, obs.velocities_m_per_s)
+            if predictor == "rigid":
+                f = f + hand_inertial_force(arm, obs.positions_m, obs.velocities_m_per_s,
+                                            recorded_accelerations(obs))
         except UnreachableError as exc:
             raise UnreachableError(f"{obs.source or obs.name}: {exc}") from None
     elif predictor == "replay":
@@ -403,12 +429,18 @@ class Classification:
         k = int(np.argmax(self.posterior))
         return bool(self.rms_residual_n[k] ** 2 / 2.0 <= MISFIT_RATIO * self.noise.force_sd_n ** 2)
 
+    @property
+    def knows_groups(self) -> bool:
+        """Whether the candidates say which group is impaired (synthetic severities)."""
+        return all(c.group is not None or c.level == "unimpaired" for c in self.candidates)
+
     def verdict(self) -> str:
         """One sentence for a clinician."""
         b = self.best
-        g = self.group_posterior
-        text = (f"most probable: {b.name} (p = {self.probability:.3g}); impaired group "
-                f"{self.group} (p = {g[self.group]:.3g})")
+        text = f"most probable: {b.name} (p = {self.probability:.3g})"
+        if self.knows_groups:
+            g = self.group_posterior
+            text += f"; impaired group {self.group} (p = {g[self.group]:.3g})"
         if not self.explains:
             k = int(np.argmax(self.posterior))
             text += (f"; but no candidate explains the recording: the best leaves "
@@ -475,7 +507,7 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
         Force noise σ and correlation time τ of the likelihood (motion noise only shapes the
         next probe).
     prior : sequence of float, optional
-    predictor : {'replay', 'static'}
+    predictor : {'replay', 'rigid', 'static'}
     next_probe : bool
         Design the stroke that best separates the candidates still in play (posterior
         ≥ ``remaining_probability``) unless the best has ``stop_probability`` already.
@@ -532,4 +564,4 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
 
 
 __all__ = ["PREDICTORS", "Classification", "Observation", "classify", "predict_all",
-           "predict_observation", "with_force_noise"]
+           "predict_observation", "recorded_accelerations", "with_force_noise"]

@@ -165,8 +165,10 @@ def classification_figure(cl: Classification, top: int = 4) -> Figure:
     names = [f"{c.name} (p = {cl.posterior[k]:.2g})" for c, k in zip(cands, order, strict=True)]
     floor = 1.0
     for j, (o, pred) in enumerate(zip(cl.observations, cl.predictions, strict=True)):
+        # the recorded force only where the likelihood counts it (one model rendered alone)
+        rec = o.force_n if o.counted is None else np.where(o.counted[:, None], o.force_n, np.nan)
         _profile_panels(axes[0][j], axes[1][j], o.times_s, pred[order], styles, names, floor,
-                        o.force_n, o.times_s)
+                        rec, o.times_s)
         axes[0][j].set_title(f"{o.name}: recorded and predicted", fontsize=9)
         axes[2][j].axis("off")
     ax = axes[0][nobs]
