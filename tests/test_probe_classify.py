@@ -21,7 +21,9 @@ from fieldbank.evaluate.design import (
     Candidate,
     NoiseModel,
     Stroke,
+    design,
     equilibrium,
+    felt_jnd,
     predict,
     seed_probes,
     severity_candidates,
@@ -239,3 +241,20 @@ def test_bad_recordings_list_every_problem_with_its_row(tmp_path) -> None:  # ty
     o = Observation.from_csv(r)
     assert o.force_n[0] == pytest.approx([-1.0, -2.0])  # the arm's force on the handle
     assert o.velocities_m_per_s == pytest.approx(np.zeros((3, 2)))
+
+
+def test_the_designed_probe_keeps_the_severe_groups_felt_apart_when_rendered() -> None:
+    """The severe shoulder, elbow and bi-articular arms rendered on the simulated robot while
+    the operator follows the designed stroke (virtual coupling, arm dynamics, the handle's own
+    mass and friction): every pair stays at least one JND apart in the force the hand feels."""
+    cands = severity_candidates()
+    d = design(cands)
+    assert len(d.paths) <= 2
+    for m in d.motions:
+        rendered = []
+        for c in cands:
+            res = probe_path(c.arm.params, m, seed=0)
+            rendered.append(np.c_[res.trace.column("fx_n"), res.trace.column("fy_n")])
+        for i in range(3):
+            for j in range(i + 1, 3):
+                assert felt_jnd(rendered[i], rendered[j]) >= 1.0, (cands[i].name, cands[j].name)

@@ -766,6 +766,16 @@ def _separations(f: _Features, perception: Perception, closed: bool
     return {"feel": felt, "orientation": orient, "minmax": minmax}
 
 
+def felt_jnd(force_a_n: FloatArray, force_b_n: FloatArray,
+             perception: Perception | None = None) -> float:
+    """How far apart two force profiles (K, 2) sampled at the same moments feel, in JNDs: the
+    largest √(m² + a²) along them (magnitude and direction JNDs, module docstring)."""
+    f = np.stack([np.asarray(force_a_n, dtype=float), np.asarray(force_b_n, dtype=float)])
+    k = f.shape[1]
+    feats = _features(f[:, None, None], np.linspace(0.0, 1.0, k)[None], perception or Perception())
+    return float(_separations(feats, perception or Perception(), False)["feel"][0, 0])
+
+
 def _kl(force: FloatArray, times_s: FloatArray, noise: NoiseModel) -> FloatArray:
     """D_KL between every pair for every execution (P, S, E); ``force`` (n, S, E, K, 2),
     ``times_s`` (S, E, K)."""
@@ -1524,9 +1534,11 @@ __all__ = [
     "equilibrium",
     "executions",
     "feasible",
+    "felt_jnd",
     "information_bits",
     "pair_error",
     "paradigms",
+    "path_accelerations",
     "path_features",
     "predict",
     "saturate",
