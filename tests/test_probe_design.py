@@ -55,7 +55,7 @@ def all12() -> tuple[Candidate, ...]:
     return severity_candidates(levels=LEVELS4)
 
 
-# --- the Must-show of the issue -------------------------------------------------------------
+# --- the severe groups: the designed set against the seed's probes ----------------------------
 def test_severe_three_designed_set_has_at_most_two_probes_and_separates_all(severe3) -> None:  # type: ignore[no-untyped-def]
     rep = design_report(severe3)
     d, seed = rep.design, rep.seed
@@ -115,7 +115,7 @@ def test_force_direction_of_a_mono_articular_group_follows_the_geometry(group, a
 
 
 def test_issue_measurements_of_the_fast_pull_directions(severe3) -> None:  # type: ignore[no-untyped-def]
-    """The issue measured the fast pull's force directions for severe shoulder / elbow /
+    """Issue 13 measured the fast pull's force directions for severe shoulder / elbow /
     bi-articular as ≈ 122° / 80° / 47° (time-averaged force of the kinematic probe, inertia
     left out); with the arm's inertia the early part of the fast pull looks alike for all."""
     mean = [math.degrees(profile(c.arm, pull(c.arm)).mean_direction_rad) for c in severe3]
