@@ -1235,19 +1235,16 @@ def _polish(ctx: _Context, fam: _Family, start: FloatArray, x0: FloatArray,
         lo, hi = lo.copy(), hi.copy()
         lo[0], hi[0] = x0[0] - 20.0, x0[0] + 20.0
     idx = list(fam.polish)
-    best: list[object] = [x0.copy(), -np.inf]
-
-    def full(x: Sequence[float]) -> FloatArray:
-        v = x0.copy()
-        v[idx] = x
-        return v
+    best_x, best_val = x0.copy(), -np.inf
 
     def f(x: Sequence[float], grad: FloatArray) -> float:
-        v = full(x)
-        val = _robust_score(ctx, fam, start, v[None], prev)[0]
-        if val > float(best[1]):  # type: ignore[arg-type]
-            best[0], best[1] = v, val
-        return float(val)
+        nonlocal best_x, best_val
+        v = x0.copy()
+        v[idx] = x
+        val = float(_robust_score(ctx, fam, start, v[None], prev)[0])
+        if val > best_val:
+            best_x, best_val = v, val
+        return val
 
     opt = nlopt.opt(nlopt.LN_SBPLX, len(idx))
     opt.set_lower_bounds(lo[idx].tolist())
@@ -1261,7 +1258,7 @@ def _polish(ctx: _Context, fam: _Family, start: FloatArray, x0: FloatArray,
         opt.optimize(x_start.tolist())
     except (nlopt.RoundoffLimited, ValueError, RuntimeError):
         pass  # the best point seen is kept
-    return np.asarray(best[0], dtype=float), float(best[1])  # type: ignore[arg-type]
+    return best_x, best_val
 
 
 def _combine(sep: dict[str, FloatArray], kl: FloatArray,
@@ -1410,11 +1407,6 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
                        ctx.evaluations, ctx.limits)
 
 
-def design_one(candidates: Sequence[Candidate], **kwargs: object) -> ProbeDesign:
-    """The single most informative path (:func:`design` with ``max_probes=1``)."""
-    return design(candidates, max_probes=1, **kwargs)  # type: ignore[arg-type]
-
-
 @dataclass(frozen=True)
 class Paradigms:
     """The seed's two paradigms read on given paths: for every path, where each candidate's
@@ -1526,7 +1518,6 @@ __all__ = [
     "check_prior",
     "circles",
     "design",
-    "design_one",
     "design_report",
     "direction_words",
     "draw_execution",
