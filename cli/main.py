@@ -41,6 +41,8 @@ COMMANDS: dict[str, LazyCommand] = {
     "haptic": C("fieldbank.cli.haptic", "haptic",
                 "Feel arm models on a 2-DOF robot: serve, push, switch, abx, probe, status, "
                 "replay."),
+    "probe": C("fieldbank.cli.probe", "probe",
+               "Design probing motions that tell candidate arms apart; classify recorded traces."),
     "report": C("fieldbank.cli.report", "report",
                 "Report the field changes of stored intervention plans (HTML + CSV + JSON)."),
     "demo": C("fieldbank.cli.demo", "demo",

@@ -10,8 +10,13 @@ I2 about those centres (the standard double pendulum without gravity):
     H22 = I2 + m2 c2²
     C q̇ = h · (-q̇2 (2 q̇1 + q̇2),  q̇1²),  h = m2 l1 c2 sin q2
 
-These array functions are for analysis and tests; the 1 kHz loop uses the unrolled scalar
-version in :mod:`fieldbank.sim`.
+These array functions are for analysis, probe design and tests; the 1 kHz loop uses the unrolled
+scalar version in :mod:`fieldbank.sim`.
+
+Moving the hand along a path x(t) takes joint torques H q̈ + C q̇ beyond the muscles' own:
+with q = ik(x), q̇ = J⁻¹ ẋ and q̈ = J⁻¹ (ẍ − J̇ q̇), the arm's inertia pushes back on the
+handle with −J⁻ᵀ (H q̈ + C q̇) (:func:`hand_inertial_force`); added to the muscles' endpoint
+force it is what a hand holding a rigid arm feels.
 """
 
 from __future__ import annotations
@@ -86,3 +91,33 @@ def kinetic_energy(arm: Arm, q: ArrayLike, qdot: ArrayLike) -> FloatArray:
     """½ q̇ᵀ H q̇, shape (N,), J."""
     qd = np.atleast_2d(np.asarray(qdot, dtype=float))
     return 0.5 * np.einsum("ni,nij,nj->n", qd, inertia(arm, q), qd)
+
+
+def hand_inertial_force(arm: Arm, x: ArrayLike, v: ArrayLike, a: ArrayLike) -> FloatArray:
+    """Force the arm's inertia puts on a handle moving the hand along a path, (N, 2), N.
+
+    Parameters
+    ----------
+    x, v, a : array, shape (N, 2)
+        Hand position (m), velocity (m/s) and acceleration (m/s²), shoulder frame.
+
+    Returns
+    -------
+    ndarray, shape (N, 2), N
+        −J⁻ᵀ (H q̈ + C q̇), arm-on-handle, shoulder frame (zero for a hand at rest).
+    """
+    q = arm.ik(x)
+    flip = np.array([-1.0, 1.0]) if arm.mirror else np.ones(2)
+    vm = np.atleast_2d(np.asarray(v, dtype=float)) * flip
+    am = np.atleast_2d(np.asarray(a, dtype=float)) * flip
+    j = arm.jacobian(q)
+    qd = np.linalg.solve(j, vm[..., None])[..., 0]
+    q1, q12 = q[:, 0], q[:, 0] + q[:, 1]
+    w1, w12 = qd[:, 0], qd[:, 0] + qd[:, 1]
+    jdot_qd = np.stack([-arm.l1 * np.cos(q1) * w1 ** 2 - arm.l2 * np.cos(q12) * w12 ** 2,
+                        -arm.l1 * np.sin(q1) * w1 ** 2 - arm.l2 * np.sin(q12) * w12 ** 2],
+                       axis=1)
+    qdd = np.linalg.solve(j, (am - jdot_qd)[..., None])[..., 0]
+    tau = np.einsum("nij,nj->ni", inertia(arm, q), qdd) + coriolis(arm, q, qd)
+    f = -np.linalg.solve(np.transpose(j, (0, 2, 1)), tau[..., None])[..., 0]
+    return np.asarray(f * flip, dtype=float)

@@ -10,9 +10,9 @@ A command names a model in one of four ways, and every command resolves it here:
 
 The result, :class:`ModelSource`, carries the parameters with a description for read-outs and,
 for stored models, the model id and patient, so lineage (plans, haptic sessions) can point at
-them, and the parameters its fit did not identify (the fit of the model itself or, for a model
-derived by interventions, of its nearest fitted ancestor), so read-outs can say what is a
-guess.
+them, and the parameters its fit did not identify with the fit's reasons (the fit of the model
+itself or, for a model derived by interventions, of its nearest fitted ancestor), so read-outs
+can say what is a guess.
 """
 
 from __future__ import annotations
@@ -39,23 +39,33 @@ class ModelSource:
     model_id: int | None = None
     patient_code: str | None = None
     unidentified: tuple[str, ...] = ()
+    guesses: tuple[str, ...] = ()
+
+
+def _fit_unidentified_entries(db: Database, model_id: int) -> list[object]:
+    """What the fit behind a stored model reported as not identified: the model's own latest
+    fit, else that of its nearest fitted ancestor (an intervention keeps what it does not
+    change); empty when no fit is behind it."""
+    for m in db.model_lineage(model_id):
+        if m.patient_code is None:
+            continue
+        fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id]
+        if fits:
+            return list(fits[-1].result.get("unidentified", ()))
+    return []
 
 
 def fit_unidentified(db: Database, model_id: int) -> tuple[str, ...]:
-    """Names of the parameters the fit behind a stored model did not identify.
+    """Names of the parameters the fit behind a stored model did not identify."""
+    return tuple(str(u["name"]) for u in _fit_unidentified_entries(db, model_id)
+                 if isinstance(u, dict) and "name" in u)
 
-    The fit is that of the model or of its nearest fitted ancestor (a model after an
-    intervention inherits its parent's guesses); a model with no fit behind it has none.
-    """
-    for m in db.model_lineage(model_id):
-        if m.origin != "fitted" or m.patient_code is None:
-            continue
-        fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id]
-        if not fits:
-            return ()
-        return tuple(str(u["name"]) for u in fits[-1].result.get("unidentified", ())
-                     if isinstance(u, dict) and "name" in u)
-    return ()
+
+def fit_guesses(db: Database, model_id: int) -> tuple[str, ...]:
+    """The fit's reason for each parameter its maps did not identify (α and β of one group
+    share a reason: said once)."""
+    return tuple(dict.fromkeys(str(u.get("reason", u)) if isinstance(u, dict) else str(u)
+                               for u in _fit_unidentified_entries(db, model_id)))
 
 
 def from_file(path: str | Path) -> ModelSource:
@@ -84,7 +94,8 @@ def stored(db: Database, model_id: int) -> ModelSource:
     m = db.get_model(model_id)
     return ModelSource(m.params, f"stored {m.origin} model {m.id}"
                        + (f" of patient {m.patient_code}" if m.patient_code else ""),
-                       int(m.id), m.patient_code, fit_unidentified(db, int(m.id)))
+                       int(m.id), m.patient_code, fit_unidentified(db, int(m.id)),
+                       fit_guesses(db, int(m.id)))
 
 
 def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
@@ -96,7 +107,8 @@ def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
         if found:
             m = max(found, key=lambda r: r.id)
             return ModelSource(m.params, f"patient {patient_code}, {origin} model {m.id}",
-                               int(m.id), patient_code, fit_unidentified(db, int(m.id)))
+                               int(m.id), patient_code, fit_unidentified(db, int(m.id)),
+                               fit_guesses(db, int(m.id)))
     raise StorageError(
         f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
         "first ('fieldbank fit'), or give the model with --params FILE.")

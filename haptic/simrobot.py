@@ -39,11 +39,11 @@ import threading
 import time
 import tty
 from dataclasses import asdict, dataclass, fields
-from urllib.parse import parse_qsl
+from urllib.parse import parse_qsl, urlencode
 
 from fieldbank.errors import ParameterError
 from fieldbank.haptic import protocol as P
-from fieldbank.haptic.motions import MOTIONS, MotionFn, make_motion
+from fieldbank.haptic.motions import MOTIONS, MotionFn, make_motion, parse_path, wander
 from fieldbank.validation import Interval, check_number
 
 #: Allowed range of every numeric field of :class:`SimRobotConfig` (messages are generated).
@@ -52,6 +52,7 @@ SIM_BOUNDS: dict[str, Interval] = {
     "y0_m": Interval(None, None, "m"),
     "motion_duration_s": Interval(None, None, "s"),
     "motion_distance_m": Interval(None, None, "m"),
+    "operator_wander_m": Interval(0.0, 0.1, "m"),
     "handle_mass_kg": Interval(0.0, None, "kg", low_closed=False),
     "viscous_n_s_per_m": Interval(None, None, "N·s/m"),
     "coulomb_n": Interval(None, None, "N"),
@@ -77,6 +78,8 @@ class SimRobotConfig:
     motion_duration_s: float = -1.0     # < 0: the motion's default
     motion_distance_m: float = -1.0     # < 0: the motion's default
     seed: int = 0
+    motion_path: str = ""               # motion 'path': t:x:y;… (haptic.motions.format_path)
+    operator_wander_m: float = 0.0      # smooth wander of the operator's hand off the motion
     handle_mass_kg: float = 1.0         # apparent handle mass (assumption, typical planar robot)
     viscous_n_s_per_m: float = 2.0
     coulomb_n: float = 0.3
@@ -95,6 +98,11 @@ class SimRobotConfig:
         if self.motion not in MOTIONS:
             raise ParameterError(f"sim motion must be one of {', '.join(MOTIONS)}; "
                                  f"got {self.motion!r}")
+        if self.motion == "path":
+            try:
+                parse_path(self.motion_path)
+            except ValueError as exc:
+                raise ParameterError(f"sim motion_path: {exc}") from None
         for name, interval in SIM_BOUNDS.items():
             check_number(name, getattr(self, name), interval, what="sim parameter")
 
@@ -117,12 +125,14 @@ class SimRobotConfig:
 
     def to_query(self) -> str:
         d = asdict(self)
-        return "&".join(f"{k}={v}" for k, v in d.items() if v != getattr(SimRobotConfig, k))
+        return urlencode({k: v for k, v in d.items() if v != getattr(SimRobotConfig, k)})
 
     def make_motion(self) -> MotionFn:
-        return make_motion(self.motion, self.x0_m, self.y0_m, self.seed,
-                           self.motion_duration_s if self.motion_duration_s >= 0 else None,
-                           self.motion_distance_m if self.motion_distance_m >= 0 else None)
+        m = make_motion(self.motion, self.x0_m, self.y0_m, self.seed,
+                        self.motion_duration_s if self.motion_duration_s >= 0 else None,
+                        self.motion_distance_m if self.motion_distance_m >= 0 else None,
+                        self.motion_path)
+        return wander(m, self.operator_wander_m, self.seed)
 
 
 class SimDevice:

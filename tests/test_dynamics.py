@@ -9,7 +9,13 @@ import pytest
 import sympy as sp
 from scipy.integrate import solve_ivp
 
-from fieldbank.dynamics import coriolis, forward_dynamics, inertia, kinetic_energy
+from fieldbank.dynamics import (
+    coriolis,
+    forward_dynamics,
+    hand_inertial_force,
+    inertia,
+    kinetic_energy,
+)
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig
@@ -131,3 +137,29 @@ def test_left_arm_sim_mirrors_right():
         fl = sl.tick(-hx, 0.5, -0.1, 0.0)
         assert fl[0] == pytest.approx(-fr[0], abs=1e-12)
         assert fl[1] == pytest.approx(fr[1], abs=1e-12)
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_hand_inertial_force_is_the_inverse_of_forward_dynamics(side):
+    """Joint angles of a hand path by inverse kinematics, their rates by finite differences;
+    forward dynamics without muscles under the handle's force (minus the arm's inertial force
+    on it) must give those accelerations back."""
+    arm = Arm.from_params(ArmParams.from_anthropometry(side=side))
+    t = np.linspace(0.0, 0.4, 4001)
+    s = 10 * (t / 0.4) ** 3 - 15 * (t / 0.4) ** 4 + 6 * (t / 0.4) ** 5
+    start = arm.rest_position()
+    sign = -1.0 if side == "left" else 1.0
+    x = start + np.c_[sign * 0.08 * s, -0.1 * s + 0.03 * np.sin(np.pi * s)]
+    v = np.gradient(x, t, axis=0, edge_order=2)
+    a = np.gradient(v, t, axis=0, edge_order=2)
+    f = hand_inertial_force(arm, x, v, a)
+    q = arm.ik(x)
+    qd = np.gradient(q, t, axis=0, edge_order=2)
+    qdd = np.gradient(qd, t, axis=0, edge_order=2)
+    on_hand = -f * (np.array([-1.0, 1.0]) if arm.mirror else 1.0)  # model frame
+    qdd_fd = forward_dynamics(arm, q, qd, on_hand, muscles=False)
+    inner = slice(20, -20)
+    assert np.abs(qdd_fd[inner] - qdd[inner]).max() < 1e-3 * np.abs(qdd).max()
+    assert np.abs(f).max() > 1.0  # a real load: ~10 N for 13 cm in 0.4 s
+    assert hand_inertial_force(arm, x[:1], np.zeros((1, 2)), np.zeros((1, 2))) == \
+        pytest.approx(np.zeros((1, 2)))

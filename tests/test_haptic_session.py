@@ -304,7 +304,9 @@ def test_handshake_times_out_without_a_device() -> None:
 # --- motions and models ---------------------------------------------------------------------
 @pytest.mark.parametrize("kind", motions.MOTIONS)
 def test_motions_start_at_rest_and_velocity_is_the_derivative(kind: str) -> None:
-    m = motions.make_motion(kind, 0.1, 0.5, seed=2)
+    # a path is its polyline (robot frame); here one starting at (0.1, 0.5)
+    path = motions.format_path([(0.0, 0.1, 0.5), (0.4, 0.16, 0.47), (1.0, 0.12, 0.38)])
+    m = motions.make_motion(kind, 0.1, 0.5, seed=2, path_text=path if kind == "path" else "")
     x, y, vx, vy = m(0.0)
     assert (x, y) == pytest.approx((0.1, 0.5), abs=1e-12) and (vx, vy) == (0.0, 0.0)
     h = 1e-6

@@ -9,7 +9,12 @@ so that fitting, interventions and haptics can all use them.
 Modules
 -------
 probing   the seed's probing motions, the force felt along them, the clinic's slow and fast
-          single-joint stretches (resisting torque, its velocity-dependent part, Tardieu catch)
+          single-joint stretches (resisting torque, its velocity-dependent part, Tardieu catch);
+          a probe as plain data (ProbePath)
+design    probing motions that tell candidate arms apart: what a hand feels, information,
+          the seed's min-max and orientation paradigms, the search
+classify  a recorded probe scored against candidate arms; the next probe
+plot      figures of probes and classifications (matplotlib loads with the first figure)
 compare   standard conditions, one arm's evaluation on them, before/after comparison
 arms      ArmCache: each distinct parameter set compiled once per use case
 

@@ -15,6 +15,10 @@ The force felt is the model's endpoint force F(x, v) along the path with the pat
 a quasi-static kinematic probe (the handle imposes the motion; the reflex sees the velocity;
 the arm's inertia is left out, as the clinician's feel of tone is about the muscles).
 
+Every motion can be handed on as a :class:`ProbePath` (:meth:`ProbeMotion.path`): a name, a
+plain-words description and a polyline of hand positions in the robot frame with their times —
+what a station draws and what the simulated operator of :mod:`fieldbank.haptic` follows.
+
 Joint stretches complement the strokes with the clinic's single-joint tests (Modified Ashworth,
 Tardieu): one joint swept through its whole range, the other held at the rest posture, once slowly
 (:data:`SLOW_STRETCH_SPEED_RAD_S`, 5°/s: BRIEF §5 "≈ 5-10°/s", Tardieu V1 "as slow as possible")
@@ -68,22 +72,80 @@ JOINTS: tuple[str, ...] = ("shoulder", "elbow")
 DIRECTION_SIGN: dict[str, float] = {"flexion": 1.0, "extension": -1.0}
 
 
-def _min_jerk(samples: int) -> tuple[FloatArray, FloatArray]:
-    tau = np.linspace(0.0, 1.0, samples)
+def min_jerk(tau: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Minimum-jerk progress s(τ) and ds/dτ for τ in [0, 1] (any shape)."""
     s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
     ds = 30 * tau**2 - 60 * tau**3 + 30 * tau**4
     return s, ds
 
 
+def _min_jerk(samples: int) -> tuple[FloatArray, FloatArray]:
+    return min_jerk(np.linspace(0.0, 1.0, samples))
+
+
+@dataclass(frozen=True)
+class ProbePath:
+    """A probe as plain data: a polyline of hand positions with timing, in the robot frame.
+
+    Attributes
+    ----------
+    name : str
+        Short name ("pull", "stroke 1").
+    description : str
+        What to do, in words.
+    times_s : tuple of float, s
+        Time of each point from the start of the motion (increasing, first 0).
+    points_m : tuple of (x, y), m
+        Hand positions in the robot frame (shoulder frame + ``shoulder_offset_m``).
+    shoulder_offset_m : (x, y), m
+        Where the shoulder is in robot coordinates.
+    """
+
+    name: str
+    description: str
+    times_s: tuple[float, ...]
+    points_m: tuple[tuple[float, float], ...]
+    shoulder_offset_m: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def duration_s(self) -> float:
+        return self.times_s[-1] if self.times_s else 0.0
+
+    def to_dict(self) -> dict[str, object]:
+        return {"name": self.name, "description": self.description, "frame": "robot",
+                "shoulder_offset_m": list(self.shoulder_offset_m),
+                "times_s": [round(t, 6) for t in self.times_s],
+                "points_m": [[round(x, 6), round(y, 6)] for x, y in self.points_m]}
+
+
 @dataclass(frozen=True, eq=False)
 class ProbeMotion:
-    """A handle path: positions (T, 2) m, velocities (T, 2) m/s, times (T,) s."""
+    """A handle path: positions (T, 2) m, velocities (T, 2) m/s, times (T,) s (shoulder frame)."""
 
     name: str
     times_s: FloatArray
     positions_m: FloatArray
     velocities_m_per_s: FloatArray
     description: str
+
+    def path(self, shoulder_offset_m: tuple[float, float] = (0.0, 0.0)) -> ProbePath:
+        """This motion as plain data in the robot frame (:class:`ProbePath`)."""
+        ox, oy = shoulder_offset_m
+        return ProbePath(self.name, self.description,
+                         tuple(float(t - self.times_s[0]) for t in self.times_s),
+                         tuple((float(x) + ox, float(y) + oy) for x, y in self.positions_m),
+                         (float(ox), float(oy)))
+
+    @property
+    def accelerations_m_per_s2(self) -> FloatArray:
+        """Hand accelerations (T, 2), m/s², differentiated from the velocities."""
+        return np.asarray(np.gradient(self.velocities_m_per_s, self.times_s, axis=0,
+                                      edge_order=2), dtype=float)
+
+    @property
+    def peak_speed_m_per_s(self) -> float:
+        v = self.velocities_m_per_s
+        return float(np.hypot(v[:, 0], v[:, 1]).max()) if len(v) else 0.0
 
 
 def pull(arm: Arm, distance_m: float = PULL_DISTANCE_M, duration_s: float = PULL_DURATION_S,

@@ -1,0 +1,458 @@
+"""``fieldbank probe design|classify|paths|trials``: probing motions that tell candidate arms
+apart, and which candidate made a recorded trace."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+
+from fieldbank import modelsource, plotting
+from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.errors import ParameterError
+from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.classify import PREDICTORS, Classification, Observation, classify
+from fieldbank.evaluate.design import (
+    CRITERIA,
+    FAMILIES,
+    TARGETS,
+    Candidate,
+    DesignReport,
+    NoiseModel,
+    Perception,
+    ProbeLimits,
+    ProbeSetScore,
+    check_candidates,
+    circles,
+    design_report,
+    direction_words,
+    equilibrium,
+    paradigms,
+    seed_probes,
+    severity_candidates,
+)
+from fieldbank.evaluate.plot import classification_figure, probe_figure
+from fieldbank.files import to_json, write_atomic
+from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
+from fieldbank.haptic.identify import designed_vs_seed
+from fieldbank.haptic.probe import observation_from_trace
+from fieldbank.haptic.recording import read_trace_h5
+from fieldbank.params import JOINT_GROUPS, ArmParams
+from fieldbank.severity import LEVELS, group_name, level_name
+
+F = TypeVar("F", bound=Callable[..., Any])
+ALL_LEVELS = ("very mild", "mild", "moderate", "severe")
+
+
+def _say(msg: str) -> None:
+    click.echo(msg, err=True)
+
+
+def _pair(text: str | None, name: str) -> tuple[float, float]:
+    if text is None:
+        return (0.0, 0.0)
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise click.BadParameter(f"{name} must read X,Y in metres; got {text!r}") from None
+    return (a, b)
+
+
+def _list(text: str | None, canon: Callable[[str], str], every: tuple[str, ...]) -> list[str]:
+    if text is None:
+        return []
+    if text.strip().lower() == "all":
+        return list(every)
+    return [canon(t) for t in text.split(",") if t.strip()]
+
+
+def candidate_options(f: F) -> F:
+    """The candidate arms: synthetic severities, parameter files, stored models."""
+    opts = [
+        click.option("--groups", default="shoulder,elbow,biarticular", show_default=True,
+                     help="Impaired groups of the synthetic candidates (or 'all')."),
+        click.option("--levels", default=None,
+                     help="Severities of the synthetic candidates, e.g. severe or "
+                          "'very-mild,mild,moderate,severe' or 'all' (default: severe, or none "
+                          "when other candidates are given)."),
+        click.option("--unimpaired", is_flag=True, help="Add the unimpaired arm."),
+        click.option("--candidate-params", "param_files", multiple=True,
+                     type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                     help="A candidate from a parameter file (named by the file). Repeatable."),
+        click.option("--candidate-model", "model_ids", multiple=True, type=int,
+                     help="A candidate from a stored model id. Repeatable."),
+        click.option("--mass", type=float, help="Body mass of the synthetic arms, kg."),
+        click.option("--height", type=float, help="Height of the synthetic arms, m."),
+        click.option("--side", type=click.Choice(["right", "left"]),
+                     help="Side of the synthetic arms (default right)."),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+def noise_options(f: F) -> F:
+    """The noise model and what a hand feels."""
+    d = NoiseModel()
+    p = Perception()
+    opts = [
+        click.option("--force-sd-n", type=float, default=d.force_sd_n, show_default=True,
+                     help="Force noise per axis, N (assumption)."),
+        click.option("--correlation-s", type=float, default=d.correlation_s, show_default=True,
+                     help="Time over which force noise decorrelates, s (assumption)."),
+        click.option("--direction-sd-deg", type=float, default=d.direction_sd_deg,
+                     show_default=True, help="Operator's scatter of a probe's direction, °."),
+        click.option("--length-sd", type=float, default=d.length_sd, show_default=True,
+                     help="Operator's relative scatter of a probe's length."),
+        click.option("--speed-sd", type=float, default=d.speed_sd, show_default=True,
+                     help="Operator's relative scatter of a probe's speed."),
+        click.option("--force-jnd", type=float, default=p.force_jnd, show_default=True,
+                     help="Weber fraction of force magnitude."),
+        click.option("--direction-jnd-deg", type=float, default=p.direction_jnd_deg,
+                     show_default=True, help="Force-direction threshold, °."),
+        click.option("--free-exploration", is_flag=True,
+                     help="Judge magnitudes with the free-exploration Weber fraction 0.6."),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+def limit_options(f: F) -> F:
+    d = ProbeLimits()
+    opts = [
+        click.option("--max-speed", type=float, default=d.max_speed_m_per_s, show_default=True,
+                     help="Peak hand speed of a probe, m/s."),
+        click.option("--force-limit-n", type=float, default=d.force_limit_n, show_default=True,
+                     help="The renderer's force saturation, N."),
+        click.option("--workspace", metavar="XMIN,XMAX,YMIN,YMAX",
+                     help="Box the handle must stay in, robot frame, m."),
+        click.option("--shoulder-offset", metavar="X,Y",
+                     help="Shoulder position in robot coordinates, m (default 0,0)."),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+def build_candidates(groups: str, levels: str | None, unimpaired: bool,
+                     param_files: tuple[Path, ...], model_ids: tuple[int, ...],
+                     mass: float | None, height: float | None, side: str | None,
+                     db_url: str | None) -> list[Candidate]:
+    cache = ArmCache()
+    base = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
+    out: list[Candidate] = []
+    lv = levels if levels is not None else (None if param_files or model_ids else "severe")
+    if lv:
+        gs = _list(groups, group_name, tuple(JOINT_GROUPS))
+        ls = _list(lv, level_name, ALL_LEVELS)
+        out += severity_candidates(gs, ls, unimpaired=unimpaired, base=base, cache=cache)
+    elif unimpaired:
+        out.append(Candidate.from_severity(None, "unimpaired", base, cache))
+    for path in param_files:
+        out.append(Candidate(path.stem, cache(ArmParams.from_file(path))))
+    if model_ids:
+        with open_db(db_url) as db:
+            for mid in model_ids:
+                src = modelsource.stored(db, mid)
+                out.append(Candidate(f"model {mid}", cache(src.params),
+                                     notes=tuple(f"rests on a guess: {g}"
+                                                 for g in src.guesses)))
+    return list(check_candidates(out, 2))
+
+
+def build_noise(force_sd_n: float, correlation_s: float, direction_sd_deg: float,
+                length_sd: float, speed_sd: float, force_jnd: float, direction_jnd_deg: float,
+                free_exploration: bool) -> tuple[NoiseModel, Perception]:
+    noise = NoiseModel(force_sd_n=force_sd_n, correlation_s=correlation_s,
+                       direction_sd_deg=direction_sd_deg, length_sd=length_sd,
+                       speed_sd=speed_sd)
+    perception = Perception.free_exploration() if free_exploration else \
+        Perception(force_jnd=force_jnd, direction_jnd_deg=direction_jnd_deg)
+    return noise, perception
+
+
+def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
+                 shoulder_offset: str | None) -> tuple[ProbeLimits, tuple[float, float]]:
+    offset = _pair(shoulder_offset, "--shoulder-offset")
+    box = None
+    if workspace is not None:
+        try:
+            x0, x1, y0, y1 = (float(v) for v in workspace.split(","))
+        except ValueError:
+            raise click.BadParameter(f"--workspace must read XMIN,XMAX,YMIN,YMAX in metres; "
+                                     f"got {workspace!r}") from None
+        box = (x0 - offset[0], x1 - offset[0], y0 - offset[1], y1 - offset[1])
+    return ProbeLimits(max_speed_m_per_s=max_speed, force_limit_n=force_limit_n,
+                       workspace_m=box), offset
+
+
+def _save_plot(fig: Any, path: Path) -> None:
+    plotting.save(fig, path)
+    _say(f"plot: {path}")
+
+
+# --- text read-outs ---------------------------------------------------------------------------
+def _set_text(score: ProbeSetScore, side: str) -> list[str]:
+    lines = []
+    for p in score.probes:
+        lines.append(f"  {p.name}: {p.motion.description} (peak speed "
+                     f"{p.motion.peak_speed_m_per_s:.2f} m/s)")
+        for f in p.features:
+            words = direction_words(f.max_direction_deg, side)
+            lines.append(f"    {f.candidate:<22} peak {f.max_force_n:6.1f} N toward "
+                         f"{f.max_direction_deg:5.0f}° ({words}) at {f.max_at_s:.2f} s, "
+                         f"{f.max_at_fraction * 100:.0f}% along")
+    s = score.summary()
+    lines.append(f"  information: {s['information_bits']:.2f} of {s['information_max_bits']:.2f}"
+                 f" bits about the {score.target}; closest pair felt {s['worst_felt_jnd']:.1f} "
+                 f"JND apart; worst pairwise error {s['worst_error_probability']:.2g}")
+    miss = score.unseparated("feel")
+    lines.append("  every pair felt apart" if not miss else
+                 "  not felt apart: " + "; ".join(f"{a} / {b}" for a, b in miss))
+    return lines
+
+
+def _notes(cands: list[Candidate]) -> list[str]:
+    return [f"note: {c.name}: {n}" for c in cands for n in c.notes]
+
+
+def _design_text(rep: DesignReport, side: str) -> str:
+    d = rep.design
+    lines = [f"designed ({d.criterion}, {d.family}s, target {d.score.target}; search "
+             f"{d.search_s:.2f} s, {d.evaluations} paths evaluated):"]
+    lines += _set_text(d.score, side)
+    lines.append("the seed's pull and semi-ellipse, measured the same way:")
+    lines += _set_text(rep.seed, side)
+    return "\n".join(lines)
+
+
+@click.group("probe")
+def probe() -> None:
+    """Design probing motions that tell candidate arms apart; classify recorded traces."""
+
+
+@probe.command("design")
+@candidate_options
+@click.option("--criterion", type=click.Choice(CRITERIA), default="feel", show_default=True,
+              help="feel: felt differences in JNDs; information: bits; orientation / minmax: "
+                   "the seed's paradigms alone.")
+@click.option("--family", type=click.Choice(list(FAMILIES)), default=None,
+              help="stroke (default) or circle (default for --criterion minmax).")
+@click.option("--target", type=click.Choice(TARGETS), default="candidate", show_default=True,
+              help="Tell every candidate apart, or only the impaired groups.")
+@click.option("--max-probes", type=click.IntRange(min=1), default=None,
+              help="At most this many probes (default: number of candidates - 1).")
+@noise_options
+@limit_options
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the probes (polylines in the robot frame with timing) as JSON.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Figure of the paths and force profiles (.png or .svg).")
+@db_option
+@json_option
+def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tuple[Path, ...],
+               model_ids: tuple[int, ...], mass: float | None, height: float | None,
+               side: str | None, criterion: str, family: str | None, target: str,
+               max_probes: int | None, force_sd_n: float, correlation_s: float,
+               direction_sd_deg: float, length_sd: float, speed_sd: float, force_jnd: float,
+               direction_jnd_deg: float, free_exploration: bool, max_speed: float,
+               force_limit_n: float, workspace: str | None, shoulder_offset: str | None,
+               out: Path | None, plot_path: Path | None, db_url: str | None,
+               as_json: bool) -> None:
+    """Find the probing motions that best tell the candidate arms apart."""
+    cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
+                             side, db_url)
+    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
+                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    limits, offset = build_limits(max_speed, force_limit_n, workspace, shoulder_offset)
+    fam = family or ("circle" if criterion == "minmax" else "stroke")
+    rep = design_report(cands, criterion=criterion, family=fam, target=target,
+                        max_probes=max_probes, perception=perception, noise=noise,
+                        limits=limits)
+    doc = rep.to_dict(offset)
+    if out is not None:
+        write_atomic(out, to_json({"format": "fieldbank-probes", "version": 1,
+                                   "probes": [m.path(offset).to_dict()
+                                              for m in rep.design.motions]}) + "\n")
+        _say(f"probes: {out}")
+    if plot_path is not None:
+        _save_plot(probe_figure(rep.design.score, cands, "designed probes"), plot_path)
+    arm_side = "left" if cands[0].arm.mirror else "right"
+    emit(doc, as_json, "\n".join([_design_text(rep, arm_side), *_notes(cands)]))
+
+
+def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | None,
+                       offset: tuple[float, float] | None) -> list[Observation]:
+    out = []
+    for ref in refs:
+        if ref.startswith(SESSION_PREFIX):
+            try:
+                sid = int(ref[len(SESSION_PREFIX):])
+            except ValueError:
+                raise click.BadParameter(f"expected {SESSION_PREFIX}ID; got {ref!r}") from None
+            with open_db(db_url) as db:
+                trace = read_trace_db(db, sid)
+            out.append(observation_from_trace(trace, ref, ref, model))
+        elif not Path(ref).is_file():
+            raise click.BadParameter(f"no trace file {ref!r} (nor {SESSION_PREFIX}ID)")
+        elif Path(ref).suffix.lower() in (".h5", ".hdf5"):
+            out.append(observation_from_trace(read_trace_h5(ref), Path(ref).stem, ref, model))
+        else:
+            out.append(Observation.from_csv(ref, offset))
+    return out
+
+
+def _classification_text(cl: Classification) -> str:
+    lines = [cl.verdict()]
+    if cl.knows_groups:
+        lines.append("  groups: " + ", ".join(f"{g} {p:.3g}"
+                                              for g, p in cl.group_posterior.items()))
+        lines.append("  levels: " + ", ".join(f"{g} {p:.3g}"
+                                              for g, p in cl.level_posterior.items()))
+    order = sorted(range(len(cl.candidates)), key=lambda k: -cl.posterior[k])
+    for k in order[:6]:
+        lines.append(f"    {cl.candidates[k].name:<22} p = {cl.posterior[k]:.3g}   residual "
+                     f"{cl.rms_residual_n[k]:.2f} N RMS")
+    lines.append(f"  likelihood ratio best : runner-up = 10^{cl.log10_likelihood_ratio:.1f}")
+    if cl.next_probe is not None:
+        p = cl.next_probe.score.probes[0]
+        lines.append(f"next probe: {p.motion.description}; {cl.next_reason}")
+    else:
+        lines.append(f"next probe: {cl.next_reason}")
+    return "\n".join(lines)
+
+
+@probe.command("classify")
+@click.argument("traces", nargs=-1, required=True, metavar="TRACE...")
+@candidate_options
+@noise_options
+@limit_options
+@click.option("--predictor", type=click.Choice(PREDICTORS), default="replay", show_default=True,
+              help="replay: the recorded motion drives each candidate's virtual arm (rendered "
+                   "traces); rigid: muscles and inertia of a rigidly held arm (measured "
+                   "traces); static: the muscles' force at the recorded position and velocity.")
+@click.option("--model", type=click.Choice(["A", "B"]), default=None,
+              help="In a session that rendered two models, the ticks of this one.")
+@click.option("--no-next", is_flag=True, help="Do not design the next probe.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Figure of the recorded and predicted forces and the posterior.")
+@db_option
+@json_option
+def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimpaired: bool,
+                 param_files: tuple[Path, ...], model_ids: tuple[int, ...],
+                 mass: float | None, height: float | None, side: str | None,
+                 force_sd_n: float, correlation_s: float, direction_sd_deg: float,
+                 length_sd: float, speed_sd: float, force_jnd: float,
+                 direction_jnd_deg: float, free_exploration: bool, max_speed: float,
+                 force_limit_n: float, workspace: str | None, shoulder_offset: str | None,
+                 predictor: str, model: str | None, no_next: bool, plot_path: Path | None,
+                 db_url: str | None, as_json: bool) -> None:
+    """Name the candidate arm most likely to have made the recorded TRACEs, and the next probe.
+
+    A TRACE is a haptic trace file (.h5), a database session (haptic_session:ID) or a CSV with
+    columns t_s,x_m,y_m,fx_n,fy_n (and vx_m_per_s,vy_m_per_s) and '# frame:' / '# sign:' lines.
+    """
+    cands = build_candidates(groups, levels if levels is not None else
+                             (None if param_files or model_ids else "all"), unimpaired,
+                             param_files, model_ids, mass, height, side, db_url)
+    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
+                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    limits, offset = build_limits(max_speed, force_limit_n, workspace, shoulder_offset)
+    obs = _read_observations(traces, db_url, model,
+                             offset if shoulder_offset is not None else None)
+    cl = classify(obs, cands, noise=noise, predictor=predictor, next_probe=not no_next,
+                  perception=perception, limits=limits)
+    if plot_path is not None:
+        _save_plot(classification_figure(cl), plot_path)
+    emit(cl.to_dict(offset), as_json, "\n".join([_classification_text(cl), *_notes(cands)]))
+
+
+@probe.command("paths")
+@candidate_options
+@click.option("--radii-cm", default="4,6,8", show_default=True,
+              help="Radii of the circles around the equilibrium, cm.")
+@noise_options
+@limit_options
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Figure of the paths and force profiles.")
+@db_option
+@json_option
+def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tuple[Path, ...],
+              model_ids: tuple[int, ...], mass: float | None, height: float | None,
+              side: str | None, radii_cm: str, force_sd_n: float, correlation_s: float,
+              direction_sd_deg: float, length_sd: float, speed_sd: float, force_jnd: float,
+              direction_jnd_deg: float, free_exploration: bool, max_speed: float,
+              force_limit_n: float, workspace: str | None, shoulder_offset: str | None,
+              plot_path: Path | None, db_url: str | None, as_json: bool) -> None:
+    """The min-max and orientation paradigms on the seed's pull, semi-ellipse and circles."""
+    cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
+                             side, db_url)
+    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
+                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    limits, _offset = build_limits(max_speed, force_limit_n, workspace, shoulder_offset)
+    try:
+        radii = [float(r) / 100.0 for r in radii_cm.split(",") if r.strip()]
+    except ValueError:
+        raise click.BadParameter(f"--radii-cm must be numbers; got {radii_cm!r}") from None
+    arm_side = "left" if cands[0].arm.mirror else "right"
+    motions = seed_probes(cands) + circles(equilibrium(cands), radii, side=arm_side)
+    closed = [False, False] + [True] * len(radii)
+    res = paradigms(cands, motions, closed=closed, perception=perception, noise=noise,
+                    limits=limits)
+    if plot_path is not None:
+        _save_plot(probe_figure(res.score, cands, "the seed's probes and circles"), plot_path)
+    lines = []
+    for p in res.score.probes:
+        lines.append(f"{p.name}: {p.motion.description}")
+        for f in p.features:
+            lines.append(f"  {f.candidate:<22} max {f.max_force_n:6.1f} N at "
+                         f"{f.max_at_fraction * 100:3.0f}% toward {f.max_direction_deg:5.0f}°, "
+                         f"min {f.min_force_n:5.1f} N at {f.min_at_fraction * 100:3.0f}%")
+    for what, chosen, ok in (("min-max", res.minmax_set, res.minmax_complete),
+                             ("orientation", res.orientation_set, res.orientation_complete)):
+        lines.append(f"{what} paradigm: {', '.join(chosen) or 'no path'} "
+                     + ("separates every pair" if ok else "does not separate every pair"))
+    emit(res.to_dict(), as_json, "\n".join(lines + _notes(cands)))
+
+
+@probe.command("trials")
+@click.option("--groups", default="shoulder,elbow,biarticular", show_default=True,
+              help="Impaired groups of the true arms (and the candidates).")
+@click.option("--levels", default="all", show_default=True,
+              help="Severities of the true arms (and the candidates).")
+@click.option("--reps", type=click.IntRange(min=1), default=3, show_default=True,
+              help="Executions of each probe set on each (group, severity) arm.")
+@click.option("--draws", type=click.IntRange(min=1), default=4, show_default=True,
+              help="Force-noise draws met by each execution.")
+@click.option("--max-probes", type=click.IntRange(min=1), default=2, show_default=True,
+              help="Probes in the designed set (the seed's set has 2).")
+@click.option("--criterion", type=click.Choice(CRITERIA), default="information",
+              show_default=True)
+@noise_options
+@click.option("--seed", "rng_seed", type=int, default=0, show_default=True)
+@json_option
+def trials_cmd(groups: str, levels: str, reps: int, draws: int, max_probes: int,
+               criterion: str, force_sd_n: float, correlation_s: float,
+               direction_sd_deg: float, length_sd: float, speed_sd: float, force_jnd: float,
+               direction_jnd_deg: float, free_exploration: bool, rng_seed: int,
+               as_json: bool) -> None:
+    """Simulated identification trials: designed probes against the seed's, confusion matrices."""
+    gs = _list(groups, group_name, tuple(JOINT_GROUPS))
+    ls = _list(levels, level_name, ALL_LEVELS)
+    if not gs or not ls or LEVELS[0] in ls:
+        raise ParameterError("Give impaired groups and levels from very mild to severe.")
+    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
+                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    rep, res = designed_vs_seed(
+        severity_candidates(gs, ls), groups=gs, levels=ls, repetitions=reps, noise_draws=draws,
+        noise=noise, perception=perception, criterion=criterion, max_probes=max_probes,
+        seed=rng_seed, progress=lambda k, n: _say(f"trial {k}/{n}") if k % 60 == 0 else None)
+    doc = {"designed": rep.design.to_dict(), "seed_probes": rep.seed.to_dict(),
+           "trials": res.to_dict()}
+    head = ("designed: " + "; ".join(p.describe() for p in rep.design.paths)
+            + f"\n{reps} execution(s) × {draws} noise draw(s) per arm; force noise "
+              f"{noise.force_sd_n:g} N per axis, τ {noise.correlation_s:g} s")
+    emit(doc, as_json, head + "\n" + res.table())

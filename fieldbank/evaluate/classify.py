@@ -1,0 +1,567 @@
+"""Which candidate arm made a recorded trace (seed, "Future directions": the likelihood of the
+recorded forces given the recorded motion names the impaired group and its severity).
+
+An :class:`Observation` is one recorded probing motion: the handle's positions and velocities
+and the force the arm put on the handle, in the shoulder frame. Each candidate predicts the
+force *for the recorded motion* - with its velocity, so the stretch reflex counts:
+
+* ``replay`` (default) - the recorded handle motion drives the candidate's virtual arm through
+  the virtual coupling, tick by tick (:class:`fieldbank.sim.ArmSim`), from rest at the first
+  sample (or where a renderer put it): for a rendered trace this reproduces the force the
+  renderer computed, arm inertia and coupling included; for a measured one it is the model of a
+  hand holding the arm through a stiff, damped coupling;
+* ``rigid`` - a hand holding the rigid arm: the endpoint force at the recorded position and
+  velocity plus the arm's inertia (:func:`fieldbank.dynamics.hand_inertial_force`), the
+  acceleration from a Savitzky-Golay derivative of the recorded velocity over
+  :data:`ACCELERATION_WINDOW_S` - for traces measured on a patient;
+* ``static`` - the kinematic probe of :mod:`fieldbank.evaluate.probing`: the endpoint force at
+  the recorded position and velocity (inertia left out).
+
+Predictions are saturated at the renderer's force limit when the observation says it had one.
+
+Likelihood (the noise model of :mod:`fieldbank.evaluate.design`): the recorded force is the
+prediction plus Gaussian noise of SD σ per axis that decorrelates over τ, so each sample k
+counts Δt_k/τ times::
+
+    log L_c = −Σ_k (Δt_k/τ) |F_rec,k − F_c,k|² / (2σ²)
+
+summed over the observations. The posterior over candidates is prior × likelihood, normalised;
+the group's probability sums its severities. The classification says whether the best
+candidate explains the trace at all (mean squared residual against σ²) and designs the next
+probe - the stroke carrying the most information about the candidates still in play, with the
+posterior as the prior (:func:`fieldbank.evaluate.design.design`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import savgol_filter
+
+from fieldbank.dynamics import hand_inertial_force
+from fieldbank.errors import ParameterError, Problem, UnreachableError, ValidationError
+from fieldbank.evaluate.design import (
+    Candidate,
+    NoiseModel,
+    Perception,
+    ProbeDesign,
+    ProbeLimits,
+    check_candidates,
+    check_prior,
+    design,
+    saturate,
+)
+from fieldbank.model import Arm, FloatArray
+from fieldbank.sim import ArmSim
+
+PREDICTORS = ("replay", "rigid", "static")
+#: Window of the Savitzky-Golay derivative giving the ``rigid`` predictor's accelerations, s.
+ACCELERATION_WINDOW_S = 0.025
+#: Stop suggesting probes when the most probable candidate has at least this probability.
+STOP_PROBABILITY = 0.99
+#: Candidates below this posterior are out of play for the next probe.
+REMAINING_PROBABILITY = 1e-3
+#: Mean squared residual per axis above this many σ² means no candidate explains the trace.
+MISFIT_RATIO = 4.0
+#: Replay accepts sample periods within this fraction of the median period.
+RATE_TOLERANCE = 0.25
+
+_COLUMNS = ("t_s", "x_m", "y_m", "fx_n", "fy_n")
+_VELOCITY = ("vx_m_per_s", "vy_m_per_s")
+_SIGNS = {"force on the handle": 1.0, "arm-on-handle": 1.0, "handle-on-arm": -1.0}
+
+
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """One recorded probing motion (shoulder frame, SI; force the arm exerts on the handle).
+
+    Attributes
+    ----------
+    name : str
+    times_s : ndarray, shape (T,), s (increasing)
+    positions_m : ndarray, shape (T, 2), m
+    velocities_m_per_s : ndarray, shape (T, 2), m/s
+    force_n : ndarray, shape (T, 2), N
+    force_limit_n : float or None, N
+        Saturation of the force when it was rendered.
+    reset_m : (x, y) or None, m
+        Where the renderer put the virtual arm at rest (default: the first position).
+    source : str
+        Where the observation came from (file, database session).
+    output_gain : ndarray, shape (T,), or None
+        The renderer's output gain per sample (its arming ramp), applied to every prediction.
+    counted : ndarray of bool, shape (T,), or None
+        Samples the likelihood counts (default all); the others only carry the replay forward
+        (e.g. while a renderer blended two models).
+    """
+
+    name: str
+    times_s: FloatArray
+    positions_m: FloatArray
+    velocities_m_per_s: FloatArray
+    force_n: FloatArray
+    force_limit_n: float | None = None
+    reset_m: tuple[float, float] | None = None
+    source: str = ""
+    output_gain: FloatArray | None = None
+    counted: NDArray[np.bool_] | None = None
+
+    @classmethod
+    def from_arrays(cls, name: str, times_s: object, positions_m: object, force_n: object,
+                    velocities_m_per_s: object | None = None, *,
+                    force_limit_n: float | None = None,
+                    reset_m: tuple[float, float] | None = None,
+                    source: str = "", output_gain: object | None = None,
+                    counted: object | None = None) -> Observation:
+        """Check shapes and values; velocities by differentiating positions when not given."""
+        where = source or name
+        t = np.asarray(times_s, dtype=float)
+        x = np.asarray(positions_m, dtype=float)
+        f = np.asarray(force_n, dtype=float)
+        problems = []
+        if t.ndim != 1 or t.shape[0] < 3:
+            problems.append(Problem(where, f"times_s must be a 1-D array of at least 3 samples; "
+                                           f"got shape {t.shape}"))
+        for label, a in (("positions_m", x), ("force_n", f)):
+            if a.shape != (t.shape[0], 2):
+                problems.append(Problem(where, f"{label} must have shape ({t.shape[0]}, 2); got "
+                                               f"{a.shape}"))
+        if problems:
+            raise ValidationError(problems, f"Observation {name!r} is malformed:")
+        v = None if velocities_m_per_s is None else np.asarray(velocities_m_per_s, dtype=float)
+        if v is not None and v.shape != x.shape:
+            raise ValidationError([Problem(where, f"velocities_m_per_s must have shape "
+                                                  f"{x.shape}; got {v.shape}")])
+        for label, arr in (("times_s", t), ("positions_m", x), ("velocities_m_per_s", v),
+                           ("force_n", f)):
+            if arr is None:
+                continue
+            bad = ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
+            if bad.any():
+                problems.append(Problem(f"{where}: sample {int(np.argmax(bad))}",
+                                        f"{label} is not finite ({int(bad.sum())} samples)"))
+        if np.any(np.diff(t) <= 0):
+            k = int(np.argmax(np.diff(t) <= 0)) + 1
+            problems.append(Problem(f"{where}: sample {k}", "times_s must increase; "
+                                                           f"{t[k]:g} s follows {t[k - 1]:g} s"))
+        gain = None if output_gain is None else np.asarray(output_gain, dtype=float)
+        mask = None if counted is None else np.asarray(counted, dtype=bool)
+        for label, extra in (("output_gain", gain), ("counted", mask)):
+            if extra is not None and extra.shape != t.shape:
+                problems.append(Problem(where, f"{label} must have shape {t.shape}; got "
+                                               f"{extra.shape}"))
+        if mask is not None and mask.shape == t.shape and mask.sum() < 3:
+            problems.append(Problem(where, f"at least 3 samples must count; {int(mask.sum())} "
+                                           "do"))
+        if problems:
+            raise ValidationError(problems, f"Observation {name!r} is malformed:")
+        if v is None:
+            v = np.gradient(x, t, axis=0)
+        return cls(name, t, x, v, f, force_limit_n, reset_m, source, gain, mask)
+
+    @classmethod
+    def from_csv(cls, path: str | Path, shoulder_offset_m: tuple[float, float] | None = None,
+                 name: str | None = None) -> Observation:
+        """Read a recorded probe from CSV: ``# key: value`` metadata lines, a header, one row a
+        sample. Columns ``t_s,x_m,y_m,fx_n,fy_n`` (any order; ``vx_m_per_s,vy_m_per_s``
+        optional, other columns ignored). ``# frame: shoulder`` or ``robot`` (then the shoulder
+        offset comes from the argument, a ``# shoulder_offset_m: [x, y]`` line or the
+        ``renderer`` metadata of an exported haptic trace); ``# sign: force on the handle`` (or
+        ``arm-on-handle``) or ``handle-on-arm``. Every problem is reported with its row."""
+        p = Path(path)
+        try:
+            lines = p.read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ValidationError([Problem(str(p), f"cannot read: {exc}")]) from None
+        meta: dict[str, str] = {}
+        body: list[tuple[int, str]] = []
+        for n, ln in enumerate(lines, start=1):
+            if ln.startswith("#"):
+                key, _, value = ln[1:].partition(":")
+                meta[key.strip().lower()] = value.strip()
+            elif ln.strip():
+                body.append((n, ln))
+        problems: list[Problem] = []
+        if not body:
+            raise ValidationError([Problem(str(p), "no header row and no samples")])
+        header = [h.strip() for h in body[0][1].split(",")]
+        missing = [c for c in _COLUMNS if c not in header]
+        if missing:
+            raise ValidationError([Problem(f"{p}:row {body[0][0]}",
+                                           f"missing column(s) {', '.join(missing)}; got "
+                                           f"{', '.join(header)}")])
+        want = list(_COLUMNS) + [c for c in _VELOCITY if c in header]
+        col = {c: header.index(c) for c in want}
+        rows = []
+        for n, ln in body[1:]:
+            parts = ln.split(",")
+            try:
+                rows.append([float(parts[col[c]]) for c in want])
+            except (ValueError, IndexError):
+                problems.append(Problem(f"{p}:row {n}", f"expected numbers in "
+                                                        f"{', '.join(want)}; got {ln!r}"))
+        frame = meta.get("frame", "").split()[0].lower() if meta.get("frame") else ""
+        if frame not in ("shoulder", "robot"):
+            problems.append(Problem(str(p), f"'# frame:' must be shoulder or robot; got "
+                                            f"{meta.get('frame')!r}"))
+        sign_text = meta.get("sign", "").split("(")[0].strip().lower()
+        if sign_text not in _SIGNS:
+            problems.append(Problem(str(p), f"'# sign:' must be one of {', '.join(_SIGNS)}; got "
+                                            f"{meta.get('sign')!r}"))
+        offset = (0.0, 0.0)
+        if frame == "robot":
+            found = shoulder_offset_m or _offset_from_meta(meta)
+            if found is None:
+                problems.append(Problem(str(p), "positions are in the robot frame but the "
+                                                "shoulder's position is unknown: give it "
+                                                "(--shoulder-offset X,Y) or a "
+                                                "'# shoulder_offset_m: [x, y]' line"))
+            else:
+                offset = found
+        if len(rows) < 3 and not problems:
+            problems.append(Problem(str(p), f"at least 3 samples needed; got {len(rows)}"))
+        if problems:
+            raise ValidationError(problems, f"{p}: not a usable probe recording:")
+        a = np.array(rows)
+        pos = a[:, 1:3] - np.asarray(offset)
+        vel = a[:, 5:7] if len(want) == 7 else None
+        limit = _force_limit_from_meta(meta)
+        return cls.from_arrays(name or p.stem, a[:, 0], pos, _SIGNS[sign_text] * a[:, 3:5],
+                               vel, force_limit_n=limit, source=str(p))
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.times_s[-1] - self.times_s[0])
+
+    def weights(self, noise: NoiseModel) -> FloatArray:
+        """Δt_k/τ per counted sample (trapezoid): how many independent samples each is worth."""
+        dt = np.diff(self.times_s)
+        w = np.zeros(self.times_s.shape)
+        w[1:] += 0.5 * dt
+        w[:-1] += 0.5 * dt
+        if self.counted is not None:
+            w = np.where(self.counted, w, 0.0)
+        return w / noise.correlation_s
+
+    def replace_force(self, force_n: FloatArray) -> Observation:
+        """The same motion with another recorded force."""
+        return Observation(self.name, self.times_s, self.positions_m, self.velocities_m_per_s,
+                           force_n, self.force_limit_n, self.reset_m, self.source,
+                           self.output_gain, self.counted)
+
+
+def _json_value(text: str) -> object:
+    try:
+        return json.loads(text)
+    except ValueError:
+        return None
+
+
+def _offset_from_meta(meta: dict[str, str]) -> tuple[float, float] | None:
+    for raw in (meta.get("shoulder_offset_m"),
+                _nested(meta.get("renderer"), "shoulder_offset_m")):
+        if raw is None:
+            continue
+        val = _json_value(raw) if isinstance(raw, str) else raw
+        if isinstance(val, list) and len(val) == 2 and all(
+                isinstance(v, (int, float)) for v in val):
+            return (float(val[0]), float(val[1]))
+    return None
+
+
+def _force_limit_from_meta(meta: dict[str, str]) -> float | None:
+    raw = meta.get("force_limit_n")
+    val = _json_value(raw) if raw is not None else _nested(meta.get("safety"), "force_limit_n")
+    return float(val) if isinstance(val, (int, float)) and val > 0 else None
+
+
+def _nested(raw: str | None, key: str) -> object:
+    if raw is None:
+        return None
+    d = _json_value(raw)
+    return d.get(key) if isinstance(d, dict) else None
+
+
+def with_force_noise(obs: Observation, noise: NoiseModel, rng: np.random.Generator
+                     ) -> Observation:
+    """``obs`` with simulated sensor noise added: per axis Gaussian with SD σ, correlated as an
+    Ornstein-Uhlenbeck process of time constant τ/2, whose integral time scale gives one
+    independent sample per τ - the noise the likelihood assumes."""
+    t = obs.times_s
+    dt = np.diff(t, prepend=t[0])
+    a = np.exp(-dt / (0.5 * noise.correlation_s))
+    e = rng.standard_normal((len(t), 2)) * noise.force_sd_n
+    out = np.empty_like(e)
+    out[0] = e[0]
+    scale = np.sqrt(1.0 - a * a)
+    for k in range(1, len(t)):
+        out[k] = a[k] * out[k - 1] + scale[k] * e[k]
+    return obs.replace_force(obs.force_n + out)
+
+
+def recorded_accelerations(obs: Observation) -> FloatArray:
+    """Hand accelerations (T, 2), m/s²: a Savitzky-Golay derivative (quadratic, window
+    :data:`ACCELERATION_WINDOW_S`) of the recorded velocity, which smooths what differencing
+    would amplify."""
+    dt = float(np.median(np.diff(obs.times_s)))
+    n = len(obs.times_s)
+    win = max(5, round(ACCELERATION_WINDOW_S / dt) | 1)
+    if win > n:
+        win = n if n % 2 else n - 1
+    if win < 3:
+        return np.asarray(np.gradient(obs.velocities_m_per_s, obs.times_s, axis=0), dtype=float)
+    return np.asarray(savgol_filter(obs.velocities_m_per_s, win, min(2, win - 1), deriv=1,
+                                    delta=dt, axis=0), dtype=float)
+
+
+def predict_observation(arm: Arm, obs: Observation, predictor: str = "replay") -> FloatArray:
+    """The force (T, 2), N, the arm puts on the handle for the recorded motion of ``obs``."""
+    if predictor in ("static", "rigid"):
+        try:
+            f = arm.endpoint_force(obs.positions_m, obs.velocities_m_per_s)
+            if predictor == "rigid":
+                f = f + hand_inertial_force(arm, obs.positions_m, obs.velocities_m_per_s,
+                                            recorded_accelerations(obs))
+        except UnreachableError as exc:
+            raise UnreachableError(f"{obs.source or obs.name}: {exc}") from None
+    elif predictor == "replay":
+        dt = np.diff(obs.times_s)
+        period = float(np.median(dt))
+        if np.any(np.abs(dt - period) > RATE_TOLERANCE * period) or not 2.5e-4 <= period <= 0.01:
+            raise ParameterError(
+                f"{obs.source or obs.name}: replay needs evenly spaced samples at 100 Hz-4 kHz "
+                f"(median period {period * 1e3:.3g} ms, from {dt.min() * 1e3:.3g} to "
+                f"{dt.max() * 1e3:.3g} ms); use the static predictor.")
+        sim = ArmSim(arm, dt_s=period)
+        rx, ry = obs.reset_m if obs.reset_m is not None else obs.positions_m[0]
+        try:
+            sim.reset_at_hand(float(rx), float(ry))
+        except UnreachableError as exc:
+            raise UnreachableError(f"{obs.source or obs.name}: the first position: {exc}") \
+                from None
+        tick = sim.tick
+        x, v = obs.positions_m.tolist(), obs.velocities_m_per_s.tolist()
+        f = np.array([tick(p[0], p[1], u[0], u[1]) for p, u in zip(x, v, strict=True)])
+    else:
+        raise ParameterError(f"Unknown predictor {predictor!r}; known: {', '.join(PREDICTORS)}.")
+    if obs.output_gain is not None:
+        f = f * obs.output_gain[:, None]
+    return f if obs.force_limit_n is None else saturate(f, obs.force_limit_n)
+
+
+@dataclass(frozen=True, eq=False)
+class Classification:
+    """The candidates scored against recorded observations.
+
+    Attributes
+    ----------
+    candidates : tuple of Candidate
+    observations : tuple of Observation
+    prior, log_likelihood, posterior : ndarray, shape (n,)
+    rms_residual_n : ndarray, shape (n,), N
+        RMS of the recorded minus the predicted force (both axes) over all samples.
+    predictions : tuple of ndarray (n, T, 2)
+        Each candidate's predicted force per observation.
+    noise : NoiseModel
+    predictor : str
+    next_probe : ProbeDesign or None
+        The stroke that best separates the candidates still in play.
+    next_reason : str
+        Why there is no next probe, or what it is for.
+    """
+
+    candidates: tuple[Candidate, ...]
+    observations: tuple[Observation, ...]
+    prior: FloatArray
+    log_likelihood: FloatArray
+    posterior: FloatArray
+    rms_residual_n: FloatArray
+    predictions: tuple[FloatArray, ...]
+    noise: NoiseModel
+    predictor: str
+    next_probe: ProbeDesign | None
+    next_reason: str
+
+    @property
+    def best(self) -> Candidate:
+        return self.candidates[int(np.argmax(self.posterior))]
+
+    @property
+    def probability(self) -> float:
+        return float(self.posterior.max())
+
+    def _marginal(self, key: str) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for c, p in zip(self.candidates, self.posterior, strict=True):
+            k = c.label if key == "group" else (c.level or c.name)
+            out[k] = out.get(k, 0.0) + float(p)
+        return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+
+    @property
+    def group_posterior(self) -> dict[str, float]:
+        """Probability of each impaired group (its severities summed), most probable first."""
+        return self._marginal("group")
+
+    @property
+    def level_posterior(self) -> dict[str, float]:
+        """Probability of each severity level (groups summed), most probable first."""
+        return self._marginal("level")
+
+    @property
+    def group(self) -> str:
+        return next(iter(self.group_posterior))
+
+    @property
+    def log10_likelihood_ratio(self) -> float:
+        """log₁₀ of the likelihood of the best candidate over the runner-up."""
+        ll = np.sort(self.log_likelihood)[::-1]
+        return float((ll[0] - ll[1]) / math.log(10.0)) if len(ll) > 1 else math.inf
+
+    @property
+    def explains(self) -> bool:
+        """Whether the best candidate's residual is within the noise model (≤ 2σ RMS)."""
+        k = int(np.argmax(self.posterior))
+        return bool(self.rms_residual_n[k] ** 2 / 2.0 <= MISFIT_RATIO * self.noise.force_sd_n ** 2)
+
+    @property
+    def knows_groups(self) -> bool:
+        """Whether the candidates say which group is impaired (synthetic severities)."""
+        return all(c.group is not None or c.level == "unimpaired" for c in self.candidates)
+
+    def verdict(self) -> str:
+        """One sentence for a clinician."""
+        b = self.best
+        text = f"most probable: {b.name} (p = {self.probability:.3g})"
+        if self.knows_groups:
+            g = self.group_posterior
+            text += f"; impaired group {self.group} (p = {g[self.group]:.3g})"
+        if not self.explains:
+            k = int(np.argmax(self.posterior))
+            text += (f"; but no candidate explains the recording: the best leaves "
+                     f"{self.rms_residual_n[k]:.2f} N RMS against a noise of "
+                     f"{self.noise.force_sd_n:g} N per axis")
+        return text
+
+    def to_dict(self, shoulder_offset_m: tuple[float, float] = (0.0, 0.0)
+                ) -> dict[str, object]:
+        order = np.argsort(-self.posterior, kind="stable")
+        return {
+            "verdict": self.verdict(),
+            "best": {"candidate": self.best.name, "group": self.best.label,
+                     "level": self.best.level, "probability": self.probability},
+            "group_posterior": {k: round(v, 6) for k, v in self.group_posterior.items()},
+            "level_posterior": {k: round(v, 6) for k, v in self.level_posterior.items()},
+            "log10_likelihood_ratio": round(self.log10_likelihood_ratio, 3),
+            "explains_recording": self.explains,
+            "candidates": [{
+                "candidate": self.candidates[k].name, "group": self.candidates[k].label,
+                "level": self.candidates[k].level,
+                "prior": round(float(self.prior[k]), 6),
+                "posterior": float(f"{self.posterior[k]:.6g}"),
+                "log_likelihood": round(float(self.log_likelihood[k]), 3),
+                "rms_residual_n": round(float(self.rms_residual_n[k]), 4),
+                "notes": list(self.candidates[k].notes),
+            } for k in order],
+            "observations": [{"name": o.name, "source": o.source, "samples": len(o.times_s),
+                              "duration_s": round(o.duration_s, 4),
+                              "effective_samples": round(float(o.weights(self.noise).sum()), 2)}
+                             for o in self.observations],
+            "predictor": self.predictor,
+            "noise": self.noise.to_dict(),
+            "next_probe": None if self.next_probe is None
+            else self.next_probe.to_dict(shoulder_offset_m),
+            "next_reason": self.next_reason,
+        }
+
+
+def predict_all(observations: Sequence[Observation], candidates: Sequence[Candidate],
+                predictor: str = "replay") -> tuple[FloatArray, ...]:
+    """Every candidate's predicted force for every observation: per observation (n, T, 2)."""
+    if predictor not in PREDICTORS:
+        raise ParameterError(f"Unknown predictor {predictor!r}; known: {', '.join(PREDICTORS)}.")
+    return tuple(np.stack([predict_observation(c.arm, o, predictor) for c in candidates])
+                 for o in observations)
+
+
+def classify(observations: Sequence[Observation], candidates: Sequence[Candidate], *,
+             noise: NoiseModel | None = None, prior: Sequence[float] | FloatArray | None = None,
+             predictor: str = "replay", next_probe: bool = True,
+             perception: Perception | None = None, limits: ProbeLimits | None = None,
+             stop_probability: float = STOP_PROBABILITY,
+             remaining_probability: float = REMAINING_PROBABILITY,
+             predictions: Sequence[FloatArray] | None = None) -> Classification:
+    """Score every candidate by the likelihood of the recorded forces given the recorded motion.
+
+    Parameters
+    ----------
+    observations : sequence of Observation
+        One or more recorded probes of the same arm.
+    candidates : sequence of Candidate
+    noise : NoiseModel, optional
+        Force noise σ and correlation time τ of the likelihood (motion noise only shapes the
+        next probe).
+    prior : sequence of float, optional
+    predictor : {'replay', 'rigid', 'static'}
+    next_probe : bool
+        Design the stroke that best separates the candidates still in play (posterior
+        ≥ ``remaining_probability``) unless the best has ``stop_probability`` already.
+    predictions : sequence of ndarray (n, T, 2), optional
+        The candidates' predictions for these motions (:func:`predict_all`), when already made
+        (the same motion met with other recorded forces).
+    """
+    cands = check_candidates(candidates, 2)
+    obs = tuple(observations)
+    if not obs:
+        raise ParameterError("Give at least one recorded observation to classify.")
+    if predictor not in PREDICTORS:
+        raise ParameterError(f"Unknown predictor {predictor!r}; known: {', '.join(PREDICTORS)}.")
+    noise = noise or NoiseModel()
+    p0 = check_prior(prior, len(cands))
+    preds = tuple(predictions) if predictions is not None else \
+        predict_all(obs, cands, predictor)
+    if len(preds) != len(obs) or any(pr.shape != (len(cands), *o.force_n.shape)
+                                     for pr, o in zip(preds, obs, strict=False)):
+        raise ParameterError("The predictions do not match the observations and candidates.")
+    ll = np.zeros(len(cands))
+    sq = np.zeros(len(cands))
+    count = 0
+    for o, pr in zip(obs, preds, strict=True):
+        w = o.weights(noise)
+        r2 = ((o.force_n[None] - pr) ** 2).sum(axis=-1)
+        ll -= (r2 * w[None]).sum(axis=1) / (2.0 * noise.force_sd_n ** 2)
+        used = np.ones(len(o.times_s), dtype=bool) if o.counted is None else o.counted
+        sq += r2[:, used].sum(axis=1)
+        count += int(used.sum())
+    with np.errstate(divide="ignore"):
+        logpost = np.log(p0) + ll
+    post = np.exp(logpost - logpost.max())
+    post /= post.sum()
+    rms = np.sqrt(sq / count)
+    nxt: ProbeDesign | None = None
+    if not next_probe:
+        reason = "not asked for"
+    elif post.max() >= stop_probability:
+        reason = (f"none needed: {cands[int(np.argmax(post))].name} has p = {post.max():.3g} "
+                  f"≥ {stop_probability:g}")
+    else:
+        keep = np.flatnonzero(post >= remaining_probability)
+        if len(keep) < 2:
+            keep = np.argsort(-post, kind="stable")[:2]
+        rest = [cands[k] for k in keep]
+        nxt = design(rest, criterion="information", max_probes=1, prior=post[keep],
+                     perception=perception, noise=noise, limits=limits, names=["next probe"])
+        reason = ("separates the candidates still in play: "
+                  + ", ".join(f"{c.name} (p = {post[k]:.2g})"
+                              for c, k in zip(rest, keep, strict=True)))
+    return Classification(cands, obs, p0, ll, post, rms, tuple(preds), noise, predictor, nxt,
+                          reason)
+
+
+__all__ = ["PREDICTORS", "Classification", "Observation", "classify", "predict_all",
+           "predict_observation", "recorded_accelerations", "with_force_noise"]

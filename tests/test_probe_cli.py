@@ -1,0 +1,155 @@
+"""``fieldbank probe design|classify|paths|trials``: outputs that parse back, files and plots
+that exist, stored models as candidates, clean errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from fieldbank.cli.main import COMMANDS, cli
+from fieldbank.evaluate.design import Stroke, equilibrium, severity_candidates
+from fieldbank.haptic.probe import probe_path
+from fieldbank.haptic.recording import write_trace_h5
+from fieldbank.severity import synthesize
+from fieldbank.storage import Database
+
+
+def _run(*args: str):  # type: ignore[no-untyped-def]
+    return CliRunner().invoke(cli, list(args))
+
+
+def test_the_registered_help_line_is_the_commands_own() -> None:
+    lazy = COMMANDS["probe"]
+    assert lazy.help == lazy.load().get_short_help_str(limit=10_000)
+
+
+def test_design_writes_json_probes_and_a_plot(tmp_path: Path) -> None:
+    out, png = tmp_path / "probes.json", tmp_path / "probes.png"
+    r = _run("probe", "design", "--json", "--out", str(out), "--plot", str(png),
+             "--shoulder-offset", "0.05,0.1")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["candidates"] == ["shoulder severe", "elbow severe", "biarticular severe"]
+    assert 1 <= doc["summary"]["probes"] <= 2 and doc["summary"]["separates_all_by_feel"]
+    assert doc["seed_probes"]["summary"]["probes"] == 2
+    assert doc["search_s"] > 0 and doc["limits"]["force_limit_n"] == 40.0
+    drawn = json.loads(out.read_text(encoding="utf-8"))
+    assert drawn["format"] == "fieldbank-probes"
+    first = drawn["probes"][0]
+    assert first["frame"] == "robot" and first["shoulder_offset_m"] == [0.05, 0.1]
+    # the polyline starts at the arm's rest hand position, shifted into the robot frame
+    eq = equilibrium(severity_candidates())
+    assert first["points_m"][0] == pytest.approx([eq[0] + 0.05, eq[1] + 0.1], abs=1e-6)
+    assert first["times_s"][0] == 0.0 and first["times_s"][-1] > 0.1
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_design_text_reads_both_sets_in_clinic_words() -> None:
+    r = _run("probe", "design", "--criterion", "orientation")
+    assert r.exit_code == 0, r.output
+    assert "designed (orientation, strokes" in r.stdout
+    assert "the seed's pull and semi-ellipse, measured the same way" in r.stdout
+    assert "toward" in r.stdout and "N toward" in r.stdout
+
+
+def test_candidates_from_files_and_stored_models(tmp_path: Path) -> None:
+    a, b = tmp_path / "stiff-elbow.json", tmp_path / "stiff-shoulder.json"
+    a.write_text(synthesize({"elbow": "moderate"}).to_json(), encoding="utf-8")
+    b.write_text(synthesize({"shoulder": "moderate"}).to_json(), encoding="utf-8")
+    url = f"sqlite:///{tmp_path / 'db.sqlite3'}"
+    with Database.open(url) as db:
+        db.add_patient("P-1", 70.0, 1.7, "right")
+        m, _fit = db.add_fitted_model(
+            synthesize({"biarticular": "mild"}), "fitted", "P-1", "mlsl+lbfgs", 0, 10, 0.1, 1.0,
+            {"unidentified": [{"name": "beta[4]", "reason": "β of bf not identifiable: all "
+                               "stiffness maps are static"}]}, [])
+    r = _run("probe", "design", "--candidate-params", str(a), "--candidate-params", str(b),
+             "--candidate-model", str(m.id), "--db", url, "--max-probes", "1")
+    assert r.exit_code == 0, r.output
+    assert "stiff-elbow" in r.stdout and f"model {m.id}" in r.stdout
+    assert f"note: model {m.id}: rests on a guess: β of bf not identifiable" in r.stdout
+
+
+@pytest.fixture(scope="module")
+def trace_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    cands = severity_candidates(levels=("mild", "severe"))
+    stroke = Stroke(tuple(equilibrium(cands)), -100.0, 0.1, 0.4, 0.2)
+    res = probe_path(synthesize({"shoulder": "mild"}), stroke.motion(), seed=1)
+    path = tmp_path_factory.mktemp("traces") / "probe.h5"
+    write_trace_h5(res.trace, path)
+    return path
+
+
+def test_classify_a_trace_file_with_a_plot(trace_file: Path, tmp_path: Path) -> None:
+    png = tmp_path / "classified.png"
+    r = _run("probe", "classify", str(trace_file), "--levels", "mild,severe", "--json",
+             "--plot", str(png))
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["best"]["candidate"] == "shoulder mild" and doc["best"]["probability"] > 0.99
+    assert doc["group_posterior"]["shoulder"] > 0.99
+    assert doc["next_probe"] is None and doc["next_reason"].startswith("none needed")
+    assert png.stat().st_size > 10_000
+    text = _run("probe", "classify", str(trace_file), "--levels", "mild,severe")
+    assert "most probable: shoulder mild" in text.stdout
+
+
+def test_classify_an_exported_csv_in_the_robot_frame(trace_file: Path, tmp_path: Path) -> None:
+    csv = tmp_path / "probe.csv"
+    r = _run("haptic", "replay", str(trace_file), "--csv", str(csv))
+    assert r.exit_code == 0, r.output
+    r = _run("probe", "classify", str(csv), "--levels", "all", "--json", "--no-next")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["best"]["group"] == "shoulder"
+
+
+def test_classify_errors_say_what_and_where(tmp_path: Path) -> None:
+    r = _run("probe", "classify", str(tmp_path / "missing.h5"))
+    assert r.exit_code != 0 and "no trace file" in r.output
+    bad = tmp_path / "bad.csv"
+    bad.write_text("# frame: shoulder\n# sign: arm-on-handle\nt_s,x_m,y_m,fx_n,fy_n\n"
+                   "0,0.1,0.5,0,0\n0.001,0.1,nan?,0,0\n", encoding="utf-8")
+    r = _run("probe", "classify", str(bad))
+    assert r.exit_code == 1 and "row 5" in r.output
+
+
+def test_paths_reports_both_paradigms() -> None:
+    r = _run("probe", "paths", "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert [p["name"] for p in doc["probes"]] == ["pull", "semi-ellipse", "circle 4 cm",
+                                                  "circle 6 cm", "circle 8 cm"]
+    assert doc["orientation_set"] == {"paths": ["semi-ellipse"], "separates_all": True}
+    assert len(doc["minmax_set"]["paths"]) <= 2
+    feats = doc["probes"][0]["features"]
+    assert {f["candidate"] for f in feats} == {"shoulder severe", "elbow severe",
+                                               "biarticular severe"}
+    r = _run("probe", "paths")
+    assert "orientation paradigm: semi-ellipse separates every pair" in r.stdout
+
+
+def test_bad_options_are_clean_errors() -> None:
+    r = _run("probe", "design", "--workspace", "1,2")
+    assert r.exit_code == 2 and "XMIN,XMAX,YMIN,YMAX" in r.output
+    r = _run("probe", "design", "--levels", "extreme")
+    assert r.exit_code == 1 and "Unknown severity level 'extreme'" in r.output
+    r = _run("probe", "design", "--groups", "elbow", "--levels", "mild,severe",
+             "--target", "group")
+    assert r.exit_code == 1 and "nothing to tell apart" in r.output
+    r = _run("probe", "design", "--force-sd-n", "-1")
+    assert r.exit_code == 1 and "'force_sd_n' noise parameter" in r.output
+
+
+@pytest.mark.slow
+def test_trials_prints_confusion_matrices() -> None:
+    r = _run("probe", "trials", "--groups", "shoulder,elbow", "--levels", "severe", "--reps",
+             "1", "--draws", "2", "--max-probes", "1", "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    sets = doc["trials"]["sets"]
+    assert set(sets) == {"designed", "seed"}
+    assert sum(map(sum, sets["seed"]["confusion"])) == 2 * 2
+
