@@ -1,16 +1,14 @@
 """Haptic sessions and their recorded traces.
 
 A haptic session records which models a robot rendered (A, and B for a comparison), when, on
-which robot (URL stored with any password removed) and the session's statistics. Its traces are
-large arrays: each is written to the content-addressed HDF5 array store first (with unit and
-provenance beside the data), then recorded in the database; equal arrays share one file, and
-every read verifies the array against its SHA-256.
+which robot (URL stored masked, :func:`fieldbank.redact.mask_url`) and the session's statistics.
+Its traces are large arrays (:mod:`fieldbank.storage.arrays`: with unit and provenance beside
+the data; equal arrays share one copy), and every read verifies the array against its SHA-256.
 """
 
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -19,14 +17,11 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from fieldbank.errors import StorageError
-from fieldbank.storage.core import DatabaseCore, array_ref, array_row, now, to_utc, to_utc_opt
+from fieldbank.redact import mask_url
+from fieldbank.storage.arrays import array_ref
+from fieldbank.storage.core import DatabaseCore, now, to_utc, to_utc_opt
 from fieldbank.storage.orm import ArrayRow, HapticSessionRow, ModelRow, PatientRow, TraceRow
 from fieldbank.storage.records import HapticSessionRecord, TraceRecord
-
-
-def strip_password(url: str) -> str:
-    """A URL with any ``user:password@`` password removed (robot URLs are not DB URLs)."""
-    return re.sub(r"(//[^/@:]*):[^/@]*@", r"\1@", url)
 
 
 class Traces(DatabaseCore):
@@ -40,8 +35,8 @@ class Traces(DatabaseCore):
     def start_haptic_session(self, model_a_id: int, robot_url: str,
                              model_b_id: int | None = None,
                              patient_code: str | None = None) -> HapticSessionRecord:
-        """Open a haptic session record; the robot URL is stored with any password removed."""
-        safe_url = strip_password(robot_url)
+        """Open a haptic session record; the robot URL is stored masked (no password)."""
+        safe_url = mask_url(robot_url)
         with self._write() as s:
             pid = self._optional_patient_id(s, patient_code)
             for mid in (model_a_id, model_b_id):
@@ -65,7 +60,7 @@ class Traces(DatabaseCore):
             if row.ended_at is not None:
                 raise StorageError(f"Haptic session {haptic_session_id} has already ended.")
             row.ended_at = now()
-            row.stats_json = json.dumps(dict(stats), sort_keys=True)
+            row.stats_json = json.dumps(dict(stats), sort_keys=True, default=str)
             self._audit(s, "end", "haptic_session", row.id, {})
             return self._haptic(s, row)
 
@@ -98,14 +93,14 @@ class Traces(DatabaseCore):
         provenance : mapping, optional
             JSON document stored beside the array (rate, robot, software, ...).
         """
-        ref = self.store.put(array, unit, {"haptic_session": haptic_session_id, "trace": name,
-                                           "stored_by": self.actor, **dict(provenance or {})})
+        pending = self.arrays.prepare(array, unit, {"haptic_session": haptic_session_id,
+                                                    "trace": name, "stored_by": self.actor,
+                                                    **dict(provenance or {})})
+        ref = pending.ref
         with self._write() as s:
             if s.get(HapticSessionRow, haptic_session_id) is None:
                 raise StorageError(f"No haptic session with id {haptic_session_id}.")
-            if s.get(ArrayRow, ref.sha256) is None:
-                s.add(array_row(ref))
-                s.flush()
+            self.arrays.record(s, pending, now())
             row = TraceRow(haptic_session_id=haptic_session_id, name=name,
                            array_sha256=ref.sha256, created_at=now())
             s.add(row)
@@ -126,5 +121,12 @@ class Traces(DatabaseCore):
             t = s.get(TraceRow, trace_id)
             if t is None:
                 raise StorageError(f"No trace with id {trace_id}.")
-            key = t.array_sha256
-        return self.store.get(key)
+            return self.arrays.get(s, t.array_sha256)
+
+    def trace_attrs(self, trace_id: int) -> dict[str, Any]:
+        """Unit, SHA-256 and provenance stored beside a trace's array."""
+        with self._read() as s:
+            t = s.get(TraceRow, trace_id)
+            if t is None:
+                raise StorageError(f"No trace with id {trace_id}.")
+            return self.arrays.attrs(s, t.array_sha256)
