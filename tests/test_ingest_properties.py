@@ -13,7 +13,9 @@ from fieldbank.ingest import read_file, write_hdf5, write_mat5, write_mat73
 from fieldbank.maps import FieldMap
 from fieldbank.sampledata import lab_units_csv
 
-finite = st.floats(-1e4, 1e4, allow_nan=False, allow_infinity=False)
+#: Values up to 90% of the plausibility limits (fieldbank.ingest.limits), above which a valid
+#: file is refused: forces in N, stiffness in N/m.
+PLAUSIBLE = {"postural": 900.0, "stiffness": 90_000.0}
 
 
 @st.composite
@@ -25,6 +27,8 @@ def field_maps(draw: st.DrawFn) -> FieldMap:
                           max_size=n, unique=True))
     pos = np.array(cells, dtype=float) * 1e-3
     shape = (n, 2) if kind == "postural" else (n, 2, 2)
+    finite = st.floats(-PLAUSIBLE[kind], PLAUSIBLE[kind], allow_nan=False,
+                       allow_infinity=False)
     vals = np.array(draw(st.lists(finite, min_size=int(np.prod(shape)),
                                   max_size=int(np.prod(shape))))).reshape(shape)
     with_sd = draw(st.booleans())

@@ -75,6 +75,13 @@ def known_revisions() -> list[str]:
     return [r.revision for r in reversed(list(script.walk_revisions()))]
 
 
+def revision_title(revision: str) -> str:
+    """The first line of a revision's docstring (what it changes)."""
+    script = ScriptDirectory.from_config(alembic_config())
+    doc = (script.get_revision(revision).doc or "").strip()
+    return doc.splitlines()[0].rstrip(".") if doc else revision
+
+
 def current_revision(engine: Engine) -> str | None:
     with _errors(engine, "Reading the schema revision of"), engine.connect() as conn:
         return MigrationContext.configure(conn).get_current_revision()
