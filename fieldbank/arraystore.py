@@ -30,7 +30,6 @@ by ``fieldbank db gc``.
 
 from __future__ import annotations
 
-import errno
 import fcntl
 import hashlib
 import io
@@ -47,7 +46,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fieldbank.errors import IntegrityError, StorageError
-from fieldbank.files import fsync_dir
+from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, fsync_dir
 
 _PREFIX = b"fieldbank-array\0"
 
@@ -71,10 +70,6 @@ class ArrayRef:
     shape: tuple[int, ...]
     dtype: str
     unit: str
-
-
-#: errno values that mean the disk (or the user's quota, or the file size limit) is full
-DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
 def encode_array(array: ArrayLike, unit: str,
@@ -131,12 +126,6 @@ def image_attrs(image: bytes) -> dict[str, Any]:
 def relpath(key: str) -> str:
     """Where the file of ``key`` lives under a store's root."""
     return f"{key[:2]}/{key}.h5"
-
-
-def disk_full_message(where: str | Path, exc: OSError) -> str:
-    """What to say when writing ``where`` failed because the disk is full."""
-    return (f"No space left to write {where} ({exc.strerror}); nothing was stored. Free some "
-            "space (or raise the quota) and try again.")
 
 
 class ArrayStore:

@@ -31,6 +31,14 @@ from fieldbank.errors import FileRefused
 
 #: Largest JSON document (plan, parameters) read from a file, bytes.
 MAX_DOCUMENT_BYTES = 16 << 20
+#: errno values that mean the disk (or the user's quota, or the file size limit) is full
+DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def disk_full_message(where: str | Path, exc: OSError) -> str:
+    """What to say when writing ``where`` failed because the disk is full."""
+    return (f"No space left to write {where} ({exc.strerror}); nothing was stored. Free some "
+            "space (or raise the quota) and try again.")
 
 
 def fsync_dir(path: str | Path) -> None:

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fieldbank.errors import StorageError
-from fieldbank.haptic.recording import COLUMNS, NCOL, Trace
+from fieldbank.haptic.recording import COLUMNS, NCOL, Trace, public_metadata
 from fieldbank.params import ArmParams
 
 if TYPE_CHECKING:  # typing only: the records come with whatever database is passed in
@@ -81,7 +81,8 @@ class DatabaseTraceSink:
     def write_trace(self, trace: Trace, name: str) -> str:
         a_id = self._model_id(trace, "A", name)
         b_id = self._model_id(trace, "B", name)
-        robot = str(trace.metadata.get("robot", "unknown"))
+        metadata = public_metadata(trace.metadata)
+        robot = str(metadata.get("robot", "unknown"))
         sess = self.db.start_haptic_session(a_id, robot, model_b_id=b_id,
                                             patient_code=self.patient_code)
         prov = {"trace_name": name, "rate_hz": trace.rate_hz, "frame": "robot",
@@ -91,7 +92,7 @@ class DatabaseTraceSink:
             self.db.add_trace(sess.id, col, np.ascontiguousarray(trace.data[:, i]), unit, prov)
         self.db.end_haptic_session(sess.id, {
             "name": name, "rate_hz": trace.rate_hz, "loop": trace.stats,
-            "faults": trace.faults, "events": trace.events, "metadata": trace.metadata,
+            "faults": trace.faults, "events": trace.events, "metadata": metadata,
         })
         return f"{SESSION_PREFIX}{sess.id}"
 

@@ -37,6 +37,7 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.home import data_home
 from fieldbank.params import ArmParams
+from fieldbank.redact import mask_url
 from fieldbank.validation import Interval, check_number
 
 #: One line of progress for the user.
@@ -85,7 +86,8 @@ class SessionResult:
     ----------
     trace : Trace
     robot : str
-        The port URL rendered on (for ``sim://``, with the operator's start filled in).
+        The port URL rendered on (for ``sim://``, with the operator's start filled in), its
+        password masked (:func:`fieldbank.redact.mask_url`).
     device : DeviceInfo
         What the robot said about itself in the handshake.
     name : str
@@ -192,7 +194,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
             f"{info.max_rate_hz} Hz, device force limit {info.force_limit_n:g} N, "
             f"watchdog {info.watchdog_ms} ms")
         rd = Renderer(link, before, after, cfg, safety=safety)
-        rd.metadata["robot"] = robot
+        # the trace, its file, the database record and every printout keep the URL masked
+        rd.metadata["robot"] = mask_url(robot)
         if any(i is not None for i in model_ids):
             rd.metadata["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
         with contextlib.ExitStack() as stack:
@@ -223,4 +226,4 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
                 ref = DatabaseTraceSink(store, patient_code).write_trace(trace, name)
         else:
             ref = DatabaseTraceSink(db, patient_code).write_trace(trace, name)
-    return SessionResult(trace, robot, info, name, trace_file, sha, ref)
+    return SessionResult(trace, mask_url(robot), info, name, trace_file, sha, ref)
