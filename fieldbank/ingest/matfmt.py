@@ -96,8 +96,18 @@ def _matrix_name(element: bytes, endian: str) -> str | None:
     return raw.decode("ascii", "replace") if raw else None
 
 
-def inflate_mat5(name: str, data: bytes, limits: IngestLimits) -> bytes:
-    """The v5 file with every compressed variable inflated, within the limits.
+def _is_logical(element: bytes, endian: str) -> bool:
+    """Whether an miMATRIX element has MATLAB's logical flag (scipy reads it as uint8)."""
+    try:
+        (flags,) = struct.unpack_from(endian + "I", element, 16)
+    except struct.error:
+        return False
+    return bool(flags & 0x0200)
+
+
+def inflate_mat5(name: str, data: bytes, limits: IngestLimits) -> tuple[bytes, set[str]]:
+    """The v5 file with every compressed variable inflated, within the limits, and the names
+    of its logical variables.
 
     Each top-level variable's declared size (dimensions × 8 bytes) and each inflated size count
     against ``max_decompressed_bytes``; inflating stops one byte past what is left, so a bomb
@@ -108,8 +118,9 @@ def inflate_mat5(name: str, data: bytes, limits: IngestLimits) -> bytes:
     LimitExceeded
         A variable is over a limit (the message names it).
     """
+    logical: set[str] = set()
     if len(data) < _MAT5_HEADER:
-        return data
+        return data, logical
     endian = "<" if data[126:128] == b"IM" else ">"
     out = [data[:_MAT5_HEADER]]
     budget = limits.max_decompressed_bytes
@@ -142,6 +153,8 @@ def inflate_mat5(name: str, data: bytes, limits: IngestLimits) -> bytes:
             declared = _declared_bytes(element, endian)
             var = _matrix_name(element, endian)
             label = f"variable {var!r}" if var else label
+            if var and _is_logical(element, endian):
+                logical.add(var)
             if declared > budget - total:
                 raise LimitExceeded(
                     f"{name}: {label} declares {declared:,} bytes, more than the "
@@ -154,13 +167,13 @@ def inflate_mat5(name: str, data: bytes, limits: IngestLimits) -> bytes:
                 f"{limits.hint('max_compression_ratio')}")
         out.append(element)
         pos = end
-    return b"".join(out)
+    return b"".join(out), logical
 
 
 def read_mat5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
               ) -> tuple[list[ParsedMap], list[Problem]]:
     try:
-        image = inflate_mat5(name, data, limits)
+        image, logical = inflate_mat5(name, data, limits)
     except LimitExceeded as exc:
         return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
     try:
@@ -173,6 +186,8 @@ def read_mat5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
             continue
         if isinstance(v, np.ndarray) and v.dtype.kind == "U":
             variables[k] = "".join(str(x) for x in v.ravel())
+        elif k in logical and isinstance(v, np.ndarray):
+            variables[k] = v.astype(bool).view(Logical)
         else:
             variables[k] = v
     return _from_variables(name, variables)
