@@ -83,6 +83,7 @@ def current(db_url: str | None, as_json: bool) -> None:
         click.echo(f"{database.url_masked}\ncurrent {cur or '(empty)'}, head {head} "
                    f"({STATES[state]})")
     if state == "newer":
+        click.echo(f"Error: {migrate.newer_message(database.engine, str(cur))}", err=True)
         raise SystemExit(1)
 
 
