@@ -113,7 +113,7 @@ class IngestLimits:
                 changes[name] = int(value)
             else:
                 changes[name] = value
-        return replace(base or cls(), **changes)
+        return replace(base or cls(), **changes)  # type: ignore[arg-type]
 
     @classmethod
     def from_environment(cls, items: Iterable[str] = ()) -> IngestLimits:

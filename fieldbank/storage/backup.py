@@ -91,15 +91,17 @@ def _postgresql(engine: Engine, rev: str, directory: str | Path | None) -> Path:
     out_dir = Path(directory) if directory is not None else data_home() / "backups"
     dest = out_dir / f"{u.database or 'postgres'}-{rev}-{_stamp()}.pgdump"
     env = {**os.environ}
-    for var, value in (("PGHOST", u.host), ("PGPORT", u.port), ("PGUSER", u.username),
-                       ("PGPASSWORD", u.password), ("PGDATABASE", u.database)):
-        if value is not None:
-            env[var] = str(value)
-    for key, value in u.query.items():  # e.g. ?password=…, ?sslmode=…
-        var = {"password": "PGPASSWORD", "sslmode": "PGSSLMODE", "host": "PGHOST",
-               "port": "PGPORT", "user": "PGUSER"}.get(key)
-        if var is not None:
-            env[var] = value if isinstance(value, str) else value[0]
+    settings: tuple[tuple[str, object], ...] = (
+        ("PGHOST", u.host), ("PGPORT", u.port), ("PGUSER", u.username),
+        ("PGPASSWORD", u.password), ("PGDATABASE", u.database))
+    for name, setting in settings:
+        if setting is not None:
+            env[name] = str(setting)
+    query_vars = {"password": "PGPASSWORD", "sslmode": "PGSSLMODE", "host": "PGHOST",
+                  "port": "PGPORT", "user": "PGUSER"}
+    for key, qvalue in u.query.items():  # e.g. ?password=…, ?sslmode=…
+        if key in query_vars:
+            env[query_vars[key]] = qvalue if isinstance(qvalue, str) else qvalue[0]
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         r = subprocess.run([exe, "--format=custom", f"--file={dest}", "--no-password"],

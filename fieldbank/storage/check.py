@@ -101,17 +101,17 @@ def check(db: Checkable) -> CheckReport:
         counts["arrays"] = len(array_keys)
         used: set[str] = set()
         n_src = 0
-        for sha, content, key in s.execute(
+        for sha, content, array_key in s.execute(
             select(SourceFileRow.sha256, SourceFileRow.content, SourceFileRow.array_sha256)
         ):
             n_src += 1
-            if key is not None:
-                used.add(key)
-                if key not in array_keys:
-                    problems.append(f"source file {sha} refers to unknown array {key}")
+            if array_key is not None:
+                used.add(array_key)
+                if array_key not in array_keys:
+                    problems.append(f"source file {sha} refers to unknown array {array_key}")
                     continue
                 try:
-                    data = arrays.get(s, key).tobytes()
+                    data = arrays.get(s, array_key).tobytes()
                 except IntegrityError as exc:  # reported above through verify
                     problems.append(f"source file {sha}: {exc}")
                     continue
