@@ -36,7 +36,7 @@ VALUE_QUANTITIES = {
 }
 DELIMITERS = ",;\t"
 #: Lines given to the sniffer (the header and the first rows).
-SNIFF_LINES = 20
+SNIFF_LINES = 6
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?", re.ASCII)
 _NUMBER_COMMA = re.compile(r"[+-]?(?:[0-9]+(?:,[0-9]*)?|,[0-9]+)(?:[eE][+-]?[0-9]+)?",
