@@ -1,11 +1,21 @@
-"""``fieldbank db``: schema revision, upgrade, downgrade and integrity check."""
+"""``fieldbank db``: schema revision, upgrade, downgrade, integrity check and clean-up."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.storage import migrate
+from fieldbank.storage.backup import guarded_downgrade
+
+STATES = {
+    "current": "up to date",
+    "behind": "behind: run 'fieldbank db upgrade'",
+    "empty": "empty: run 'fieldbank db upgrade'",
+    "newer": "created by a newer fieldbank: use that version with it",
+}
 
 
 @click.group("db")
@@ -20,7 +30,7 @@ def upgrade(db_url: str | None, revision: str) -> None:
     """Migrate the database to REVISION (safe to run from several processes at once)."""
     database = open_db(db_url, upgrade="never")
     try:
-        before, after = migrate.upgrade(database.engine, revision)
+        before, after = migrate.upgrade(database.engine, revision, database.store.root)
     finally:
         database.close()
     click.echo(f"{database.url_masked}: {before or 'empty'} -> {after}", err=True)
@@ -29,14 +39,29 @@ def upgrade(db_url: str | None, revision: str) -> None:
 @db.command("downgrade")
 @db_option
 @click.argument("revision")
-def downgrade(db_url: str | None, revision: str) -> None:
-    """Migrate the database down to REVISION ('base' removes every table and its data)."""
+@click.option("--yes", is_flag=True, help="Really downgrade (it removes schema and data).")
+@click.option("--no-backup", is_flag=True,
+              help="Do not back up first (you have a backup of your own).")
+@click.option("--backup-dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Where the backup goes (default: beside a SQLite file; backups/ in the "
+                   "data directory for PostgreSQL).")
+def downgrade(db_url: str | None, revision: str, yes: bool, no_backup: bool,
+              backup_dir: Path | None) -> None:
+    """Migrate the database down to REVISION ('base' removes every table and its data).
+
+    Refused unless --yes. First a backup: SQLite, a copy of the file beside it; PostgreSQL,
+    pg_dump (custom format) when it is installed, else refused with what to do.
+    """
     database = open_db(db_url, upgrade="never")
     try:
-        before, after = migrate.downgrade(database.engine, revision)
+        res = guarded_downgrade(database.engine, revision, confirmed=yes,
+                                make_backup=not no_backup, backup_dir=backup_dir,
+                                store_root=database.store.root)
     finally:
         database.close()
-    click.echo(f"{database.url_masked}: {before} -> {after or 'empty'}", err=True)
+    if res.backup is not None:
+        click.echo(f"backup: {res.backup}", err=True)
+    click.echo(f"{database.url_masked}: {res.before} -> {res.after or 'empty'}", err=True)
 
 
 @db.command("current")
@@ -50,12 +75,16 @@ def current(db_url: str | None, as_json: bool) -> None:
     finally:
         database.close()
     head = migrate.head_revision()
+    state = migrate.schema_state(cur)
     if as_json:
         emit_json({"url": database.url_masked, "current": cur, "head": head,
-                   "up_to_date": cur == head})
+                   "state": state, "up_to_date": state == "current"})
     else:
-        state = "up to date" if cur == head else "behind: run 'fieldbank db upgrade'"
-        click.echo(f"{database.url_masked}\ncurrent {cur or '(empty)'}, head {head} ({state})")
+        click.echo(f"{database.url_masked}\ncurrent {cur or '(empty)'}, head {head} "
+                   f"({STATES[state]})")
+    if state == "newer":
+        click.echo(f"Error: {migrate.newer_message(database.engine, str(cur))}", err=True)
+        raise SystemExit(1)
 
 
 @db.command("check")
@@ -76,10 +105,34 @@ def check(db_url: str | None, as_json: bool) -> None:
         for p in report.problems:
             click.echo(f"problem: {p}")
         for o in report.orphans:
-            click.echo(f"orphan (harmless): {o}")
+            click.echo(f"orphan (harmless; 'fieldbank db gc' removes it): {o}")
         counts = ", ".join(f"{v} {k}" for k, v in report.counts.items())
         click.echo(f"{database.url_masked}: {'OK' if report.ok else 'DAMAGED'} ({counts}; "
                    f"{len(report.problems)} problem(s), {len(report.orphans)} orphan(s))",
                    err=True)
     if not report.ok:
         raise SystemExit(1)
+
+
+@db.command("gc")
+@db_option
+@json_option
+def gc(db_url: str | None, as_json: bool) -> None:
+    """Remove orphans: unused array records, unreferenced store files, stray temporaries.
+
+    Safe while others write: nothing a concurrent transaction is about to use is removed.
+    """
+    with open_db(db_url) as database:
+        report = database.gc()
+    if as_json:
+        emit_json({"url": database.url_masked, **report.to_dict()})
+        return
+    for line in report.rows + report.files + report.temporaries:
+        click.echo(f"removed: {line}")
+    for line in report.moved:
+        click.echo(f"moved: {line}")
+    for line in report.in_use:
+        click.echo(f"kept: {line}")
+    n = len(report.rows) + len(report.files) + len(report.temporaries)
+    click.echo(f"{database.url_masked}: removed {n} orphan(s), moved {len(report.moved)} "
+               "array(s) into the database", err=True)

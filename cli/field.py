@@ -10,8 +10,8 @@ import numpy as np
 
 from fieldbank import modelsource, plotting
 from fieldbank.cli.options import json_option
-from fieldbank.errors import ParameterError
-from fieldbank.files import to_json, write_atomic
+from fieldbank.errors import FileRefused, ParameterError
+from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
 from fieldbank.maps import FieldMap, ellipse, postural_map, stiffness_map, workspace_grid
 from fieldbank.model import Arm
 from fieldbank.severity import (
@@ -40,8 +40,11 @@ def _parse_pairs(text: str, what: str) -> np.ndarray:
 
 def _read_positions(path: Path) -> np.ndarray:
     rows = []
-    lines = [ln for ln in path.read_text(encoding="utf-8").splitlines()
-             if ln.strip() and not ln.startswith("#")]
+    try:
+        text = read_regular_file(path, MAX_DOCUMENT_BYTES).decode("utf-8")
+    except (FileRefused, UnicodeDecodeError) as exc:
+        raise ParameterError(f"{path}: cannot read positions ({exc}).") from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("#")]
     if not lines:
         raise ParameterError(f"{path}: no rows.")
     header = [h.strip() for h in lines[0].split(",")]

@@ -18,6 +18,7 @@ from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
 from fieldbank.fitting.plot import plot_fit
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
+from fieldbank.sanitize import printable
 
 StoreFactory = Callable[[str | None], FitStore]
 
@@ -143,7 +144,7 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
     for m in rows:
         parent = "" if m.parent_id is None else str(m.parent_id)
         click.echo(f"{m.id!s:>5}  {m.patient_code or '-':<12} {m.origin:<13} "
-                   f"{parent:>6}  {m.label}")
+                   f"{parent:>6}  {printable(m.label)}")
 
 
 @models.command("show")
@@ -160,7 +161,7 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
         return
     m = detail.model
     p = m.params
-    click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {m.label}")
+    click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}")
     click.echo("  group        Km N/m    alpha N    beta")
     from fieldbank.params import GROUPS
 

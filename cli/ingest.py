@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.ingest import ingest_paths
+from fieldbank.ingest import IngestLimits, ingest_paths
+from fieldbank.sanitize import printable
 
 if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to show a bar
     from tqdm import tqdm
@@ -27,14 +28,20 @@ PROGRESS_MIN_FILES = 20
 @click.option("--date", "session_date", type=click.DateTime(["%Y-%m-%d"]),
               help="Date of the session.")
 @click.option("--dry-run", is_flag=True, help="Validate and report; store nothing.")
+@click.option("--limit", "limit_items", multiple=True, metavar="NAME=VALUE",
+              help="Override an ingest limit (repeatable): max_file_bytes, "
+                   "max_decompressed_bytes, max_compression_ratio, max_rows, max_maps, "
+                   "max_problems, max_force_n, max_stiffness_n_per_m (docs/formats.md).")
 @json_option
 def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, session_label: str,
-           session_date: datetime | None, dry_run: bool, as_json: bool) -> None:
+           session_date: datetime | None, dry_run: bool, limit_items: tuple[str, ...],
+           as_json: bool) -> None:
     """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3).
 
     Every file is validated first; any problem anywhere stores nothing. A file already
     stored (same SHA-256) is reported and not stored again.
     """
+    limits = IngestLimits.from_environment(limit_items)
     bar: tqdm | None = None
     if len(files) >= PROGRESS_MIN_FILES:
         from tqdm import tqdm
@@ -51,7 +58,7 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
         with open_db(db_url) as db:
             report = ingest_paths(db, [Path(f) for f in files], patient_code, session_label,
                                   session_date.date() if session_date else None, dry_run,
-                                  progress)
+                                  progress, limits)
     finally:
         if bar is not None:
             bar.close()
@@ -59,10 +66,11 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
         emit_json(report.to_json_dict())
     for o in report.outcomes:
         if o.status == "duplicate":
-            click.echo(f"{o.file_name}: already stored (SHA-256 {o.sha256[:12]}…), skipped",
-                       err=True)
+            click.echo(f"{printable(o.file_name)}: already stored (SHA-256 "
+                       f"{o.sha256[:12]}…), skipped", err=True)
     verb = "would store" if dry_run else "stored"
     n = report.n_stored if not dry_run else sum(o.status == "would-store"
                                                 for o in report.outcomes)
-    click.echo(f"{verb} {n} file(s) for {report.patient_code} / {report.session_label}; "
+    click.echo(f"{verb} {n} file(s) for {report.patient_code} / "
+               f"{printable(report.session_label)}; "
                f"{report.n_duplicates} duplicate(s)", err=True)

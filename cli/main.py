@@ -14,6 +14,7 @@ import click
 
 from fieldbank.cli.lazy import LazyCommand, LazyGroup
 from fieldbank.errors import FieldbankError
+from fieldbank.sanitize import printable
 
 C = LazyCommand
 #: command name -> where it lives and its one-line help (tests check the help is the command's)
@@ -57,7 +58,8 @@ class FieldbankGroup(LazyGroup):
         try:
             return super().invoke(ctx)
         except FieldbankError as exc:
-            raise click.ClickException(str(exc)) from None
+            # messages quote file names and labels from outside: no terminal escapes
+            raise click.ClickException(printable(str(exc), multiline=True)) from None
 
 
 @click.group(cls=FieldbankGroup, lazy=COMMANDS,

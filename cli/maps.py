@@ -8,6 +8,7 @@ from datetime import datetime
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.sanitize import printable
 
 
 @click.group("maps")
@@ -36,7 +37,8 @@ def list_(db_url: str | None, patient_code: str | None, session_label: str | Non
     for m in rows:
         v = "static" if m.velocity_m_per_s == (0.0, 0.0) else (
             "v=({:g}, {:g}) m/s".format(*m.velocity_m_per_s))
-        click.echo(f"{m.id:>6} {m.patient_code:<12} {m.session_label:<14} "
+        # labels and file names come from outside: no terminal escapes reach the screen
+        click.echo(f"{m.id:>6} {m.patient_code:<12} {printable(m.session_label):<14} "
                    f"{m.session_date or ''!s:<10} {m.kind:<9} {m.n_points:>4} pts {v:<18} "
-                   f"{m.source_file}")
+                   f"{printable(m.source_file)}")
     click.echo(f"{len(rows)} map(s)", err=True)

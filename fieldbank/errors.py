@@ -7,6 +7,8 @@ The whole tree, rooted in built-ins so callers may catch either::
     ├── UnreachableError(FieldbankError, ValueError)  a hand position the arm cannot reach
     ├── MapError(FieldbankError, ValueError)          a force/stiffness map that is malformed
     ├── ValidationError(FieldbankError, ValueError)   input with one or more located problems
+    ├── FileRefused(FieldbankError, ValueError)       an input file refused before reading it
+    │                                                 (not a regular file, too large)
     ├── StorageError(FieldbankError, RuntimeError)    the database or the array store failed
     │   └── IntegrityError(StorageError)              a stored reference or checksum is wrong
     ├── FitError(FieldbankError, RuntimeError)        a fit that cannot run or was refused
@@ -61,13 +63,27 @@ class Problem:
 
 
 class ValidationError(FieldbankError, ValueError):
-    """Input with one or more problems; ``problems`` lists every one, located."""
+    """Input with one or more problems; ``problems`` lists every one, located.
 
-    def __init__(self, problems: list[Problem] | tuple[Problem, ...], header: str = "") -> None:
+    ``max_shown``: the message lists at most this many, then says how many more there are
+    (``problems`` keeps them all).
+    """
+
+    def __init__(self, problems: list[Problem] | tuple[Problem, ...], header: str = "",
+                 max_shown: int | None = None) -> None:
         self.problems = tuple(problems)
         lines = [header] if header else []
-        lines += [str(p) for p in self.problems]
+        shown = self.problems if max_shown is None else self.problems[:max_shown]
+        lines += [str(p) for p in shown]
+        if len(shown) < len(self.problems):
+            lines.append(f"... and {len(self.problems) - len(shown)} more problem(s) not "
+                         "listed")
         super().__init__("\n".join(lines))
+
+
+class FileRefused(FieldbankError, ValueError):
+    """An input file refused before it is read: not a regular file (a FIFO, a device, a
+    directory), larger than the limit, or unreadable. The message names the file."""
 
 
 class StorageError(FieldbankError, RuntimeError):

@@ -1,20 +1,44 @@
-"""Durable file writes and the one JSON encoder, shared by the CLI, reports, stores and traces.
+"""Durable file writes, bounded file reads, and the one JSON encoder, shared by the CLI,
+reports, stores and traces.
 
 :func:`write_atomic` never leaves a half-written file: the data go to a temporary file in the
 target's directory, are flushed and fsynced, renamed over the target with ``os.replace``
 (atomic on POSIX), and the directory is fsynced so the rename itself survives a crash.
+
+:func:`write_new` is the same for files a user asked for (exports): it refuses to overwrite an
+existing file unless told to, and never writes through a symbolic link.
+
+:func:`read_regular_file` reads a file someone else made (lab files, plans, parameters): only
+a regular file (a symlink is judged by its target), refused without opening it for reading
+when it is a FIFO, a device or a directory, and never more than a limit, so ``/dev/zero``, a
+named pipe with no writer or a file that grows as it is read cannot hang or exhaust memory.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
+import stat
 import tempfile
 from collections.abc import Mapping
 from datetime import date, datetime
 from pathlib import Path
 from typing import Any
+
+from fieldbank.errors import FileRefused
+
+#: Largest JSON document (plan, parameters) read from a file, bytes.
+MAX_DOCUMENT_BYTES = 16 << 20
+#: errno values that mean the disk (or the user's quota, or the file size limit) is full
+DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def disk_full_message(where: str | Path, exc: OSError) -> str:
+    """What to say when writing ``where`` failed because the disk is full."""
+    return (f"No space left to write {where} ({exc.strerror}); nothing was stored. Free some "
+            "space (or raise the quota) and try again.")
 
 
 def fsync_dir(path: str | Path) -> None:
@@ -51,6 +75,110 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    fsync_dir(p.parent)
+    return p
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISCHR, "a character "
+                       "device"), (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISDIR, "a directory")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def _size(n: int) -> str:
+    return f"{n:,} bytes" if n < 1 << 20 else f"{n / (1 << 20):,.1f} MiB"
+
+
+def read_regular_file(path: str | Path, max_bytes: int, limit_hint: str = "") -> bytes:
+    """The bytes of a regular file of at most ``max_bytes`` (see the module docstring).
+
+    Raises
+    ------
+    FileRefused
+        Not a regular file, larger than ``max_bytes`` (``limit_hint`` is added to the
+        message), changed while opened, or unreadable; the message names the file.
+    """
+    p = os.fspath(path)
+    try:
+        st = os.stat(p)  # follows a symlink: /dev/zero behind a link is refused as a device
+    except OSError as exc:
+        raise FileRefused(f"{p}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise FileRefused(f"{p}: {_kind(st.st_mode)}, not a regular file; refused without "
+                          "reading it")
+    if st.st_size > max_bytes:
+        raise FileRefused(f"{p}: {_size(st.st_size)}, larger than {_size(max_bytes)} "
+                          f"{limit_hint}".rstrip())
+    try:
+        # O_NONBLOCK: a FIFO swapped in after the stat cannot make the open wait for a writer
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
+    except OSError as exc:
+        raise FileRefused(f"{p}: cannot read ({exc.strerror})") from None
+    try:
+        st2 = os.fstat(fd)
+        if not stat.S_ISREG(st2.st_mode) or (st2.st_dev, st2.st_ino) != (st.st_dev, st.st_ino):
+            raise FileRefused(f"{p}: changed while it was being opened; refused")
+        chunks = []
+        total = 0
+        while True:
+            chunk = os.read(fd, min(1 << 20, max_bytes + 1 - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+            if total > max_bytes:
+                raise FileRefused(f"{p}: grew past {_size(max_bytes)} while being read "
+                                  f"{limit_hint}".rstrip())
+        return b"".join(chunks)
+    except OSError as exc:
+        raise FileRefused(f"{p}: cannot read ({exc.strerror})") from None
+    finally:
+        os.close(fd)
+
+
+def write_new(path: str | Path, data: bytes | str, force: bool = False) -> Path:
+    """Write a file a user asked for: atomically (as :func:`write_atomic`), never through a
+    symbolic link, and never over an existing file unless ``force``.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists (as a file, a link or anything else) and ``force`` is False, or it is
+        a symbolic link or not a regular file (refused even with ``force``).
+    """
+    p = Path(path)
+    try:
+        st = os.lstat(p)
+    except FileNotFoundError:
+        st = None
+    if st is not None:
+        if stat.S_ISLNK(st.st_mode):
+            raise FileExistsError(errno.EEXIST, "is a symbolic link; fieldbank does not write "
+                                  "through links", str(p))
+        if not stat.S_ISREG(st.st_mode):
+            raise FileExistsError(errno.EEXIST, f"exists and is {_kind(st.st_mode)}", str(p))
+        if not force:
+            raise FileExistsError(errno.EEXIST, "exists; give --force to replace it", str(p))
+    p.parent.mkdir(parents=True, exist_ok=True)
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.")
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(raw)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if force:
+            os.replace(tmp, p)  # replaces the directory entry; never follows a link
+        else:
+            os.link(tmp, p)  # fails if anything appeared at p meanwhile
+            os.unlink(tmp)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

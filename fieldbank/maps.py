@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike
 
 from fieldbank.errors import MapError
 from fieldbank.model import Arm, FloatArray
+from fieldbank.sanitize import csv_comment
 
 KINDS = ("postural", "stiffness")
 FRAMES = ("shoulder",)
@@ -147,7 +148,12 @@ class FieldMap:
         return np.hstack(parts)
 
     def to_csv(self) -> str:
-        """The BRIEF §11 CSV text: ``# key: value`` metadata, a header, one row per position."""
+        """The BRIEF §11 CSV text: ``# key: value`` metadata, a header, one row per position.
+
+        Metadata text is written one line per key and neutralised for spreadsheets
+        (:func:`fieldbank.sanitize.csv_comment`): a value from a lab file cannot start a new
+        line or run as a formula when the file is opened in a spreadsheet.
+        """
         out = io.StringIO()
         out.write(f"# kind: {self.kind}\n")
         out.write(f"# frame: {self.frame}\n")
@@ -156,12 +162,12 @@ class FieldMap:
         if self.speed_m_per_s > 0:
             vx, vy = self.velocity_m_per_s
             out.write(f"# velocity_vector_m_per_s: {vx:.17g}, {vy:.17g}\n")
-        out.write(f"# source: {self.source}\n")
+        out.write(f"# source: {csv_comment(self.source)}\n")
         for k, v in self.metadata.items():
             if k in ("kind", "frame", "sign", "velocity_m_per_s", "velocity_vector_m_per_s",
                      "source"):
                 continue
-            out.write(f"# {k}: {v}\n")
+            out.write(f"# {csv_comment(k).replace(':', '_')}: {csv_comment(v)}\n")
         out.write(",".join(self.columns()) + "\n")
         for row in self.table():
             out.write(",".join(f"{v:.10g}" for v in row) + "\n")

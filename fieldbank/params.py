@@ -30,7 +30,8 @@ from dataclasses import MISSING, asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import ParameterError
+from fieldbank.errors import FileRefused, ParameterError
+from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file
 from fieldbank.validation import Interval, check_number, check_tuple
 
 GROUPS: tuple[str, ...] = ("sf", "se", "ef", "ee", "bf", "be")
@@ -346,15 +347,20 @@ class ArmParams:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise ParameterError(f"{where}: not valid JSON ({exc}).") from None
+        except RecursionError:
+            raise ParameterError(f"{where}: JSON nested too deeply to be a "
+                                 "parameter set.") from None
         return cls.from_dict(data, where)
 
     @classmethod
     def from_file(cls, path: str | Path) -> ArmParams:
         p = Path(path)
         try:
-            text = p.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ParameterError(f"{p}: cannot read ({exc.strerror}).") from None
+            text = read_regular_file(p, MAX_DOCUMENT_BYTES).decode("utf-8")
+        except FileRefused as exc:
+            raise ParameterError(f"{exc}.") from None
+        except UnicodeDecodeError as exc:
+            raise ParameterError(f"{p}: not UTF-8 text (byte {exc.start}).") from None
         return cls.from_json(text, where=str(p))
 
     # --- conversions ---------------------------------------------------------------------------

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fieldbank.errors import StorageError
-from fieldbank.haptic.recording import COLUMNS, NCOL, Trace
+from fieldbank.haptic.recording import COLUMNS, NCOL, Trace, public_metadata
 from fieldbank.params import ArmParams
 
 if TYPE_CHECKING:  # typing only: the records come with whatever database is passed in
@@ -104,7 +104,8 @@ class DatabaseTraceSink:
     def write_trace(self, trace: Trace, name: str) -> str:
         a_id = self._model_id(trace, "A", name)
         b_id = self._model_id(trace, "B", name)
-        robot = str(trace.metadata.get("robot", "unknown"))
+        metadata = public_metadata(trace.metadata)
+        robot = str(metadata.get("robot", "unknown"))
         sess = self.db.start_haptic_session(
             a_id, robot, model_b_id=b_id, patient_code=self.patient_code,
             started_at=_when(trace.metadata.get("started_at")), patient_note=self.patient_note)
@@ -118,7 +119,7 @@ class DatabaseTraceSink:
             self.db.add_haptic_trials(sess.id, trials)
         self.db.end_haptic_session(sess.id, {
             "name": name, "rate_hz": trace.rate_hz, "loop": trace.stats,
-            "faults": trace.faults, "events": trace.events, "metadata": trace.metadata,
+            "faults": trace.faults, "events": trace.events, "metadata": metadata,
         }, ended_at=_when(trace.metadata.get("ended_at")))
         return f"{SESSION_PREFIX}{sess.id}"
 

@@ -4,8 +4,16 @@
 pty, ``socket://``, or the simulated robot ``sim://``). Reads never block the loop: each
 :meth:`RobotLink.poll` takes the bytes that have arrived, reassembles frames, keeps the newest
 STATE in plain attributes, and counts what went wrong (CRC and other decode errors, frames lost
-to sequence gaps, duplicates, device FAULT frames). Judging those counts is the safety layer's
-job (:mod:`haptic.safety`); a port that fails raises :class:`LinkDown`.
+to sequence gaps, duplicates, device FAULT frames, STATE frames whose flags report a device
+fault or a tripped watchdog - each frame counted, even when a newer STATE of the same read
+replaces it; the fault flag even in a frame dropped as a duplicate). Judging those counts is
+the safety layer's job (:mod:`haptic.safety`); a port that fails raises :class:`LinkDown`.
+
+Sequence numbers: a frame numbered behind the last one is a duplicate and dropped. One forged
+or corrupted-but-valid frame far ahead would then make every genuine frame look old and blind
+the host; so when :data:`RESYNC_FRAMES` frames in a row arrive in order from another point of
+the sequence, the link resynchronises to them (counted in ``resyncs``). The jump itself is a
+sequence gap, which the safety layer turns into a fault.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ import serial
 
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.errors import HandshakeError, HapticError, LinkDown
+from fieldbank.redact import mask_url, redact
 
 # pyserial resolves a URL scheme X to the module <package>.protocol_X: sim:// -> protocol_sim
 if "fieldbank.haptic" not in serial.protocol_handler_packages:
@@ -25,6 +34,10 @@ if "fieldbank.haptic" not in serial.protocol_handler_packages:
 
 #: Baud rate asked of real USB serial adapters (ignored by ptys and sim://).
 DEFAULT_BAUDRATE = 1_000_000
+#: Consecutive in-order frames from another point of the sequence that resynchronise it.
+RESYNC_FRAMES = 3
+#: Offset of the flags byte in a STATE payload (t_us u32, x, y, vx, vy f32).
+STATE_FLAGS_AT = 20
 
 
 class RobotLink:
@@ -32,8 +45,9 @@ class RobotLink:
 
     Attributes (newest STATE): ``t_us``, ``x``, ``y``, ``vx``, ``vy`` (m, m/s, robot frame),
     ``flags``, ``echo_seq`` (last FORCE seq the device applied), ``states`` (STATE frames
-    received so far). Counters: ``frames_lost``, ``max_gap``, ``duplicates``, ``device_faults``,
-    ``decode_errors`` (by kind, from the frame reader).
+    received so far). Counters: ``frames_lost``, ``max_gap``, ``duplicates``, ``resyncs``,
+    ``device_faults`` (FAULT frames), ``fault_flag_frames`` and ``watchdog_flag_frames``
+    (STATE frames with those flags), ``decode_errors`` (by kind, from the frame reader).
     """
 
     def __init__(self, port: serial.SerialBase) -> None:
@@ -52,8 +66,13 @@ class RobotLink:
         self.frames_lost = 0
         self.max_gap = 0
         self.duplicates = 0
+        self.resyncs = 0
+        self._resync_next = -1
+        self._resync_run = 0
         self.device_faults = 0
         self.last_device_fault = 0
+        self.fault_flag_frames = 0
+        self.watchdog_flag_frames = 0
         try:
             self._fd: int | None = port.fileno()
         except (AttributeError, OSError, ValueError, serial.SerialException):
@@ -71,7 +90,8 @@ class RobotLink:
         try:
             port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0.05)
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise HapticError(f"cannot open robot port {url!r}: {exc}") from None
+            raise HapticError(f"cannot open robot port {mask_url(url)!r}: "
+                              f"{redact(str(exc), url)}") from None
         if hasattr(port, "set_low_latency_mode"):
             try:
                 port.set_low_latency_mode(True)  # FTDI latency timer 16 ms -> 1 ms
@@ -162,11 +182,20 @@ class RobotLink:
         for frame in self.reader.feed(data):
             self.frames_rx += 1
             seq = frame.seq
+            if frame.type == P.MsgType.STATE and frame.payload[STATE_FLAGS_AT] & P.FLAG_FAULT:
+                self.fault_flag_frames += 1  # every one counts, even a frame dropped below
             if self._rx_seq >= 0:
                 lost = (seq - self._rx_seq - 1) & 0xFFFF
-                if lost >= 0x8000:
-                    self.duplicates += 1
-                    continue
+                if lost >= 0x8000:  # behind the last frame: a duplicate, unless a run of them
+                    run = self._resync_run + 1 if seq == self._resync_next else 1
+                    self._resync_next = (seq + 1) & 0xFFFF
+                    self._resync_run = run
+                    if run < RESYNC_FRAMES:
+                        self.duplicates += 1
+                        continue
+                    self.resyncs += 1  # the stream continues from here: follow it
+                    lost = 0
+                self._resync_run = 0
                 if lost:
                     self.frames_lost += lost
                     if lost > self.max_gap:
@@ -178,6 +207,8 @@ class RobotLink:
                  self.echo_seq) = P.STATE_FMT.unpack(frame.payload)
                 self.states += 1
                 new += 1
+                if self.flags & P.FLAG_WATCHDOG:
+                    self.watchdog_flag_frames += 1
             elif t == P.MsgType.HELLO_ACK:
                 self.device = P.DeviceInfo.from_payload(frame.payload)
             elif t == P.MsgType.FAULT:

@@ -34,6 +34,7 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.redact import mask_url
 
 
 @dataclass(frozen=True)
@@ -125,7 +126,7 @@ def probe(params: ArmParams, motion: str = "pull", robot: str | None = None,
                              shoulder_offset_m=offset_m, realtime_priority=not lockstep)
         rd = Renderer(link, params, params, cfg, safety=safety,
                       clock=VirtualClock() if lockstep else None)
-        rd.metadata.update({"robot": url, "motion": motion})
+        rd.metadata.update({"robot": mask_url(url), "motion": motion})
         # a lockstep device answered the handshake with its first STATE already
         trace = rd.run(duration_s if duration_s is not None
                        else motion_duration_s(motion, path_text=path_text),

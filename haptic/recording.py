@@ -18,8 +18,6 @@ import csv
 import hashlib
 import io
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -28,7 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fieldbank.errors import StorageError
-from fieldbank.files import fsync_dir
+from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, write_new
+from fieldbank.redact import mask_url
+from fieldbank.sanitize import csv_comment
 
 TRACE_FORMAT = "fieldbank-haptic-trace"
 TRACE_FORMAT_VERSION = 1
@@ -131,8 +131,8 @@ class Trace:
         out.write(f"# format: {TRACE_FORMAT} {TRACE_FORMAT_VERSION}\n")
         out.write(f"# rate_hz: {self.rate_hz}\n")
         out.write("# frame: robot\n# sign: force on the handle\n")
-        for k, v in self.metadata.items():
-            out.write(f"# {k}: {json.dumps(v)}\n")
+        for k, v in public_metadata(self.metadata).items():
+            out.write(f"# {csv_comment(k)}: {csv_comment(json.dumps(v))}\n")
         w = csv.writer(out, lineterminator="\n")
         w.writerow(["t_s"] + [name for name, _ in COLUMNS])
         for t, row in zip(self.t_s, self.data, strict=True):
@@ -174,46 +174,53 @@ class Hdf5TraceSink:
         return str(path)
 
 
+def public_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
+    """A trace's metadata as it may be written or printed: the robot URL masked
+    (:func:`fieldbank.redact.mask_url`), also for traces recorded before it was."""
+    out = dict(metadata)
+    if "robot" in out:
+        out["robot"] = mask_url(str(out["robot"]))
+    return out
+
+
 def write_trace_h5(trace: Trace, path: str | Path) -> None:
-    """Write-once HDF5: temp file in the same directory, fsync, rename, directory fsync."""
+    """Write-once HDF5: built in memory, then written with plain system calls to a temporary
+    file in the same directory, fsynced, linked into place (never over an existing file),
+    directory fsynced. A full disk is a StorageError and leaves nothing behind."""
     import h5py
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.exists():
-        raise StorageError(f"{path}: a trace file by this name exists; traces are write-once")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    buf = io.BytesIO()
+    with h5py.File(buf, "w") as h:
+        h.attrs["format"] = TRACE_FORMAT
+        h.attrs["format_version"] = TRACE_FORMAT_VERSION
+        h.attrs["rate_hz"] = trace.rate_hz
+        h.attrs["frame"] = "robot"
+        h.attrs["sign"] = "force on the handle"
+        h.attrs["models"] = json.dumps(trace.models)
+        h.attrs["events"] = json.dumps(trace.events)
+        h.attrs["faults"] = json.dumps(trace.faults)
+        h.attrs["stats"] = json.dumps(trace.stats)
+        h.attrs["metadata"] = json.dumps(public_metadata(trace.metadata))
+        kw: dict[str, Any] = {"fletcher32": True, "compression": "gzip",
+                              "compression_opts": 4}
+        if len(trace) > 0:
+            kw["chunks"] = True
+        d = h.create_dataset("t_s", data=trace.t_s, **kw)
+        d.attrs["unit"] = "s"
+        g = h.create_group("columns")
+        for i, (name, unit) in enumerate(COLUMNS):
+            d = g.create_dataset(name, data=trace.data[:, i], **kw)
+            d.attrs["unit"] = unit
     try:
-        with h5py.File(tmp, "w") as h:
-            h.attrs["format"] = TRACE_FORMAT
-            h.attrs["format_version"] = TRACE_FORMAT_VERSION
-            h.attrs["rate_hz"] = trace.rate_hz
-            h.attrs["frame"] = "robot"
-            h.attrs["sign"] = "force on the handle"
-            h.attrs["models"] = json.dumps(trace.models)
-            h.attrs["events"] = json.dumps(trace.events)
-            h.attrs["faults"] = json.dumps(trace.faults)
-            h.attrs["stats"] = json.dumps(trace.stats)
-            h.attrs["metadata"] = json.dumps(trace.metadata)
-            kw: dict[str, Any] = {"fletcher32": True, "compression": "gzip",
-                                  "compression_opts": 4}
-            if len(trace) > 0:
-                kw["chunks"] = True
-            d = h.create_dataset("t_s", data=trace.t_s, **kw)
-            d.attrs["unit"] = "s"
-            g = h.create_group("columns")
-            for i, (name, unit) in enumerate(COLUMNS):
-                d = g.create_dataset(name, data=trace.data[:, i], **kw)
-                d.attrs["unit"] = unit
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-        fsync_dir(path.parent)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        write_new(path, buf.getvalue())
+    except FileExistsError:
+        raise StorageError(f"{path}: a trace file by this name exists; traces are "
+                           "write-once") from None
+    except OSError as exc:
+        if exc.errno in DISK_FULL_ERRNOS:
+            raise StorageError(disk_full_message(path, exc)) from None
+        raise StorageError(f"{path}: cannot write the trace ({exc.strerror})") from None
 
 
 def read_trace_h5(path: str | Path) -> Trace:
@@ -237,7 +244,7 @@ def read_trace_h5(path: str | Path) -> Trace:
                 t_s=t, data=data, rate_hz=float(h.attrs["rate_hz"]),
                 models=json.loads(h.attrs["models"]), events=json.loads(h.attrs["events"]),
                 faults=json.loads(h.attrs["faults"]), stats=json.loads(h.attrs["stats"]),
-                metadata=json.loads(h.attrs["metadata"]),
+                metadata=public_metadata(json.loads(h.attrs["metadata"])),
             )
     except OSError as exc:
         raise StorageError(f"{path}: cannot read trace: {exc}") from None

@@ -4,7 +4,10 @@ Each tick (default 1 kHz, 500 Hz–4 kHz):
 
 1. read the link without blocking and take the newest handle state (robot frame → shoulder
    frame by subtracting ``shoulder_offset_m``, the shoulder's position in robot coordinates);
-2. check it (timeout, CRC, sequence gap, device fault, NaN, workspace, speed: :mod:`safety`);
+   apply the commands queued since the last tick (an operator's re-arm among them);
+2. check it, whenever the renderer is armed - including the tick on which it was re-armed
+   (timeout, CRC, sequence gap, device FAULT frames and the fault or watchdog flag of every
+   STATE frame read, NaN, workspace, speed: :mod:`safety`); a fault zeroes this tick's force;
 3. tick both virtual arms (A = before, B = after) with the same handle state; each returns the
    force its coupling puts on the handle (:class:`fieldbank.sim.ArmSim`);
 4. blend them, F = (1 − w) F_A + w F_B, where w follows a raised-cosine ramp on each switch so
@@ -51,7 +54,7 @@ from fieldbank.haptic.commands import (
 from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.loopstats import LoopTimes, loop_stats, status_figures
-from fieldbank.haptic.protocol import FLAG_WATCHDOG, FaultCode
+from fieldbank.haptic.protocol import FLAG_FAULT, FaultCode
 from fieldbank.haptic.recording import NCOL, Trace, TraceBuffer
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
@@ -206,6 +209,9 @@ class Renderer:
         self._timeout_ticks = max(1, math.ceil(self.safety.config.state_timeout_ms * 1e-3
                                                / self.dt_s))
         self._device_faults_seen = 0
+        self._fault_flags_seen = 0
+        self._fault_flags_before_poll = 0
+        self._watchdog_flags_seen = 0
         self._stop = False
         self.running = False
         self.t_s = 0.0
@@ -341,14 +347,26 @@ class Renderer:
                 sim.reset()
 
     def arm(self) -> None:
-        """Arm (or re-arm after a fault): refused while the handle state is unsafe."""
+        """Arm (or re-arm after a fault): refused while the link is down, the device reports a
+        fault in its latest STATE, or the handle state is unsafe. The tick that applies it runs
+        every safety check before any force goes out."""
         if self._link_down:
             raise CommandError("cannot arm: the robot link is down")
+        link = self.link
+        if link.flags & FLAG_FAULT:
+            raise CommandError("cannot arm: the robot reports a device fault in its latest "
+                               "state; clear it on the robot first")
         if self.safety.latched & (1 << (FaultCode.MODEL - 1)):
             self._reset_arms()
-        self.safety.rearm((self.link.x, self.link.y, self.link.vx, self.link.vy))
+        self.safety.rearm((link.x, link.y, link.vx, link.vy))
         self._stale = 0
-        self._device_faults_seen = self.link.device_faults
+        self._device_faults_seen = link.device_faults
+        # fault flags read before this tick are forgiven by the operator's re-arm; those read
+        # on this tick are checked on it (the watchdog flag clears only once the device has the
+        # ARM, so every earlier one is forgiven)
+        self._fault_flags_seen = (self._fault_flags_before_poll if self.running
+                                  else link.fault_flag_frames)
+        self._watchdog_flags_seen = link.watchdog_flag_frames
         try:
             self.link.arm()
         except LinkDown as exc:
@@ -387,8 +405,8 @@ class Renderer:
         c0 = pc()
         link = self.link
         safety = self.safety
-        armed = safety.mode == Mode.ARMED
         new = 0
+        self._fault_flags_before_poll = link.fault_flag_frames
         if not self._link_down:
             try:
                 wait = self.config.state_wait_s
@@ -399,6 +417,8 @@ class Renderer:
                 self._trip(FaultCode.DISCONNECT, str(exc))
         if self.commands.qsize():
             self._drain()
+        # after the commands: a re-arm applied this tick is checked this tick
+        armed = safety.mode == Mode.ARMED
         c1 = pc()
         ox, oy = self.config.shoulder_offset_m
         x, y, vx, vy = link.x - ox, link.y - oy, link.vx, link.vy
@@ -416,7 +436,11 @@ class Renderer:
             if link.device_faults != self._device_faults_seen:
                 self._device_faults_seen = link.device_faults
                 self._trip(FaultCode.DEVICE, f"device fault code {link.last_device_fault}")
-            if link.flags & FLAG_WATCHDOG:
+            if link.fault_flag_frames != self._fault_flags_seen:
+                self._fault_flags_seen = link.fault_flag_frames
+                self._trip(FaultCode.DEVICE, "the robot's STATE reports a device fault")
+            if link.watchdog_flag_frames != self._watchdog_flags_seen:
+                self._watchdog_flags_seen = link.watchdog_flag_frames
                 self._trip(FaultCode.DEVICE, "device watchdog tripped")
             code, msg = safety.check_handle(link.x, link.y, vx, vy)
             if code:

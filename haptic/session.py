@@ -46,6 +46,7 @@ from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.station.launch import StationOptions, StationProcess
 from fieldbank.home import data_home
 from fieldbank.params import ArmParams
+from fieldbank.redact import mask_url
 from fieldbank.validation import Interval, check_number
 
 #: One line of progress for the user.
@@ -94,7 +95,8 @@ class SessionResult:
     ----------
     trace : Trace
     robot : str
-        The port URL rendered on (for ``sim://``, with the operator's start filled in).
+        The port URL rendered on (for ``sim://``, with the operator's start filled in), its
+        password masked (:func:`fieldbank.redact.mask_url`).
     device : DeviceInfo
         What the robot said about itself in the handshake.
     name : str
@@ -244,7 +246,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
             f"{device.max_rate_hz} Hz, device force limit {device.force_limit_n:g} N, "
             f"watchdog {device.watchdog_ms} ms")
         rd = Renderer(link, before, after, cfg, safety=safety)
-        rd.metadata["robot"] = robot
+        # the trace, its file, the database record and every printout keep the URL masked
+        rd.metadata["robot"] = mask_url(robot)
         if any(i is not None for i in model_ids):
             rd.metadata["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
         if info:
@@ -285,4 +288,5 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
     if db is not None:
         ref = _with_store(db, lambda s: DatabaseTraceSink(s, patient_code, patient_note)
                           .write_trace(trace, name))
-    return SessionResult(trace, robot, device, name, trace_file, sha, ref, station_url)
+    return SessionResult(trace, mask_url(robot), device, name, trace_file, sha, ref,
+                         station_url)

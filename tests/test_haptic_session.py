@@ -66,11 +66,13 @@ def test_trace_h5_round_trip_with_units(probe_result, tmp_path: Path) -> None:  
 
 
 def test_failed_trace_write_leaves_nothing(probe_result, tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    def boom(*a: object, **k: object) -> None:
-        raise OSError("disk full")
+    import errno
 
-    monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(OSError):
+    def boom(*a: object, **k: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "link", boom)  # the last step: the file goes into place
+    with pytest.raises(StorageError, match="No space left"):
         write_trace_h5(probe_result.trace, tmp_path / "x.h5")
     assert list(tmp_path.iterdir()) == []
 

@@ -83,12 +83,14 @@ def test_kill_9_mid_batch_leaves_database_and_store_consistent(any_db_url: str,
     assert proc.returncode == -signal.SIGKILL
     written = len(mark.read_text().splitlines())
     assert 10 <= written < len(files)  # killed in the middle of the batch
-    # the batch is absent; the check is clean apart from explained orphans
+    # the batch is absent; the check is clean apart from explained orphans: the two large files
+    # a SQLite database wrote to its store before the transaction (a server database writes
+    # them inside it, so the rollback takes them too)
     db2 = Database.open(url, store_root=arrays)
     assert db2.list_maps() == [] and db2.list_sessions() == []
     report = db2.check()
     assert report.ok, report.problems
-    assert len(report.orphans) == 2
+    assert len(report.orphans) == (2 if url.startswith("sqlite") else 0)
     assert all("not referenced by the database" in o for o in report.orphans)
     # re-running the batch (with the command line) stores it whole and adopts the orphaned
     # store files

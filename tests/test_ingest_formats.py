@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fieldbank.errors import ValidationError
 from fieldbank.ingest import (
     detect_format,
     ingest_paths,
@@ -115,17 +116,20 @@ def test_ingest_sample_set_and_export_round_trip(sample_dir: Path, tmp_path: Pat
             for f in s["files"]} == {"csv", "hdf5", "mat5", "mat73"}
     # every sample source says it is synthetic
     assert all("not patient data" in m.source_text for m in db.list_maps())
-    # export to HDF5 and ingest the export for a second patient: same maps
+    # export to HDF5 and ingest the export into a new session of the same patient: same maps
+    # (the maps name their patient, so another patient would be refused)
     from fieldbank.ingest.hdf5fmt import write_hdf5 as w
 
     rows = db.list_maps("SYN-001", kind="stiffness")
     w(tmp_path / "exp.h5", db.get_maps([r.id for r in rows]))
-    p = db.get_patient("SYN-001")
-    db.add_patient("SYN-001-copy", p.body_mass_kg, p.height_m, p.side)
-    rep = ingest_paths(db, [tmp_path / "exp.h5"], "SYN-001-copy", "re-import")
+    rep = ingest_paths(db, [tmp_path / "exp.h5"], "SYN-001", "re-import")
     again = db.get_maps(list(rep.outcomes[0].map_ids))
     for a, b in zip(db.get_maps([r.id for r in rows]), again, strict=True):
         _same(a, b)
+    p = db.get_patient("SYN-001")
+    db.add_patient("SYN-001-copy", p.body_mass_kg, p.height_m, p.side)
+    with pytest.raises(ValidationError, match="being ingested for patient 'SYN-001-copy'"):
+        ingest_paths(db, [tmp_path / "exp.h5"], "SYN-001-copy", "re-import")
     assert db.check().ok
     db.close()
 

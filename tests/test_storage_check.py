@@ -38,12 +38,12 @@ def test_clean_database_checks_ok(db: Database) -> None:
     assert r.ok and r.orphans == () and r.counts["maps"] == 1
 
 
-def test_check_reads_only_the_engine_and_the_store(db: Database) -> None:
+def test_check_reads_only_the_engine_and_the_arrays(db: Database) -> None:
     from fieldbank.storage.check import check
 
     class Bare:  # not a Database: check needs nothing else
         engine = db.engine
-        store = db.store
+        arrays = db.arrays
 
     assert check(Bare()) == db.check()
 

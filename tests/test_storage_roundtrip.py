@@ -222,7 +222,7 @@ def test_haptic_sessions_and_traces_round_trip(db: Database) -> None:
     back = db.get_trace_array(rec.id)
     assert back.dtype == np.float32
     np.testing.assert_array_equal(back, trace)
-    assert db.store.attrs(rec.array.sha256)["provenance"]["rate_hz"] == 1000
+    assert db.trace_attrs(rec.id)["provenance"]["rate_hz"] == 1000
     assert db.list_traces(hs.id) == [rec]
     ended = db.end_haptic_session(hs.id, {"ticks": 1000, "overruns": 0})
     assert ended.ended_at is not None and ended.stats == {"ticks": 1000, "overruns": 0}

@@ -5,7 +5,8 @@ See :mod:`fieldbank.ingest.batch` for the flow and ``docs/formats.md`` for the f
 
 from fieldbank.ingest.batch import IngestReport, detect_format, ingest_paths, read_file
 from fieldbank.ingest.hdf5fmt import write_hdf5
+from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
 from fieldbank.ingest.matfmt import write_mat5, write_mat73
 
-__all__ = ["IngestReport", "detect_format", "ingest_paths", "read_file", "write_hdf5",
-           "write_mat5", "write_mat73"]
+__all__ = ["DEFAULT_LIMITS", "IngestLimits", "IngestReport", "detect_format", "ingest_paths",
+           "read_file", "write_hdf5", "write_mat5", "write_mat73"]

@@ -1,11 +1,15 @@
 """Ingest of a batch of files: detect, read, validate every file, then store all at once.
 
-1. Each file is read whole; its SHA-256 is taken over the exact bytes.
+1. Each file is read whole - only a regular file, at most ``max_file_bytes``
+   (:func:`fieldbank.files.read_regular_file`: a FIFO, a device or a link to one is refused
+   without being read); its SHA-256 is taken over the exact bytes.
 2. The format is detected from the content (not the extension): fieldbank HDF5, MATLAB v5,
-   MATLAB v7.3, or CSV text.
-3. Every map of every file is validated against the patient's arm; every problem of every file
-   is collected, located. If there is any, :class:`~fieldbank.errors.ValidationError` lists
-   them all and nothing is written.
+   MATLAB v7.3, or CSV text. Readers are bounded (:mod:`fieldbank.ingest.limits`); anything a
+   reader did not foresee in a damaged file is still a located problem, never a traceback.
+3. Every map of every file is validated against the patient's arm and the plausibility
+   limits, and must not name another patient; every problem of every file is collected,
+   located (at most ``max_problems`` listed per file and per batch, the rest counted). If
+   there is any, :class:`~fieldbank.errors.ValidationError` lists them and nothing is written.
 4. Otherwise all files go to :meth:`Database.ingest_files` in one transaction: the batch lands
    whole or not at all. A file already stored (same SHA-256) is reported as a duplicate.
 """
@@ -19,9 +23,11 @@ from datetime import date
 from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import Problem, ValidationError
+from fieldbank.errors import FileRefused, Problem, ValidationError
+from fieldbank.files import read_regular_file
 from fieldbank.ingest.csvfmt import read_csv
 from fieldbank.ingest.hdf5fmt import read_hdf5
+from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
 from fieldbank.ingest.matfmt import read_mat5, read_mat73
 from fieldbank.ingest.parsed import ParsedMap, validate_map
 from fieldbank.model import Arm
@@ -29,8 +35,9 @@ from fieldbank.storage import Database, IncomingFile, IngestOutcome
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 FORMATS = ("csv", "hdf5", "mat5", "mat73")
+FORMAT_NAMES = {"csv": "CSV", "hdf5": "HDF5", "mat5": "MATLAB v5", "mat73": "MATLAB v7.3"}
 
-Reader = Callable[[str, bytes], tuple[list[ParsedMap], list[Problem]]]
+Reader = Callable[[str, bytes, IngestLimits], tuple[list[ParsedMap], list[Problem]]]
 READERS: dict[str, Reader] = {"csv": read_csv, "hdf5": read_hdf5, "mat5": read_mat5,
                               "mat73": read_mat73}
 
@@ -50,7 +57,7 @@ def detect_format(data: bytes) -> str | None:
     except UnicodeDecodeError:
         head = data[:4095].decode("utf-8-sig", errors="ignore")
     first = next((ln.strip() for ln in head.splitlines() if ln.strip()), "")
-    if first.startswith("#") or "," in first:
+    if first.startswith("#") or any(d in first for d in ",;\t"):
         return "csv"
     return None
 
@@ -87,26 +94,53 @@ class IngestReport:
         }
 
 
-def read_file(name: str, data: bytes, arm: Arm | None,
-              patient: str = "") -> tuple[IncomingFile | None, list[Problem]]:
-    """Detect, read and validate one file's bytes; the IncomingFile or its problems."""
+def read_file(name: str, data: bytes, arm: Arm | None, patient: str = "",
+              limits: IngestLimits = DEFAULT_LIMITS) -> tuple[IncomingFile | None,
+                                                             list[Problem]]:
+    """Detect, read and validate one file's bytes; the IncomingFile or its problems.
+
+    ``patient``: the code the file is ingested for; a file whose metadata names another
+    patient is refused. At most ``limits.max_problems`` problems are returned, the last one
+    saying how many more there were.
+    """
+    if len(data) > limits.max_file_bytes:
+        return None, [Problem(name, f"{len(data):,} bytes, larger than "
+                              f"{limits.max_file_bytes:,} {limits.hint('max_file_bytes')}")]
     sha = hashlib.sha256(data).hexdigest()
     fmt = detect_format(data)
     if fmt is None:
         return None, [Problem(name, "unknown format: expected map CSV, fieldbank HDF5, or "
                               "MATLAB .mat v5/v7.3")]
-    parsed, problems = READERS[fmt](name, data)
-    maps = []
-    for pm in parsed:
-        fm, probs = validate_map(pm, arm, patient)
-        problems += probs
-        if fm is not None:
-            maps.append(fm)
+    try:
+        parsed, problems = READERS[fmt](name, data, limits)
+        if len(parsed) > limits.max_maps:
+            return None, [Problem(name, f"{len(parsed):,} maps, more than {limits.max_maps:,} "
+                                  f"{limits.hint('max_maps')}")]
+        maps = []
+        for pm in parsed:
+            fm, probs = validate_map(pm, arm, patient, limits)
+            problems += probs
+            if fm is not None:
+                maps.append(fm)
+    except MemoryError:
+        return None, [Problem(name, f"too large to read as {FORMAT_NAMES[fmt]} in the memory "
+                              "available; refused")]
+    except Exception as exc:  # a damaged file no reader check foresaw: still a message
+        return None, [Problem(name, f"unreadable {FORMAT_NAMES[fmt]} file "
+                              f"({type(exc).__name__}: {exc})")]
     if not problems and not maps:
         problems.append(Problem(name, "no map in file"))
     if problems:
-        return None, problems
+        return None, _capped(problems, limits.max_problems, name)
     return IncomingFile(name, sha, fmt, data, tuple(maps)), []
+
+
+def _capped(problems: list[Problem], most: int, where: str) -> list[Problem]:
+    """At most ``most`` problems, then one counting the rest."""
+    if len(problems) <= most:
+        return problems
+    return [*problems[:most], Problem(where, f"... and {len(problems) - most:,} more "
+                                      "problem(s) in this file not listed")]
 
 
 def ingest_paths(
@@ -117,6 +151,7 @@ def ingest_paths(
     session_date: date | None = None,
     dry_run: bool = False,
     progress: Callable[[int, int, str], None] | None = None,
+    limits: IngestLimits = DEFAULT_LIMITS,
 ) -> IngestReport:
     """Validate then store a batch of files for one patient's session (see module docstring).
 
@@ -126,24 +161,29 @@ def ingest_paths(
     arm = Arm.from_params(patient.arm_params())
     files: list[IncomingFile] = []
     problems: list[Problem] = []
+    bad: set[str] = set()
     total = len(paths)
     for k, p in enumerate(paths):
         path = Path(p)
         try:
-            data = path.read_bytes()
-        except OSError as exc:
-            problems.append(Problem(str(path), f"cannot read ({exc.strerror})"))
+            data = read_regular_file(path, limits.max_file_bytes,
+                                     limits.hint("max_file_bytes"))
+        except FileRefused as exc:
+            problems.append(Problem(str(path), str(exc).removeprefix(f"{path}: ")))
+            bad.add(str(path))
             continue
-        inc, probs = read_file(path.name, data, arm, patient.code)
+        inc, probs = read_file(path.name, data, arm, patient.code, limits)
         problems += probs
+        if probs:
+            bad.add(str(path))
         if inc is not None:
             files.append(inc)
         if progress is not None:
             progress(k + 1, 2 * total, path.name)
     if problems:
-        n_bad = len({p.location.split(":")[0] for p in problems})
-        raise ValidationError(problems, header=f"Nothing was stored: {len(problems)} problem(s) "
-                              f"in {n_bad} file(s):")
+        n = sum(not p.reason.startswith("... and ") for p in problems)
+        raise ValidationError(problems, header=f"Nothing was stored: {n} problem(s) in "
+                              f"{len(bad)} file(s):", max_shown=limits.max_problems)
     if dry_run:
         seen: set[str] = set()
         outcomes = []

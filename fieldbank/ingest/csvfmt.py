@@ -3,13 +3,30 @@
 Layout: ``# key: value`` metadata lines, then a header row, then one row per position. Rows are
 located by their line number in the file (``file.csv:row 12``). Columns carry their unit in
 their name; see :mod:`fieldbank.ingest.units`.
+
+Cells are split by the standard library's :mod:`csv` module, whose :class:`csv.Sniffer` finds
+the dialect from the header and the first rows: comma, semicolon or tab delimiters and quoted
+cells (R's ``write.csv`` quotes every header and writes an unnamed first column of row names,
+which is dropped). A file whose delimiter is a semicolon or a tab may write decimal commas
+(``0,05``; R's ``write.csv2``, spreadsheets in many locales); such a file must then use them
+throughout, since ``1.000`` would be ambiguous there.
+
+Numbers are parsed strictly: ASCII digits, an optional sign, one decimal separator and an
+exponent (``-1.5e-3``); ``nan`` and ``inf`` are read so that the validation can name them. No
+``1_000``, no thousands separators, no Arabic-Indic or other non-ASCII digits — Python's
+``float()`` accepts those, a lab file must not. A header with problems is reported once; its
+rows are not parsed (they would each repeat it).
 """
 
 from __future__ import annotations
 
+import csv
+import re
+
 import numpy as np
 
 from fieldbank.errors import Problem
+from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
 from fieldbank.ingest.parsed import RESERVED_KEYS, ParsedMap, parse_velocity
 from fieldbank.ingest.units import QUANTITIES, factor, split_column
 
@@ -17,9 +34,48 @@ VALUE_QUANTITIES = {
     "postural": ("fx", "fy"),
     "stiffness": ("kxx", "kxy", "kyx", "kyy"),
 }
+DELIMITERS = ",;\t"
+#: Lines given to the sniffer (the header and the first rows).
+SNIFF_LINES = 6
+
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?", re.ASCII)
+_NUMBER_COMMA = re.compile(r"[+-]?(?:[0-9]+(?:,[0-9]*)?|,[0-9]+)(?:[eE][+-]?[0-9]+)?",
+                           re.ASCII)
+_DECIMAL_COMMA = re.compile(r"[+-]?[0-9]*,[0-9]+(?:[eE][+-]?[0-9]+)?", re.ASCII)
+_SPECIAL = re.compile(r"[+-]?(?:nan|inf|infinity)", re.ASCII | re.IGNORECASE)
 
 
-def read_csv(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
+def parse_number(cell: str, decimal_comma: bool = False) -> float | None:
+    """``cell`` as a float under the strict grammar above, else None."""
+    text = cell.strip()
+    if _SPECIAL.fullmatch(text):
+        return float(text)
+    if decimal_comma:
+        return float(text.replace(",", ".")) if _NUMBER_COMMA.fullmatch(text) else None
+    return float(text) if _NUMBER.fullmatch(text) else None
+
+
+def _dialect(lines: list[str]) -> type[csv.Dialect] | csv.Dialect:
+    sample = "\n".join(lines[:SNIFF_LINES])
+    try:
+        dialect = csv.Sniffer().sniff(sample, delimiters=DELIMITERS)
+    except csv.Error:
+        dialect = None
+    if dialect is None or dialect.delimiter not in DELIMITERS:
+        # a single-line file or a header alone: the delimiter the header uses most
+        head = lines[0] if lines else ""
+        delim = max(DELIMITERS, key=head.count) if any(d in head for d in DELIMITERS) else ","
+
+        class Fallback(csv.excel):
+            delimiter = delim
+
+        return Fallback
+    dialect.skipinitialspace = True
+    return dialect
+
+
+def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
+             ) -> tuple[list[ParsedMap], list[Problem]]:
     """Parse one CSV map file; returns the map (if the structure allows) and file problems."""
     problems: list[Problem] = []
     try:
@@ -27,30 +83,36 @@ def read_csv(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
     except UnicodeDecodeError as exc:
         return [], [Problem(name, f"not UTF-8 text (byte {exc.start})")]
     meta: dict[str, str] = {}
-    header: list[str] | None = None
-    header_line = 0
-    rows: list[tuple[int, list[str]]] = []
+    body: list[tuple[int, str]] = []  # (line number, text) of the header and data rows
     for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if not line:
             continue
         if line.startswith("#"):
-            body = line[1:].strip()
-            key, sep, value = body.partition(":")
-            if sep and header is None:
+            key, sep, value = line[1:].strip().partition(":")
+            if sep and not body:
                 k = key.strip().lower()
                 if k in meta:
                     problems.append(Problem(f"{name}:row {lineno}", f"metadata key {k!r} given "
                                             "twice"))
                 meta[k] = value.strip()
             continue
-        if header is None:
-            header = [c.strip() for c in line.split(",")]
-            header_line = lineno
-        else:
-            rows.append((lineno, line.split(",")))
-    if header is None:
+        if len(body) >= limits.max_rows + 1:
+            problems.append(Problem(f"{name}:row {lineno}", f"more than {limits.max_rows:,} "
+                                    f"data rows {limits.hint('max_rows')}"))
+            return [], problems
+        body.append((lineno, raw))
+    if not body:
         return [], [*problems, Problem(name, "no header row (expected e.g. x_m,y_m,fx_n,fy_n)")]
+    dialect = _dialect([t for _, t in body])
+    rows = list(csv.reader([t for _, t in body], dialect))
+    header_line = body[0][0]
+    header = [c.strip() for c in rows[0]]
+    cells_of = [(body[i][0], r) for i, r in enumerate(rows[1:], start=1)]
+    row_names = bool(header) and header[0] == "" and len(header) > 1
+    if row_names:  # R's write.csv: an unnamed first column of row names
+        header = header[1:]
+        cells_of = [(ln, r[1:]) for ln, r in cells_of]
     kind = meta.get("kind")
     hloc = f"{name}:row {header_line}"
     # Which value columns to expect: from the kind when valid, else guessed from the header.
@@ -58,48 +120,60 @@ def read_csv(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
         "stiffness" if any((split_column(c) or ("",))[0].startswith("k") for c in header)
         else "postural")
     wanted = ("x", "y", *VALUE_QUANTITIES[shape_kind])
+    hprobs: list[Problem] = []
     col: dict[tuple[str, bool], tuple[int, float]] = {}
     for j, c in enumerate(header):
         parts = split_column(c)
         if parts is None:
-            problems.append(Problem(hloc, f"unknown column {c!r}; a {shape_kind} map has "
-                                    f"{', '.join(_names(shape_kind))} (units in the names)"))
+            hprobs.append(Problem(hloc, f"unknown column {c!r}; a {shape_kind} map has "
+                                  f"{', '.join(_names(shape_kind))} (units in the names; "
+                                  f"cells split at {_delimiter_name(dialect.delimiter)})"))
             continue
         q, is_sd, unit = parts
         dim, table = QUANTITIES[q]
         if q not in wanted or (is_sd and q in ("x", "y")):
-            problems.append(Problem(hloc, f"column {c!r} does not belong to a {shape_kind} map"))
+            hprobs.append(Problem(hloc, f"column {c!r} does not belong to a {shape_kind} map"))
             continue
         f = factor(unit, table)
         if f is None:
-            problems.append(Problem(hloc, f"unknown unit {unit!r} in column {c!r}; known "
-                                    f"{dim} units: {', '.join(table)}"))
+            hprobs.append(Problem(hloc, f"unknown unit {unit!r} in column {c!r}; known "
+                                  f"{dim} units: {', '.join(table)}"))
             continue
         if (q, is_sd) in col:
-            problems.append(Problem(hloc, f"column {c!r} repeats quantity "
-                                    f"{'sd_' if is_sd else ''}{q}"))
+            hprobs.append(Problem(hloc, f"column {c!r} repeats quantity "
+                                  f"{'sd_' if is_sd else ''}{q}"))
             continue
         col[(q, is_sd)] = (j, f)
     for q in wanted:
         if (q, False) not in col and not any(
             p.reason.startswith(("unknown unit", "column")) and f"'{q}_" in p.reason.lower()
-            for p in problems
+            for p in hprobs
         ):
-            problems.append(Problem(hloc, f"missing column for {q} (e.g. "
-                                    f"{_names(shape_kind)[wanted.index(q)]})"))
+            hprobs.append(Problem(hloc, f"missing column for {q} (e.g. "
+                                  f"{_names(shape_kind)[wanted.index(q)]})"))
     vq = VALUE_QUANTITIES[shape_kind]
     sd_present = [q for q in vq if (q, True) in col]
     if sd_present and len(sd_present) != len(vq):
         missing = [f"sd_{q}" for q in vq if q not in sd_present]
-        problems.append(Problem(hloc, f"standard deviations incomplete: missing "
-                                f"{', '.join(missing)}"))
-    n = len(rows)
+        hprobs.append(Problem(hloc, f"standard deviations incomplete: missing "
+                              f"{', '.join(missing)}"))
+    problems += hprobs
+    mprobs: list[Problem] = []
+    velocity, vmissing = parse_velocity(meta.get("velocity_m_per_s"),
+                                        meta.get("velocity_vector_m_per_s"), name, kind, mprobs)
+    if any(p.reason.startswith(("unknown column", "missing column", "unknown unit", "column"))
+           for p in hprobs):
+        cells_of = []  # the rows cannot be read against this header; it is reported once
+    decimal_comma = dialect.delimiter != "," and any(
+        _DECIMAL_COMMA.fullmatch(r[j].strip()) for _, r in cells_of for j, _f in col.values()
+        if j < len(r))
+    n = len(cells_of)
     pos = np.full((n, 2), np.nan)
     vals = np.full((n, len(vq)), np.nan)
     sd = np.full((n, len(vq)), np.nan) if sd_present and len(sd_present) == len(vq) else None
     reported: set[int] = set()
-    lines = [ln for ln, _ in rows]
-    for i, (lineno, cells) in enumerate(rows):
+    lines = [ln for ln, _ in cells_of]
+    for i, (lineno, cells) in enumerate(cells_of):
         loc = f"{name}:row {lineno}"
         if len(cells) != len(header):
             problems.append(Problem(loc, f"{len(cells)} fields, the header has {len(header)}"))
@@ -107,10 +181,15 @@ def read_csv(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
             continue
         for (q, is_sd), (j, f) in col.items():
             cell = cells[j].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                problems.append(Problem(loc, f"column {header[j]!r}: {cell!r} is not a number"))
+            v = parse_number(cell, decimal_comma)
+            if v is None:
+                why = "is not a number"
+                if decimal_comma and "." in cell:
+                    why = ("is not a number here: this file writes decimal commas, so a "
+                           "decimal point is ambiguous")
+                elif not decimal_comma and "," in cell:
+                    why = "is not a number (a decimal comma needs a ';' or tab delimiter)"
+                problems.append(Problem(loc, f"column {header[j]!r}: {cell!r} {why}"))
                 reported.add(i)
                 continue
             if q in ("x", "y"):
@@ -121,9 +200,6 @@ def read_csv(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
             else:
                 vals[i, vq.index(q)] = v * f
     vshape = (n, 2) if shape_kind == "postural" else (n, 2, 2)
-    mprobs: list[Problem] = []
-    velocity, vmissing = parse_velocity(meta.get("velocity_m_per_s"),
-                                        meta.get("velocity_vector_m_per_s"), name, kind, mprobs)
     other = {k: v for k, v in meta.items() if k not in RESERVED_KEYS}
     pm = ParsedMap(
         location=name, kind=kind, frame=meta.get("frame"), sign=meta.get("sign"),
@@ -131,8 +207,13 @@ def read_csv(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
         values=vals.reshape(vshape), sd=None if sd is None else sd.reshape(vshape),
         velocity_m_per_s=velocity, velocity_missing=vmissing,
         point_location=lambda i: f"{name}:row {lines[i]}", problems=mprobs, reported=reported,
+        rows_unread=bool(hprobs) and not cells_of,
     )
     return [pm], problems
+
+
+def _delimiter_name(d: str) -> str:
+    return {",": "commas", ";": "semicolons", "\t": "tabs"}.get(d, repr(d))
 
 
 def _names(kind: str) -> list[str]:

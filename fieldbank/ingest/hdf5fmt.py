@@ -13,7 +13,9 @@ Layout::
                            or (N, 2, 2) stiffness K[i, j] = -dF_i/dx_j, attr unit: N/m | N/mm …
     /maps/<name>/sd        optional, shape and unit of values
 
-Points are located as ``file.h5:/maps/<name>/positions[i]``.
+Points are located as ``file.h5:/maps/<name>/positions[i]``. Files are read through
+:class:`~fieldbank.ingest.h5safe.H5Reader`: hard links only, declared sizes checked before a
+dataset is read, every h5py failure a located problem.
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ import h5py
 import numpy as np
 
 from fieldbank.errors import Problem
-from fieldbank.ingest.parsed import RESERVED_KEYS, ParsedMap, parse_velocity
+from fieldbank.ingest.h5safe import H5_ERRORS, H5Reader
+from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits, LimitExceeded
+from fieldbank.ingest.parsed import PATIENT_KEYS, RESERVED_KEYS, ParsedMap, parse_velocity
 from fieldbank.ingest.units import FORCE, LENGTH, STIFFNESS, factor
 from fieldbank.maps import VALUE_UNITS, FieldMap
 
@@ -45,18 +49,20 @@ def _text(v: Any) -> str:
     return str(v)
 
 
-def _dataset(g: h5py.Group, name: str, where: str, table: dict[str, float], dim: str,
-             problems: list[Problem], required: bool = True) -> np.ndarray | None:
+def _dataset(rd: H5Reader, g: h5py.Group, name: str, where: str, table: dict[str, float],
+             dim: str, problems: list[Problem], required: bool = True) -> np.ndarray | None:
     loc = f"{where}/{name}"
-    if name not in g:
-        if required:
+    ds = rd.child(g, name, loc, problems)
+    if ds is None:
+        if required and not any(p.location == loc for p in problems):
             problems.append(Problem(where, f"missing dataset '{name}'"))
         return None
-    ds = g[name]
     if not isinstance(ds, h5py.Dataset) or ds.dtype.kind not in "iuf":
-        problems.append(Problem(loc, "must be a numeric dataset"))
+        kind = "a group" if isinstance(ds, h5py.Group) else (
+            "logical (boolean)" if ds.dtype.kind == "b" else f"of type {ds.dtype}")
+        problems.append(Problem(loc, f"must be a numeric dataset; it is {kind}"))
         return None
-    unit = ds.attrs.get("unit")
+    unit = H5Reader.attrs(ds, loc, problems).get("unit")
     if unit is None:
         problems.append(Problem(loc, f"missing 'unit' attribute ({dim}: {', '.join(table)})"))
         return None
@@ -65,54 +71,78 @@ def _dataset(g: h5py.Group, name: str, where: str, table: dict[str, float], dim:
         problems.append(Problem(loc, f"unknown unit {_text(unit)!r}; known {dim} units: "
                                 f"{', '.join(table)}"))
         return None
-    return np.asarray(ds[()], dtype=float) * f
+    try:
+        return np.asarray(rd.read(ds, loc), dtype=float) * f
+    except LimitExceeded as exc:
+        problems.append(Problem(loc, str(exc).removeprefix(f"{loc}: ")))
+    except H5_ERRORS as exc:
+        problems.append(Problem(loc, f"unreadable: {exc}"))
+    return None
 
 
-def read_hdf5(name: str, data: bytes) -> tuple[list[ParsedMap], list[Problem]]:
+def read_hdf5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
+              ) -> tuple[list[ParsedMap], list[Problem]]:
     problems: list[Problem] = []
     maps: list[ParsedMap] = []
     try:
         f = h5py.File(io.BytesIO(data), "r")
-    except OSError as exc:
+    except H5_ERRORS as exc:
         return [], [Problem(name, f"not a readable HDF5 file ({exc})")]
+    rd = H5Reader(len(data), limits)
     with f:
-        fmt = _text(f.attrs.get("format", ""))
+        root = H5Reader.attrs(f, f"{name}:/", problems)
+        fmt = _text(root.get("format", ""))
         if fmt != FORMAT:
             problems.append(Problem(f"{name}:/", f"attribute format must be {FORMAT!r}; got "
                                     f"{fmt!r} (see docs/formats.md)"))
-        if "maps" not in f or not isinstance(f["maps"], h5py.Group) or len(f["maps"]) == 0:
+        root_meta = {k: _text(v) for k, v in root.items() if k.lower() in PATIENT_KEYS}
+        group = rd.child(f, "maps", f"{name}:/maps", problems)
+        if not isinstance(group, h5py.Group) or len(group) == 0:
             return [], [*problems, Problem(f"{name}:/", "no /maps group with at least one map")]
-        for key in sorted(f["maps"]):
-            g = f["maps"][key]
+        if len(group) > limits.max_maps:
+            return [], [*problems, Problem(f"{name}:/maps", f"{len(group):,} maps, more than "
+                                           f"{limits.max_maps:,} {limits.hint('max_maps')}")]
+        for key in sorted(group):
             where = f"{name}:/maps/{key}"
+            g = rd.child(group, key, where, problems)
+            if g is None:
+                continue
             if not isinstance(g, h5py.Group):
                 problems.append(Problem(where, "must be a group"))
                 continue
-            maps.append(_read_group(g, where, problems))
+            pm = _read_group(rd, g, where, problems)
+            for k, v in root_meta.items():
+                pm.metadata.setdefault(k, v)
+            maps.append(pm)
     return maps, problems
 
 
-def _read_group(g: h5py.Group, where: str, problems: list[Problem]) -> ParsedMap:
-    attrs = {k: g.attrs[k] for k in g.attrs}
+def _read_group(rd: H5Reader, g: h5py.Group, where: str,
+                problems: list[Problem]) -> ParsedMap:
+    attrs = H5Reader.attrs(g, where, problems)
     kind = _text(attrs["kind"]) if "kind" in attrs else None
     mprobs: list[Problem] = []
     vel_text = None
     vec_text = None
     if "velocity_m_per_s" in attrs:
-        v = np.atleast_1d(np.asarray(attrs["velocity_m_per_s"], dtype=float))
+        try:
+            v = np.atleast_1d(np.asarray(attrs["velocity_m_per_s"], dtype=float))
+        except (ValueError, TypeError):
+            v = np.zeros(0)
         if v.size == 2:
             vec_text = f"{float(v[0])!r}, {float(v[1])!r}"
             vel_text = repr(float(np.hypot(v[0], v[1])))
         elif v.size == 1:
             vel_text = repr(float(v[0]))
         else:
-            mprobs.append(Problem(where, "velocity_m_per_s must hold 1 or 2 numbers"))
+            mprobs.append(Problem(where, "velocity_m_per_s must hold 1 or 2 numbers (m/s); got "
+                                  f"{_text(attrs['velocity_m_per_s'])[:80]!r}"))
     velocity, vmissing = (None, False) if mprobs else parse_velocity(
         vel_text, vec_text, where, kind, mprobs)
     vtable, vdim = (STIFFNESS, "stiffness") if kind == "stiffness" else (FORCE, "force")
-    pos = _dataset(g, "positions", where, LENGTH, "length", problems)
-    vals = _dataset(g, "values", where, vtable, vdim, problems)
-    sd = _dataset(g, "sd", where, vtable, vdim, problems, required=False)
+    pos = _dataset(rd, g, "positions", where, LENGTH, "length", problems)
+    vals = _dataset(rd, g, "values", where, vtable, vdim, problems)
+    sd = _dataset(rd, g, "sd", where, vtable, vdim, problems, required=False)
     vshape_tail = (2, 2) if kind == "stiffness" else (2,)
     n = 0
     if pos is not None and (pos.ndim != 2 or pos.shape[1] != 2):
@@ -129,6 +159,8 @@ def _read_group(g: h5py.Group, where: str, problems: list[Problem]) -> ParsedMap
             else:
                 sd = None
     other = {k: _text(v) for k, v in attrs.items() if k not in RESERVED_KEYS}
+    unread = pos is None and any(p.location.startswith(f"{where}/positions") or
+                                 "'positions'" in p.reason for p in problems)
     return ParsedMap(
         location=where, kind=kind,
         frame=_text(attrs["frame"]) if "frame" in attrs else None,
@@ -138,6 +170,7 @@ def _read_group(g: h5py.Group, where: str, problems: list[Problem]) -> ParsedMap
         values=vals if vals is not None else np.full((n, *vshape_tail), np.nan),
         sd=sd, velocity_m_per_s=velocity, velocity_missing=vmissing,
         point_location=lambda i: f"{where}/positions[{i}]", problems=mprobs,
+        reported=set(range(n)) if vals is None else set(), rows_unread=unread,
     )
 
 

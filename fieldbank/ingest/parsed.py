@@ -3,8 +3,9 @@
 A reader turns a file into :class:`ParsedMap` objects — arrays already in SI, NaN where a cell
 was not a number (the reader has reported that), metadata as read — plus the problems it found
 in the file's structure. :func:`validate_map` then checks everything that does not depend on the
-format (required metadata, NaN/inf, duplicate positions, reachability by the patient's arm) and
-builds the :class:`~fieldbank.maps.FieldMap`. Every problem is located (file, row or dataset).
+format (required metadata, NaN/inf, plausible magnitudes, duplicate positions, reachability by
+the patient's arm, the patient the file names) and builds the :class:`~fieldbank.maps.FieldMap`.
+Every problem is located (file, row or dataset).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fieldbank.errors import MapError, Problem
+from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
 from fieldbank.maps import FRAMES, KINDS, SIGNS, FieldMap
 from fieldbank.model import Arm
 
@@ -23,6 +25,8 @@ from fieldbank.model import Arm
 DUPLICATE_TOLERANCE_M = 1e-6
 #: metadata keys that the map itself holds; others are kept verbatim as provenance
 RESERVED_KEYS = ("kind", "frame", "sign", "velocity_m_per_s", "velocity_vector_m_per_s", "source")
+#: metadata keys that name the patient a file belongs to (compared with the ingest's patient)
+PATIENT_KEYS = ("patient", "patient_code")
 
 
 @dataclass
@@ -50,6 +54,8 @@ class ParsedMap:
     problems: list[Problem] = field(default_factory=list)
     #: points whose unreadable cells the reader has already reported (NaN placeholders)
     reported: set[int] = field(default_factory=set)
+    #: the reader did not read the rows (their header is broken and reported)
+    rows_unread: bool = False
 
 
 def parse_velocity(
@@ -96,11 +102,52 @@ def parse_velocity(
     return vec, False
 
 
-def validate_map(pm: ParsedMap, arm: Arm | None, patient: str = "") -> tuple[FieldMap | None,
-                                                                             list[Problem]]:
+def patient_problem(metadata: dict[str, str], patient: str, where: str) -> Problem | None:
+    """The problem when ``metadata`` names a patient other than ``patient``, else None."""
+    if not patient:
+        return None
+    for key, value in metadata.items():
+        if key.lower() in PATIENT_KEYS and value.strip() != patient:
+            return Problem(where, f"the file's {key!r} is {value.strip()!r}, but it is being "
+                           f"ingested for patient {patient!r}; another patient's data is never "
+                           "stored here (check the file and --patient)")
+    return None
+
+
+def _plausibility(pm: ParsedMap, limits: IngestLimits) -> list[Problem]:
+    """A problem per point whose values or sds exceed the plausible magnitude."""
+    if pm.kind == "stiffness":
+        bound, what, unit, name = (limits.max_stiffness_n_per_m, "stiffness", "N/m",
+                                   "max_stiffness_n_per_m")
+    else:
+        bound, what, unit, name = limits.max_force_n, "force", "N", "max_force_n"
+    out = []
+    n = pm.positions_m.shape[0]
+    for label, arr in (("value", pm.values), ("standard deviation", pm.sd)):
+        if arr is None or arr.shape[0] != n:
+            continue
+        if n == 0:
+            continue
+        flat = np.abs(arr.reshape(n, -1))
+        worst_per_point = np.where(np.isfinite(flat), flat, 0.0).max(axis=1)
+        for idx in np.flatnonzero(worst_per_point > bound):
+            i = int(idx)
+            worst = float(worst_per_point[i])
+            out.append(Problem(pm.point_location(i), f"{what} {label} {worst:.4g} {unit} is "
+                               f"implausible: above {bound:g} {unit}, more than any arm puts "
+                               f"on a handle (a wrong unit?) {limits.hint(name)}"))
+    return out
+
+
+def validate_map(pm: ParsedMap, arm: Arm | None, patient: str = "",
+                 limits: IngestLimits = DEFAULT_LIMITS) -> tuple[FieldMap | None,
+                                                                 list[Problem]]:
     """Check a parsed map; the FieldMap when it has no problem, else None and the problems."""
     probs = list(pm.problems)
     loc = pm.location
+    named = patient_problem(pm.metadata, patient, loc)
+    if named is not None:
+        probs.append(named)
     for key, value, allowed in (("kind", pm.kind, KINDS), ("frame", pm.frame, FRAMES),
                                 ("sign", pm.sign, SIGNS)):
         if value is None:
@@ -116,8 +163,13 @@ def validate_map(pm: ParsedMap, arm: Arm | None, patient: str = "") -> tuple[Fie
         probs.append(Problem(loc, "a postural map is static; velocity must be 0"))
     pos, vals, sd = pm.positions_m, pm.values, pm.sd
     n = pos.shape[0]
-    if n == 0:
+    if n == 0 and not pm.rows_unread:
         probs.append(Problem(loc, "no data rows"))
+    if n > limits.max_rows:
+        probs.append(Problem(loc, f"{n:,} points, more than {limits.max_rows:,} "
+                             f"{limits.hint('max_rows')}"))
+        return None, probs
+    probs += _plausibility(pm, limits)
     for i in range(n):
         cells = [pos[i].ravel(), vals[i].ravel()] + ([sd[i].ravel()] if sd is not None else [])
         row = np.concatenate(cells)
@@ -148,7 +200,7 @@ def validate_map(pm: ParsedMap, arm: Arm | None, patient: str = "") -> tuple[Fie
                                  f"{pos[j, 1]:.4g}) m is out of reach of patient {patient}'s "
                                  f"{arm.params.side} arm (upper arm {arm.l1:.3f} m, forearm "
                                  f"and hand {arm.l2:.3f} m, within its range of motion)"))
-    if probs:
+    if probs or pm.rows_unread:
         return None, probs
     try:
         fm = FieldMap(kind=str(pm.kind), positions_m=pos, values=vals, sd=sd,

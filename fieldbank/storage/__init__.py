@@ -35,11 +35,12 @@ leave this package)::
     db.end_haptic_session(id, stats) / db.get_haptic_session(id)
     db.list_haptic_sessions(patient_code=None)
     db.add_trace(haptic_session_id, name, array, unit, provenance) -> TraceRecord
-    db.list_traces(haptic_session_id) / db.get_trace_array(trace_id)
-    # audit and integrity                                          database.py, check.py
+    db.list_traces(haptic_session_id) / db.get_trace_array(trace_id) / db.trace_attrs(id)
+    # audit, integrity and clean-up                      database.py, check.py, arrays.py
     db.audit_entries(limit=None) -> [AuditEntry]
-    db.check() -> CheckReport      # check.check(db): reads db.engine and db.store only
-    db.engine / db.store / db.actor / db.url_masked
+    db.check() -> CheckReport      # check.check(db): reads db.engine and db.arrays only
+    db.gc() -> CollectReport       # orphans removed, safely while others write
+    db.engine / db.store / db.arrays / db.actor / db.url_masked
 
 Every write runs in one transaction together with its audit-log entry (``audit_log`` is
 append-only: the database refuses UPDATE and DELETE on it). On SQLite write transactions start
@@ -53,8 +54,10 @@ Errors (the storage part of the tree in :mod:`fieldbank.errors`)::
     │                                an empty session label
     └── StorageError(RuntimeError)   the database or array store failed or refused: unknown
         │                            patient/session/map/model/fit/plan/trace, a duplicate
-        │                            patient, a constraint, a schema behind head, an
-        │                            unreachable server (URL shown without its password)
+        │                            patient, a constraint, a schema behind head or made by a
+        │                            newer fieldbank, a read-only database asked to write, a
+        │                            full disk, a downgrade not confirmed, an unreachable
+        │                            server (URL shown without its secrets)
         └── IntegrityError           stored bytes or an array no longer match their SHA-256,
                                      or a store file is missing or unreadable
 
@@ -66,11 +69,15 @@ Modules::
     mapstore.py    MapStore mixin: ingest, maps, source files (IngestProgress)
     lineage.py     Lineage mixin: models, fits, plans
     traces.py      Traces mixin: haptic sessions and traces
+    arrays.py      where large arrays live (store directory or array_chunks), write, read, gc
     check.py       check(db) -> CheckReport: every reference and checksum, orphans
     records.py     the frozen records returned by Database
     orm.py         ORM rows and the schema (never leave this package)
-    config.py      where the database lives (data_home, URLs), engines, SQLite set-up
-    migrate.py     alembic driven from code; the migrations are the package fieldbank.migrations
+    config.py      where the database lives (data_home, URLs), engines, SQLite set-up,
+                   read-only files
+    migrate.py     alembic driven from code; the migrations are the package fieldbank.migrations;
+                   refuses a database made by a newer fieldbank
+    backup.py      the backup before a destructive downgrade, and that downgrade
 
 See ``docs/storage.md`` for the schema and the durability guarantees.
 """

@@ -8,12 +8,21 @@ Problems (the database is damaged; exit non-zero):
   corrupt; a map whose arrays have the wrong size or non-finite numbers; a model whose
   parameters no longer validate; an ``arrays`` row whose file is missing or corrupt.
 
-Orphans (harmless; reported so they can be cleaned):
+* the schema made by a newer fieldbank (a revision this program does not know);
+* an array a server database keeps in a workstation's file store that this workstation
+  cannot see (written before revision 0002; ``fieldbank db gc`` there moves it in).
+
+Orphans (harmless; reported so they can be cleaned with ``fieldbank db gc``):
 
 * a complete file in the array store that no ``arrays`` row names — the writer stored it and
   was killed before its database transaction committed; nothing refers to it;
 * a temporary file left by a writer killed mid-write;
 * an ``arrays`` row that neither a source file nor a trace uses.
+
+Arrays are read where their row says (:mod:`fieldbank.storage.arrays`). A server database's
+store directory is not its own (every database of the data directory shares it), so its files
+are neither listed nor called orphans: a healthy server database checks the same from every
+workstation.
 """
 
 from __future__ import annotations
@@ -25,10 +34,10 @@ from typing import Protocol
 import numpy as np
 from sqlalchemy import Engine, func, select, text
 
-from fieldbank.arraystore import ArrayStore
-from fieldbank.errors import ParameterError, StorageError
+from fieldbank.errors import IntegrityError, ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.storage import migrate
+from fieldbank.storage.arrays import ArrayAccess
 from fieldbank.storage.core import read_session
 from fieldbank.storage.orm import (
     ArrayRow,
@@ -42,14 +51,14 @@ from fieldbank.storage.records import CheckReport
 
 
 class Checkable(Protocol):
-    """What :func:`check` reads: a database and its array store (a
+    """What :func:`check` reads: a database and its arrays (a
     :class:`~fieldbank.storage.Database` is one)."""
 
     @property
     def engine(self) -> Engine: ...
 
     @property
-    def store(self) -> ArrayStore: ...
+    def arrays(self) -> ArrayAccess: ...
 
 
 def check(db: Checkable) -> CheckReport:
@@ -65,6 +74,9 @@ def check(db: Checkable) -> CheckReport:
     counts: dict[str, int] = {}
     head = migrate.head_revision()
     current = migrate.current_revision(db.engine)
+    if migrate.schema_state(current) == "newer":
+        problems.append(migrate.newer_message(db.engine, str(current)))
+        return CheckReport(tuple(problems), (), counts)
     if current != head:
         problems.append(f"schema revision is {current}, expected {head}")
     else:
@@ -79,27 +91,28 @@ def check(db: Checkable) -> CheckReport:
                 problems += [f"sqlite quick_check: {r}" for r in res]
             for r in s.execute(text("PRAGMA foreign_key_check")):
                 problems.append(f"table {r[0]} row {r[1]} refers to a missing row of {r[2]}")
+        arrays = db.arrays
         array_keys: set[str] = set()
-        for a in s.scalars(select(ArrayRow)):
-            array_keys.add(a.sha256)
-            reason = db.store.verify(a.sha256)
+        for key in s.scalars(select(ArrayRow.sha256)):
+            array_keys.add(key)
+            reason = arrays.verify(s, key)
             if reason:
                 problems.append(reason)
         counts["arrays"] = len(array_keys)
         used: set[str] = set()
         n_src = 0
-        for sha, content, key in s.execute(
+        for sha, content, array_key in s.execute(
             select(SourceFileRow.sha256, SourceFileRow.content, SourceFileRow.array_sha256)
         ):
             n_src += 1
-            if key is not None:
-                used.add(key)
-                if key not in array_keys:
-                    problems.append(f"source file {sha} refers to unknown array {key}")
+            if array_key is not None:
+                used.add(array_key)
+                if array_key not in array_keys:
+                    problems.append(f"source file {sha} refers to unknown array {array_key}")
                     continue
                 try:
-                    data = db.store.get(key).tobytes()
-                except Exception as exc:  # reported above through verify
+                    data = arrays.get(s, array_key).tobytes()
+                except IntegrityError as exc:  # reported above through verify
                     problems.append(f"source file {sha}: {exc}")
                     continue
             else:
@@ -145,10 +158,12 @@ def check(db: Checkable) -> CheckReport:
         counts["models"] = n_models
     for key in sorted(array_keys - used):
         orphans.append(f"array {key} is recorded but used by no source file or trace")
-    for key in db.store.keys():
-        if key not in array_keys:
-            orphans.append(f"store file {db.store.relpath(key)} is not referenced by the "
-                           "database (a write that did not commit)")
-    for p in db.store.stray_temporaries():
-        orphans.append(f"temporary file {p.name} left by an interrupted write")
+    if db.arrays.owns_store:
+        store = db.arrays.store
+        for key in store.keys():
+            if key not in array_keys:
+                orphans.append(f"store file {store.relpath(key)} is not referenced by the "
+                               "database (a write that did not commit)")
+        for p in store.stray_temporaries():
+            orphans.append(f"temporary file {p.name} left by an interrupted write")
     return CheckReport(tuple(problems), tuple(orphans), counts)

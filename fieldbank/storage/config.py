@@ -14,14 +14,23 @@ one file in turn. The driver's own transaction handling is switched off so that 
 ``fieldbank_begin``), which takes the write lock up front and waits for it instead of failing
 when two processes upgrade a read lock at once.
 
-A password in a URL is never printed or logged: use :func:`mask_url` for every message.
+A SQLite file that cannot be written (a read-only file or file system, e.g. a database on a
+write-protected medium) is opened read-only: ``mode=ro``, or ``immutable=1`` when there is no
+write-ahead log next to it (SQLite could not create its shared-memory file). Reading works;
+writing is refused with a clear message, and fieldbank never tries to migrate it.
+
+A password in a URL is never printed or logged: every message shows :func:`mask_url`'s text
+(:mod:`fieldbank.redact`), and driver errors go through :func:`db_failure`.
 """
 
 from __future__ import annotations
 
 import os
 import sqlite3
+import weakref
+from collections.abc import Callable
 from pathlib import Path
+from urllib.parse import quote
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
@@ -30,8 +39,10 @@ from sqlalchemy.pool import ConnectionPoolEntry
 
 from fieldbank.errors import StorageError
 from fieldbank.home import data_home
+from fieldbank.redact import mask_url, quote_password, redact
 
 ENV_DB = "FIELDBANK_DB"
+ENV_ARRAYS = "FIELDBANK_ARRAYS"
 DEFAULT_DB_FILE = "fieldbank.sqlite3"
 #: How long a SQLite connection waits for another writer before giving up, ms.
 SQLITE_BUSY_TIMEOUT_MS = 60_000
@@ -44,7 +55,7 @@ def resolve_url(explicit: str | None = None) -> URL:
         home = data_home()
         return URL.create("sqlite", database=str(home / DEFAULT_DB_FILE))
     try:
-        return make_url(text)
+        return make_url(quote_password(text))
     except ArgumentError:
         raise StorageError(
             "Not a database URL (expected e.g. sqlite:///path/file.sqlite3 or "
@@ -52,14 +63,23 @@ def resolve_url(explicit: str | None = None) -> URL:
         ) from None
 
 
-def mask_url(url: URL | str) -> str:
-    """The URL as text with any password replaced by ``***``."""
-    if isinstance(url, str):
-        try:
-            url = make_url(url)
-        except ArgumentError:
-            return "<unparseable URL>"
-    return url.render_as_string(hide_password=True)
+def default_store_root(url: URL) -> Path:
+    """The array store directory of a database: ``FIELDBANK_ARRAYS``, else next to a SQLite
+    file, else ``arrays/`` in the data directory (a server database keeps its arrays inside
+    itself; there the directory only holds arrays written before revision 0002)."""
+    env = os.environ.get(ENV_ARRAYS)
+    if env:
+        return Path(env).expanduser()
+    if is_sqlite(url) and url.database not in (None, "", ":memory:"):
+        return Path(str(url.database) + ".arrays")
+    return data_home() / "arrays"
+
+
+def db_failure(doing: str, url: URL, exc: Exception, verb: str = "failed") -> str:
+    """``"<doing> <URL without secrets> failed: <driver message without secrets>"``."""
+    orig = getattr(exc, "orig", None) or exc
+    tail = f" {verb}" if verb else ""
+    return f"{doing} {mask_url(url)}{tail}: {redact(str(orig), url)}"
 
 
 def is_sqlite(url: URL) -> bool:
@@ -71,6 +91,45 @@ def sqlite_path(url: URL) -> Path | None:
     if not is_sqlite(url) or url.database in (None, "", ":memory:"):
         return None
     return Path(url.database)
+
+
+def sqlite_read_only(path: Path) -> bool:
+    """Whether an existing SQLite file cannot be written (file or file system read-only)."""
+    if not path.exists():
+        return False
+    return not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK))
+
+
+#: Engines that make_engine opened read-only.
+_READ_ONLY: weakref.WeakSet[Engine] = weakref.WeakSet()
+
+
+def is_read_only(engine: Engine) -> bool:
+    """Whether ``engine`` is a SQLite database opened read-only (see the module docstring)."""
+    return engine in _READ_ONLY
+
+
+def _read_only_creator(path: Path) -> Callable[[], sqlite3.Connection]:
+    wal = Path(f"{path}-wal")
+    shm = Path(f"{path}-shm")
+    # Without a write-ahead log there is nothing SQLite must merge, and it cannot create the
+    # shared-memory file beside a read-only database: 'immutable' reads the file as it is.
+    flag = "mode=ro" if wal.exists() and shm.exists() else "immutable=1"
+    uri = f"file:{quote(str(path))}?{flag}"
+
+    def connect() -> sqlite3.Connection:
+        return sqlite3.connect(uri, uri=True, check_same_thread=False)
+
+    return connect
+
+
+def _sqlite_connect_read_only(dbapi_connection: sqlite3.Connection,
+                              _record: ConnectionPoolEntry) -> None:
+    dbapi_connection.isolation_level = None
+    cur = dbapi_connection.cursor()
+    cur.execute(f"PRAGMA busy_timeout = {SQLITE_BUSY_TIMEOUT_MS}")
+    cur.execute("PRAGMA query_only = ON")
+    cur.close()
 
 
 def _sqlite_connect(dbapi_connection: sqlite3.Connection, _record: ConnectionPoolEntry) -> None:
@@ -94,20 +153,31 @@ def _sqlite_begin(conn: Connection) -> None:
 def make_engine(url: URL | str | None = None) -> Engine:
     """An engine for ``url`` (resolved with :func:`resolve_url` when None or text)."""
     u = url if isinstance(url, URL) else resolve_url(url)
+    read_only = False
     if is_sqlite(u):
         path = sqlite_path(u)
         if path is not None:
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise StorageError(
-                    f"Cannot create the data directory {path.parent} ({exc.strerror})."
-                ) from None
+            read_only = sqlite_read_only(path)
+            if not read_only:
+                try:
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise StorageError(
+                        f"Cannot create the data directory {path.parent} ({exc.strerror})."
+                    ) from None
     try:
-        engine = create_engine(u)
+        if read_only:
+            assert path is not None
+            engine = create_engine(u, creator=_read_only_creator(path))
+        else:
+            engine = create_engine(u)
     except (ArgumentError, ImportError) as exc:
-        raise StorageError(f"Cannot open database {mask_url(u)}: {exc}") from None
+        raise StorageError(f"Cannot open database {mask_url(u)}: "
+                           f"{redact(str(exc), u)}") from None
+    if read_only:
+        _READ_ONLY.add(engine)
     if is_sqlite(u):
-        event.listen(engine, "connect", _sqlite_connect)
+        event.listen(engine, "connect",
+                     _sqlite_connect_read_only if read_only else _sqlite_connect)
         event.listen(engine, "begin", _sqlite_begin)
     return engine

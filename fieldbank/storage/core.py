@@ -16,6 +16,7 @@ timeout instead of failing when they upgrade a read lock. Database failures beco
 from __future__ import annotations
 
 import json
+import sqlite3
 from collections.abc import Iterator, Mapping
 from contextlib import AbstractContextManager, contextmanager
 from datetime import UTC, date, datetime
@@ -25,10 +26,11 @@ from sqlalchemy import Engine, select
 from sqlalchemy import exc as sa_exc
 from sqlalchemy.orm import Session
 
-from fieldbank.arraystore import ArrayRef, ArrayStore
+from fieldbank.arraystore import ArrayStore
 from fieldbank.errors import ParameterError, StorageError
-from fieldbank.storage.config import mask_url
-from fieldbank.storage.orm import ArrayRow, AuditRow, PatientRow, SessionRow
+from fieldbank.storage.arrays import ArrayAccess
+from fieldbank.storage.config import db_failure, is_read_only, mask_url
+from fieldbank.storage.orm import AuditRow, PatientRow, SessionRow
 
 
 def now() -> datetime:
@@ -52,7 +54,7 @@ def read_session(engine: Engine) -> Iterator[Session]:
         with Session(engine) as s:
             yield s
     except sa_exc.DBAPIError as exc:
-        raise StorageError(f"Database {mask_url(engine.url)} failed: {exc.orig}") from None
+        raise StorageError(db_failure("Database", engine.url, exc)) from None
 
 
 @contextmanager
@@ -76,22 +78,15 @@ def write_session(engine: Engine) -> Iterator[Session]:
                     s.rollback()
                     raise
     except sa_exc.IntegrityError as exc:
-        raise StorageError(f"The database refused the change: {exc.orig}") from None
+        raise StorageError(db_failure("The database refused the change to", engine.url,
+                                      exc, verb="")) from None
     except sa_exc.DBAPIError as exc:
-        raise StorageError(f"Database {mask_url(engine.url)} failed: {exc.orig}") from None
-
-
-def array_row(ref: ArrayRef) -> ArrayRow:
-    """The ``arrays`` row recording an array written to the store."""
-    return ArrayRow(sha256=ref.sha256, relpath=ref.relpath, nbytes=ref.nbytes,
-                    shape_json=json.dumps(list(ref.shape)), dtype=ref.dtype, unit=ref.unit,
-                    created_at=now())
-
-
-def array_ref(r: ArrayRow) -> ArrayRef:
-    """What an ``arrays`` row says of its array in the store."""
-    return ArrayRef(r.sha256, r.relpath, r.nbytes, tuple(json.loads(r.shape_json)), r.dtype,
-                    r.unit)
+        if is_read_only(engine) or (isinstance(exc.orig, sqlite3.OperationalError)
+                                    and "readonly" in str(exc.orig)):
+            raise StorageError(f"The database {mask_url(engine.url)} is read-only (a "
+                               "read-only file or file system): it can be read, but nothing "
+                               "was changed.") from None
+        raise StorageError(db_failure("Database", engine.url, exc)) from None
 
 
 class DatabaseCore:
@@ -104,7 +99,8 @@ class DatabaseCore:
     engine : sqlalchemy.Engine
         The database (see :func:`fieldbank.storage.config.make_engine`).
     store : ArrayStore
-        Where large arrays go.
+        The array store directory: where a SQLite database's large arrays go (a server
+        database keeps them inside itself; :mod:`fieldbank.storage.arrays`).
     actor : str
         Who writes; recorded with every write in the audit log.
     """
@@ -112,6 +108,7 @@ class DatabaseCore:
     def __init__(self, engine: Engine, store: ArrayStore, actor: str) -> None:
         self.engine = engine
         self.store = store
+        self.arrays = ArrayAccess(engine, store)
         self.actor = actor
 
     @property

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import getpass
 import json
-import os
 import re
 from datetime import date
 from pathlib import Path
@@ -36,8 +35,17 @@ from fieldbank.arraystore import ArrayStore
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.storage import migrate
+from fieldbank.storage.arrays import CollectReport
 from fieldbank.storage.check import check
-from fieldbank.storage.config import data_home, is_sqlite, make_engine, mask_url, resolve_url
+from fieldbank.storage.config import (
+    db_failure,
+    default_store_root,
+    is_read_only,
+    is_sqlite,
+    make_engine,
+    mask_url,
+    resolve_url,
+)
 from fieldbank.storage.core import now, to_utc
 from fieldbank.storage.lineage import Lineage
 from fieldbank.storage.mapstore import MapStore
@@ -45,10 +53,10 @@ from fieldbank.storage.orm import AuditRow, MapRow, PatientRow, SessionRow
 from fieldbank.storage.records import AuditEntry, CheckReport, PatientInfo, SessionInfo
 from fieldbank.storage.traces import Traces
 
-ENV_ARRAYS = "FIELDBANK_ARRAYS"
 SIDES = ("left", "right")
 #: Patient codes are pseudonyms: letters, digits and ``-_.``, no spaces (so no full names).
-CODE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+#: Matched whole (``fullmatch``): a trailing newline or any control character is refused.
+CODE_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}", re.ASCII)
 
 
 def default_actor() -> str:
@@ -57,16 +65,6 @@ def default_actor() -> str:
         return getpass.getuser()
     except (KeyError, OSError):  # no login name (containers without a passwd entry)
         return "unknown"
-
-
-def default_store_root(url: URL) -> Path:
-    """The array store of a database: next to a SQLite file, else under the data home."""
-    env = os.environ.get(ENV_ARRAYS)
-    if env:
-        return Path(env).expanduser()
-    if is_sqlite(url) and url.database not in (None, "", ":memory:"):
-        return Path(str(url.database) + ".arrays")
-    return data_home() / "arrays"
 
 
 def _patient_info(r: PatientRow) -> PatientInfo:
@@ -92,24 +90,38 @@ class Database(MapStore, Lineage, Traces):
         ``upgrade``: 'auto' brings a SQLite database to head on first use (the embedded default
         and any private SQLite file) and requires a server database to be at head already
         (``fieldbank db upgrade``); 'always' upgrades any backend; 'never' does not look.
+        A read-only SQLite file is never migrated: it must be at head to be used. A database
+        made by a newer fieldbank is refused (``created by a newer fieldbank``).
         """
         u = url if isinstance(url, URL) else resolve_url(url)
         engine = make_engine(u)
-        db = cls(engine, ArrayStore(store_root or default_store_root(u)),
-                 actor or default_actor())
+        root = Path(store_root) if store_root is not None else default_store_root(u)
+        db = cls(engine, ArrayStore(root), actor or default_actor())
         if upgrade == "never":
             return db
         try:
-            if upgrade == "always" or (upgrade == "auto" and is_sqlite(u)):
-                migrate.ensure_head(engine)
-            elif migrate.current_revision(engine) != migrate.head_revision():
-                raise StorageError(
-                    f"The database {mask_url(u)} is not at the current schema revision; "
-                    "run 'fieldbank db upgrade'."
-                )
+            current = migrate.current_revision(engine)
+            migrate.refuse_newer(engine, current)
+            migrating = upgrade == "always" or (upgrade == "auto" and is_sqlite(u))
+            if current != migrate.head_revision():
+                if is_read_only(engine):
+                    raise StorageError(
+                        f"The database {mask_url(u)} is read-only and at schema revision "
+                        f"{current or '(empty)'}, not {migrate.head_revision()}: it cannot "
+                        "be migrated here; open it with the fieldbank that wrote it, or "
+                        "upgrade a writable copy.")
+                if not migrating:
+                    raise StorageError(
+                        f"The database {mask_url(u)} is at schema revision "
+                        f"{current or '(empty)'}, behind {migrate.head_revision()}; run "
+                        "'fieldbank db upgrade'.")
+                migrate.ensure_head(engine, root)
         except sa_exc.OperationalError as exc:
             engine.dispose()
-            raise StorageError(f"Cannot open database {mask_url(u)}: {exc.orig}") from None
+            raise StorageError(db_failure("Cannot open database", u, exc, verb="")) from None
+        except StorageError:
+            engine.dispose()
+            raise
         return db
 
     def close(self) -> None:
@@ -137,7 +149,7 @@ class Database(MapStore, Lineage, Traces):
         side : {'left', 'right'}
             The arm that is measured.
         """
-        if not CODE_RE.match(code):
+        if not CODE_RE.fullmatch(code):
             raise ParameterError(
                 f"Patient code {code!r} must be a pseudonym of 1-64 letters, digits or '-_.' "
                 "starting with a letter or digit (no spaces, so no names)."
@@ -210,6 +222,24 @@ class Database(MapStore, Lineage, Traces):
     def check(self) -> CheckReport:
         """Verify every reference and checksum; see :func:`fieldbank.storage.check.check`."""
         return check(self)
+
+    def gc(self) -> CollectReport:
+        """Remove what nothing refers to: ``arrays`` rows no source file or trace uses, then
+        store files no row names and temporary files of interrupted writes; on a server
+        database, move arrays this workstation still holds as files into the database.
+
+        Safe while other processes write (:mod:`fieldbank.storage.arrays` explains why); each
+        step is one audited transaction.
+        """
+        with self._write() as s:
+            rows = self.arrays.collect_rows(s)
+            self._audit(s, "gc", "arrays", "-", {"rows": len(rows.rows),
+                                                 "moved": len(rows.moved)})
+        with self._write() as s:
+            files = self.arrays.collect_files(s)
+            self._audit(s, "gc", "array_store", "-",
+                        {"files": len(files.files), "temporaries": len(files.temporaries)})
+        return rows.merged(files)
 
     def raw_sql(self, sql: str) -> None:
         """Run one SQL statement in a write transaction, NOT audited: for tests and

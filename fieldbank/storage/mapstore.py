@@ -2,13 +2,16 @@
 
 A map's arrays are little-endian float64 blobs in its ``maps`` row (small: 9-100 points read
 faster from the database than from a file each); its source file is kept byte for byte, inline
-up to :data:`INLINE_MAX_BYTES` and in the array store above that.
+up to :data:`INLINE_MAX_BYTES` and as an array above that (:mod:`fieldbank.storage.arrays`:
+the store directory of a SQLite database, ``array_chunks`` of a server database).
 
 An ingest batch is one transaction: every file and every map of the batch lands, or none does.
-Large source files go to the write-once array store *before* the transaction, so a crash in
-between leaves only complete, unreferenced store files (orphans that ``fieldbank db check``
-reports and a new ingest of the same file adopts). ``progress`` is called after each file is
-written, inside the transaction, with its :class:`~fieldbank.storage.records.IngestOutcome`.
+Large source files of a SQLite database go to the write-once array store *before* the
+transaction, so a crash in between leaves only complete, unreferenced store files (orphans
+that ``fieldbank db check`` reports, ``fieldbank db gc`` removes and a new ingest of the same
+file adopts); a server database writes them inside the transaction, so nothing is left.
+``progress`` is called after each file is written, inside the transaction, with its
+:class:`~fieldbank.storage.records.IngestOutcome`.
 """
 
 from __future__ import annotations
@@ -24,11 +27,12 @@ from numpy.typing import ArrayLike, NDArray
 from sqlalchemy import Row, Select, select, text
 from sqlalchemy import exc as sa_exc
 
-from fieldbank.arraystore import ArrayRef
 from fieldbank.errors import IntegrityError, StorageError
 from fieldbank.maps import VALUE_UNITS, FieldMap
-from fieldbank.storage.core import DatabaseCore, array_row, now, to_utc
-from fieldbank.storage.orm import ArrayRow, MapRow, PatientRow, SessionRow, SourceFileRow
+from fieldbank.storage.arrays import PendingArray
+from fieldbank.storage.config import db_failure
+from fieldbank.storage.core import DatabaseCore, now, to_utc
+from fieldbank.storage.orm import MapRow, PatientRow, SessionRow, SourceFileRow
 from fieldbank.storage.records import IncomingFile, IngestOutcome, SourceFileInfo, StoredMap
 
 #: Source files up to this size are kept inside the database; larger ones in the array store.
@@ -116,10 +120,10 @@ class MapStore(DatabaseCore):
         list of IngestOutcome
             One per file, in order: 'stored' with the new map ids, or 'duplicate'.
         """
-        refs: dict[str, ArrayRef] = {}
+        refs: dict[str, PendingArray] = {}
         for f in files:
             if len(f.content) > INLINE_MAX_BYTES and f.sha256 not in refs:
-                refs[f.sha256] = self.store.put(
+                refs[f.sha256] = self.arrays.prepare(
                     np.frombuffer(f.content, dtype=np.uint8), "bytes",
                     {"file_name": f.file_name, "file_sha256": f.sha256,
                      "format": f.file_format, "stored_by": self.actor})
@@ -144,14 +148,13 @@ class MapStore(DatabaseCore):
                                                   len(f.maps)))
                     continue
                 existing.add(f.sha256)
-                ref = refs.get(f.sha256)
-                if ref is not None and s.get(ArrayRow, ref.sha256) is None:
-                    s.add(array_row(ref))
-                    s.flush()
+                pending = refs.get(f.sha256)
+                if pending is not None:
+                    self.arrays.record(s, pending, at)
                 s.add(SourceFileRow(
                     sha256=f.sha256, file_name=f.file_name, file_format=f.file_format,
-                    nbytes=len(f.content), content=None if ref else f.content,
-                    array_sha256=ref.sha256 if ref else None, ingested_at=at,
+                    nbytes=len(f.content), content=None if pending else f.content,
+                    array_sha256=pending.ref.sha256 if pending else None, ingested_at=at,
                     ingested_by=self.actor))
                 s.flush()  # rows refer to each other by foreign key only, not relationships
                 rows = [self._map_row(m, p.id, sess.id, f.sha256, i, at)
@@ -200,7 +203,7 @@ class MapStore(DatabaseCore):
             with self.engine.connect() as conn:
                 rows = conn.execute(q).all()
         except sa_exc.DBAPIError as exc:
-            raise StorageError(f"Database {self.url_masked} failed: {exc.orig}") from None
+            raise StorageError(db_failure("Database", self.engine.url, exc)) from None
         return [_stored_map(r) for r in rows]
 
     def get_stored_map(self, map_id: int) -> StoredMap:
@@ -251,7 +254,7 @@ class MapStore(DatabaseCore):
             if r is None:
                 raise StorageError(f"No source file with SHA-256 {sha256}.")
             content, key = r.content, r.array_sha256
-        data = content if content is not None else self.store.get(str(key)).tobytes()
+            data = content if content is not None else self.arrays.get(s, str(key)).tobytes()
         if hashlib.sha256(data).hexdigest() != sha256:
             raise IntegrityError(f"Source file {sha256} does not match its SHA-256.")
         return data

@@ -10,6 +10,10 @@ SQLite — then reads the current revision and migrates only if it is still behi
 processes opening a fresh embedded database at once therefore both succeed; one creates the
 schema, the other waits and finds it at head. DDL is transactional on both backends, so a
 failed upgrade leaves the previous revision in place.
+
+A database whose revision this program does not know was made by a newer fieldbank: every
+entry point refuses it with :func:`newer_message` ("created by a newer fieldbank (revision …)")
+and changes nothing, instead of calling it behind or letting alembic fail.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import io
 from collections.abc import Iterator
 from contextlib import contextmanager
 from importlib import resources
+from pathlib import Path
 
 from alembic import command
 from alembic.config import Config
@@ -28,19 +33,23 @@ from sqlalchemy import Connection, Engine, text
 from sqlalchemy import exc as sa_exc
 
 from fieldbank.errors import StorageError
-from fieldbank.storage.config import mask_url
+from fieldbank.storage.config import db_failure, mask_url
 
 #: Arbitrary constant key of the PostgreSQL advisory lock held while migrating.
 PG_LOCK_KEY = 0x6669656C64  # "field"
 
 
-def alembic_config(connection: Connection | None = None) -> Config:
-    """An alembic Config for the packaged migrations, optionally bound to a connection."""
+def alembic_config(connection: Connection | None = None,
+                   store_root: Path | None = None) -> Config:
+    """An alembic Config for the packaged migrations, optionally bound to a connection and
+    told the database's array store directory (revision 0002 moves arrays)."""
     cfg = Config(stdout=io.StringIO())  # alembic's chatter must not reach our stdout (--json)
     # The migrations ship as the package fieldbank.migrations (the repository's migrations/).
     cfg.set_main_option("script_location", str(resources.files("fieldbank.migrations")))
     if connection is not None:
         cfg.attributes["connection"] = connection
+    if store_root is not None:
+        cfg.attributes["store_root"] = store_root
     return cfg
 
 
@@ -50,7 +59,7 @@ def _errors(engine: Engine, doing: str) -> Iterator[None]:
     try:
         yield
     except sa_exc.DBAPIError as exc:
-        raise StorageError(f"{doing} {mask_url(engine.url)} failed: {exc.orig}") from None
+        raise StorageError(db_failure(doing, engine.url, exc)) from None
 
 
 def head_revision() -> str:
@@ -60,9 +69,44 @@ def head_revision() -> str:
     return heads[0]
 
 
+def known_revisions() -> list[str]:
+    """Every revision this program's migrations know, oldest first."""
+    script = ScriptDirectory.from_config(alembic_config())
+    return [r.revision for r in reversed(list(script.walk_revisions()))]
+
+
+def revision_title(revision: str) -> str:
+    """The first line of a revision's docstring (what it changes)."""
+    script = ScriptDirectory.from_config(alembic_config())
+    doc = (script.get_revision(revision).doc or "").strip()
+    return doc.splitlines()[0].rstrip(".") if doc else revision
+
+
 def current_revision(engine: Engine) -> str | None:
     with _errors(engine, "Reading the schema revision of"), engine.connect() as conn:
         return MigrationContext.configure(conn).get_current_revision()
+
+
+def schema_state(current: str | None) -> str:
+    """'empty', 'behind', 'current' or 'newer' (made by a newer fieldbank) for a revision."""
+    if current is None:
+        return "empty"
+    if current == head_revision():
+        return "current"
+    return "behind" if current in known_revisions() else "newer"
+
+
+def newer_message(engine: Engine, current: str) -> str:
+    """The refusal for a database made by a newer fieldbank."""
+    return (f"The database {mask_url(engine.url)} was created by a newer fieldbank (schema "
+            f"revision {current}; this fieldbank knows revisions up to {head_revision()}). "
+            "Use that newer fieldbank (or a later one) with it; nothing was changed.")
+
+
+def refuse_newer(engine: Engine, current: str | None) -> None:
+    """Raise StorageError when ``current`` is a revision this program does not know."""
+    if current is not None and schema_state(current) == "newer":
+        raise StorageError(newer_message(engine, current))
 
 
 def _locked(engine: Engine) -> Connection:
@@ -75,28 +119,45 @@ def _locked(engine: Engine) -> Connection:
     return conn
 
 
-def upgrade(engine: Engine, revision: str = "head") -> tuple[str | None, str | None]:
+def upgrade(engine: Engine, revision: str = "head",
+            store_root: Path | None = None) -> tuple[str | None, str | None]:
     """Migrate to ``revision`` under the lock; returns (revision before, revision after)."""
     with _errors(engine, "Upgrading"):
-        return _migrate(engine, revision, down=False)
+        return _migrate(engine, revision, down=False, store_root=store_root)
 
 
-def downgrade(engine: Engine, revision: str) -> tuple[str | None, str | None]:
-    """Migrate down to ``revision`` ('base' empties the database) under the lock."""
+def downgrade(engine: Engine, revision: str,
+              store_root: Path | None = None) -> tuple[str | None, str | None]:
+    """Migrate down to ``revision`` ('base' empties the database) under the lock.
+
+    This is the bare step; ``fieldbank db downgrade`` asks for ``--yes`` and makes a backup
+    first (:mod:`fieldbank.storage.backup`).
+    """
     with _errors(engine, "Downgrading"):
-        return _migrate(engine, revision, down=True)
+        return _migrate(engine, revision, down=True, store_root=store_root)
 
 
-def _migrate(engine: Engine, revision: str, down: bool) -> tuple[str | None, str | None]:
+def check_target(revision: str) -> None:
+    """Refuse a target revision this program does not know, with the known ones."""
+    known = known_revisions()
+    if revision not in ("head", "base", *known):
+        raise StorageError(f"Unknown schema revision {revision!r}; known: base, "
+                           f"{', '.join(known)} (head).")
+
+
+def _migrate(engine: Engine, revision: str, down: bool,
+             store_root: Path | None) -> tuple[str | None, str | None]:
     """One migration step in one locked transaction; an upgrade already at the target is a
     no-op (concurrent first uses each find the head the first one reached)."""
+    check_target(revision)
     conn = _locked(engine)
     try:
         before = MigrationContext.configure(conn).get_current_revision()
+        refuse_newer(engine, before)
         if down:
-            command.downgrade(alembic_config(conn), revision)
+            command.downgrade(alembic_config(conn, store_root), revision)
         elif before != (head_revision() if revision == "head" else revision):
-            command.upgrade(alembic_config(conn), revision)
+            command.upgrade(alembic_config(conn, store_root), revision)
         after = MigrationContext.configure(conn).get_current_revision()
         conn.commit()
     except Exception:
@@ -116,7 +177,10 @@ def check_drift(engine: Engine) -> None:
             raise StorageError(f"The models and the migrations differ: {exc}") from None
 
 
-def ensure_head(engine: Engine) -> None:
-    """Bring a database to head if it is behind (first use of the embedded default)."""
-    if current_revision(engine) != head_revision():
-        upgrade(engine)
+def ensure_head(engine: Engine, store_root: Path | None = None) -> None:
+    """Bring a database to head if it is behind (first use of the embedded default); refuse
+    one made by a newer fieldbank."""
+    current = current_revision(engine)
+    refuse_newer(engine, current)
+    if current != head_revision():
+        upgrade(engine, store_root=store_root)

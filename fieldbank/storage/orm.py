@@ -6,13 +6,17 @@ objects from :class:`fieldbank.storage.Database`. Every constraint is named thro
 
 Tables::
 
-    patients ─┬─ sessions ── maps ── source_files ── arrays
+    patients ─┬─ sessions ── maps ── source_files ── arrays ── array_chunks
               ├─ models (parent → models)
               ├─ fits ── fit_maps ── maps
               ├─ plans (base/result → models)
               └─ haptic_sessions ─┬─ traces ── arrays
                                   └─ haptic_trials  (A/B/X and training answers)
     audit_log  (append-only: UPDATE and DELETE are refused by triggers)
+
+An array's bytes (a self-describing HDF5 file image, :mod:`fieldbank.arraystore`) live where
+its ``arrays.location`` says: ``file`` — the array store directory next to a SQLite file;
+``database`` — ``array_chunks`` rows, which every workstation of a server database reads.
 
 Timestamps are UTC, stored without a zone. Arrays of a map are little-endian float64 blobs in
 the ``maps`` row (N×2 positions, N×2 or N×4 values); JSON documents are text.
@@ -84,8 +88,12 @@ class SessionRow(Base):
     patient: Mapped[PatientRow] = relationship()
 
 
+#: Where an array's bytes are: the store directory, or array_chunks in the database.
+ARRAY_LOCATIONS = ("file", "database")
+
+
 class ArrayRow(Base):
-    """An array in the content-addressed HDF5 store."""
+    """An array in the content-addressed HDF5 store (a file, or chunks in the database)."""
 
     __tablename__ = "arrays"
     sha256: Mapped[str] = mapped_column(SHA, primary_key=True)
@@ -95,6 +103,18 @@ class ArrayRow(Base):
     dtype: Mapped[str] = mapped_column(String(32))
     unit: Mapped[str] = mapped_column(String(64))
     created_at: Mapped[datetime] = mapped_column(DateTime)
+    # one of ARRAY_LOCATIONS, set by fieldbank.storage.arrays only
+    location: Mapped[str] = mapped_column(String(16), server_default="file")
+
+
+class ArrayChunkRow(Base):
+    """One piece of the HDF5 file image of an array kept in the database (server databases:
+    every workstation sees the same bytes). Pieces are numbered from 0 in order."""
+
+    __tablename__ = "array_chunks"
+    sha256: Mapped[str] = mapped_column(ForeignKey("arrays.sha256"), primary_key=True)
+    idx: Mapped[int] = mapped_column(Integer, primary_key=True)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
 
 
 class SourceFileRow(Base):

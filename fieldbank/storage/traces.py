@@ -1,12 +1,12 @@
 """Haptic sessions, their recorded traces and their trials.
 
 A haptic session records which models a robot rendered (A, and B for a comparison), when the
-session itself started and ended, on which robot (URL stored with any password removed), the
-patient it belongs to, and the session's statistics. Its traces are large arrays: each is
-written to the content-addressed HDF5 array store first (with unit and provenance beside the
-data), then recorded in the database; equal arrays share one file, and every read verifies the
-array against its SHA-256. Its trials (A/B/X and training) are rows: condition, answer, whether
-it was right, response time, and the trial's time window in the traces.
+session itself started and ended, on which robot (URL stored masked,
+:func:`fieldbank.redact.mask_url`), the patient it belongs to, and the session's statistics.
+Its traces are large arrays (:mod:`fieldbank.storage.arrays`: with unit and provenance beside
+the data; equal arrays share one copy), and every read verifies the array against its SHA-256.
+Its trials (A/B/X and training) are rows: condition, answer, whether it was right, response
+time, and the trial's time window in the traces.
 
 A session's patient is its models' patient. A session filed under another patient than a model
 it renders - or rendering two patients' models - needs a stated reason (``patient_note``);
@@ -18,7 +18,6 @@ models' patient.
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
@@ -28,7 +27,9 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from fieldbank.errors import StorageError
-from fieldbank.storage.core import DatabaseCore, array_ref, array_row, now, to_utc, to_utc_opt
+from fieldbank.redact import mask_url
+from fieldbank.storage.arrays import array_ref
+from fieldbank.storage.core import DatabaseCore, now, to_utc, to_utc_opt
 from fieldbank.storage.orm import (
     ArrayRow,
     HapticSessionRow,
@@ -43,11 +44,6 @@ from fieldbank.storage.records import HapticSessionRecord, HapticTrialRecord, Tr
 MAX_PATIENT_NOTE_CHARS = 500
 _TRIAL_FIELDS = ("kind", "block", "trial", "phase", "condition", "answer", "correct",
                  "started_s", "answered_s", "response_time_s")
-
-
-def strip_password(url: str) -> str:
-    """A URL with any ``user:password@`` password removed (robot URLs are not DB URLs)."""
-    return re.sub(r"(//[^/@:]*):[^/@]*@", r"\1@", url)
 
 
 class Traces(DatabaseCore):
@@ -102,7 +98,7 @@ class Traces(DatabaseCore):
                              patient_code: str | None = None, *,
                              started_at: datetime | None = None,
                              patient_note: str | None = None) -> HapticSessionRecord:
-        """Open a haptic session record; the robot URL is stored with any password removed.
+        """Open a haptic session record; the robot URL is stored masked (no password).
 
         Parameters
         ----------
@@ -111,7 +107,7 @@ class Traces(DatabaseCore):
         patient_note : str, optional
             Why the session's patient is not its models' patient (required then).
         """
-        safe_url = strip_password(robot_url)
+        safe_url = mask_url(robot_url)
         with self._write() as s:
             code = self._session_patient(s, (model_a_id, model_b_id), patient_code,
                                          patient_note)
@@ -143,7 +139,7 @@ class Traces(DatabaseCore):
                                    f"({end:%Y-%m-%d %H:%M:%S}) before it started "
                                    f"({row.started_at:%Y-%m-%d %H:%M:%S}).")
             row.ended_at = end
-            row.stats_json = json.dumps(dict(stats), sort_keys=True)
+            row.stats_json = json.dumps(dict(stats), sort_keys=True, default=str)
             self._audit(s, "end", "haptic_session", row.id, {})
             return self._haptic(s, row)
 
@@ -220,14 +216,14 @@ class Traces(DatabaseCore):
         provenance : mapping, optional
             JSON document stored beside the array (rate, robot, software, ...).
         """
-        ref = self.store.put(array, unit, {"haptic_session": haptic_session_id, "trace": name,
-                                           "stored_by": self.actor, **dict(provenance or {})})
+        pending = self.arrays.prepare(array, unit, {"haptic_session": haptic_session_id,
+                                                    "trace": name, "stored_by": self.actor,
+                                                    **dict(provenance or {})})
+        ref = pending.ref
         with self._write() as s:
             if s.get(HapticSessionRow, haptic_session_id) is None:
                 raise StorageError(f"No haptic session with id {haptic_session_id}.")
-            if s.get(ArrayRow, ref.sha256) is None:
-                s.add(array_row(ref))
-                s.flush()
+            self.arrays.record(s, pending, now())
             row = TraceRow(haptic_session_id=haptic_session_id, name=name,
                            array_sha256=ref.sha256, created_at=now())
             s.add(row)
@@ -248,8 +244,15 @@ class Traces(DatabaseCore):
             t = s.get(TraceRow, trace_id)
             if t is None:
                 raise StorageError(f"No trace with id {trace_id}.")
-            key = t.array_sha256
-        return self.store.get(key)
+            return self.arrays.get(s, t.array_sha256)
+
+    def trace_attrs(self, trace_id: int) -> dict[str, Any]:
+        """Unit, SHA-256 and provenance stored beside a trace's array."""
+        with self._read() as s:
+            t = s.get(TraceRow, trace_id)
+            if t is None:
+                raise StorageError(f"No trace with id {trace_id}.")
+            return self.arrays.attrs(s, t.array_sha256)
 
 
 def _stored_time(t: datetime | None) -> datetime:

@@ -3,8 +3,11 @@
 
 Determinism: cases are ordered by patient code and plan id, results are collected in that
 order whatever the number of workers, figures carry no dates, and the page states the inputs
-(database, selection) but the time of writing only when a ``stamp`` is given. Each file is
-written to a temporary name and renamed, so a failed run leaves no half-written file.
+(title, selection, number of cases) but the time of writing only when a ``stamp`` is given.
+The database's URL is never embedded (a report travels; the URL may carry a host, a user or a
+password). Text cells of ``metrics.csv`` are neutralised against formula injection
+(:func:`fieldbank.sanitize.csv_cell`). Each file is written to a temporary name and renamed,
+so a failed run leaves no half-written file.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from fieldbank.files import write_atomic
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
 from fieldbank.interventions.report.html import render
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
+from fieldbank.sanitize import csv_cell
 from fieldbank.storage import Database
 
 SCHEMA = "fieldbank.report"
@@ -69,7 +73,8 @@ def metrics_csv(results: Iterable[CaseResult]) -> str:
     w.writerow([k for k, _ in ALL_COLUMNS])
     for r in results:
         w.writerow(["" if r.row.get(k) is None else repr(r.row[k])
-                    if isinstance(r.row[k], float) else r.row[k] for k, _ in ALL_COLUMNS])
+                    if isinstance(r.row[k], float) else csv_cell(r.row[k])
+                    for k, _ in ALL_COLUMNS])
     return buf.getvalue()
 
 
@@ -96,8 +101,8 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
     if title is None:
         title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
                  f"fieldbank report: {len(cases)} cases")
-    inputs: dict[str, Any] = {"title": title, "database": db.url_masked,
-                              "selection": selection.describe(), "cases": len(cases)}
+    inputs: dict[str, Any] = {"title": title, "selection": selection.describe(),
+                              "cases": len(cases)}
     if stamp:
         inputs["generated"] = stamp
     out = Path(out_dir)
