@@ -60,6 +60,13 @@ SPEEDS_M_PER_S: tuple[float, ...] = (0.3,)
 N_DIRECTIONS = 8
 
 
+def standard_grid(arm: Arm, grid_n: int = GRID_N) -> FloatArray:
+    """The workspace grid of the standard conditions: :func:`fieldbank.maps.workspace_grid`
+    without the postures whose elbow is within :data:`MIN_ELBOW_RAD` of straight, (N, 2), m."""
+    grid = workspace_grid(arm, grid_n)
+    return grid[arm.ik(grid)[:, 1] >= MIN_ELBOW_RAD]
+
+
 @dataclass(frozen=True, eq=False)
 class Conditions:
     """Standard evaluation conditions: grid (N, 2) m; velocity sets per condition."""
@@ -80,8 +87,7 @@ class Conditions:
         th = 2 * np.pi * np.arange(n_directions) / n_directions
         dirs = np.stack([np.cos(th), np.sin(th)], axis=1)
         vels = [np.zeros((1, 2))] + [s * dirs for s in speeds_m_per_s]
-        grid = workspace_grid(arm, grid_n)
-        grid = grid[arm.ik(grid)[:, 1] >= MIN_ELBOW_RAD]
+        grid = standard_grid(arm, grid_n)
         ref = unimpaired_reference(arm)
         return cls(grid, (0.0, *speeds_m_per_s), tuple(vels), standard_probes(arm), ref,
                    stretch_profiles(ref))
@@ -108,6 +114,9 @@ class Evaluation:
         Passive potential on the grid.
     probes, stretches : probing-motion profiles and the slow/fast joint stretches
     severity : dict muscle group -> GroupSeverity (passive and dynamic grade)
+    profiles : the torque-angle profiles of the four joint stretches the read-outs and the
+        grades come from (:func:`fieldbank.evaluate.probing.stretch_profiles`; figures draw
+        them)
     """
 
     arm: Arm
@@ -118,6 +127,7 @@ class Evaluation:
     probes: tuple[ProbeProfile, ...]
     stretches: tuple[JointStretch, ...]
     severity: dict[str, GroupSeverity]
+    profiles: Profiles | None = None
 
     @property
     def params(self) -> ArmParams:
@@ -162,6 +172,7 @@ def evaluate_arm(arm: Arm, conditions: Conditions | None = None,
         stretches=standard_stretches(arm, reference, profiles, ref_profiles),
         severity=classify(arm, unidentified, reference, profiles=profiles,
                           reference_profiles=ref_profiles),
+        profiles=profiles,
     )
 
 

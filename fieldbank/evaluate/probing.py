@@ -178,6 +178,18 @@ def semi_ellipse(arm: Arm, depth_m: float = ELLIPSE_DEPTH_M, bulge_m: float = EL
                        f"{bulge_m * 100:g} cm lateral, in {duration_s:g} s")
 
 
+def lengthening_direction(arm: Arm, group: str) -> FloatArray:
+    """Unit hand velocity, shape (2,), shoulder frame, that lengthens ``group`` fastest at the
+    rest posture: λ̇_g = J_λ,g J_q⁻¹ v is largest over |v| = 1 for v ∝ J_q⁻ᵀ J_λ,gᵀ (the
+    direction a moving field shows that group's stretch reflex in)."""
+    if group not in GROUPS:
+        raise ValueError(f"unknown muscle group {group!r} (known: {', '.join(GROUPS)}).")
+    jq = arm.jacobian(arm.q_rest)[0]
+    w = np.linalg.solve(jq.T, arm.jl[GROUPS.index(group)])
+    w = w / np.hypot(w[0], w[1])
+    return np.asarray(w * np.array([-1.0, 1.0]) if arm.mirror else w, dtype=float)
+
+
 def standard_probes(arm: Arm) -> tuple[ProbeMotion, ...]:
     return (pull(arm), semi_ellipse(arm))
 
