@@ -1,5 +1,9 @@
 """Metrics week by week after a botulinum injection (BRIEF §7 time course).
 
+Two forms: :func:`time_course` evaluates every metric at every week (``whatif --timecourse``);
+:func:`stretch_course` gives the joint-stretch read-outs week by week at almost no cost, for
+reports (see there).
+
 :func:`time_course` evaluates the compiled arm before once and the plan's after model at each
 week (:meth:`fieldbank.interventions.plan.Plan.at_week`: weeks after the most recent
 injection), on the same standard conditions, and collects the headline figures per week. The
@@ -23,10 +27,12 @@ from fieldbank.evaluate.compare import (
     compare_evaluations,
     evaluate_arm,
 )
+from fieldbank.evaluate.probing import STRETCHES, Profiles, stretch_profiles
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray
+from fieldbank.params import GROUP_INDEX
 
 DEFAULT_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(25))
 
@@ -71,6 +77,116 @@ class TimeCourse:
         }
 
 
+def _check(plan: Plan, weeks: ArrayLike) -> FloatArray:
+    w = np.asarray(weeks, dtype=float).reshape(-1)
+    if not any(isinstance(s, Botulinum) for s in plan.steps):
+        raise InterventionError("time course: the plan has no botulinum step to follow.")
+    if w.size == 0 or np.any(w < 0) or np.any(~np.isfinite(w)):
+        raise InterventionError("time course: weeks must be finite, >= 0, and not empty.")
+    return w
+
+
+def botulinum_effects(plan: Plan, weeks: ArrayLike) -> dict[str, FloatArray]:
+    """Effect e (fractional drop of α) per injected group at each of ``weeks`` after the most
+    recent injection, compounded over the plan's injections: 1 - Π (1 - e_step)."""
+    w = np.asarray(weeks, dtype=float).reshape(-1)
+    groups = sorted({g for s in plan.steps if isinstance(s, Botulinum) for g in s.targets()},
+                    key=GROUP_INDEX.__getitem__)
+    effect = {g: np.zeros(w.size) for g in groups}
+    for i, week in enumerate(w):
+        keep = dict.fromkeys(groups, 1.0)
+        for s in plan.at_week(float(week)).steps:
+            if isinstance(s, Botulinum):
+                for g, e in s.effect().items():
+                    keep[g] *= 1.0 - e
+        for g in groups:
+            effect[g][i] = 1.0 - keep[g]
+    return effect
+
+
+@dataclass(frozen=True, eq=False)
+class StretchCourse:
+    """Joint-stretch read-outs per week (:func:`stretch_course`).
+
+    Attributes
+    ----------
+    weeks : ndarray, shape (W,)
+    plan_week : float
+        The week the plan itself stands at (weeks since its most recent injection).
+    effect : dict group -> ndarray (W,)
+        Botulinum effect per injected group (:func:`botulinum_effects`).
+    fast_peak_n_m, velocity_dependent_n_m : dict stretch name -> ndarray (W,), N·m
+        Peak torque resisting the fast stretch, and its largest velocity-dependent part.
+    slow_peak_n_m : dict stretch name -> ndarray (W,), N·m
+        Peak torque resisting the slow stretch (nearly unchanged by botulinum, whose effect is
+        on the reflex, velocity-dependent torque; Gäverth 2014).
+    """
+
+    weeks: FloatArray
+    plan_week: float
+    effect: dict[str, FloatArray]
+    fast_peak_n_m: dict[str, FloatArray]
+    velocity_dependent_n_m: dict[str, FloatArray]
+    slow_peak_n_m: dict[str, FloatArray]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"weeks": self.weeks.tolist(), "plan_week": self.plan_week,
+                "effect": {g: e.tolist() for g, e in self.effect.items()},
+                "fast_peak_n_m": {k: v.tolist() for k, v in self.fast_peak_n_m.items()},
+                "velocity_dependent_n_m": {k: v.tolist()
+                                           for k, v in self.velocity_dependent_n_m.items()},
+                "slow_peak_n_m": {k: v.tolist() for k, v in self.slow_peak_n_m.items()}}
+
+
+def stretch_course(arm: Arm, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
+                   arms: ArmCache | None = None) -> StretchCourse:
+    """The joint-stretch read-outs of ``plan`` applied to ``arm``, week by week.
+
+    Between weeks only the botulinum effect changes, and the toxin scales α (BRIEF §7); the
+    reflex force φ = max(0, α u Γ e^(-Γ²)) is linear in α ≥ 0, so each group's reflex torque
+    at week w is its torque in the plan without toxin effect (every injection seen at week
+    0) times 1 - e_g(w). One set of stretch profiles therefore gives every week exactly
+    (``tests/test_report_figures.py`` checks it against :func:`time_course`). A plan stored
+    before the recalibration (``scale_beta``) also scales β, where this does not hold; its
+    weeks are then evaluated one by one.
+    """
+    w = _check(plan, weeks)
+    compiled = arms if arms is not None else ArmCache()
+    compiled.add(arm)
+    effect = botulinum_effects(plan, w)
+    bots = [s for s in plan.steps if isinstance(s, Botulinum)]
+    plan_week = min(s.weeks_since for s in bots)
+    names = [f"{j} {d}" for j, d in STRETCHES]
+    fast = {n: np.zeros(w.size) for n in names}
+    vel = {n: np.zeros(w.size) for n in names}
+    slow = {n: np.zeros(w.size) for n in names}
+    if any(s.scale_beta for s in bots):
+        for i, week in enumerate(w):
+            prof = stretch_profiles(compiled(plan.at_week(float(week)).apply(arm.params)))
+            _read_week(prof, np.ones(6), i, fast, vel, slow)
+    else:
+        untreated = Plan(tuple(s.at_week(0.0) if isinstance(s, Botulinum) else s
+                               for s in plan.steps), plan.label)
+        prof = stretch_profiles(compiled(untreated.apply(arm.params)))
+        for i in range(w.size):
+            keep = np.ones(6)
+            for g, e in effect.items():
+                keep[GROUP_INDEX[g]] = 1.0 - e[i]
+            _read_week(prof, keep, i, fast, vel, slow)
+    return StretchCourse(w, float(plan_week), effect, fast, vel, slow)
+
+
+def _read_week(prof: Profiles, keep: FloatArray, i: int, fast: dict[str, FloatArray],
+               vel: dict[str, FloatArray], slow: dict[str, FloatArray]) -> None:
+    for (j, d), p in prof.items():
+        name = f"{j} {d}"
+        slow_t = (p.passive_n_m + p.reflex_slow_n_m * keep).sum(axis=1)
+        fast_t = (p.passive_n_m + p.reflex_fast_n_m * keep).sum(axis=1)
+        fast[name][i] = float(fast_t.max())
+        vel[name][i] = float(np.max(fast_t - slow_t))
+        slow[name][i] = float(slow_t.max())
+
+
 def time_course(arm: Arm, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
                 conditions: Conditions | None = None,
                 arms: ArmCache | None = None) -> TimeCourse:
@@ -89,27 +205,15 @@ def time_course(arm: Arm, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
     arms : ArmCache, optional
         The use case's compiled arms (default: a new cache holding ``arm``).
     """
-    w = np.asarray(weeks, dtype=float).reshape(-1)
-    if not any(isinstance(s, Botulinum) for s in plan.steps):
-        raise InterventionError("time course: the plan has no botulinum step to follow.")
-    if w.size == 0 or np.any(w < 0) or np.any(~np.isfinite(w)):
-        raise InterventionError("time course: weeks must be finite, >= 0, and not empty.")
+    w = _check(plan, weeks)
     compiled = arms if arms is not None else ArmCache()
     compiled.add(arm)
     cond = conditions if conditions is not None else Conditions.standard(arm)
     before = evaluate_arm(arm, cond)
-    groups = sorted({g for s in plan.steps if isinstance(s, Botulinum) for g in s.targets()})
-    effect = {g: np.zeros(w.size) for g in groups}
+    effect = botulinum_effects(plan, w)
     comps = []
-    for i, week in enumerate(w):
+    for week in w:
         p_week = plan.at_week(float(week))
-        keep = dict.fromkeys(groups, 1.0)
-        for s in p_week.steps:
-            if isinstance(s, Botulinum):
-                for g, e in s.effect().items():
-                    keep[g] *= 1.0 - e
-        for g in groups:
-            effect[g][i] = 1.0 - keep[g]
         week_params = p_week.apply(arm.params)
         after = (before if week_params == arm.params
                  else evaluate_arm(compiled(week_params), cond))
