@@ -1,4 +1,5 @@
-"""``fieldbank field postural|stiffness``: a model's maps as CSV, JSON or a plot."""
+"""``fieldbank field postural|stiffness``: a model's maps as CSV, JSON or a figure (SVG, PNG or
+PDF: :func:`fieldbank.fieldplot.map_figure`, the conventions of the report's field figures)."""
 
 from __future__ import annotations
 
@@ -8,11 +9,11 @@ from pathlib import Path
 import click
 import numpy as np
 
-from fieldbank import modelsource, plotting
+from fieldbank import fieldplot, modelsource
 from fieldbank.cli.options import json_option
 from fieldbank.errors import FileRefused, ParameterError
 from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
-from fieldbank.maps import FieldMap, ellipse, postural_map, stiffness_map, workspace_grid
+from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
 from fieldbank.model import Arm
 from fieldbank.severity import (
     classify,
@@ -78,7 +79,7 @@ def _read_positions(path: Path) -> np.ndarray:
               path_type=Path), help="CSV whose first columns are x_m,y_m.")
 @click.option("--velocity", default="0,0", show_default=True, metavar="VX,VY",
               help="Endpoint velocity for a stiffness map, m/s.")
-@click.option("--format", "fmt", type=click.Choice(["csv", "json", "png", "svg"]),
+@click.option("--format", "fmt", type=click.Choice(["csv", "json", "svg", "png", "pdf"]),
               help="Output format (default from --out's suffix, else csv).")
 @json_option
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
@@ -119,7 +120,7 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
         fmt = "json"
     if fmt is None:
         suffix = out.suffix.lower().lstrip(".") if out else ""
-        fmt = suffix if suffix in ("csv", "json", "png", "svg") else "csv"
+        fmt = suffix if suffix in ("csv", "json", "svg", "png", "pdf") else "csv"
     grades = classify(arm)
     source = f"fieldbank model (synthetic): {summary(grades)}"
     if kind == "postural":
@@ -128,10 +129,10 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
         m = postural_map(arm, pos, source=source)
     else:
         m = stiffness_map(arm, pos, vel, source=source)
-    if fmt in ("png", "svg"):
+    if fmt in ("svg", "png", "pdf"):
         if out is None:
-            raise ParameterError("A plot needs --out FILE.png or FILE.svg.")
-        _plot(arm, m, out, fmt)
+            raise ParameterError("A plot needs --out FILE.svg, FILE.png or FILE.pdf.")
+        fieldplot.map_figure(arm, m).save(out, fmt)
         click.echo(f"wrote {out}", err=True)
         return
     if fmt == "json":
@@ -159,20 +160,3 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
         write_atomic(out, text)
         click.echo(f"wrote {out} ({m.n} positions)", err=True)
 
-
-def _plot(arm: Arm, m: FieldMap, out: Path, fmt: str) -> None:
-    fig, axes = plotting.new_figure()
-    ax = axes[0]
-    if m.kind == "postural":
-        plotting.contours(ax, m.positions_m, arm.potential(m.positions_m))
-        plotting.quiver(ax, m.positions_m, m.values)
-        ax.set_title("Postural field (force of the arm on the handle)")
-    else:
-        plotting.ellipses(ax, m.positions_m, m.values)
-        v = m.velocity_m_per_s
-        ax.set_title(f"Stiffness ellipses at v = ({v[0]:g}, {v[1]:g}) m/s")
-    rest = arm.rest_position()
-    ax.plot([rest[0]], [rest[1]], marker="*", color="C3", markersize=10, label="rest posture")
-    plotting.mark_shoulder(ax)
-    ax.legend(loc="lower left", fontsize=8)
-    plotting.save(fig, out, fmt)

@@ -65,7 +65,15 @@ def test_plots_are_written(tmp_path):
     assert _run("field", "postural", "--grid", "8", "--out", str(png)).exit_code == 0
     assert _run("field", "stiffness", "--grid", "8", "--out", str(svg)).exit_code == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
-    assert b"<svg" in svg.read_bytes()[:400]
+    text = svg.read_text(encoding="utf-8")
+    assert "<svg" in text[:400]
+    # the report's conventions: a key in units, the markers named, every ellipse drawn
+    assert "diameter = " in text and " N/m" in text
+    assert "rest hand position" in text and "shoulder" in text
+    assert text.count("<ellipse") >= 20
+    pdf = tmp_path / "f.pdf"
+    assert _run("field", "postural", "--grid", "8", "--out", str(pdf)).exit_code == 0
+    assert pdf.read_bytes()[:5] == b"%PDF-"
 
 
 def test_params_file_round_trip(tmp_path):
