@@ -2,8 +2,9 @@
 
 Select one patient (``--patient``), one or more plans (``--plan``), or a batch (``--patients``,
 ``--session``, ``--since``, ``--until``, ``--kind``; no filter: every stored plan). Writes
-``report.html`` (self-contained, plots embedded), ``metrics.csv`` and ``metrics.json`` into
-``--out``. An empty selection or missing data is a clear message and exit status 1.
+``report.html`` (self-contained, figures inline, dated unless ``--no-date``), ``metrics.csv``
+and ``metrics.json`` into ``--out``. An empty selection or missing data is a clear message and
+exit status 1.
 """
 
 from __future__ import annotations
@@ -41,13 +42,13 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
               help="Directory for report.html, metrics.csv and metrics.json.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes for batches (default: the cores available).")
-@click.option("--stamp", is_flag=True,
-              help="Write the time of writing into the report (reruns then differ).")
+@click.option("--no-date", "no_date", is_flag=True,
+              help="Leave the time of writing out, so that reruns give identical files.")
 @json_option
 def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ...],
            plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: datetime | None,
            until: datetime | None, kinds: tuple[str, ...], out_dir: str, jobs: int | None,
-           stamp: bool, as_json: bool) -> None:
+           no_date: bool, as_json: bool) -> None:
     """Report the field changes of stored intervention plans (HTML + CSV + JSON)."""
     bad = [k for k in kinds if k not in KINDS]
     if bad:
@@ -58,7 +59,7 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     sel = Selection(patients=_codes(patient + patients), plan_ids=tuple(plan_ids),
                     sessions=tuple(sessions), since=since.date() if since else None,
                     until=until.date() if until else None, kinds=tuple(kinds))
-    when = datetime.now().astimezone().isoformat(timespec="seconds") if stamp else None
+    when = None if no_date else datetime.now().astimezone().isoformat(timespec="seconds")
     with open_db(db_url) as db:
         out = build_report(db, sel, out_dir, jobs=jobs or default_jobs(), progress=True,
                            stamp=when)

@@ -59,7 +59,8 @@ from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
 @click.option("--groups", "opt_groups", default=None, metavar="G1,G2",
               help="Groups --optimize may inject (default all six).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
-              help="Write before/after/difference fields to this PNG or SVG.")
+              help="Write the figures (joint stretches, fields, grades) to this SVG, PNG or "
+                   "PDF.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,

@@ -1,11 +1,13 @@
-"""Every matplotlib helper: force arrows, stiffness ellipses, potential contours, the
-before / after / difference field row, and deterministic PNG or SVG output.
+"""matplotlib helpers (force arrows, stiffness ellipses, deterministic PNG or SVG output) and
+the scaling rules every field figure shares.
 
-matplotlib is loaded the first time a figure is made (:func:`pyplot`), with the Agg backend
-(no screen needed), chosen there once; importing this module loads nothing, so commands and
-worker processes that never draw never pay for it. Callers draw into Axes they lay out
-themselves (the what-if figure, the report's figures, measured against fitted, a model's map)
-and share two scaling rules, so every figure reads the same way:
+The report, ``whatif --plot`` and ``field --out`` draw with :mod:`fieldbank.svgplot` and
+:mod:`fieldbank.fieldplot` (vector graphics written directly; PNG and PDF through matplotlib
+only when asked); the fit and probe figures (measured against fitted, probing paths) draw
+with matplotlib through the helpers here. matplotlib is loaded the first time such a figure is
+made (:func:`pyplot`), with the Agg backend (no screen needed), chosen there once; importing
+this module loads nothing, so commands and worker processes that never draw never pay for it.
+Both kinds share two scaling rules, so every figure reads the same way:
 
 * arrows - a high percentile of the force magnitudes spans :data:`ARROW_FILL` of the spacing
   between grid points, so a few near-singular edge postures do not shrink every other arrow
@@ -23,7 +25,6 @@ from __future__ import annotations
 
 import functools
 import io
-from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -56,19 +57,6 @@ def pyplot() -> ModuleType:
     import matplotlib.pyplot as plt
 
     return plt
-
-
-def new_figure(ncols: int = 1, size_in: tuple[float, float] = (5.5, 5.0)
-               ) -> tuple[Figure, list[Axes]]:
-    """A row of ``ncols`` equal-aspect panels in the shoulder frame; (figure, axes)."""
-    fig, axes = pyplot().subplots(1, ncols, figsize=(size_in[0] * ncols, size_in[1]),
-                                  squeeze=False)
-    row: list[Axes] = list(axes[0])
-    for ax in row:
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m, +right)")
-        ax.set_ylabel("y (m, +forward)")
-    return fig, row
 
 
 def spatial_axes(ax: Axes, title: str, fontsize: float = 9.0) -> None:
@@ -153,79 +141,6 @@ def ellipses(ax: Axes, positions_m: ArrayLike, stiffness_n_per_m: ArrayLike, col
         ax.plot([], [], color=color, linewidth=linewidth, label=label)
     ax.autoscale_view()
     return scale_n_per_m
-
-
-def contours(ax: Axes, positions_m: ArrayLike, values: ArrayLike, label: str = "U (J)",
-             levels: int = 12, alpha: float = 0.5, fontsize: float | None = None) -> None:
-    """Filled contours of a scalar over scattered positions (e.g. the passive potential), with
-    a colour bar; nothing for fewer than 4 points or a constant."""
-    pos = np.asarray(positions_m, dtype=float)
-    val = np.asarray(values, dtype=float)
-    if len(pos) < 4 or float(np.ptp(val)) <= 1e-9:
-        return
-    cs = ax.tricontourf(pos[:, 0], pos[:, 1], val, levels=levels, cmap="Greys", alpha=alpha)
-    if fontsize is None:
-        ax.figure.colorbar(cs, ax=ax, label=label, shrink=0.8)
-        return
-    cb = ax.figure.colorbar(cs, ax=ax, shrink=0.8, pad=0.02, fraction=0.05)
-    cb.ax.tick_params(labelsize=fontsize - 1)
-    cb.set_label(label, fontsize=fontsize)
-
-
-def mark_shoulder(ax: Axes) -> None:
-    ax.plot([0.0], [0.0], marker="o", color="k", markersize=6)
-    ax.annotate("shoulder", (0.0, 0.0), textcoords="offset points", xytext=(5, -12), fontsize=8)
-
-
-def field_row(axes: Sequence[Axes], grid_m: ArrayLike, before_n: ArrayLike, after_n: ArrayLike,
-              label: str, *, potential_before_j: ArrayLike | None = None,
-              potential_after_j: ArrayLike | None = None, mark_m: ArrayLike | None = None,
-              spacing_m: float | None = None, fontsize: float = 9.0,
-              key_at: tuple[float, float] = (0.82, -0.2)) -> None:
-    """Three panels: the field before, after (one arrow scale) and after − before (its own
-    scale, from a higher percentile, shown by its key), over the potential when given.
-
-    Parameters
-    ----------
-    axes : three Axes
-    grid_m : array_like, shape (N, 2), m
-    before_n, after_n : array_like, shape (N, 2), N
-    label : what the row shows, in each panel's title
-    potential_before_j, potential_after_j : array_like, shape (N,), J, optional
-        Contours of U (ΔU in the difference panel).
-    mark_m : array_like, shape (2,), m, optional
-        A point marked '+' in every panel (the rest hand position).
-    spacing_m : float, optional
-        Grid spacing for the arrow scale (default :func:`grid_spacing`).
-    """
-    grid = np.asarray(grid_m, dtype=float)
-    fb, fa = np.asarray(before_n, dtype=float), np.asarray(after_n, dtype=float)
-    spacing = grid_spacing(grid) if spacing_m is None else spacing_m
-    ub = None if potential_before_j is None else np.asarray(potential_before_j, dtype=float)
-    ua = None if potential_after_j is None else np.asarray(potential_after_j, dtype=float)
-    d = fa - fb
-    scale = arrow_scale(np.vstack([fb, fa]), spacing)
-    panels = ((fb, ub, scale, f"before: {label}", "C0", "U (J)"),
-              (fa, ua, scale, f"after: {label}", "C0", "U (J)"),
-              (d, None if ub is None or ua is None else ua - ub, arrow_scale(d, spacing, 98.0),
-               f"after − before: {label}", "C3", "ΔU (J)"))
-    for ax, (f, u, sc, title, color, ulabel) in zip(axes, panels, strict=True):
-        if u is not None:
-            contours(ax, grid, u, ulabel, levels=10, alpha=0.55, fontsize=fontsize - 2)
-        if float(np.abs(f).max()) < 1e-9:
-            ax.text(0.5, 0.5, "no change", transform=ax.transAxes, ha="center",
-                    fontsize=fontsize + 1)
-            ax.set_xlim(float(grid[:, 0].min()), float(grid[:, 0].max()))
-            ax.set_ylim(float(grid[:, 1].min()), float(grid[:, 1].max()))
-        else:
-            q = ax.quiver(grid[:, 0], grid[:, 1], f[:, 0], f[:, 1], angles="xy",
-                          scale_units="xy", scale=sc, width=0.005, color=color)
-            key_n = float(f"{sc * ARROW_FILL * spacing:.2g}")
-            ax.quiverkey(q, key_at[0], key_at[1], key_n, f"{key_n:g} N", labelpos="E",
-                         fontproperties={"size": fontsize - 2})
-        if mark_m is not None:
-            ax.plot(*np.asarray(mark_m, dtype=float), "k+", ms=8)
-        spatial_axes(ax, title, fontsize)
 
 
 # --- output -------------------------------------------------------------------------------

@@ -1,63 +1,65 @@
-"""Before / after / difference plots of two compiled arms' fields (through
-:mod:`fieldbank.plotting`).
+"""``whatif --plot``: the report's figures of one what-if, on one page.
 
-Three rows: the static (postural) field with stiffness ellipses, the field at a moving speed
-(mean over the standard directions is not a field; the plot shows the pull direction, -y,
-where the probing pull runs), and the seed's probing motions with the force felt along them.
-Columns: before, after, after - before. PNG or SVG by the file suffix.
+The same figures as a report case (:func:`fieldbank.interventions.report.figures.case_figures`:
+the joint stretches, the moving field in the direction that lengthens the treated groups, the
+static field and stiffness when the plan changes them, the grades, the probing motions, the
+botulinum time course), stacked under a title, written as SVG (:mod:`fieldbank.svgplot`) or,
+for ``.png`` and ``.pdf``, drawn from the same description by matplotlib.
 """
 
 from __future__ import annotations
 
+import textwrap
+from collections.abc import Mapping
 from pathlib import Path
 
-import numpy as np
-
-from fieldbank import plotting
 from fieldbank.errors import FieldbankError
-from fieldbank.evaluate.compare import Conditions
-from fieldbank.evaluate.probing import profile
-from fieldbank.model import Arm
+from fieldbank.evaluate.compare import Comparison
+from fieldbank.interventions.catalogue import Botulinum
+from fieldbank.interventions.course import stretch_course
+from fieldbank.interventions.plan import Plan
+from fieldbank.interventions.report.figures import WIDTH, case_figures
+from fieldbank.model import Arm, FloatArray
+from fieldbank.svgplot import FIGURE_FORMATS, FONT, FONT_TITLE, GREY, Scene
 
-PLOT_SPEED_M_PER_S = 0.3
-#: Workspace grid of the figure (denser grids only crowd the arrows).
-PLOT_GRID_N = 11
+#: Characters per line of a note in a figure page (12 px type over the page's width).
+NOTE_CHARS = 150
 
 
-def plot_comparison(arm_b: Arm, arm_a: Arm, path: str | Path, title: str = "") -> Path:
-    """Write the figure; returns the path. Refuses suffixes other than .png and .svg."""
+def comparison_page(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
+                    title: str = "",
+                    bands: Mapping[str, Mapping[str, tuple[FloatArray, FloatArray]]]
+                    | None = None) -> Scene:
+    """The what-if's figures under a title, one below the other; a figure the plan leaves
+    unchanged is a line of text saying so."""
+    course = (stretch_course(arm_b, plan) if plan is not None
+              and any(isinstance(s, Botulinum) for s in plan.steps) else None)
+    head = Scene(WIDTH, 44)
+    head.text(10, 22, f"{title} (model predictions, not treatment advice)" if title else
+              "What-if (model predictions, not treatment advice)", FONT_TITLE + 2, bold=True)
+    parts = [head]
+    for f in case_figures(arm_b, arm_a, c, plan, course, bands):
+        if f.scene is not None:
+            parts.append(f.scene)
+            continue
+        lines = textwrap.wrap(f.caption, NOTE_CHARS)
+        note = Scene(WIDTH, 18 * len(lines) + 10)
+        for i, line in enumerate(lines):
+            note.text(62, 16 + 18 * i, line, FONT, colour=GREY)
+        parts.append(note)
+    page = Scene.stack(parts, gap=18, label=title or "what-if")
+    page.data["figure"] = "whatif"
+    return page
+
+
+def plot_comparison(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
+                    path: str | Path, title: str = "",
+                    bands: Mapping[str, Mapping[str, tuple[FloatArray, FloatArray]]]
+                    | None = None) -> Path:
+    """Write :func:`comparison_page` as SVG, PNG or PDF (by the suffix); returns the path."""
     out = Path(path)
-    if out.suffix.lower() not in (".png", ".svg"):
-        raise FieldbankError(f"{out}: plots are written as .png or .svg; got {out.suffix!r}.")
-    cond = Conditions.standard(arm_b, grid_n=PLOT_GRID_N)
-    x = cond.grid_m
-    rest = arm_b.rest_position()
-    v = np.array([0.0, -PLOT_SPEED_M_PER_S])
-    fig, axes = plotting.pyplot().subplots(3, 3, figsize=(13, 12), squeeze=False)
-    (fb, kb, _), (fa, ka, _) = arm_b.field(x), arm_a.field(x)
-    plotting.field_row(axes[0], x, fb, fa, "static", mark_m=rest, key_at=(0.85, 1.02))
-    kscale = plotting.ellipse_scale(kb, plotting.grid_spacing(x))
-    for ax, k in ((axes[0][0], kb), (axes[0][1], ka)):
-        plotting.ellipses(ax, x, k, color="0.4", scale_n_per_m=kscale, linewidth=0.6)
-    plotting.field_row(axes[1], x, arm_b.endpoint_force(x, v), arm_a.endpoint_force(x, v),
-                       f"moving {PLOT_SPEED_M_PER_S:g} m/s toward the body", mark_m=rest,
-                       key_at=(0.85, 1.02))
-    for col, motion in enumerate(cond.probes):
-        ax = axes[2][col]
-        for arm, name, style in ((arm_b, "before", "C0-"), (arm_a, "after", "C1--")):
-            p = profile(arm, motion)
-            ax.plot(motion.times_s, np.hypot(*p.force_n.T), style, label=name)
-        ax.set_title(f"probing: {motion.description}", fontsize=9)
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("|force| (N)")
-        ax.legend(fontsize=8)
-    ax = axes[2][2]
-    for motion in cond.probes:
-        ax.plot(motion.positions_m[:, 0], motion.positions_m[:, 1], label=motion.name)
-    ax.set_aspect("equal")
-    ax.set_title("probing paths (shoulder frame)", fontsize=9)
-    ax.legend(fontsize=8)
-    if title:
-        fig.suptitle(f"{title} (model predictions)")
-    fig.tight_layout()
-    return plotting.save(fig, out, dpi=100)
+    fmt = out.suffix.lower().lstrip(".")
+    if fmt not in FIGURE_FORMATS:
+        raise FieldbankError(f"{out}: plots are written as .svg, .png or .pdf; got "
+                             f"{out.suffix!r}.")
+    return comparison_page(arm_b, arm_a, c, plan, title, bands).save(out, fmt)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import xml.etree.ElementTree as ET
 from collections import Counter
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from fieldbank.interventions.spec import parse_length, parse_units
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.severity import synthesize
+from tests.report_helpers import svg_paths
 
 #: Built before any test counts compilations (synthesis compiles the arm it starts from).
 SEVERE_ELBOW = synthesize({"elbow": "severe"})
@@ -92,7 +94,36 @@ def test_plot_is_written(tmp_path: Path) -> None:
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     code, _, err = run("--severity", "elbow=severe", "--botox", "ef=100", "--plot",
                        str(tmp_path / "f.jpg"))
-    assert code == 1 and ".png or .svg" in err
+    assert code == 1 and ".svg, .png or .pdf" in err
+
+
+@pytest.mark.parametrize(("group", "changed", "unchanged"), [
+    ("ef", "elbow extension", "elbow flexion"), ("ee", "elbow flexion", "elbow extension")])
+def test_plot_shows_what_botulinum_changes(tmp_path: Path, group: str, changed: str,
+                                           unchanged: str) -> None:
+    """The what-if figure is the report's: the fast stretch that lengthens the injected group
+    drops in the figure's own curve data, the other direction and the slow stretch do not."""
+    svg = tmp_path / "w.svg"
+    code, _, err = run("--severity", "elbow=severe", "--botox", f"{group}=150U", "--plot",
+                       str(svg))
+    assert code == 0, err
+    text = svg.read_text(encoding="utf-8")
+    ET.fromstring(text.split("?>", 1)[1])  # well-formed
+    assert 'data-figure="whatif"' in text
+
+    def peak(stretch: str, curve: str) -> float:
+        (path,) = svg_paths(text, stretch=stretch, curve=curve)
+        return float(-min(p[:, 1].min() for p in path))  # y down: the highest point
+
+    assert peak(changed, "fast after") < peak(changed, "fast before") - 5.0  # px
+    assert peak(unchanged, "fast after") == peak(unchanged, "fast before")
+    assert abs(peak(changed, "slow after") - peak(changed, "slow before")) < 1.5
+    assert f"treated: {group}" in text
+    # botulinum leaves the static field alone: said in words instead of an empty figure
+    assert "Static (passive, position-dependent) field, potential and stiffness: no change" \
+        in text
+    moving = float(text.split('data-moving-field-change-max-n="', 1)[1].split('"', 1)[0])
+    assert moving > 0.1  # N: the moving field in the direction that stretches the group
 
 
 def test_bad_input_is_refused_with_a_clear_message(tmp_path: Path) -> None:

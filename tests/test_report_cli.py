@@ -26,8 +26,10 @@ def _rows(out: Path) -> list[dict[str, str]]:
 
 def test_stored_batch_reports_byte_identically(batch: dict[str, Any], tmp_path: Path) -> None:
     a, b = tmp_path / "a", tmp_path / "b"
-    r1 = run_cli("report", "--db", batch["url"], "--out", str(a), "--jobs", "1", "--json")
-    r2 = run_cli("report", "--db", batch["url"], "--out", str(b), "--jobs", "2", "--json")
+    r1 = run_cli("report", "--db", batch["url"], "--out", str(a), "--jobs", "1", "--json",
+                 "--no-date")
+    r2 = run_cli("report", "--db", batch["url"], "--out", str(b), "--jobs", "2", "--json",
+                 "--no-date")
     assert r1.exit_code == 0, r1.output
     assert r2.exit_code == 0, r2.output
     assert json.loads(r1.stdout)["jobs"] == 1
@@ -43,11 +45,16 @@ def test_stored_batch_reports_byte_identically(batch: dict[str, Any], tmp_path: 
     assert "generated" not in doc["inputs"]
     assert len(doc["cases"]) == len(plan_ids)
     html = (a / "report.html").read_text(encoding="utf-8")
-    n_img = html.count('<img src="data:image/png;base64,')
-    # 4 figures per case, a 5th (time course) for each botulinum plan
+    n_fig = html.count('<svg xmlns="http://www.w3.org/2000/svg"')
+    # botulinum: stretches, moving field, grades, probes, time course (the static field
+    # unchanged: a sentence); lengthening: stretches, moving and static field, stiffness,
+    # grades, probes; a batch: one cohort figure
     n_bot = sum("botulinum" in r["kinds"] for r in rows)
-    assert n_img == 4 * len(rows) + n_bot
-    assert "http://" not in html and "https://" not in html  # self-contained
+    assert n_fig == 5 * n_bot + 6 * (len(rows) - n_bot) + 1
+    assert html.count('class="nochange"') == n_bot
+    # self-contained: no address but the SVG namespace
+    assert "https://" not in html
+    assert html.replace("http://www.w3.org/2000/svg", "").count("http://") == 0
 
 
 def test_metrics_match_the_intervention(batch: dict[str, Any], tmp_path: Path) -> None:
@@ -91,12 +98,20 @@ def test_one_plan(batch: dict[str, Any], tmp_path: Path) -> None:
     assert f"plan {plan_id}" in (tmp_path / "report.html").read_text(encoding="utf-8")
 
 
-def test_stamp_is_opt_in(batch: dict[str, Any], tmp_path: Path) -> None:
-    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path), "--plan",
-                  str(batch["plans"]["SYN-001"][0]), "--stamp")
+def test_the_date_of_writing_is_left_out_only_when_asked(batch: dict[str, Any],
+                                                         tmp_path: Path) -> None:
+    plan = str(batch["plans"]["SYN-001"][0])
+    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path / "a"), "--plan", plan)
     assert res.exit_code == 0, res.output
-    doc = json.loads((tmp_path / "metrics.json").read_text(encoding="utf-8"))
-    assert doc["inputs"]["generated"]
+    doc = json.loads((tmp_path / "a" / "metrics.json").read_text(encoding="utf-8"))
+    assert doc["inputs"]["generated"][:4].isdigit()
+    assert "<th>written</th>" in (tmp_path / "a" / "report.html").read_text(encoding="utf-8")
+    res = run_cli("report", "--db", batch["url"], "--out", str(tmp_path / "b"), "--plan", plan,
+                  "--no-date")
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "b" / "metrics.json").read_text(encoding="utf-8"))
+    assert "generated" not in doc["inputs"]
+    assert "written" not in (tmp_path / "b" / "report.html").read_text(encoding="utf-8")
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -1,9 +1,11 @@
-"""Build a report: select the cases, compute them (over worker processes for batches), write
-``report.html``, ``metrics.csv`` and ``metrics.json`` into the output directory.
+"""Build a report: select the cases, compute them (over worker processes for batches), draw
+the cohort figures, write ``report.html``, ``metrics.csv`` and ``metrics.json`` into the output
+directory.
 
 Determinism: cases are ordered by patient code and plan id, results are collected in that
 order whatever the number of workers, figures carry no dates, and the page states the inputs
-(title, selection, number of cases) but the time of writing only when a ``stamp`` is given.
+(title, selection, number of cases) and the time of writing (``stamp``; the command line
+leaves it out only when asked, so that reruns can be byte-identical).
 The database's URL is never embedded (a report travels; the URL may carry a host, a user or a
 password). Text cells of ``metrics.csv`` are neutralised against formula injection
 (:func:`fieldbank.sanitize.csv_cell`). Each file is written to a temporary name and renamed,
@@ -24,7 +26,8 @@ from typing import Any
 
 from fieldbank.files import write_atomic
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
-from fieldbank.interventions.report.html import render
+from fieldbank.interventions.report.figures import CohortPoint, cohort_change_figure
+from fieldbank.interventions.report.html import case_stretches, render
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
 from fieldbank.sanitize import csv_cell
 from fieldbank.storage import Database
@@ -85,6 +88,45 @@ def metrics_json(results: Iterable[CaseResult], inputs: dict[str, Any]) -> str:
     return json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False) + "\n"
 
 
+def cohort_points(results: Iterable[CaseResult]) -> list[CohortPoint]:
+    """Per case and treated group: the change (%) of the peak torque resisting the fast and
+    the slow stretch the group is graded on."""
+    out = []
+    for r in results:
+        row = r.row
+        kinds = "+".join(r.spec.kinds) or "plan"
+        for g in str(row.get("treated_groups") or "").split():
+            (j, d), = case_stretches({"treated_groups": g})
+            vals = [row.get(f"{j}_{d}_{stem}_{when}") for stem in ("fast_n_m", "slow_n_m")
+                    for when in ("before", "after")]
+            if not all(isinstance(v, float) for v in vals):
+                continue
+            fb, fa, sb, sa = (float(v) for v in vals)  # type: ignore[arg-type]
+            if fb <= 0 or sb <= 0:
+                continue
+            out.append(CohortPoint(f"{kinds} · {g}",
+                                   f"{r.spec.patient_code or '-'} plan {r.spec.plan_id}",
+                                   100.0 * (fa - fb) / fb, 100.0 * (sa - sb) / sb))
+    return out
+
+
+def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
+    """The summary's figures (key, caption, SVG) of a batch of two or more cases."""
+    if len(results) < 2:
+        return []
+    out = []
+    points = cohort_points(results)
+    if points:
+        out.append(("cohort-change",
+                    "Change per intervention kind and treated muscle group: the peak torque "
+                    "resisting the fast stretch (velocity-dependent: spasticity) and the slow "
+                    "stretch (position-dependent: contracture) of the stretch each treated "
+                    "group is graded on, after against before; one dot per case and group, "
+                    "bar: median.",
+                    cohort_change_figure(points).to_svg("cohort1")))
+    return out
+
+
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
                  title: str | None = None) -> ReportOutput:
@@ -111,5 +153,5 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
     json_inputs = {**inputs, "selection": selection.to_dict()}
     write_atomic(paths[1], metrics_csv(results).encode("utf-8"))
     write_atomic(paths[2], metrics_json(results, json_inputs).encode("utf-8"))
-    write_atomic(paths[0], render(results, inputs).encode("utf-8"))
+    write_atomic(paths[0], render(results, inputs, cohort_figures(results)).encode("utf-8"))
     return ReportOutput(out, paths[0], paths[1], paths[2], len(cases), used)

@@ -1,4 +1,4 @@
-"""One case of a report: metrics, time course, probing profiles and figures of a stored plan.
+"""One case of a report: metrics, time course, clinical read-outs and figures of a stored plan.
 
 :func:`compute_case` is a pure function of a
 :class:`~fieldbank.interventions.report.select.CaseSpec`, so batches can run it in worker
@@ -11,26 +11,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Comparison, Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
-from fieldbank.interventions.course import time_course
+from fieldbank.interventions.course import stretch_course
 from fieldbank.interventions.plan import dose_warnings
-from fieldbank.interventions.report import figures
+from fieldbank.interventions.report.figures import case_figures, treated_groups
 from fieldbank.interventions.report.select import CaseSpec
 from fieldbank.params import GROUPS
-from fieldbank.severity import COMPONENTS, LEVELS, GroupSeverity, summary
+from fieldbank.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
 
 #: Weeks after the most recent injection at which the time course is evaluated.
 TIMECOURSE_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(0, 25))
-#: Grid of the field figures (``workspace_grid`` n; denser grids only crowd the arrows).
-FIGURE_GRID_N = 11
-#: Hand speed of the moving-field row (the metrics' moving speed), m/s toward the body.
-FIGURE_SPEED_M_PER_S = 0.3
 
 
 #: Columns of the metrics table (CSV header and HTML table), in order, with their headings.
@@ -39,6 +33,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("plan_id", "plan"),
     ("plan_label", "plan label"),
     ("kinds", "kinds"),
+    ("treated_groups", "treated groups"),
     ("sessions", "sessions"),
     ("case_date", "date"),
     ("base_model_id", "before model"),
@@ -77,6 +72,9 @@ CLINICAL_COLUMNS: tuple[tuple[str, str], ...] = tuple(
 ) + tuple(
     (f"severity_{g}_{c}_{when}", f"{g} {c} {when}")
     for g in GROUPS for c in COMPONENTS for when in ("before", "after")
+) + tuple(
+    (f"severity_{g}_{c}_score_{when}", f"{g} {c} score {when}")
+    for g in GROUPS for c in COMPONENTS for when in ("before", "after")
 )
 #: Every column of metrics.csv / metrics.json; the HTML overview shows :data:`COLUMNS`.
 ALL_COLUMNS: tuple[tuple[str, str], ...] = COLUMNS + CLINICAL_COLUMNS
@@ -84,9 +82,12 @@ ALL_COLUMNS: tuple[tuple[str, str], ...] = COLUMNS + CLINICAL_COLUMNS
 
 @dataclass(frozen=True)
 class Figure:
+    """A case's figure: key, caption and its SVG (empty: the caption says why there is no
+    figure, e.g. a field the plan does not change)."""
+
     key: str
     caption: str
-    png: bytes
+    svg: str
 
 
 @dataclass(frozen=True)
@@ -111,6 +112,8 @@ def _clinical(c: Comparison) -> dict[str, Any]:
         for comp in COMPONENTS:
             out[f"severity_{g}_{comp}_before"] = sb.component(comp).text()
             out[f"severity_{g}_{comp}_after"] = sa.component(comp).text()
+            out[f"severity_{g}_{comp}_score_before"] = sb.component(comp).score
+            out[f"severity_{g}_{comp}_score_after"] = sa.component(comp).score
     return out
 
 
@@ -127,17 +130,19 @@ def compute_case(spec: CaseSpec) -> CaseResult:
     plan = spec.plan
     course = None
     if plan is not None and any(isinstance(s, Botulinum) for s in plan.steps):
-        course = time_course(arm_b, plan, TIMECOURSE_WEEKS, conditions=cond, arms=arms)
+        course = stretch_course(arm_b, plan, TIMECOURSE_WEEKS, arms=arms)
 
     static, moving = c.fields[0], c.fields[min(1, len(c.fields) - 1)]
     probes = {n: (b, a) for n, b, a in c.probe_rows()}
     sev_b, sev_a = c.before.severity, c.after.severity
     warnings = dose_warnings(plan) if plan is not None else []
+    treated = treated_groups(plan)
     row: dict[str, Any] = {
         "patient": spec.patient_code or "",
         "plan_id": spec.plan_id,
         "plan_label": spec.plan_label,
         "kinds": " ".join(spec.kinds),
+        "treated_groups": " ".join(treated),
         "sessions": " ".join(label for label, _ in spec.sessions),
         "case_date": spec.case_date,
         "base_model_id": spec.base_model_id,
@@ -165,6 +170,8 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "plan_label": spec.plan_label,
         "plan": spec.plan_doc,
         "kinds": list(spec.kinds),
+        "treated_groups": list(treated),
+        "graded_stretches": {g: " ".join(GRADED_STRETCH[g]) for g in treated},
         "sessions": [{"label": lb, "date": d} for lb, d in spec.sessions],
         "case_date": spec.case_date,
         "fit_id": spec.fit_id,
@@ -176,38 +183,9 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "timecourse": course.to_dict() if course is not None else None,
         "warnings": warnings,
     }
-
-    grid = Conditions.standard(arm_b, grid_n=FIGURE_GRID_N).grid_m
-    _, kb, _ = arm_b.field(grid)
-    _, ka, _ = arm_a.field(grid)
-    figs = [
-        Figure("fields", "Endpoint force field before, after and the difference: static "
-               "(postural) over contours of the passive potential U, and with the hand moving "
-               f"at {FIGURE_SPEED_M_PER_S:g} m/s (where the stretch reflex acts) in the "
-               "direction, of 8 (angle from +x), where the field changes most; + marks the "
-               "rest hand position.",
-               figures.fields_figure(arm_b, arm_a, grid, FIGURE_SPEED_M_PER_S)),
-        Figure("ellipses", "Static endpoint stiffness ellipses before and after "
-               "(symmetric part of K, one scale).",
-               figures.ellipses_figure(grid, kb, ka)),
-        Figure("severity", "Severity per muscle group before and after: passive "
-               "(position-dependent: contracture) and dynamic (velocity-dependent: "
-               "spasticity, the stretch reflex) grades, 0 unimpaired … 4 severe.",
-               figures.severity_figure(
-                   list(sev_b),
-                   {k: [min(s.component(k).score, 4.5) for s in sev_b.values()]
-                    for k in COMPONENTS},
-                   {k: [min(s.component(k).score, 4.5) for s in sev_a.values()]
-                    for k in COMPONENTS}, LEVELS)),
-        Figure("probes", "Force felt along the probing motions (seed Fig. 3b, 3c), before "
-               "and after.",
-               figures.probes_figure([
-                   (n, b.motion.times_s, np.hypot(*b.force_n.T), np.hypot(*a.force_n.T))
-                   for n, b, a in c.probe_rows()])),
-    ]
-    if course is not None:
-        figs.append(Figure(
-            "timecourse", "Botulinum time course: effect per injected group and probing peak "
-            "force, weeks after the most recent injection.",
-            figures.timecourse_figure(course.weeks, course.effect, course.probe_peak_n)))
-    return CaseResult(spec, json_finite(row), json_finite(detail), tuple(figs))
+    # clip-path ids must be unique in the page: plan id and figure number
+    figs = tuple(
+        Figure(f.key, f.caption,
+               "" if f.scene is None else f.scene.to_svg(f"p{spec.plan_id}f{k}"))
+        for k, f in enumerate(case_figures(arm_b, arm_a, c, plan, course)))
+    return CaseResult(spec, json_finite(row), json_finite(detail), figs)

@@ -1,55 +1,97 @@
-"""The report page: one self-contained HTML file, images embedded as PNG data URIs.
+"""The report page: one self-contained HTML file, figures inline as SVG.
 
 Written with the standard library (``html.escape``); no external resources, so the file can be
-mailed or archived alone. A small script marks ``<body data-images-ok="yes">`` once every image
-has loaded with a non-zero width (read by the browser test). Nothing in the page depends on the
-time of writing unless a stamp is given.
+mailed or archived alone. Layout, for a clinic lead reading many cases:
+
+1. title, the inputs (selection, number of cases, the date of writing unless left out);
+2. **summary** (batches): cohort figures - the change per intervention kind and treated muscle
+   group, and predicted against measured change where maps measured after a plan exist;
+3. **contents**: one line per patient with links to each plan;
+4. **metrics**: one row per case with the columns that matter for *that* case - the joint
+   stretch that lengthens each treated group (fast and slow peak torque, the velocity-dependent
+   part, the catch), the treated groups' grades, the field change - so the table fits a
+   printed page; every read-out of every stretch and group is in ``metrics.csv`` and
+   ``metrics.json``;
+5. one section per patient, one subsection per plan: the plan, its warnings, the stretch
+   read-outs (treated stretches first), the figures, the grades per muscle group, the field
+   metrics.
+
+A print stylesheet lays it out for A4 (``chromium --headless --print-to-pdf``): each case
+starts a page, figures and tables are not split, figures scale to the page width. A small
+script marks ``<body data-figures-ok="yes">`` once every figure has been laid out with a
+non-zero size (read by the browser test).
 """
 
 from __future__ import annotations
 
-import base64
 from collections.abc import Mapping, Sequence
 from html import escape
 from typing import Any
 
 from fieldbank.evaluate.probing import STRETCHES
 from fieldbank.interventions.report.compute import COLUMNS, STRETCH_READOUTS, CaseResult
+from fieldbank.interventions.report.figures import pct
 from fieldbank.params import GROUPS
 from fieldbank.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES
 
 CSS = """
-body { font-family: system-ui, sans-serif; margin: 1.5em auto; padding: 0 1em; max-width: 1180px;
-       color: #222; }
+body { font-family: system-ui, "DejaVu Sans", sans-serif; margin: 1.5em auto; padding: 0 1em;
+       max-width: 1180px; color: #222; line-height: 1.35; }
 h1 { font-size: 1.5em; margin-bottom: 0.2em; }
-h2 { font-size: 1.15em; border-top: 2px solid #ccd; padding-top: 0.6em; margin-top: 1.6em; }
-table { border-collapse: collapse; font-size: 0.78em; margin: 0.6em 0; }
-th, td { border: 1px solid #ccd; padding: 2px 6px; text-align: right; vertical-align: top; }
+h2 { font-size: 1.25em; border-top: 3px solid #ccd; padding-top: 0.6em; margin-top: 1.8em; }
+h3 { font-size: 1.08em; border-top: 1px solid #dde; padding-top: 0.5em; margin-top: 1.4em; }
+table { border-collapse: collapse; font-size: 0.85em; margin: 0.6em 0; }
+th, td { border: 1px solid #ccd; padding: 3px 6px; text-align: right; vertical-align: top; }
 th { background: #eef; }
 td.t, th.t { text-align: left; }
-.note { color: #844; font-size: 0.9em; }
+tr.treated td, tr.treated th { background: #fdf0e6; }
+.note { color: #844; font-size: 0.92em; }
 .warn { color: #a00; font-weight: bold; font-size: 0.95em; }
-.legend { color: #555; font-size: 0.8em; max-width: 60em; }
-table.clinical td { white-space: nowrap; }
+.legend, .nochange { color: #555; font-size: 0.88em; max-width: 70em; }
+.nochange { border-left: 3px solid #ccd; padding-left: 0.6em; }
 .inputs td, .inputs th { text-align: left; }
-.scroll { overflow-x: auto; }
-figure { margin: 0.6em 0 1em 0; }
-figcaption { font-size: 0.82em; color: #555; max-width: 60em; }
-img { max-width: 100%; height: auto; }
+table.metrics { width: 100%; }
+table.metrics td { font-variant-numeric: tabular-nums; }
+table.metrics td.t { white-space: normal; }
+table.metrics .sub { color: #555; font-size: 0.92em; }
+.down { color: #0a5a8a; } .up { color: #a33c00; }
+ol.toc { columns: 2; font-size: 0.92em; }
+ol.toc li { break-inside: avoid; margin-bottom: 0.2em; }
+figure { margin: 0.8em 0 1.2em 0; }
+figcaption { font-size: 0.88em; color: #444; max-width: 70em; }
+svg.fig { max-width: 100%; height: auto; display: block; }
 ul.steps { font-size: 0.95em; list-style: none; padding-left: 0.5em; }
+@page { size: A4; margin: 12mm 10mm; }
+@media print {
+  body { max-width: none; margin: 0; padding: 0; font-size: 9pt; }
+  section.patient, section.case { break-before: page; }
+  section.patient > section.case:first-of-type { break-before: avoid; }
+  figure, table, tr { break-inside: avoid; }
+  h2, h3 { break-after: avoid; }
+  svg.fig { width: 100% !important; height: auto !important; }
+  table.metrics { font-size: 7pt; table-layout: fixed; }
+  table.metrics th, table.metrics td { padding: 1px 3px; overflow-wrap: break-word; }
+  table.clinical, table.kv { font-size: 7.5pt; }
+  a { color: inherit; text-decoration: none; }
+  ol.toc { font-size: 8pt; }
+}
 """
 
 SCRIPT = """
 window.addEventListener("load", function () {
-  var imgs = Array.prototype.slice.call(document.images);
-  var bad = imgs.filter(function (i) { return !(i.complete && i.naturalWidth > 0); });
-  document.body.setAttribute("data-images", String(imgs.length));
-  document.body.setAttribute("data-images-ok", bad.length === 0 ? "yes" : "no");
+  var figs = Array.prototype.slice.call(document.querySelectorAll("svg.fig"));
+  var bad = figs.filter(function (f) {
+    var r = f.getBoundingClientRect();
+    var drawn = f.querySelectorAll("path,rect,circle,ellipse").length;
+    return !(r.width > 0 && r.height > 0 && drawn > 0);
+  });
+  document.body.setAttribute("data-figures", String(figs.length));
+  document.body.setAttribute("data-figures-ok", bad.length === 0 ? "yes" : "no");
 });
 """
 
-TEXT_COLUMNS = {"patient", "plan_label", "kinds", "sessions", "case_date", "severity_before",
-                "severity_after", "warnings"}
+TEXT_COLUMNS = {"patient", "plan_label", "kinds", "treated_groups", "sessions", "case_date",
+                "severity_before", "severity_after", "warnings"}
 
 
 def fmt(v: Any) -> str:
@@ -61,28 +103,93 @@ def fmt(v: Any) -> str:
     return str(v)
 
 
-def _png_tag(png: bytes, alt: str) -> str:
-    w = int.from_bytes(png[16:20], "big")
-    h = int.from_bytes(png[20:24], "big")
-    data = base64.b64encode(png).decode("ascii")
-    return (f'<img src="data:image/png;base64,{data}" width="{w}" height="{h}" '
-            f'alt="{escape(alt)}">')
+def _num(v: Any, digits: str = ".2f") -> str:
+    """A number, '—' for none; never '-0'."""
+    if v is None:
+        return "—"
+    text = f"{v:{digits}}"
+    return text[1:] if text.startswith("-") and float(text) == 0 else text
 
 
-def _table(rows: Sequence[Mapping[str, Any]], link: bool) -> list[str]:
-    out = ['<div class="scroll"><table>', "<tr>"]
-    out += [f'<th class="{"t" if k in TEXT_COLUMNS else ""}">{escape(h)}</th>'
-            for k, h in COLUMNS]
-    out.append("</tr>")
-    for r in rows:
+def _change(row: Mapping[str, Any], key: str, digits: str = ".2f", rel: bool = True) -> str:
+    """'b → a (Δ%)' of a before/after pair of the row, HTML."""
+    b, a = row.get(key + "_before"), row.get(key + "_after")
+    text = f"{_num(b, digits)} → {_num(a, digits)}"
+    if rel and isinstance(b, float) and isinstance(a, float):
+        p = pct(b, a)
+        if p and p != "±0%":
+            cls = "down" if a < b else "up"
+            return f'{escape(text)} <span class="{cls}">({escape(p)})</span>'
+    return escape(text)
+
+
+def _angle_change(row: Mapping[str, Any], key: str) -> str:
+    b, a = row.get(key + "_before"), row.get(key + "_after")
+    return escape(f"{_num(b, '.0f')} → {_num(a, '.0f')}")
+
+
+def case_stretches(row: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """The (joint, direction) stretches a case's columns show: the stretch each treated group
+    is graded on (bi-articular groups at the elbow), in the standard order; elbow extension
+    when no group is treated."""
+    treated = str(row.get("treated_groups") or "").split()
+    wanted = {GRADED_STRETCH[g] for g in treated if g in GRADED_STRETCH}
+    return [s for s in STRETCHES if s in wanted] or [STRETCHES[0]]
+
+
+def _overview(results: Sequence[CaseResult], patient_ids: Mapping[str, str]) -> list[str]:
+    """The metrics table: one row per case, the columns chosen for that case."""
+    head = ["patient", "plan", "treated", "stretch of the treated group",
+            "fast peak (N·m)", "velocity-dep. part (N·m)", "slow peak (N·m)", "catch R1 (°)",
+            "grades that change", "ΔF RMS (N): static; moving"]
+    widths = (9, 9, 10, 10, 11, 11, 11, 7, 13, 9)  # % of the printed page
+    out = ['<div class="scroll"><table class="metrics"><colgroup>']
+    out += [f'<col style="width:{w}%">' for w in widths]
+    out.append("</colgroup><thead><tr>")
+    out += [f'<th class="t">{escape(h)}</th>' for h in head]
+    out.append("</tr></thead><tbody>")
+    for r in results:
+        row = r.row
+        stretches = case_stretches(row)
+        keys = [f"{j}_{d}" for j, d in stretches]
+
+        def lines(cells: list[str]) -> str:
+            return "<br>".join(cells)
+
+        treated = str(row.get("treated_groups") or "").split()
+        grades = [escape(f"{g} {comp}: {row.get(f'severity_{g}_{comp}_before')} → "
+                         f"{row.get(f'severity_{g}_{comp}_after')}")
+                  for g in GROUPS for comp in ("dynamic", "passive")
+                  if row.get(f"severity_{g}_{comp}_before")
+                  != row.get(f"severity_{g}_{comp}_after")]
+        code = str(row.get("patient") or "")
+        who = (f'<a href="#{patient_ids[code]}">{escape(code)}</a>' if code in patient_ids
+               else escape(code or "—"))
         out.append("<tr>")
-        for k, _ in COLUMNS:
-            cell = escape(fmt(r.get(k)))
-            if link and k == "plan_id":
-                cell = f'<a href="#plan-{r["plan_id"]}">{cell}</a>'
-            out.append(f'<td class="{"t" if k in TEXT_COLUMNS else ""}">{cell}</td>')
+        out.append(f'<td class="t">{who}</td>')
+        out.append(f'<td class="t"><a href="#plan-{row["plan_id"]}">{row["plan_id"]}</a>'
+                   f'<br><span class="sub">{escape(str(row.get("plan_label") or ""))}</span>'
+                   "</td>")
+        out.append(f'<td class="t">{escape(str(row.get("kinds") or ""))}: '
+                   f'{escape(" ".join(treated) or "—")}</td>')
+        out.append(f'<td class="t">{lines([escape(f"{j} {d}") for j, d in stretches])}</td>')
+        out.append(f"<td>{lines([_change(row, f'{k}_fast_n_m') for k in keys])}</td>")
+        out.append("<td>" + lines([_change(row, f"{k}_velocity_dependent_n_m")
+                                   for k in keys]) + "</td>")
+        out.append(f"<td>{lines([_change(row, f'{k}_slow_n_m') for k in keys])}</td>")
+        out.append(f"<td>{lines([_angle_change(row, f'{k}_catch_r1_deg') for k in keys])}</td>")
+        out.append(f'<td class="t">{lines(grades) or "none"}</td>')
+        out.append(f"<td>{escape(_num(row.get('static_diff_rms_n')))}; "
+                   f"{escape(_num(row.get('moving_diff_rms_n')))}</td>")
         out.append("</tr>")
-    out.append("</table></div>")
+    out.append("</tbody></table></div>")
+    out.append('<p class="legend">Each row shows the joint stretch that lengthens each treated '
+               "muscle group (the bi-articular groups at the elbow): peak torque resisting the "
+               "fast (180°/s) and the slow (5°/s) stretch, its velocity-dependent part (fast − "
+               "slow: the stretch reflex, spasticity) and the catch angle R1; the grades "
+               "(dynamic: spasticity, passive: contracture) of every muscle group whose level "
+               "changes. Every read-out of every stretch, muscle group and field is in "
+               "metrics.csv and metrics.json.</p>")
     return out
 
 
@@ -91,89 +198,136 @@ def _steps(steps: Sequence[str]) -> list[str]:
 
 
 def _case_table(row: Mapping[str, Any]) -> list[str]:
-    """One case's metrics as name/value pairs, three pairs per line."""
-    pairs = [(h, fmt(row.get(k))) for k, h in COLUMNS if k not in TEXT_COLUMNS
-             and k not in ("plan_id", "base_model_id", "result_model_id")]
+    """One case's field metrics as name/value pairs, three pairs per line."""
+    skip = TEXT_COLUMNS | {"plan_id", "base_model_id", "result_model_id"}
+    pairs = [(h, fmt(row.get(k))) for k, h in COLUMNS if k not in skip]
     out = ['<table class="kv">']
     for i in range(0, len(pairs), 3):
         out.append("<tr>" + "".join(f'<th class="t">{escape(h)}</th><td>{escape(v)}</td>'
                                     for h, v in pairs[i:i + 3]) + "</tr>")
-    for k in ("severity_before", "severity_after"):
-        out.append(f'<tr><th class="t">{escape(dict(COLUMNS)[k])}</th>'
-                   f'<td class="t" colspan="5">{escape(fmt(row.get(k)))}</td></tr>')
     out.append("</table>")
     return out
 
 
-def _change(row: Mapping[str, Any], key: str) -> str:
-    return f"{fmt(row.get(key + '_before'))} → {fmt(row.get(key + '_after'))}"
-
-
 def _clinical_tables(row: Mapping[str, Any]) -> list[str]:
-    """Joint stretches per joint and direction, and grades per muscle group, before → after."""
+    """Joint stretches per joint and direction (the treated ones first and highlighted), and
+    grades per muscle group, before → after."""
+    treated_stretches = case_stretches(row) if row.get("treated_groups") else []
+    order = treated_stretches + [s for s in STRETCHES if s not in treated_stretches]
     out = ['<table class="clinical">', '<tr><th class="t">joint stretch</th>']
     out += [f"<th>{escape(head)}</th>" for _, _, head in STRETCH_READOUTS]
     out.append("</tr>")
-    for j, d in STRETCHES:
-        out.append(f'<tr><th class="t">{escape(f"{j} {d}")}</th>')
-        out += [f"<td>{escape(_change(row, f'{j}_{d}_{stem}'))}</td>"
-                for _, stem, _ in STRETCH_READOUTS]
+    for j, d in order:
+        cls = ' class="treated"' if (j, d) in treated_stretches else ""
+        out.append(f'<tr{cls}><th class="t">{escape(f"{j} {d}")}</th>')
+        for _, stem, _ in STRETCH_READOUTS:
+            key = f"{j}_{d}_{stem}"
+            cell = _angle_change(row, key) if stem.endswith("_deg") else _change(row, key)
+            out.append(f"<td>{cell}</td>")
         out.append("</tr>")
     out.append("</table>")
+    treated = set(str(row.get("treated_groups") or "").split())
     out.append('<table class="clinical"><tr><th class="t">muscle group</th>'
                '<th class="t">graded on</th><th class="t">passive (contracture)</th>'
                '<th class="t">dynamic (spasticity)</th></tr>')
     for g in GROUPS:
         joint, direction = GRADED_STRETCH[g]
-        out.append(f'<tr><th class="t">{escape(MUSCLE_GROUP_NAMES[g])} ({g})</th>'
+        cls = ' class="treated"' if g in treated else ""
+        cells = []
+        for comp in ("passive", "dynamic"):
+            b, a = row.get(f"severity_{g}_{comp}_before"), row.get(f"severity_{g}_{comp}_after")
+            sb = row.get(f"severity_{g}_{comp}_score_before")
+            sa = row.get(f"severity_{g}_{comp}_score_after")
+            cells.append(escape(f"{b} → {a} ({_num(sb, '.1f')} → {_num(sa, '.1f')})"))
+        out.append(f'<tr{cls}><th class="t">{escape(MUSCLE_GROUP_NAMES[g])} ({g})</th>'
                    f'<td class="t">{escape(f"{joint} {direction}")}</td>'
-                   f'<td class="t">{escape(_change(row, f"severity_{g}_passive"))}</td>'
-                   f'<td class="t">{escape(_change(row, f"severity_{g}_dynamic"))}</td></tr>')
+                   f'<td class="t">{cells[0]}</td><td class="t">{cells[1]}</td></tr>')
     out.append("</table>")
     out.append('<p class="legend">Slow stretch 5°/s, fast 180°/s, one joint through its range, '
-               "the other at rest. Catch (Tardieu-style): R1 where the fast stretch, R2 where "
-               "the slow one first meets twice the unimpaired arm's largest slow-stretch "
-               "torque (— never); R2 − R1 is the velocity-dependent part. Grades: + beyond "
-               "severe, * rests on a parameter the fit did not identify.</p>")
+               "the other at rest (treated stretches highlighted). Catch (Tardieu-style): R1 "
+               "where the fast stretch, R2 where the slow one first meets twice the unimpaired "
+               "arm's largest slow-stretch torque (— never); R2 − R1 is the velocity-dependent "
+               "part. Grades (score 0 unimpaired … 4 severe): + beyond severe, * rests on a "
+               "parameter the fit did not identify.</p>")
     return out
 
 
-def render(results: Sequence[CaseResult], inputs: Mapping[str, Any]) -> str:
-    """The whole page for ``results`` (in order); ``inputs`` are shown as generation inputs."""
+def _figure(key: str, caption: str, svg: str) -> str:
+    if not svg:
+        return f'<p class="nochange" data-figure="{escape(key)}">{escape(caption)}</p>'
+    return (f'<figure data-figure="{escape(key)}">{svg}'
+            f"<figcaption>{escape(caption)}</figcaption></figure>")
+
+
+def _patients(results: Sequence[CaseResult]) -> dict[str, list[CaseResult]]:
+    groups: dict[str, list[CaseResult]] = {}
+    for r in results:
+        groups.setdefault(r.spec.patient_code or "", []).append(r)
+    return groups
+
+
+def render(results: Sequence[CaseResult], inputs: Mapping[str, Any],
+           summary: Sequence[tuple[str, str, str]] = ()) -> str:
+    """The whole page for ``results`` (in order); ``inputs`` are shown as generation inputs;
+    ``summary``: cohort figures (key, caption, SVG) shown first."""
     title = str(inputs.get("title", "fieldbank report"))
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+           '<meta name="viewport" content="width=device-width, initial-scale=1">',
            f"<title>{escape(title)}</title>", f"<style>{CSS}</style>",
            f"<script>{SCRIPT}</script>", "</head>", "<body>",
            f"<h1>{escape(title)}</h1>",
            '<p class="note">Model predictions from the fitted arm models, not treatment '
            "advice.</p>", '<table class="inputs">']
+    names = {"selection": "selection", "cases": "cases", "generated": "written"}
     for k, v in inputs.items():
         if k != "title":
-            out.append(f"<tr><th>{escape(str(k))}</th><td>{escape(str(v))}</td></tr>")
+            out.append(f"<tr><th>{escape(names.get(str(k), str(k)))}</th>"
+                       f"<td>{escape(str(v))}</td></tr>")
     out.append("</table>")
-    out.append(f"<h2>Metrics ({len(results)} case{'s' if len(results) != 1 else ''})</h2>")
-    out += _table([r.row for r in results], link=True)
-    for r in results:
-        s = r.spec
-        out.append(f'<h2 id="plan-{s.plan_id}">{escape(s.title)}</h2>')
-        who = s.patient
+    groups = _patients(results)
+    patient_ids = {code: f"patient-{i + 1}" for i, code in enumerate(groups)}
+    if summary:
+        out.append('<h2 id="summary">Summary</h2>')
+        out += [_figure(k, c, s) for k, c, s in summary]
+    out.append('<h2 id="contents">Contents</h2><ol class="toc">')
+    for code, cases in groups.items():
+        links = ", ".join(f'<a href="#plan-{r.spec.plan_id}">plan {r.spec.plan_id}: '
+                          f"{escape(r.spec.plan_label or ', '.join(r.spec.kinds))}</a>"
+                          for r in cases)
+        out.append(f'<li><a href="#{patient_ids[code]}">{escape(code or "no patient")}</a>: '
+                   f"{links}</li>")
+    out.append("</ol>")
+    out.append(f'<h2 id="metrics">Metrics ({len(results)} case'
+               f"{'s' if len(results) != 1 else ''})</h2>")
+    out += _overview(results, patient_ids)
+    for code, cases in groups.items():
+        out.append(f'<section class="patient" id="{patient_ids[code]}">')
+        out.append(f"<h2>Patient {escape(code or '(none)')}</h2>")
+        who = cases[0].spec.patient
         if who:
-            out.append(f"<p>Patient {escape(str(who['code']))}: {who['body_mass_kg']:g} kg, "
-                       f"{who['height_m']:g} m, {escape(str(who['side']))} arm. ")
-        else:
-            out.append("<p>")
-        sess = ", ".join(f"{lb} ({d or 'undated'})" for lb, d in s.sessions)
-        out.append(f"Before: model {s.base_model_id} ({escape(s.base_origin)}: "
-                   f"{escape(s.base_label)}); after: model {s.result_model_id}. "
-                   f"Sessions fitted: {escape(sess or 'none recorded')}. "
-                   f"Case date {escape(s.case_date)}.</p>")
-        out += _steps(r.detail.get("steps") or [])
-        out += [f'<p class="warn">Warning: {escape(w)}.</p>'
-                for w in r.detail.get("warnings") or []]
-        out += _case_table(r.row)
-        for f in r.figures:
-            out.append(f"<figure>{_png_tag(f.png, f.caption)}"
-                       f"<figcaption>{escape(f.caption)}</figcaption></figure>")
-        out += _clinical_tables(r.row)
+            out.append(f"<p>{who['body_mass_kg']:g} kg, {who['height_m']:g} m, "
+                       f"{escape(str(who['side']))} arm; {len(cases)} plan"
+                       f"{'s' if len(cases) != 1 else ''}.</p>")
+        for r in cases:
+            out += _case(r)
+        out.append("</section>")
     out += ["</body>", "</html>", ""]
     return "\n".join(out)
+
+
+def _case(r: CaseResult) -> list[str]:
+    s = r.spec
+    out = [f'<section class="case" id="plan-{s.plan_id}">', f"<h3>{escape(s.title)}</h3>"]
+    sess = ", ".join(f"{lb} ({d or 'undated'})" for lb, d in s.sessions)
+    out.append(f"<p>Before: model {s.base_model_id} ({escape(s.base_origin)}: "
+               f"{escape(s.base_label)}); after: model {s.result_model_id}. "
+               f"Sessions fitted: {escape(sess or 'none recorded')}. "
+               f"Case date {escape(s.case_date)}.</p>")
+    out += _steps(r.detail.get("steps") or [])
+    out += [f'<p class="warn">Warning: {escape(w)}.</p>'
+            for w in r.detail.get("warnings") or []]
+    out += _clinical_tables(r.row)
+    out += [_figure(f.key, f.caption, f.svg) for f in r.figures]
+    out += _case_table(r.row)
+    out.append("</section>")
+    return out
