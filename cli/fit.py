@@ -18,7 +18,8 @@ from fieldbank.cli.options import db_option, emit_json, json_option
 from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
 from fieldbank.fitting.plot import plot_fit
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
-from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
+from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
+from fieldbank.params import GROUPS, ArmParams
 
 StoreFactory = Callable[[str | None], FitStore]
 
@@ -68,7 +69,10 @@ def fit_quality_lines(report: Mapping[str, Any]) -> list[str]:
     intervals = report.get("intervals")
     if isinstance(intervals, Mapping) and intervals:
         lines.append(f"  {'parameter':<16}{'value':>10}{'sd':>10}   {'95% interval':<23}basis")
-        for name, iv in intervals.items():
+        # stored documents sort their keys: show them in the fit's order (km, alpha, beta, ...)
+        order = {n: k for k, n in enumerate(ParamSpace.build(ArmParams.from_anthropometry(),
+                                                             FIT_KINDS).names)}
+        for name, iv in sorted(intervals.items(), key=lambda kv: order.get(kv[0], 99)):
             span = f"{_num(iv.get('low'), '.4g')} … {_num(iv.get('high'), '.4g')}"
             lines.append(f"  {name:<16}{_num(iv.get('value'), '.4g'):>10}"
                          f"{_num(iv.get('sd'), '.3g'):>10}   {span:<23}{iv.get('basis')}")
@@ -194,8 +198,6 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
     p = m.params
     click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {m.label}")
     click.echo("  group        Km N/m    alpha N    beta")
-    from fieldbank.params import GROUPS
-
     for i, g in enumerate(GROUPS):
         click.echo(f"  {g:<6} {p.km_n_per_m[i]:>12.1f} {p.alpha_n[i]:>10.1f} "
                    f"{p.beta[i]:>7.3f}")

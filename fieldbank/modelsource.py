@@ -10,7 +10,8 @@ A command names a model in one of four ways, and every command resolves it here:
 
 The result, :class:`ModelSource`, carries the parameters with a description for read-outs and,
 for stored models, the model id and patient, so lineage (plans, haptic sessions) can point at
-them.
+them, and the fit behind the model (:func:`fit_behind`: the fit of the model or of the fitted
+model it was derived from), so a what-if can say what the prediction rests on.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.severity import parse_severity_options, synthesize
-from fieldbank.storage import Database
+from fieldbank.storage import Database, FitRecord
 
 #: Opens the database only when a stored model is asked for.
 DatabaseOpener = Callable[[], Database]
@@ -36,6 +37,32 @@ class ModelSource:
     description: str
     model_id: int | None = None
     patient_code: str | None = None
+    #: The fit behind a stored model (None for files, severities, unfitted models).
+    fit: FitRecord | None = None
+    #: The fitted model that fit produced (``model_id`` itself, or an ancestor of it).
+    fitted_model_id: int | None = None
+
+
+def fit_behind(db: Database, model_id: int) -> tuple[FitRecord, int] | None:
+    """The fit that produced ``model_id`` or the nearest fitted model in its lineage, with
+    that fitted model's id; None when the model has no fitted ancestor."""
+    for m in db.model_lineage(model_id):
+        if m.origin != "fitted":
+            continue
+        if m.patient_code is None:
+            return None
+        fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id]
+        return (fits[-1], int(m.id)) if fits else None
+    return None
+
+
+def _with_fit(db: Database, source: ModelSource) -> ModelSource:
+    assert source.model_id is not None
+    found = fit_behind(db, source.model_id)
+    if found is None:
+        return source
+    return ModelSource(source.params, source.description, source.model_id,
+                       source.patient_code, found[0], found[1])
 
 
 def from_file(path: str | Path) -> ModelSource:
@@ -62,9 +89,9 @@ def synthetic(severity: Sequence[str] = (), *, body_mass_kg: float | None = None
 
 def stored(db: Database, model_id: int) -> ModelSource:
     m = db.get_model(model_id)
-    return ModelSource(m.params, f"stored {m.origin} model {m.id}"
-                       + (f" of patient {m.patient_code}" if m.patient_code else ""),
-                       int(m.id), m.patient_code)
+    return _with_fit(db, ModelSource(m.params, f"stored {m.origin} model {m.id}"
+                                     + (f" of patient {m.patient_code}" if m.patient_code
+                                        else ""), int(m.id), m.patient_code))
 
 
 def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
@@ -75,8 +102,9 @@ def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
         found = [m for m in models if m.origin == origin]
         if found:
             m = max(found, key=lambda r: r.id)
-            return ModelSource(m.params, f"patient {patient_code}, {origin} model {m.id}",
-                               int(m.id), patient_code)
+            return _with_fit(db, ModelSource(m.params,
+                                             f"patient {patient_code}, {origin} model {m.id}",
+                                             int(m.id), patient_code))
     raise StorageError(
         f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
         "first ('fieldbank fit'), or give the model with --params FILE.")

@@ -70,7 +70,9 @@ import numpy as np
 from fieldbank.errors import FitError
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.search import nlopt_run
+from fieldbank.fitting.space import PARAM_FIELD
 from fieldbank.model import FloatArray
+from fieldbank.params import GROUP_INDEX, ArmParams
 
 METHODS: tuple[str, ...] = ("auto", "gauss-newton", "bootstrap")
 DEFAULT_METHOD = "auto"
@@ -185,6 +187,26 @@ class FitSamples:
         if arr.ndim != 2 or arr.shape[1] != len(names) or not np.all(np.isfinite(arr)):
             return None
         return cls(tuple(str(n) for n in names), arr)
+
+    def params(self, base: ArmParams, limit: int | None = None) -> list[ArmParams]:
+        """Each sample (the first ``limit``) written into ``base`` (the fitted model)."""
+        rows = self.values if limit is None else self.values[:limit]
+        out = []
+        for row in rows:
+            fields: dict[str, list[float]] = {}
+            for name, v in zip(self.names, row, strict=True):
+                kind, _, which = name.rpartition("_")
+                if name.startswith("q_rest_"):
+                    field = fields.setdefault("q_rest_rad", list(base.q_rest_rad))
+                    field[0 if which == "shoulder" else 1] = float(v)
+                elif kind in PARAM_FIELD and which in GROUP_INDEX:
+                    attr = PARAM_FIELD[kind]
+                    field = fields.setdefault(attr, list(getattr(base, attr)))
+                    field[GROUP_INDEX[which]] = float(v)
+                else:
+                    raise FitError(f"fit samples: unknown parameter {name!r}.")
+            out.append(base.replace(**{k: tuple(v) for k, v in fields.items()}))
+        return out
 
 
 def reduced_problem(problem: FitProblem, theta: FloatArray,
