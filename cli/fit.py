@@ -19,6 +19,7 @@ from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
 from fieldbank.fitting.plot import plot_fit
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
+from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
 from fieldbank.params import GROUPS, ArmParams
 
 StoreFactory = Callable[[str | None], FitStore]
@@ -114,14 +115,20 @@ def _summary(out: FitOutcome) -> str:
               help=f"Comma-separated parameter kinds to fit ({', '.join(FIT_KINDS)}).")
 @click.option("--prior-weight", type=float, default=DEFAULT_PRIOR_WEIGHT, show_default=True)
 @click.option("--max-evals", type=click.IntRange(min=10), default=None)
+@click.option("--uncertainty", type=click.Choice(list(METHODS)), default=DEFAULT_METHOD,
+              show_default=True,
+              help="Gauss-Newton where it holds else a parametric bootstrap ('auto'), or one "
+                   "of the two always.")
+@click.option("--replicates", type=click.IntRange(min=2), default=DEFAULT_REPLICATES,
+              show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write measured against fitted fields to this .png or .svg.")
 @json_option
 @db_option
 @click.pass_context
 def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, seed: int,
-        fit_kinds: str, prior_weight: float, max_evals: int | None, plot_path: str | None,
-        as_json: bool, db_url: str | None) -> None:
+        fit_kinds: str, prior_weight: float, max_evals: int | None, uncertainty: str,
+        replicates: int, plot_path: str | None, as_json: bool, db_url: str | None) -> None:
     """Fit PATIENT's arm model to the patient's measured maps and store it."""
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
 
@@ -129,7 +136,8 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
         click.echo(f"  {n} evaluations, best cost {best:.6g}", err=True)
 
     fitter = ArmFitter(algorithm=algorithm, seed=seed, fit=kinds, prior_weight=prior_weight,
-                       max_evals=max_evals, progress=progress)
+                       max_evals=max_evals, progress=progress, uncertainty=uncertainty,
+                       replicates=replicates)
     store = _store(ctx, db_url)
     out = fit_patient(store, patient, session, fitter,
                       progress=lambda msg: click.echo(msg, err=True))

@@ -98,12 +98,17 @@ class FitBasis:
         """The basis of a resolved model, or None when no fit lies behind it."""
         if source.fit is None or source.fitted_model_id is None:
             return None
-        report: Mapping[str, Any] = source.fit.result
+        return cls.from_report(source.fit.id, source.fitted_model_id,
+                               source.model_id == source.fitted_model_id, source.fit.result)
+
+    @classmethod
+    def from_report(cls, fit_id: int, fitted_model_id: int, same_model: bool,
+                    report: Mapping[str, Any]) -> FitBasis:
+        """The basis from a stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`)."""
         gof = report.get("goodness_of_fit") or {}
         unid = tuple((str(u.get("name")), str(u.get("reason", "")))
                      for u in report.get("unidentified", []) if isinstance(u, Mapping))
-        return cls(int(source.fit.id), int(source.fitted_model_id),
-                   source.model_id == source.fitted_model_id,
+        return cls(int(fit_id), int(fitted_model_id), bool(same_model),
                    str(report.get("status", "unknown")), str(gof.get("verdict", "unknown")),
                    tuple(str(r) for r in gof.get("reasons", [])), unid,
                    tuple(str(h) for h in report.get("held_at_unimpaired", []) or []),
@@ -291,18 +296,24 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
 
 
 def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *,
-           accept_poor_fit: bool = False,
-           n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
+            accept_poor_fit: bool = False,
+            n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
     """Everything above for one what-if (raises :class:`PoorFitError` first)."""
-    basis = FitBasis.of(source)
+    return examine_basis(FitBasis.of(source), source.params, plan, cond, arms,
+                         accept_poor_fit=accept_poor_fit, n_samples=n_samples)
+
+
+def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
+                  arms: ArmCache, *, accept_poor_fit: bool = False,
+                  n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
+    """:func:`examine` for a model ``before`` whose fit basis is known (reports)."""
     note = check_fit(basis, accept_poor_fit)
-    intervals, inote, used = (prediction_intervals(basis, source.params, plan, cond, arms,
-                                                   n_samples) if n_samples > 0 else
-                              ((), "intervals not asked for", 0))
-    warn = list(plan_warnings(plan, basis, source.params))
+    intervals, inote, used = (prediction_intervals(basis, before, plan, cond, arms, n_samples)
+                              if n_samples > 0 else ((), "intervals not asked for", 0))
+    warn = list(plan_warnings(plan, basis, before))
     if note:
         warn.insert(0, note)
-    return Guesses(basis, guesses(basis, source.params), tuple(warn), intervals, inote, used,
+    return Guesses(basis, guesses(basis, before), tuple(warn), intervals, inote, used,
                    note is not None)
 
 

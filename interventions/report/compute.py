@@ -20,6 +20,7 @@ from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import time_course
 from fieldbank.interventions.report import figures
 from fieldbank.interventions.report.select import CaseSpec
+from fieldbank.interventions.report.trust import case_trust
 from fieldbank.severity import LEVELS, GroupSeverity
 
 #: Weeks after the most recent injection at which the time course is evaluated.
@@ -137,6 +138,9 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "steps": plan.describe() if plan is not None else [],
         "timecourse": course.to_dict() if course is not None else None,
     }
+    trust_row, trust_detail = case_trust(spec, cond, arms)
+    row.update(trust_row)
+    detail.update(trust_detail)
 
     grid = Conditions.standard(arm_b, grid_n=FIGURE_GRID_N).grid_m
     _, kb, _ = arm_b.field(grid)
