@@ -235,3 +235,5 @@ def demo(out_dir: str, home: str | None, force: bool, jobs: int | None,
         f"total {time.perf_counter() - t0:.1f} s")
     click.echo(f"next: FIELDBANK_HOME={res.home} fieldbank report --kind botulinum "
                f"--out {res.report_dir}-botulinum", err=True)
+    click.echo(f"      FIELDBANK_HOME={res.home} fieldbank validate   (the given plans against "
+               "the post-BoNT maps)", err=True)
