@@ -17,7 +17,7 @@ model it was derived from), so a what-if can say what the prediction rests on.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from fieldbank.errors import ParameterError, StorageError
@@ -38,9 +38,9 @@ class ModelSource:
     model_id: int | None = None
     patient_code: str | None = None
     #: The fit behind a stored model (None for files, severities, unfitted models).
-    fit: FitRecord | None = None
+    fit: FitRecord | None = field(default=None, compare=False)
     #: The fitted model that fit produced (``model_id`` itself, or an ancestor of it).
-    fitted_model_id: int | None = None
+    fitted_model_id: int | None = field(default=None, compare=False)
 
 
 def fit_behind(db: Database, model_id: int) -> tuple[FitRecord, int] | None:

@@ -228,3 +228,16 @@ def test_r2_of_a_map_that_varies_less_than_its_noise_does_not_condemn_it() -> No
     assert gof.verdict == "good" and gof.n_values == 40
     assert map_sd(m) == pytest.approx(sd)
     assert math.isfinite(gof.r2)
+
+
+def test_without_a_prior_an_open_direction_gets_a_huge_sd_not_zero() -> None:
+    """Prior weight 0 and static maps: the reflex columns are zero; the information is
+    singular, and what it leaves open is reported as wide open (finite, JSON-able)."""
+    truth = impaired_params("elbow", "severe", BASE)
+    pat = synthetic_patient(truth, seed=2, moving=False)
+    fit = ArmFitter(seed=0, prior_weight=0.0, replicates=4,
+                    hold_unidentified=False).fit(pat.maps, BASE)
+    json.dumps(fit.report(), allow_nan=False)
+    assert fit.intervals_["beta_ef"]["sd"] > 1e3  # β lives in [0, 1]: no information at all
+    assert fit.intervals_["beta_ef"]["low"] == 0.0 and fit.intervals_["beta_ef"]["high"] == 1.0
+    assert fit.intervals_["km_ef"]["sd"] < 0.1 * fit.intervals_["km_ef"]["value"]

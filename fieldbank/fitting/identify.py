@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.uncertainty import spd_inverse
 from fieldbank.model import FloatArray
 from fieldbank.params import GROUPS
 
@@ -91,9 +92,7 @@ def identify(problem: FitProblem, theta: FloatArray) -> Identification:
     sig = s.prior_sd[fit]
     jtj = jac.T @ jac
     h = jtj + np.diag(s.prior_weight / sig**2)
-    # solve in prior-SD units: h is positive definite (the prior), so no cut-off is needed
-    hw = h * np.outer(sig, sig)
-    h_inv = np.linalg.solve(hw, np.eye(fit.size)) * np.outer(sig, sig)
+    h_inv = spd_inverse(h, sig)  # no pseudo-inverse cut-off (fieldbank.fitting.uncertainty)
     m = r.size
     p_eff = float(np.trace(jtj @ h_inv))
     s2 = float(r @ r) / (m - p_eff) if m > p_eff + 1e-9 else 1.0

@@ -228,11 +228,24 @@ def _information(problem: FitProblem, theta: FloatArray, fit: np.ndarray,
     return jac, h
 
 
-def _inverse(h: FloatArray, scale: FloatArray) -> FloatArray:
-    """Inverse of a positive definite ``h``, computed in the units ``scale`` (no cut-off)."""
+def spd_inverse(h: FloatArray, scale: FloatArray) -> FloatArray:
+    """Inverse of a symmetric positive (semi-)definite ``h``, computed in the units ``scale``.
+
+    No cut-off to zero (a pseudo-inverse's): with the prior ``h`` is positive definite and is
+    inverted exactly (Cholesky); only when it is singular (prior weight 0 and a direction the
+    data leave open) are its eigenvalues floored at 1e-15 of the largest, so that direction
+    gets a huge variance, never a zero one.
+    """
     hw = h * np.outer(scale, scale)
-    w, v = np.linalg.eigh(0.5 * (hw + hw.T))
-    w = np.maximum(w, np.finfo(float).tiny)
+    hw = 0.5 * (hw + hw.T)
+    try:
+        c = np.linalg.cholesky(hw)
+        ci = np.linalg.solve(c, np.eye(hw.shape[0]))
+        return np.asarray(ci.T @ ci * np.outer(scale, scale), dtype=float)
+    except np.linalg.LinAlgError:
+        pass
+    w, v = np.linalg.eigh(hw)
+    w = np.maximum(w, 1e-15 * max(float(w.max()), np.finfo(float).tiny))
     return np.asarray((v / w) @ v.T * np.outer(scale, scale), dtype=float)
 
 
@@ -261,7 +274,7 @@ def _conditional_sd(problem: FitProblem, theta: FloatArray, fit: np.ndarray, h: 
     base = problem.cost(theta)
     for a, k in enumerate(fit):
         if k < 12:  # Km, α: linear, the cost is exactly quadratic in them
-            out[a] = math.sqrt(s2 / h[a, a])
+            out[a] = math.sqrt(s2 / max(float(h[a, a]), np.finfo(float).tiny))
             continue
         # each side: the largest of room, room/2, room/4, ... at which the cost stays within
         # s² (a lower bound, within a factor 2, of the conditional half-width on that side)
@@ -359,7 +372,7 @@ def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (),
     names = tuple(s.names[k] for k in fit)
     r = red.residuals(theta)
     jac, h = _information(red, theta, fit, STEP_SECANT)
-    cov1 = _inverse(h, s.prior_sd[fit])
+    cov1 = spd_inverse(h, s.prior_sd[fit])
     p_eff = float(np.trace(jac.T @ jac @ cov1))
     m = r.size
     s2 = max(1.0, float(r @ r) / (m - p_eff)) if m > p_eff + 1.0 else 1.0
