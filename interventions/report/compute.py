@@ -22,6 +22,7 @@ from fieldbank.interventions.course import time_course
 from fieldbank.interventions.plan import dose_warnings
 from fieldbank.interventions.report import figures
 from fieldbank.interventions.report.select import CaseSpec
+from fieldbank.interventions.report.trust import case_trust
 from fieldbank.params import GROUPS
 from fieldbank.severity import COMPONENTS, LEVELS, GroupSeverity, summary
 
@@ -176,6 +177,13 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "timecourse": course.to_dict() if course is not None else None,
         "warnings": warnings,
     }
+    trust_row, trust_detail = case_trust(spec, cond, arms)
+    row.update(trust_row)
+    detail.update(trust_detail)
+    # what the prediction rests on first, then the plan's own warnings (dose above the limit)
+    every = list(trust_detail.get("warnings", ())) + list(warnings)
+    detail["warnings"] = every
+    row["warnings"] = " | ".join(every)
 
     grid = Conditions.standard(arm_b, grid_n=FIGURE_GRID_N).grid_m
     _, kb, _ = arm_b.field(grid)
