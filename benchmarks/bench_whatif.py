@@ -25,7 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np
 
-from fieldbank.evaluate import ArmCache, Conditions, compare
+from fieldbank.evaluate import ArmCache
+from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.catalogue import Botulinum, Lengthening
 from fieldbank.interventions.course import time_course
