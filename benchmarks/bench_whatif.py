@@ -2,7 +2,10 @@
 
 * all before/after metrics for one plan (``fieldbank.evaluate.compare``, both arms compiled):
   target ≤ 50 ms;
-* a 24-week botulinum time course (weeks 0..24, 25 evaluations): target ≤ 0.5 s.
+* a 24-week botulinum time course (weeks 0..24, 25 evaluations): target ≤ 0.5 s;
+* the fit's uncertainty carried through the plan: the headline metrics before and after for
+  each of 40 parameter samples (:func:`fieldbank.interventions.guesses.prediction_intervals`;
+  no target, printed against one compare).
 
 Baseline in the same process: one plain model field evaluation on the same grid
 (``Arm.field`` at every standard condition), the floor any metric must pay.
@@ -20,12 +23,18 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import numpy as np
+
+from fieldbank.evaluate import ArmCache
 from fieldbank.evaluate.compare import Conditions, compare
+from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.catalogue import Botulinum, Lengthening
 from fieldbank.interventions.course import time_course
+from fieldbank.interventions.guesses import FitBasis, prediction_intervals
 from fieldbank.interventions.inverse import optimise_botulinum
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm
+from fieldbank.params import GROUPS, ArmParams
 from fieldbank.severity import synthesize
 
 
@@ -66,6 +75,21 @@ def main() -> None:
           f"{course_max:.3f} s max  (target <= 0.5 s; {course / one:.1f}x one compare)  "
           f"{'OK' if course <= 0.5 else 'OVER'}")
     print(f"inverse   3-group dose split (COBYLA)         {inv:8.3f} s  median (no target)")
+    basis = _basis(before, 40)
+    ivs, _ = timeit(lambda: prediction_intervals(basis, before, plan, cond, ArmCache()), 3)
+    print(f"intervals 40 fit samples through the plan     {ivs:8.3f} s  median (no target; "
+          f"{ivs / one:.1f}x one compare)")
+
+
+def _basis(before: ArmParams, n: int) -> FitBasis:
+    """A fit basis with ``n`` samples: Km, α, β of every group 5% log-normal about ``before``."""
+    rng = np.random.default_rng(0)
+    names = [f"{k}_{g}" for k in ("km", "alpha", "beta") for g in GROUPS]
+    centre = np.array([*before.km_n_per_m, *before.alpha_n, *before.beta])
+    values = centre * np.exp(rng.normal(scale=0.05, size=(n, centre.size)))
+    values[:, 12:] = np.minimum(values[:, 12:], 1.0)
+    return FitBasis(1, 1, True, "good", "good", (), (), (),
+                    FitSamples(tuple(names), values))
 
 
 if __name__ == "__main__":

@@ -5,10 +5,12 @@ Steps, each announced on stderr as it runs:
 
 1. a fresh data directory (``FIELDBANK_HOME``) with the embedded SQLite database;
 2. the shipped synthetic sample files (:mod:`fieldbank.sampledata`, not patient data);
-3. ingest: each patient and both sessions (pre-BoNT, post-BoNT);
+3. ingest: each patient and both sessions (pre-BoNT, post-BoNT), dated as the manifest says;
 4. fit: each patient's arm model to the pre-BoNT maps (:mod:`fieldbank.fitting`);
-5. what-if: a botulinum plan (150 U into each hypertonic group) and a lengthening plan (+1 cm
-   of the first hypertonic group) on each fitted model, stored with lineage;
+5. what-if: the botulinum plan each patient was given (150 U into each hypertonic group,
+   recorded with the day it was given, so ``fieldbank validate`` checks it against the
+   post-BoNT maps) and a lengthening plan (+1 cm of the first hypertonic group, only explored)
+   on each fitted model, stored with lineage;
 6. report: ``report.html``, ``metrics.csv``, ``metrics.json`` over every stored plan;
 7. haptics: a short simulated side-by-side session (before and after, with a switch) on the
    simulated robot ``sim://``, traces stored.
@@ -36,18 +38,15 @@ from fieldbank.fitting.records import fit_patient
 from fieldbank.haptic import session
 from fieldbank.haptic.renderer import RendererConfig
 from fieldbank.ingest import ingest_paths
-from fieldbank.interventions import Botulinum, Lengthening, Plan
+from fieldbank.interventions import Lengthening, Plan
 from fieldbank.interventions.report import Selection, build_report, default_jobs
+from fieldbank.interventions.samples import write_samples
 from fieldbank.interventions.whatif import save_plan
-from fieldbank.sampledata import write_samples
 from fieldbank.storage import Database
 
 Say = Callable[[str], None]
 
-#: Session dates given to the sample sessions on ingest (the files carry none).
-SESSION_DATES = {"pre-BoNT": date(2024, 1, 10), "post-BoNT": date(2024, 2, 21)}
 FIT_SESSION = "pre-BoNT"
-BOTULINUM_UNITS_PER_GROUP = 150.0
 LENGTHENING_M = 0.01
 DB_FILE = "fieldbank.sqlite3"
 
@@ -69,15 +68,15 @@ class DemoResult:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
-def demo_plans(hypertonic: Sequence[str]) -> list[Plan]:
-    """The botulinum plan and the lengthening plan for a patient's hypertonic groups."""
-    groups = list(hypertonic)
-    bot = Plan.of(Botulinum({g: BOTULINUM_UNITS_PER_GROUP for g in groups}),
-                  label=f"botulinum {BOTULINUM_UNITS_PER_GROUP:g} U into "
-                        + ", ".join(groups))
+def demo_plans(entry: dict[str, Any]) -> list[tuple[Plan, date | None]]:
+    """A sample patient's plans with the day each was given: the botulinum plan of the
+    manifest (given), and a lengthening of the first hypertonic group (only explored)."""
+    groups = list(entry["hypertonic"])
+    given = entry["treatment"]
+    bot = Plan.from_dict(given["plan"], where=f"manifest, patient {entry['code']}")
     length = Plan.of(Lengthening(group=groups[0], delta_m=LENGTHENING_M),
                      label=f"lengthening of {groups[0]} by {LENGTHENING_M * 100:g} cm")
-    return [bot, length]
+    return [(bot, date.fromisoformat(given["given_on"])), (length, None)]
 
 
 def populate(db: Database, samples: Path, patients: Sequence[str] | None = None,
@@ -100,7 +99,7 @@ def populate(db: Database, samples: Path, patients: Sequence[str] | None = None,
                        notes="synthetic sample patient (not patient data)")
         for s in p["sessions"]:
             files = [samples / f["file"] for f in s["files"]]
-            rep = ingest_paths(db, files, code, s["label"], SESSION_DATES.get(s["label"]))
+            rep = ingest_paths(db, files, code, s["label"], date.fromisoformat(s["date"]))
             say(f"ingested {rep.n_stored} file(s) for {code} / {s['label']} "
                 f"({', '.join(sorted({f['format'] for f in s['files']}))})")
         out["patients"].append(code)
@@ -117,11 +116,11 @@ def populate(db: Database, samples: Path, patients: Sequence[str] | None = None,
         code = p["code"]
         source = modelsource.stored(db, out["fitted_models"][code])
         ids = []
-        for plan in demo_plans(list(p["hypertonic"])):
-            saved = save_plan(db, source, plan)
+        for plan, given_on in demo_plans(p):
+            saved = save_plan(db, source, plan, given_on=given_on)
             ids.append(saved.plan_id)
             say(f"what-if for {code}: {plan.label} -> after model {saved.result_model_id}, "
-                f"plan {saved.plan_id}")
+                f"plan {saved.plan_id}" + (f", given on {given_on}" if given_on else ""))
         out["plans"][code] = ids
     return out
 
@@ -236,3 +235,5 @@ def demo(out_dir: str, home: str | None, force: bool, jobs: int | None,
         f"total {time.perf_counter() - t0:.1f} s")
     click.echo(f"next: FIELDBANK_HOME={res.home} fieldbank report --kind botulinum "
                f"--out {res.report_dir}-botulinum", err=True)
+    click.echo(f"      FIELDBANK_HOME={res.home} fieldbank validate   (the given plans against "
+               "the post-BoNT maps)", err=True)

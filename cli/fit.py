@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from typing import Any
 
 import click
 
@@ -17,7 +18,9 @@ from fieldbank.cli.options import db_option, emit_json, json_option
 from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
 from fieldbank.fitting.plot import plot_fit
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
-from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
+from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
+from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
+from fieldbank.params import GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
 StoreFactory = Callable[[str | None], FitStore]
@@ -34,22 +37,65 @@ def _store(ctx: click.Context, db_url: str | None) -> FitStore:
     return factory(db_url)
 
 
+def _num(v: object, fmt: str = ".3g") -> str:
+    return format(v, fmt) if isinstance(v, (int, float)) else "-"
+
+
+def fit_quality_lines(report: Mapping[str, Any]) -> list[str]:
+    """Status, goodness of fit per map and the parameters with their 95% intervals, from a
+    stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`)."""
+    lines = [f"  status: {report.get('status')}"]
+    gof = report.get("goodness_of_fit")
+    if isinstance(gof, Mapping):
+        lines.append(f"  goodness of fit: {gof.get('verdict')}: χ²/dof "
+                     f"{_num(gof.get('chi2_per_dof'), '.2f')} (limit "
+                     f"{_num(gof.get('chi2_limit'), '.2f')}), pooled R² "
+                     f"{_num(gof.get('r2'), '.3f')}")
+        ids = report.get("map_ids") or []
+        lines.append(f"    {'map':>6} {'kind':<10} {'values':>6} {'R²':>7} {'χ²/n':>7} "
+                     f"{'RMS residual':>15}  verdict")
+        for m in gof.get("maps", []):
+            k = int(m.get("index", 0))
+            name = str(ids[k]) if k < len(ids) else str(k)
+            lines.append(f"    {name:>6} {m.get('kind', ''):<10} {m.get('n_values', 0):>6} "
+                         f"{_num(m.get('r2'), '.3f'):>7} {_num(m.get('chi2_per_value'), '.2f'):>7}"
+                         f" {_num(m.get('rms_residual'), '.3g'):>9} {m.get('unit', ''):<5}  "
+                         f"{m.get('verdict')}")
+        lines += [f"    {r}" for r in gof.get("reasons", [])]
+    method = report.get("uncertainty_method")
+    if isinstance(method, Mapping):
+        why = "; ".join(method.get("reasons", [])) or "the Gaussian approximation holds"
+        lines.append(f"  uncertainty: {method.get('method')}, {method.get('replicates')} "
+                     f"samples, residual scale {_num(method.get('residual_scale'), '.2f')} "
+                     f"({why})")
+    intervals = report.get("intervals")
+    if isinstance(intervals, Mapping) and intervals:
+        lines.append(f"  {'parameter':<16}{'value':>10}{'sd':>10}   {'95% interval':<23}basis")
+        # stored documents sort their keys: show them in the fit's order (km, alpha, beta, ...)
+        order = {n: k for k, n in enumerate(ParamSpace.build(ArmParams.from_anthropometry(),
+                                                             FIT_KINDS).names)}
+        for name, iv in sorted(intervals.items(), key=lambda kv: order.get(kv[0], 99)):
+            span = f"{_num(iv.get('low'), '.4g')} … {_num(iv.get('high'), '.4g')}"
+            lines.append(f"  {name:<16}{_num(iv.get('value'), '.4g'):>10}"
+                         f"{_num(iv.get('sd'), '.3g'):>10}   {span:<23}{iv.get('basis')}")
+    held = report.get("held_at_unimpaired") or []
+    if held:
+        lines.append("  held at the unimpaired value (a guess, not a measurement): "
+                     + ", ".join(held))
+    return lines
+
+
 def _summary(out: FitOutcome) -> str:
     f = out.fitter
+    report = out.record.report
     lines = [
         f"fit {out.saved.fit_id} -> model {out.saved.model_id} for patient "
         f"{out.record.patient!r}" + (f", session {out.record.session!r}" if out.record.session
                                      else ""),
         f"  {f.algorithm_} seed {f.seed_}: cost {f.cost_:.4g}, {f.n_evals_} evaluations, "
-        f"{f.time_s_:.2f} s; status: {f.status_}",
-        "  maps: " + ", ".join(
-            f"{m.metadata.get('map_id', k)} {m.kind} n={m.n} R²={r2:.3f}"
-            for k, (m, r2) in enumerate(zip(f.maps_, f.r2_, strict=True))),
-        "  parameter        value        sd",
+        f"{f.time_s_:.2f} s",
+        *fit_quality_lines(report),
     ]
-    for name, sd in f.uncertainty_.items():
-        k = f.space_.names.index(name)
-        lines.append(f"  {name:<14} {f.theta_[k]:>10.4g} {sd:>9.3g}")
     if f.unidentified_:
         lines.append("  not identified by these maps:")
         lines += [f"    {u.name}: {u.reason}" for u in f.unidentified_]
@@ -83,14 +129,20 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
               help=f"Comma-separated parameter kinds to fit ({', '.join(FIT_KINDS)}).")
 @click.option("--prior-weight", type=float, default=DEFAULT_PRIOR_WEIGHT, show_default=True)
 @click.option("--max-evals", type=click.IntRange(min=10), default=None)
+@click.option("--uncertainty", type=click.Choice(list(METHODS)), default=DEFAULT_METHOD,
+              show_default=True,
+              help="Gauss-Newton where it holds else a parametric bootstrap ('auto'), or one "
+                   "of the two always.")
+@click.option("--replicates", type=click.IntRange(min=2), default=DEFAULT_REPLICATES,
+              show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write measured against fitted fields to this .png or .svg.")
 @json_option
 @db_option
 @click.pass_context
 def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, seed: int,
-        fit_kinds: str, prior_weight: float, max_evals: int | None, plot_path: str | None,
-        as_json: bool, db_url: str | None) -> None:
+        fit_kinds: str, prior_weight: float, max_evals: int | None, uncertainty: str,
+        replicates: int, plot_path: str | None, as_json: bool, db_url: str | None) -> None:
     """Fit PATIENT's arm model to the patient's measured maps and store it."""
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
 
@@ -98,7 +150,8 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
         click.echo(f"  {n} evaluations, best cost {best:.6g}", err=True)
 
     fitter = ArmFitter(algorithm=algorithm, seed=seed, fit=kinds, prior_weight=prior_weight,
-                       max_evals=max_evals, progress=progress)
+                       max_evals=max_evals, progress=progress, uncertainty=uncertainty,
+                       replicates=replicates)
     store = _store(ctx, db_url)
     out = fit_patient(store, patient, session, fitter,
                       progress=lambda msg: click.echo(msg, err=True))
@@ -117,6 +170,10 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
     if out.fitter.unidentified_:
         click.echo(f"warning: {len(out.fitter.unidentified_)} parameter(s) are not identified "
                    "by these maps and stay near the unimpaired prior (see 'unidentified').",
+                   err=True)
+    if out.fitter.status_ == "poor":
+        click.echo("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons) + "). It is "
+                   "stored, but what-ifs and reports refuse it unless given --accept-poor-fit.",
                    err=True)
 
 
@@ -163,8 +220,6 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
     p = m.params
     click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}")
     click.echo("  group        Km N/m    alpha N    beta")
-    from fieldbank.params import GROUPS
-
     for i, g in enumerate(GROUPS):
         click.echo(f"  {g:<6} {p.km_n_per_m[i]:>12.1f} {p.alpha_n[i]:>10.1f} "
                    f"{p.beta[i]:>7.3f}")
@@ -177,5 +232,7 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
         click.echo(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, cost "
                    f"{fit_report.get('cost'):.4g}, status {fit_report.get('status')}, maps "
                    f"{fit_report.get('map_ids')}")
+        for line in fit_quality_lines(fit_report):
+            click.echo("  " + line)
         for u in fit_report.get("unidentified", []):
             click.echo(f"    not identified: {u['name']}: {u['reason']}")

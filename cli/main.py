@@ -46,6 +46,9 @@ COMMANDS: dict[str, LazyCommand] = {
                "Design probing motions that tell candidate arms apart; classify recorded traces."),
     "report": C("fieldbank.cli.report", "report",
                 "Report the field changes of stored intervention plans (HTML + CSV + JSON)."),
+    "validate": C("fieldbank.cli.validate", "validate",
+                  "Check predictions against maps measured after the plan; --loo: leave maps "
+                  "out of a fit."),
     "demo": C("fieldbank.cli.demo", "demo",
               "Run the whole product once on synthetic sample data, saying what it does."),
 }

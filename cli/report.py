@@ -44,11 +44,13 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
               help="Worker processes for batches (default: the cores available).")
 @click.option("--no-date", "no_date", is_flag=True,
               help="Leave the time of writing out, so that reruns give identical files.")
+@click.option("--accept-poor-fit", is_flag=True,
+              help="Report cases whose model comes from a poor fit anyway (recorded per case).")
 @json_option
 def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ...],
            plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: datetime | None,
            until: datetime | None, kinds: tuple[str, ...], out_dir: str, jobs: int | None,
-           no_date: bool, as_json: bool) -> None:
+           no_date: bool, accept_poor_fit: bool, as_json: bool) -> None:
     """Report the field changes of stored intervention plans (HTML + CSV + JSON)."""
     bad = [k for k in kinds if k not in KINDS]
     if bad:
@@ -62,7 +64,7 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     when = None if no_date else datetime.now().astimezone().isoformat(timespec="seconds")
     with open_db(db_url) as db:
         out = build_report(db, sel, out_dir, jobs=jobs or default_jobs(), progress=True,
-                           stamp=when)
+                           stamp=when, accept_poor_fit=accept_poor_fit)
     if as_json:
         emit_json({"cases": out.n_cases, "jobs": out.jobs_used, "html": str(out.html),
                    "csv": str(out.csv), "json": str(out.json)})

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from fieldbank.cli.options import emit_json, json_option
-from fieldbank.sampledata import write_samples
+from fieldbank.interventions.samples import write_samples
 
 
 @click.command("samples")

@@ -9,6 +9,7 @@ from ``--plan FILE`` and the intervention options (:mod:`fieldbank.interventions
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Any
 
 import click
@@ -19,6 +20,7 @@ from fieldbank.cli.whatif_report import render_text
 from fieldbank.errors import FieldbankError
 from fieldbank.haptic.client import push_models
 from fieldbank.interventions.defaults import DOSE_UNIT, value
+from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES, summary_lines
 from fieldbank.interventions.spec import build_plan
 from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
 
@@ -65,6 +67,14 @@ from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,
               help="Store the after model and the plan, with lineage, in the database.")
+@click.option("--given-on", type=click.DateTime(["%Y-%m-%d"]), default=None,
+              help="With --save: the plan was carried out on this day ('fieldbank validate' "
+                   "checks it against maps measured later).")
+@click.option("--accept-poor-fit", is_flag=True,
+              help="Run on a model from a poor fit anyway (recorded in the output).")
+@click.option("--interval-samples", type=click.IntRange(min=0), default=None,
+              help="Fit samples carried through the plan for 95% intervals (default "
+                   f"{DEFAULT_INTERVAL_SAMPLES}; 0: none).")
 @db_option
 @click.option("--render", is_flag=True,
               help="Push before and after to a running 'fieldbank haptic serve' (A = before, "
@@ -79,7 +89,8 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
            lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
            rhizotomy: str | None, baclofen: str | None, timecourse: bool, optimize: bool,
            total_units: float | None, opt_groups: str | None, plot_path: str | None,
-           out_dir: str | None, save: bool, db_url: str | None, render: bool,
+           out_dir: str | None, save: bool, given_on: datetime | None, accept_poor_fit: bool,
+           interval_samples: int | None, db_url: str | None, render: bool,
            control_path: str | None, as_json: bool) -> None:
     """Apply clinical interventions to a model and compare the fields before and after.
 
@@ -108,7 +119,11 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
         res = run_whatif(source, plan, search=search, timecourse=timecourse,
                          plot_path=plot_path, out_dir=out_dir,
                          save_to=(lambda: open_db(db_url)) if save else None,
-                         session_limit_units=session_limit)
+                         session_limit_units=session_limit,
+                         accept_poor_fit=accept_poor_fit,
+                         interval_samples=(DEFAULT_INTERVAL_SAMPLES if interval_samples is None
+                                           else interval_samples),
+                         given_on=given_on.date() if given_on else None)
         doc: dict[str, Any] = res.to_dict()
         if render:
             ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
@@ -127,6 +142,13 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
         return
     click.echo(render_text(source.description, res.plan, res.comparison, res.course,
                            res.inverse, res.warnings))
+    if res.guesses is not None:
+        click.echo("")
+        click.echo("\n".join(summary_lines(res.guesses)))
+        if res.guesses.warnings:
+            click.echo(f"warning: {len(res.guesses.warnings)} warning(s) in the output: the "
+                       "prediction rests on parameters the fit did not identify, or on a poor "
+                       "fit.", err=True)
     if plot_path:
         click.echo(f"plot written to {plot_path}", err=True)
     if out_dir:

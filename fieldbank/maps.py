@@ -276,6 +276,14 @@ def stiffness_map(
     )
 
 
+def model_map_like(arm: Arm, m: FieldMap, source: str | None = None) -> FieldMap:
+    """The model's map of the same kind, at the positions (and velocity) of ``m``, in the
+    arm-on-handle convention (compare with ``m.as_arm_on_handle()``)."""
+    if m.kind == "postural":
+        return postural_map(arm, m.positions_m, source)
+    return stiffness_map(arm, m.positions_m, m.velocity_m_per_s, source)
+
+
 def evaluate(
     arm: Arm,
     positions_m: ArrayLike,

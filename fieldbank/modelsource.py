@@ -10,21 +10,21 @@ A command names a model in one of four ways, and every command resolves it here:
 
 The result, :class:`ModelSource`, carries the parameters with a description for read-outs and,
 for stored models, the model id and patient, so lineage (plans, haptic sessions) can point at
-them, and the parameters its fit did not identify with the fit's reasons (the fit of the model
-itself or, for a model derived by interventions, of its nearest fitted ancestor), so read-outs
-can say what is a guess.
+them, the fit behind the model (:func:`fit_behind`: the fit of the model or of the fitted
+model it was derived from), and the parameters that fit did not identify with its reasons, so
+read-outs can say what is a guess and a what-if what the prediction rests on.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.severity import parse_severity_options, synthesize
-from fieldbank.storage import Database
+from fieldbank.storage import Database, FitRecord
 
 #: Opens the database only when a stored model is asked for.
 DatabaseOpener = Callable[[], Database]
@@ -40,32 +40,53 @@ class ModelSource:
     patient_code: str | None = None
     unidentified: tuple[str, ...] = ()
     guesses: tuple[str, ...] = ()
+    #: The fit behind a stored model (None for files, severities, unfitted models).
+    fit: FitRecord | None = field(default=None, compare=False)
+    #: The fitted model that fit produced (``model_id`` itself, or an ancestor of it).
+    fitted_model_id: int | None = field(default=None, compare=False)
 
 
-def _fit_unidentified_entries(db: Database, model_id: int) -> list[object]:
-    """What the fit behind a stored model reported as not identified: the model's own latest
-    fit, else that of its nearest fitted ancestor (an intervention keeps what it does not
-    change); empty when no fit is behind it."""
+def fit_behind(db: Database, model_id: int) -> tuple[FitRecord, int] | None:
+    """The fit that produced ``model_id`` or the nearest fitted model in its lineage, with
+    that fitted model's id; None when the model has no fitted ancestor."""
     for m in db.model_lineage(model_id):
-        if m.patient_code is None:
+        if m.origin != "fitted":
             continue
+        if m.patient_code is None:
+            return None
         fits = [f for f in db.list_fits(m.patient_code) if f.model_id == m.id]
-        if fits:
-            return list(fits[-1].result.get("unidentified", ()))
-    return []
+        return (fits[-1], int(m.id)) if fits else None
+    return None
 
 
-def fit_unidentified(db: Database, model_id: int) -> tuple[str, ...]:
-    """Names of the parameters the fit behind a stored model did not identify."""
-    return tuple(str(u["name"]) for u in _fit_unidentified_entries(db, model_id)
+def _unidentified_entries(fit: FitRecord) -> list[object]:
+    return list(fit.result.get("unidentified", ()))
+
+
+def fit_unidentified(fit: FitRecord) -> tuple[str, ...]:
+    """Names of the parameters a fit did not identify."""
+    return tuple(str(u["name"]) for u in _unidentified_entries(fit)
                  if isinstance(u, dict) and "name" in u)
 
 
-def fit_guesses(db: Database, model_id: int) -> tuple[str, ...]:
-    """The fit's reason for each parameter its maps did not identify (α and β of one group
+def fit_guesses(fit: FitRecord) -> tuple[str, ...]:
+    """A fit's reason for each parameter its maps did not identify (α and β of one group
     share a reason: said once)."""
     return tuple(dict.fromkeys(str(u.get("reason", u)) if isinstance(u, dict) else str(u)
-                               for u in _fit_unidentified_entries(db, model_id)))
+                               for u in _unidentified_entries(fit)))
+
+
+def _with_fit(db: Database, source: ModelSource) -> ModelSource:
+    """``source`` with the fit behind it (an intervention keeps what it does not change, so a
+    derived model rests on its nearest fitted ancestor's fit)."""
+    assert source.model_id is not None
+    found = fit_behind(db, source.model_id)
+    if found is None:
+        return source
+    fit, fitted_id = found
+    return ModelSource(source.params, source.description, source.model_id,
+                       source.patient_code, fit_unidentified(fit), fit_guesses(fit), fit,
+                       fitted_id)
 
 
 def from_file(path: str | Path) -> ModelSource:
@@ -92,10 +113,9 @@ def synthetic(severity: Sequence[str] = (), *, body_mass_kg: float | None = None
 
 def stored(db: Database, model_id: int) -> ModelSource:
     m = db.get_model(model_id)
-    return ModelSource(m.params, f"stored {m.origin} model {m.id}"
-                       + (f" of patient {m.patient_code}" if m.patient_code else ""),
-                       int(m.id), m.patient_code, fit_unidentified(db, int(m.id)),
-                       fit_guesses(db, int(m.id)))
+    return _with_fit(db, ModelSource(m.params, f"stored {m.origin} model {m.id}"
+                                     + (f" of patient {m.patient_code}" if m.patient_code
+                                        else ""), int(m.id), m.patient_code))
 
 
 def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
@@ -106,9 +126,9 @@ def latest_of_patient(db: Database, patient_code: str) -> ModelSource:
         found = [m for m in models if m.origin == origin]
         if found:
             m = max(found, key=lambda r: r.id)
-            return ModelSource(m.params, f"patient {patient_code}, {origin} model {m.id}",
-                               int(m.id), patient_code, fit_unidentified(db, int(m.id)),
-                               fit_guesses(db, int(m.id)))
+            return _with_fit(db, ModelSource(m.params,
+                                             f"patient {patient_code}, {origin} model {m.id}",
+                                             int(m.id), patient_code))
     raise StorageError(
         f"Patient {patient_code!r} has no fitted or synthetic model in the database; fit one "
         "first ('fieldbank fit'), or give the model with --params FILE.")

@@ -6,9 +6,16 @@ list the synthetic patients, their sessions, each file's format and kind, and th
 parameters each patient's maps were computed from (``params-<session>.json``), so that a fit can
 be compared with the truth.
 
-Each patient has two sessions, 'pre-BoNT' and 'post-BoNT' (botulinum toxin halves α and β of the
-hypertonic groups). Maps are the model's postural map on 25 scattered reachable positions and
-stiffness maps on 9, static and at a moving endpoint, with 5 % Gaussian noise (plus a small
+Each patient has two sessions: 'pre-BoNT' on :data:`PRE_DATE`, after which a treatment is
+given (its plan document is recorded in the manifest with the day it was given), and
+'post-BoNT' ``post_weeks`` later. The treatment is passed in (:class:`Treatment`): the core does
+not know the intervention catalogue, so the shipped set is written by
+:func:`fieldbank.interventions.samples.write_samples`, which gives every patient the catalogue's
+botulinum toxin A (150 U into each hypertonic group) and computes the later session's maps from
+the truth with the catalogue's own effect at those weeks - for all patients but one, whose
+``response`` is a fraction of it (a patient the plan's prediction gets wrong). Maps are the
+model's postural map on 25 scattered reachable positions and stiffness maps on 9, static and at
+a moving endpoint, the same positions in both sessions, with 5 % Gaussian noise (plus a small
 floor) and the matching standard deviations. The files come in every format ingest reads: CSV in
 SI units, CSV in lab units (mm, kgf, N/mm), MATLAB v5, MATLAB v7.3 and fieldbank HDF5.
 """
@@ -16,9 +23,11 @@ SI units, CSV in lab units (mm, kgf, N/mm), MATLAB v5, MATLAB v7.3 and fieldbank
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
+from datetime import date, timedelta
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -39,7 +48,10 @@ N_STIFFNESS = 9
 #: stretch, so the lab perturbs the arm while moving the hand at 1 m/s along the mid-sagittal
 #: direction that stretches the patient's hypertonic groups (see ``SyntheticPatient``).
 MOVING_SPEED_M_PER_S = 1.0
-BONT_FACTOR = 0.5
+#: The day of every patient's first session; the treatment is given the same day, after it.
+PRE_DATE = date(2024, 1, 10)
+PRE_SESSION = "pre-BoNT"
+POST_SESSION = "post-BoNT"
 
 
 @dataclass(frozen=True)
@@ -51,6 +63,10 @@ class SyntheticPatient:
     hypertonic: tuple[tuple[str, float], ...]  # (group, Km multiple of unimpaired)
     #: +1: hand moving away from the body (+y, stretches the flexors); -1: toward the body.
     moving_direction: float = -1.0
+    #: Weeks from the treatment to the second session.
+    post_weeks: float = 6.0
+    #: Fraction of the treatment's predicted effect the patient shows (1: as predicted).
+    response: float = 1.0
 
     @property
     def moving_velocity_m_per_s(self) -> tuple[float, float]:
@@ -64,18 +80,33 @@ class SyntheticPatient:
             p = p.with_group(g, km_n_per_m=km, alpha_n=alpha, beta=0.8)
         return p
 
-    def after_bont(self) -> ArmParams:
-        p = self.params()
-        for g, _ in self.hypertonic:
-            p = p.with_group(g, alpha_n=p.group_value("alpha_n", g) * BONT_FACTOR,
-                             beta=p.group_value("beta", g) * BONT_FACTOR)
-        return p
+    @property
+    def post_date(self) -> date:
+        return PRE_DATE + timedelta(days=round(7 * self.post_weeks))
+
+
+@dataclass(frozen=True)
+class Given:
+    """A treatment as given to a sample patient: its plan document, the truth at the later
+    session, and the response in words (for the manifest)."""
+
+    plan: Mapping[str, Any]
+    after: ArmParams
+    response: str
+
+
+class Treatment(Protocol):
+    """What happens between a patient's sessions (see :func:`write_samples`)."""
+
+    def __call__(self, patient: SyntheticPatient, truth: ArmParams, weeks: float) -> Given: ...
 
 
 PATIENTS = (
     SyntheticPatient("SYN-001", 72.0, 1.74, "right", (("ef", 6.0), ("bf", 4.0)), +1.0),
-    SyntheticPatient("SYN-002", 61.0, 1.62, "left", (("sf", 5.0),)),
-    SyntheticPatient("SYN-003", 85.0, 1.83, "right", (("ee", 3.0), ("be", 3.0))),
+    SyntheticPatient("SYN-002", 61.0, 1.62, "left", (("sf", 5.0),), post_weeks=4.0),
+    # measured effect a tenth of the catalogue's (e.g. a partial secondary non-responder)
+    SyntheticPatient("SYN-003", 85.0, 1.83, "right", (("ee", 3.0), ("be", 3.0)),
+                     response=0.1),
 )
 
 
@@ -128,8 +159,13 @@ def lab_units_csv(m: FieldMap) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_samples(root: str | Path, seed: int = 20240601) -> dict[str, Any]:
-    """Write the sample set under ``root``; returns the manifest (also in manifest.json)."""
+def write_samples(root: str | Path, *, treatment: Treatment,
+                  seed: int = 20240601) -> dict[str, Any]:
+    """Write the sample set under ``root``; returns the manifest (also in manifest.json).
+
+    ``treatment`` is given on :data:`PRE_DATE` after the first session; the second session's
+    truth is what it returns for the patient's ``post_weeks``.
+    """
     rng = np.random.default_rng(seed)
     base = Path(root)
     base.mkdir(parents=True, exist_ok=True)
@@ -144,7 +180,12 @@ def write_samples(root: str | Path, seed: int = 20240601) -> dict[str, Any]:
         pre_arm = Arm.from_params(pat.params())
         pos_p = scattered_positions(pre_arm, N_POSTURAL, rng)
         pos_k = scattered_positions(pre_arm, N_STIFFNESS, rng)
-        for label, params in (("pre-BoNT", pat.params()), ("post-BoNT", pat.after_bont())):
+        given = treatment(pat, pat.params(), pat.post_weeks)
+        entry["treatment"] = {"given_on": PRE_DATE.isoformat(), "after_session": POST_SESSION,
+                              "weeks_to_after_session": pat.post_weeks,
+                              "plan": dict(given.plan), "response": given.response}
+        dates = {PRE_SESSION: PRE_DATE, POST_SESSION: pat.post_date}
+        for label, params in ((PRE_SESSION, pat.params()), (POST_SESSION, given.after)):
             arm = Arm.from_params(params)
             sdir = pdir / label
             sdir.mkdir(exist_ok=True)
@@ -165,7 +206,7 @@ def write_samples(root: str | Path, seed: int = 20240601) -> dict[str, Any]:
                     rel: str = rel) -> None:
                 files.append({"file": f"{rel}/{name}", "format": fmt, "kinds": kinds})
 
-            if label == "pre-BoNT":
+            if label == PRE_SESSION:
                 (sdir / "postural.csv").write_text(post.to_csv(), encoding="utf-8")
                 add("postural.csv", "csv", "postural")
                 if k % 2 == 0:
@@ -184,15 +225,17 @@ def write_samples(root: str | Path, seed: int = 20240601) -> dict[str, Any]:
                 add("postural.mat", "mat73", "postural")
                 write_hdf5(sdir / "stiffness.h5", [stat, mov])
                 add("stiffness.h5", "hdf5", "stiffness,stiffness")
-            entry["sessions"].append({"label": label, "params": f"{pat.code}/params-{label}.json",
+            entry["sessions"].append({"label": label, "date": dates[label].isoformat(),
+                                      "params": f"{pat.code}/params-{label}.json",
                                       "files": files})
         manifest["patients"].append(entry)
     (base / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
     (base / "README.txt").write_text(
         "SYNTHETIC SAMPLE DATA - NOT PATIENT DATA.\n"
         f"Written by fieldbank.sampledata (seed {seed}): maps of made-up patients computed from "
-        "the arm model with 5 % noise. manifest.json lists patients, sessions and files; "
-        "params-*.json hold the true model parameters.\n",
+        "the arm model with 5 % noise. manifest.json lists patients, sessions (with dates) and "
+        "files, and the treatment each patient was given between the sessions; params-*.json "
+        "hold the true model parameters of each session.\n",
         encoding="utf-8",
     )
     return manifest

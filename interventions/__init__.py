@@ -18,6 +18,9 @@ course        metrics week by week after an injection, on a compiled arm
 inverse       botulinum dose split closest to the unimpaired reference (nlopt), on a compiled arm
 plot          before / after / difference figure (through :mod:`fieldbank.plotting`)
 whatif        the what-if use case: search, compare, time course, figure, files, stored result
+guesses       what a what-if rests on: poor fits refused, guessed parameters, warnings, intervals
+validate      stored plans that were given, checked against the maps measured after them
+samples       the shipped sample set, with the catalogue's botulinum between the sessions
 report        reports over stored plans: select, compute (worker processes), HTML, CSV, JSON
 
 Everything here is a model prediction, not treatment advice.

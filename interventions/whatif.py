@@ -7,13 +7,19 @@
    the plan when none is given;
 2. apply the plan with its lineage (:meth:`fieldbank.interventions.plan.Plan.derive`) and
    compare before with after on the standard conditions of the model before
-   (:func:`fieldbank.evaluate.compare.compare`; severity grades name the parameters the
-   model's fit did not identify), and warn about a botulinum session above the session
-   limit (:func:`fieldbank.interventions.plan.dose_warnings`);
-3. optionally follow the metrics week by week after the injection
+   (:func:`fieldbank.evaluate.compare`; severity grades name the parameters the model's fit
+   did not identify), and warn about a botulinum session above the session limit
+   (:func:`fieldbank.interventions.plan.dose_warnings`);
+3. say what the prediction rests on (:mod:`fieldbank.interventions.guesses`): a model from a
+   poor fit is refused unless accepted; the parameters the fit did not identify are listed,
+   steps that act on them warned about, and the fit's uncertainty carried through the plan as
+   95% intervals of the headline metrics;
+4. optionally follow the metrics week by week after the injection
    (:func:`fieldbank.interventions.course.time_course`);
-4. optionally draw the figure, write ``plan.json``, ``after.json`` and ``lineage.json``, and
-   store the after model and the plan with lineage (:func:`save_plan_result`).
+5. optionally draw the figure, write ``plan.json``, ``after.json`` and ``lineage.json``, and
+   store the after model and the plan with lineage (:func:`save_plan_result`; a plan that was
+   carried out records its date, ``given_on``, which ``fieldbank validate`` checks against the
+   maps measured after it).
 
 One :class:`fieldbank.evaluate.ArmCache` lives for the whole use case, so each distinct model
 (before, after, every week, every dose split tried, the unimpaired reference) is compiled
@@ -22,7 +28,9 @@ exactly once. Everything here is a model prediction, not treatment advice.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from datetime import date
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +40,13 @@ from fieldbank.files import to_json, write_atomic
 from fieldbank.interventions.course import TimeCourse, time_course
 from fieldbank.interventions.defaults import value
 from fieldbank.interventions.errors import InterventionError
+from fieldbank.interventions.guesses import (
+    DEFAULT_INTERVAL_SAMPLES,
+    FitBasis,
+    Guesses,
+    check_fit,
+    examine,
+)
 from fieldbank.interventions.inverse import DoseSplitResult, optimise_botulinum
 from fieldbank.interventions.plan import Derivation, Plan, dose_warnings, params_sha256
 from fieldbank.interventions.plot import plot_comparison
@@ -94,7 +109,15 @@ class WhatIf:
     plot: str | None = None
     out_dir: str | None = None
     saved: SavedPlan | None = None
+    #: Warnings about the plan itself (a botulinum session above the session limit).
     warnings: tuple[str, ...] = ()
+    guesses: Guesses | None = None
+
+    def all_warnings(self) -> list[str]:
+        """What the prediction rests on that the reader must know (poor fit accepted, steps
+        acting on guessed parameters), then warnings about the plan itself."""
+        first = list(self.guesses.warnings) if self.guesses is not None else []
+        return first + list(self.warnings)
 
     @property
     def before(self) -> ArmParams:
@@ -112,9 +135,11 @@ class WhatIf:
             doc["inverse"] = self.inverse.to_dict()
         doc["plan"] = self.plan.to_dict()
         doc["plan_steps"] = self.plan.describe()
-        doc["warnings"] = list(self.warnings)
         doc["lineage"] = self.derivation.to_dict()
         doc["comparison"] = self.comparison.to_dict()
+        if self.guesses is not None:
+            doc.update(self.guesses.to_dict())
+        doc["warnings"] = self.all_warnings()
         if self.course is not None:
             doc["timecourse"] = self.course.to_dict()
         if self.plot is not None:
@@ -131,33 +156,56 @@ def plan_label(plan: Plan) -> str:
     return plan.label or "; ".join(s.describe() for s in plan.steps)
 
 
+def record_extras(given_on: date | None = None,
+                  accepted_poor_fit: str | None = None) -> dict[str, Any]:
+    """What a stored plan records beside its lineage: the day it was carried out
+    (``given_on``, ISO date; absent for a plan only explored) and an accepted poor fit."""
+    extra: dict[str, Any] = {}
+    if given_on is not None:
+        extra["given_on"] = given_on.isoformat()
+    if accepted_poor_fit:
+        extra["accepted_poor_fit"] = accepted_poor_fit
+    return extra
+
+
 def save_plan_result(db: Database, source: ModelSource, after: ArmParams,
-                     derivation: Derivation) -> SavedPlan:
+                     derivation: Derivation,
+                     extra: Mapping[str, Any] | None = None) -> SavedPlan:
     """Store the after model (origin 'intervention', parent = the model before) and the plan
     with its lineage, in one transaction.
 
     A model before that is not stored yet (a parameter file, a severity) is stored first as a
     synthetic model named by ``source.description``, so the lineage always has both ends.
+    ``extra`` (:func:`record_extras`) is stored in the plan's document beside the lineage.
     """
     stored = source.model_id is not None
     base_id, child, rec = db.add_plan_result(
-        after, derivation.to_dict(), plan_label(derivation.plan),
+        after, {**derivation.to_dict(), **(extra or {})}, plan_label(derivation.plan),
         patient_code=source.patient_code, base_model_id=source.model_id,
         before=None if stored else source.params, before_label=source.description)
     return SavedPlan(int(base_id), int(child.id), int(rec.id))
 
 
-def save_plan(db: Database, source: ModelSource, plan: Plan) -> SavedPlan:
-    """Apply ``plan`` to the model of ``source`` and store the result (:func:`save_plan_result`)."""
+def save_plan(db: Database, source: ModelSource, plan: Plan, *, given_on: date | None = None,
+              accept_poor_fit: bool = False) -> SavedPlan:
+    """Apply ``plan`` to the model of ``source`` and store the result (:func:`save_plan_result`).
+
+    A model from a poor fit is refused unless ``accept_poor_fit``
+    (:func:`fieldbank.interventions.guesses.check_fit`); ``given_on``: the day the plan was
+    carried out.
+    """
+    accepted = check_fit(FitBasis.of(source), accept_poor_fit)
     after, derivation = plan.derive(source.params)
-    return save_plan_result(db, source, after, derivation)
+    return save_plan_result(db, source, after, derivation, record_extras(given_on, accepted))
 
 
 def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | None = None,
                timecourse: bool = False, plot_path: str | None = None,
                out_dir: str | None = None,
                save_to: DatabaseOpener | None = None,
-               session_limit_units: float | None = None) -> WhatIf:
+               session_limit_units: float | None = None, accept_poor_fit: bool = False,
+               interval_samples: int = DEFAULT_INTERVAL_SAMPLES,
+               given_on: date | None = None) -> WhatIf:
     """Apply ``plan`` (or the plan ``search`` finds) to the model of ``source`` and compare.
 
     Parameters
@@ -179,9 +227,19 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     session_limit_units : float, optional
         Botulinum units (onabotulinumtoxinA) per session above which the result warns
         (default ``botulinum.session_warning_units``, 400 U).
+    accept_poor_fit : bool
+        Run on a model from a poor fit anyway (recorded in the result and the stored plan).
+    interval_samples : int
+        Fit samples carried through the plan for the intervals (0: none).
+    given_on : date, optional
+        With ``save_to``: the day the plan was carried out.
     """
     if plan is None and search is None:
         raise InterventionError("what-if: give a plan or a dose search.")
+    if given_on is not None and save_to is None:
+        raise InterventionError("what-if: a date the plan was given is stored with the plan; "
+                                "it needs --save.")
+    accepted = check_fit(FitBasis.of(source), accept_poor_fit)  # before any work or writing
     arms = ArmCache()
     arm_b = arms(source.params)
     cond = Conditions.standard(arm_b)
@@ -195,6 +253,8 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     after, derivation = plan.derive(source.params)
     arm_a = arms(after)
     comparison = compare(arm_b, arm_a, cond, source.unidentified)
+    guesses = examine(source, plan, cond, arms, accept_poor_fit=accept_poor_fit,
+                      n_samples=interval_samples)
     course = time_course(arm_b, plan, conditions=cond, arms=arms) if timecourse else None
     if plot_path:
         plot_comparison(arm_b, arm_a, comparison, plan, plot_path, title=source.description)
@@ -206,7 +266,8 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     saved = None
     if save_to is not None:
         with save_to() as db:
-            saved = save_plan_result(db, source, after, derivation)
+            saved = save_plan_result(db, source, after, derivation,
+                                     record_extras(given_on, accepted))
     return WhatIf(source, plan, arm_b, arm_a, derivation, comparison, course, inverse,
                   plot_path or None, out_dir or None, saved,
-                  tuple(dose_warnings(plan, session_limit_units)))
+                  tuple(dose_warnings(plan, session_limit_units)), guesses)

@@ -72,7 +72,7 @@ def any_db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
 @pytest.fixture(scope="session")
 def sample_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The synthetic sample files, written once per test run."""
-    from fieldbank.sampledata import write_samples
+    from fieldbank.interventions.samples import write_samples
 
     root = tmp_path_factory.mktemp("samples")
     write_samples(root)

@@ -17,7 +17,8 @@ def test_demo_runs_every_step(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     err = res.stderr
     for step in ("fresh embedded database", "ingested 3 file(s) for SYN-003 / post-BoNT",
-                 "fitted SYN-002", "what-if for SYN-001: botulinum", "lengthening",
+                 "fitted SYN-002", "what-if for SYN-001: botulinum", "given on 2024-01-10",
+                 "lengthening", "fieldbank validate",
                  "report.html (6 cases", "haptic session:"):
         assert step in err, step
     rows = list(csv.DictReader((out / "report" / "metrics.csv").open(encoding="utf-8")))

@@ -5,7 +5,10 @@
 * :mod:`.space` - fitted parameters, bounds and prior in one table;
 * :mod:`.problem` - the precomputed, variable-projected cost;
 * :mod:`.search` - nlopt global + local, and scipy's dual annealing baseline;
-* :mod:`.identify` - uncertainty and what the maps do not identify;
+* :mod:`.identify` - what the maps do not identify;
+* :mod:`.uncertainty` - SDs, 95% intervals and parameter samples that cannot collapse;
+* :mod:`.quality` - goodness of fit per map and overall, and the fit's status;
+* :mod:`.crossval` - each map left out of a stored fit and predicted by the others;
 * :mod:`.synthetic` - synthetic patients for tests and benchmarks;
 * :mod:`.plot` - measured against fitted fields.
 """

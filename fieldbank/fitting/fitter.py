@@ -9,13 +9,14 @@ Example::
     fitter = ArmFitter(algorithm="mlsl+lbfgs", seed=1).fit(maps, base)
     fitter.params_        # the fitted ArmParams
     fitter.unidentified_  # what the maps leave open, with reasons
+    fitter.status_        # 'good', 'under-determined' or 'poor' (fitting.quality)
+    fitter.intervals_     # value, SD and 95% interval per parameter (fitting.uncertainty)
     fitter.report()       # JSON-able summary
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -25,6 +26,14 @@ import numpy as np
 from fieldbank.errors import FitError
 from fieldbank.fitting.identify import Unidentified, identify
 from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.quality import (
+    DEFAULT_THRESHOLDS,
+    GoodnessOfFit,
+    Thresholds,
+    assess,
+    r2_score,
+    status,
+)
 from fieldbank.fitting.search import (
     ALGORITHMS,
     DEFAULT_ALGORITHM,
@@ -34,6 +43,13 @@ from fieldbank.fitting.search import (
     run_nlopt,
 )
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
+from fieldbank.fitting.uncertainty import (
+    DEFAULT_METHOD,
+    DEFAULT_REPLICATES,
+    METHODS,
+    Uncertainty,
+    estimate,
+)
 from fieldbank.maps import FRAMES, FieldMap
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
@@ -52,7 +68,8 @@ HOLD_TEST_LEVEL = 0.95
 _RESULTS = ("held_", "hold_test_", "params_", "theta_", "cost_", "chi2_", "residuals_", "r2_",
             "uncertainty_", "relative_sd_", "residual_variance_", "unidentified_", "status_",
             "at_bounds_", "n_evals_", "stop_reason_", "time_s_", "algorithm_", "seed_", "maps_",
-            "severity_", "problem_", "space_", "base_")
+            "severity_", "problem_", "space_", "base_", "goodness_", "intervals_",
+            "uncertainty_detail_")
 
 
 def _unit(value: str) -> str:
@@ -116,16 +133,6 @@ def validate_maps(
     return out
 
 
-def _r2(y: FloatArray, yhat: FloatArray) -> float:
-    """Coefficient of determination over all entries, each component about its own mean."""
-    n = y.shape[0]
-    y2 = y.reshape(n, -1)
-    yh = yhat.reshape(n, -1)
-    ss_res = float(((y2 - yh) ** 2).sum())
-    ss_tot = float(((y2 - y2.mean(axis=0)) ** 2).sum())
-    return 1.0 - ss_res / ss_tot if ss_tot > 0 else (1.0 if ss_res == 0 else -math.inf)
-
-
 class ArmFitter:
     """Fit per-muscle Km, α, β (optionally q_rest) to a patient's measured maps.
 
@@ -151,6 +158,13 @@ class ArmFitter:
         (prior) values and refit the others, unless the maps reject that: a likelihood-ratio
         test, Δχ² of the data above the χ² quantile :data:`HOLD_TEST_LEVEL` with one degree of
         freedom per held parameter. This keeps noise from setting what the data leave open.
+    uncertainty : str
+        'auto' (Gauss–Newton where it holds, else a parametric bootstrap), 'gauss-newton' or
+        'bootstrap' (:mod:`fieldbank.fitting.uncertainty`).
+    replicates : int
+        Bootstrap replicates (and parameter samples kept with the fit).
+    thresholds : Thresholds, optional
+        The goodness-of-fit verdict's thresholds (:mod:`fieldbank.fitting.quality`).
     """
 
     def __init__(
@@ -163,6 +177,9 @@ class ArmFitter:
         max_evals: int | None = None,
         progress: Progress | None = None,
         hold_unidentified: bool = True,
+        uncertainty: str = DEFAULT_METHOD,
+        replicates: int = DEFAULT_REPLICATES,
+        thresholds: Thresholds | None = None,
     ) -> None:
         self.algorithm = algorithm
         self.seed = seed
@@ -172,6 +189,9 @@ class ArmFitter:
         self.max_evals = max_evals
         self.progress = progress
         self.hold_unidentified = hold_unidentified
+        self.uncertainty = uncertainty
+        self.replicates = replicates
+        self.thresholds = thresholds
 
     def __getattr__(self, name: str) -> Any:
         if name in _RESULTS:
@@ -191,6 +211,12 @@ class ArmFitter:
         unknown = sorted(set(self.fit_kinds) - set(FIT_KINDS))
         if unknown:
             raise FitError(f"cannot fit {', '.join(unknown)}; choose from {', '.join(FIT_KINDS)}.")
+        if self.uncertainty not in METHODS:
+            raise FitError(f"unknown uncertainty method {self.uncertainty!r}; choose one of "
+                           f"{', '.join(METHODS)}.")
+        if isinstance(self.replicates, bool) or not isinstance(self.replicates, int) \
+                or self.replicates < 2:
+            raise FitError(f"replicates must be an integer >= 2; got {self.replicates!r}.")
 
     def fit(self, maps: Sequence[FieldMap], base: ArmParams,
             patient: str | None = None) -> ArmFitter:
@@ -238,6 +264,10 @@ class ArmFitter:
                 ident = identify(problem, theta)  # uncertainty at the final point
             # what the full fit could not identify stays reported, held or not
             ident = dataclasses.replace(ident, unidentified=flagged)
+        unc = estimate(problem, theta, self.held_,
+                       unidentified=[u.name for u in ident.unidentified],
+                       method=self.uncertainty, n_replicates=self.replicates, seed=seed)
+        n_evals += unc.n_evals
         yhat = problem.predict(theta)
         self.time_s_ = time.perf_counter() - t0
         self.base_ = base
@@ -250,17 +280,23 @@ class ArmFitter:
         self.maps_ = used
         self.residuals_: list[FloatArray] = []
         self.r2_: list[float] = []
+        predicted = []
         for m, rows in zip(used, problem.map_rows, strict=True):
             y = problem.y[rows].reshape(m.values.shape)
             fitted = yhat[rows].reshape(m.values.shape)
+            predicted.append(fitted)
             self.residuals_.append(y - fitted)
-            self.r2_.append(_r2(y, fitted))
-        self.uncertainty_ = {n: float(ident.sd[k]) for k, n in enumerate(space.names)
-                             if space.fitted[k]}
+            self.r2_.append(r2_score(y, fitted))
+        self.goodness_: GoodnessOfFit = assess(
+            used, predicted, ident.effective_parameters, self.thresholds or DEFAULT_THRESHOLDS,
+            sds=[problem.sd[rows] for rows in problem.map_rows])
+        self.uncertainty_detail_: Uncertainty = unc
+        self.uncertainty_ = unc.sd()
+        self.intervals_ = unc.intervals()
         self.relative_sd_ = {n: float(ident.relative_sd[k]) for k, n in enumerate(space.names)
                              if space.fitted[k]}
         self.unidentified_: tuple[Unidentified, ...] = ident.unidentified
-        self.status_ = "under-determined" if ident.unidentified else "identified"
+        self.status_ = status(self.goodness_, len(ident.unidentified))
         self.residual_variance_ = ident.residual_variance
         self.at_bounds_ = [n for k, n in enumerate(space.names) if space.fitted[k] and (
             theta[k] <= space.lower[k] + 1e-9 or theta[k] >= space.upper[k] - 1e-9)]
@@ -290,7 +326,7 @@ class ArmFitter:
     def score(self, maps: Sequence[FieldMap]) -> list[float]:
         """R² of the fitted model on each of ``maps`` (e.g. held-out positions)."""
         pred = self.predict(maps)
-        return [_r2(m.as_arm_on_handle().values, p.values)
+        return [r2_score(m.as_arm_on_handle().values, p.values)
                 for m, p in zip(maps, pred, strict=True)]
 
     def report(self) -> dict[str, Any]:
@@ -299,6 +335,7 @@ class ArmFitter:
         params = {n: float(self.theta_[k]) for k, n in enumerate(space.names)}
         return {
             "status": self.status_,
+            "goodness_of_fit": self.goodness_.to_dict(),
             "algorithm": self.algorithm_,
             "seed": self.seed_,
             "fitted": list(self.fit_kinds),
@@ -311,6 +348,9 @@ class ArmFitter:
             "stop_reason": self.stop_reason_,
             "parameters": params,
             "uncertainty": self.uncertainty_,
+            "uncertainty_method": self.uncertainty_detail_.summary(),
+            "intervals": self.intervals_,
+            "samples": self.uncertainty_detail_.samples_dict(),
             "posterior_to_prior_sd": self.relative_sd_,
             "at_bounds": self.at_bounds_,
             "held_at_unimpaired": self.held_,
@@ -320,7 +360,9 @@ class ArmFitter:
                 {"index": k, "kind": m.kind, "n": m.n, "velocity_m_per_s": list(
                     m.velocity_m_per_s), "source": m.source, "metadata": dict(m.metadata),
                  "r2": self.r2_[k],
-                 "rms_residual": float(np.sqrt(np.mean(self.residuals_[k] ** 2)))}
+                 "rms_residual": float(np.sqrt(np.mean(self.residuals_[k] ** 2))),
+                 "chi2_per_value": self.goodness_.maps[k].chi2_per_value,
+                 "verdict": self.goodness_.maps[k].verdict}
                 for k, m in enumerate(self.maps_)
             ],
             "severity": self.severity_,

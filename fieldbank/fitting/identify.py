@@ -1,9 +1,11 @@
-"""How sure a fit is: parameter uncertainty and the parameters the maps do not identify.
+"""What the maps do not identify, and the fit's effective number of parameters.
 
-Uncertainty. At the optimum the Gauss-Newton information is H = JᵀJ + w·diag(1/σ²), with J the
-Jacobian of the whitened residuals and the prior (weight w, SDs σ) added. The covariance is
-s²·H⁻¹ with s² = χ²_data / (M - p_eff), the residual variance per degree of freedom, where
-p_eff = trace(JᵀJ H⁻¹) is the effective number of parameters (s² = 1 when M ≤ p_eff).
+(The parameters' SDs and intervals: :mod:`fieldbank.fitting.uncertainty`.)
+
+Effective parameters. At the optimum the Gauss-Newton information is H = JᵀJ + w·diag(1/σ²),
+with J the Jacobian of the whitened residuals and the prior (weight w, SDs σ) added;
+p_eff = trace(JᵀJ H⁻¹) is the effective number of parameters and s² = χ²_data / (M - p_eff)
+the residual variance per degree of freedom (s² = 1 when M ≤ p_eff).
 
 Identifiability. In units of each parameter's prior SD the data information is F = S JᵀJ S
 (S = diag σ). Against a reference prior of weight 1 the relative posterior SD is
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.uncertainty import spd_inverse
 from fieldbank.model import FloatArray
 from fieldbank.params import GROUPS
 
@@ -45,7 +48,6 @@ class Unidentified:
 
 @dataclass(frozen=True)
 class Identification:
-    sd: FloatArray  # per parameter (0 where not fitted)
     relative_sd: FloatArray  # ρ_k (nan where not fitted)
     unidentified: tuple[Unidentified, ...]
     residual_variance: float
@@ -82,7 +84,7 @@ def _zero_cause(problem: FitProblem, theta: FloatArray, k: int) -> str:
 
 
 def identify(problem: FitProblem, theta: FloatArray) -> Identification:
-    """Uncertainty and identifiability at ``theta`` (see module docstring)."""
+    """Identifiability and effective parameters at ``theta`` (see module docstring)."""
     s = problem.space
     fit = np.flatnonzero(s.fitted)
     jac = problem.jacobian(theta)[:, fit]
@@ -90,12 +92,10 @@ def identify(problem: FitProblem, theta: FloatArray) -> Identification:
     sig = s.prior_sd[fit]
     jtj = jac.T @ jac
     h = jtj + np.diag(s.prior_weight / sig**2)
-    h_inv = np.linalg.pinv(h)
+    h_inv = spd_inverse(h, sig)  # no pseudo-inverse cut-off (fieldbank.fitting.uncertainty)
     m = r.size
     p_eff = float(np.trace(jtj @ h_inv))
     s2 = float(r @ r) / (m - p_eff) if m > p_eff + 1e-9 else 1.0
-    sd = np.zeros(s.size)
-    sd[fit] = np.sqrt(np.maximum(np.diag(h_inv), 0.0) * s2)
 
     fisher = jtj * np.outer(sig, sig)
     post = np.linalg.inv(fisher + np.eye(fit.size))
@@ -121,4 +121,4 @@ def identify(problem: FitProblem, theta: FloatArray) -> Identification:
                 reason = (f"{s.names[k]} not identifiable: the maps barely constrain it "
                           f"(posterior SD {100 * rel[k]:.0f}% of the prior SD)")
         flagged.append(Unidentified(s.names[k], reason, float(rel[k])))
-    return Identification(sd, rel, tuple(flagged), s2, p_eff)
+    return Identification(rel, tuple(flagged), s2, p_eff)

@@ -77,7 +77,7 @@ class _Tracker:
             self.progress(self.n, float(self.best_cost))
 
 
-def _nlopt_run(
+def nlopt_run(
     algorithm: int,
     local: int | None,
     f: Callable[[FloatArray, FloatArray], float],
@@ -87,6 +87,8 @@ def _nlopt_run(
     max_evals: int,
     seed: int,
 ) -> str:
+    """One nlopt run (``local``: MLSL's local optimiser) minimising ``f`` from ``x0``; returns
+    why it stopped. nlopt's failures are caught: the caller keeps its best point."""
     nlopt.srand(seed)
     opt = nlopt.opt(algorithm, x0.size)
     opt.set_lower_bounds(lo)
@@ -151,7 +153,7 @@ def run_nlopt(
         if budget < 10:
             break
         start_x = x0 if tracker.best_x is None else tracker.best_x
-        reason = _nlopt_run(glob, loc if glob == nlopt.G_MLSL_LDS else None, f, start_x, lo, hi,
+        reason = nlopt_run(glob, loc if glob == nlopt.G_MLSL_LDS else None, f, start_x, lo, hi,
                             budget, seed + attempt)
         reasons.append(reason)
         if not reason.startswith("stopped"):
@@ -182,9 +184,9 @@ def _polish(
     """Local search from the best point; after a gradient search stopped on a kink of the
     cost, finish without gradients (BOBYQA)."""
     assert tracker.best_x is not None
-    reason = _nlopt_run(algorithm, None, f, tracker.best_x, lo, hi, POLISH_EVALS, seed)
+    reason = nlopt_run(algorithm, None, f, tracker.best_x, lo, hi, POLISH_EVALS, seed)
     if reason.startswith("stopped") and algorithm != nlopt.LN_BOBYQA:
-        reason += "; then bobyqa: " + _nlopt_run(nlopt.LN_BOBYQA, None, f, tracker.best_x, lo,
+        reason += "; then bobyqa: " + nlopt_run(nlopt.LN_BOBYQA, None, f, tracker.best_x, lo,
                                                  hi, POLISH_EVALS, seed)
     return reason
 

@@ -15,6 +15,7 @@ so a failed run leaves no half-written file.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import os
@@ -25,10 +26,12 @@ from pathlib import Path
 from typing import Any
 
 from fieldbank.files import write_atomic
+from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
 from fieldbank.interventions.report.figures import CohortPoint, cohort_change_figure
 from fieldbank.interventions.report.html import case_stretches, render
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
+from fieldbank.interventions.report.trust import TRUST_COLUMNS
 from fieldbank.sanitize import csv_cell
 from fieldbank.storage import Database
 
@@ -38,6 +41,8 @@ VERSION = 1
 #: benchmarks/bench_report.py: starting a worker and shipping results ≈ 0.1 s).
 MIN_CASES_PER_JOB = 2
 FILES = ("report.html", "metrics.csv", "metrics.json")
+#: Columns of metrics.csv and metrics.json: the metrics, then what they rest on and the check.
+TABLE_COLUMNS = ALL_COLUMNS + TRUST_COLUMNS
 
 
 @dataclass(frozen=True)
@@ -73,17 +78,17 @@ def compute_all(cases: list[CaseSpec], jobs: int,
 def metrics_csv(results: Iterable[CaseResult]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow([k for k, _ in ALL_COLUMNS])
+    w.writerow([k for k, _ in TABLE_COLUMNS])
     for r in results:
         w.writerow(["" if r.row.get(k) is None else repr(r.row[k])
                     if isinstance(r.row[k], float) else csv_cell(r.row[k])
-                    for k, _ in ALL_COLUMNS])
+                    for k, _ in TABLE_COLUMNS])
     return buf.getvalue()
 
 
 def metrics_json(results: Iterable[CaseResult], inputs: dict[str, Any]) -> str:
     doc = {"schema": SCHEMA, "version": VERSION, "inputs": inputs,
-           "columns": [k for k, _ in ALL_COLUMNS],
+           "columns": [k for k, _ in TABLE_COLUMNS],
            "cases": [{"metrics": r.row, **r.detail} for r in results]}
     return json.dumps(doc, indent=1, ensure_ascii=False, allow_nan=False) + "\n"
 
@@ -129,9 +134,20 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
 
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
-                 title: str | None = None) -> ReportOutput:
-    """Select, compute and write the report; raises SelectionError for an empty selection."""
+                 title: str | None = None, accept_poor_fit: bool = False) -> ReportOutput:
+    """Select, compute and write the report; raises SelectionError for an empty selection,
+    and for cases whose model comes from a poor fit unless ``accept_poor_fit`` (then each such
+    case records it)."""
     cases = select_cases(db, selection)
+    poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
+    if poor and not accept_poor_fit:
+        raise SelectionError(
+            "the model before of " + ", ".join(f"plan {c.plan_id} ({c.patient_code})"
+                                               for c in poor)
+            + " comes from a poor fit; its predictions would not describe the patient. "
+            "Narrow the selection, refit, or give --accept-poor-fit (recorded in the report).")
+    if accept_poor_fit:
+        cases = [dataclasses.replace(c, accept_poor_fit=True) for c in cases]
     wrap = None
     if progress:
         from tqdm import tqdm

@@ -20,6 +20,7 @@ from fieldbank.interventions.course import stretch_course
 from fieldbank.interventions.plan import dose_warnings
 from fieldbank.interventions.report.figures import case_figures, treated_groups
 from fieldbank.interventions.report.select import CaseSpec
+from fieldbank.interventions.report.trust import case_trust
 from fieldbank.params import GROUPS
 from fieldbank.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
 
@@ -183,6 +184,13 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "timecourse": course.to_dict() if course is not None else None,
         "warnings": warnings,
     }
+    trust_row, trust_detail = case_trust(spec, cond, arms)
+    row.update(trust_row)
+    detail.update(trust_detail)
+    # what the prediction rests on first, then the plan's own warnings (dose above the limit)
+    every = list(trust_detail.get("warnings", ())) + list(warnings)
+    detail["warnings"] = every
+    row["warnings"] = " | ".join(every)
     # clip-path ids must be unique in the page: plan id and figure number
     figs = tuple(
         Figure(f.key, f.caption,

@@ -12,8 +12,10 @@ cases that match every filter given:
 * ``kinds`` - the plan has a step of one of these intervention kinds.
 
 :func:`select_cases` reads everything a case needs into a picklable :class:`CaseSpec` - the
-two parameter sets and the plan, already read - so the computation can run in other processes
-without the database.
+two parameter sets and the plan, already read; the report of the fit behind the model before;
+and, for a plan recorded as given, the maps measured after it
+(:func:`fieldbank.interventions.validate.read_plan_inputs`) - so the computation can run in
+other processes without the database.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from typing import Any
 
 from fieldbank.interventions.errors import InterventionError, SelectionError
 from fieldbank.interventions.plan import Plan
+from fieldbank.interventions.validate import PlanInputs, read_plan_inputs
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database, FitRecord, PatientInfo, StoredMap, StoredModel
 
@@ -89,6 +92,13 @@ class CaseSpec:
     case_date: str
     fit_id: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    #: The stored report of fit ``fit_id`` and the fitted model it produced.
+    fit_report: dict[str, Any] | None = None
+    fitted_model_id: int | None = None
+    #: What checking the plan against later maps needs (None: not read).
+    checks: PlanInputs | None = None
+    #: A poor fit behind the model before was accepted by the user.
+    accept_poor_fit: bool = False
 
     @property
     def title(self) -> str:
@@ -199,7 +209,10 @@ def select_cases(db: Database, selection: Selection) -> list[CaseSpec]:
             base_model_id=base.id, base_origin=base.origin, base_label=base.label,
             before=base.params, result_model_id=result.id, after=result.params,
             sessions=tuple(sorted(sessions.items())), case_date=case_date,
-            fit_id=fit.id if fit is not None else None))
+            fit_id=fit.id if fit is not None else None,
+            fit_report=dict(fit.result) if fit is not None else None,
+            fitted_model_id=ancestor.id if ancestor is not None and fit is not None else None,
+            checks=read_plan_inputs(db, plan)))
     if not cases:
         raise SelectionError(
             f"No stored plan matches the selection ({selection.describe()}) in "

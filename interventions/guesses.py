@@ -1,0 +1,364 @@
+"""What a what-if rests on: the fit behind the model, what it guessed, and how sure it is.
+
+A prediction is only as good as the model it starts from (BRIEF §14). For a model that came
+out of a fit (or was derived from one), this module turns the stored fit report into what the
+what-if must say:
+
+* **refusal of a poor fit** (:func:`check_fit`): a fit whose goodness-of-fit verdict is 'poor'
+  (:mod:`fieldbank.fitting.quality`) does not describe the patient's maps, so a what-if, a
+  stored plan or a report on it is refused with :class:`PoorFitError` - unless the user insists
+  (``accept_poor_fit``), which the output then records;
+* **the guesses** (:func:`guesses`): every parameter the fit did not identify, with the fit's
+  reason (held at the unimpaired value, or left near the prior). The result lists them all: each
+  enters the predicted fields;
+* **warnings** (:func:`plan_warnings`): a plan step that acts on a guessed parameter - botulinum
+  toxin, rhizotomy or baclofen into a group whose reflex (α, β) was never identified, surgery or
+  casting on a group whose passive stiffness (Km) was not - predicts a change that rests on the
+  unimpaired default, not on the patient ("no effect" would otherwise be predicted silently);
+* **intervals** (:func:`prediction_intervals`): the plan applied to each of the fit's parameter
+  samples (bootstrap replicates or Gaussian draws, :mod:`fieldbank.fitting.uncertainty`) gives
+  the spread of the headline metrics before, after and of the change; reported as the 2.5-97.5
+  percentiles (95%) beside the point prediction. Parameters held at the unimpaired value stay
+  held in the samples: what rests on them is in the warnings, not in the intervals.
+
+Which parameters a step acts on follows from the catalogue's public contract (``targets()``
+and ``EFFECTS``): a change of α or β scales the group's reflex force, which rests on both α
+and β of the group; a change of Km or of the slack length moves its passive force, which rests
+on Km.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.compare import Conditions, fields_per_velocity
+from fieldbank.evaluate.probing import profile, standard_stretches
+from fieldbank.fitting.uncertainty import FitSamples
+from fieldbank.interventions.errors import InterventionError
+from fieldbank.interventions.plan import Plan
+from fieldbank.model import Arm
+from fieldbank.modelsource import ModelSource
+from fieldbank.params import ArmParams
+
+#: Parameter samples a what-if runs through its plan (at most; the fit keeps 40 by default).
+DEFAULT_INTERVAL_SAMPLES = 40
+#: Percentiles of the reported intervals.
+INTERVAL_PERCENTILES = (2.5, 97.5)
+
+#: Changed parameter (catalogue ``EFFECTS`` key) -> what the change scales and the fitted
+#: parameters that size it.
+_FORCE_OF = {"alpha_n": ("reflex", ("alpha", "beta")), "beta": ("reflex", ("alpha", "beta")),
+             "km_n_per_m": ("passive", ("km",)), "slack_offset_m": ("passive", ("km",))}
+_WHAT = {"reflex": "stretch reflex (α, β)", "passive": "passive stiffness (Km)"}
+
+
+class PoorFitError(InterventionError):
+    """The model before comes from a fit whose goodness-of-fit verdict is 'poor'."""
+
+
+@dataclass(frozen=True)
+class Guess:
+    """A parameter the fit did not identify, its value in the model and why."""
+
+    name: str
+    value: float
+    held: bool
+    reason: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "value": self.value, "held_at_unimpaired": self.held,
+                "reason": self.reason}
+
+
+@dataclass(frozen=True, eq=False)
+class FitBasis:
+    """What a prediction knows about the fit behind its model.
+
+    ``same_model``: the model before *is* the fitted model (its samples apply directly);
+    otherwise it was derived from it by earlier plans.
+    """
+
+    fit_id: int
+    fitted_model_id: int
+    same_model: bool
+    status: str
+    verdict: str
+    reasons: tuple[str, ...]
+    unidentified: tuple[tuple[str, str], ...]
+    held: tuple[str, ...]
+    samples: FitSamples | None
+
+    @classmethod
+    def of(cls, source: ModelSource) -> FitBasis | None:
+        """The basis of a resolved model, or None when no fit lies behind it."""
+        if source.fit is None or source.fitted_model_id is None:
+            return None
+        return cls.from_report(source.fit.id, source.fitted_model_id,
+                               source.model_id == source.fitted_model_id, source.fit.result)
+
+    @classmethod
+    def from_report(cls, fit_id: int, fitted_model_id: int, same_model: bool,
+                    report: Mapping[str, Any]) -> FitBasis:
+        """The basis from a stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`)."""
+        gof = report.get("goodness_of_fit") or {}
+        unid = tuple((str(u.get("name")), str(u.get("reason", "")))
+                     for u in report.get("unidentified", []) if isinstance(u, Mapping))
+        return cls(int(fit_id), int(fitted_model_id), bool(same_model),
+                   str(report.get("status", "unknown")), str(gof.get("verdict", "unknown")),
+                   tuple(str(r) for r in gof.get("reasons", [])), unid,
+                   tuple(str(h) for h in report.get("held_at_unimpaired", []) or []),
+                   FitSamples.from_report(report))
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A metric's point prediction and 95% interval, before, after and of the change."""
+
+    metric: str
+    unit: str
+    before: float
+    after: float
+    before_low: float
+    before_high: float
+    after_low: float
+    after_high: float
+    change_low: float
+    change_high: float
+
+    @property
+    def change(self) -> float:
+        return self.after - self.before
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"unit": self.unit, "before": self.before, "after": self.after,
+                "change": self.change, "before_interval": [self.before_low, self.before_high],
+                "after_interval": [self.after_low, self.after_high],
+                "change_interval": [self.change_low, self.change_high]}
+
+
+@dataclass(frozen=True, eq=False)
+class Guesses:
+    """What a what-if result says about the ground it stands on (module docstring)."""
+
+    basis: FitBasis | None
+    guesses: tuple[Guess, ...] = ()
+    warnings: tuple[str, ...] = ()
+    intervals: tuple[Interval, ...] = ()
+    interval_note: str = ""
+    n_samples: int = 0
+    accepted_poor_fit: bool = False
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def fit_dict(self) -> dict[str, Any] | None:
+        b = self.basis
+        if b is None:
+            return None
+        return {"fit_id": b.fit_id, "fitted_model_id": b.fitted_model_id, "status": b.status,
+                "goodness_of_fit": b.verdict, "reasons": list(b.reasons),
+                "accepted_poor_fit": self.accepted_poor_fit}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The parts of the what-if JSON: ``fit``, ``unidentified``, ``warnings``,
+        ``intervals``."""
+        return {"fit": self.fit_dict(),
+                "unidentified": [g.to_dict() for g in self.guesses],
+                "warnings": list(self.warnings),
+                "intervals": {"level": 0.95, "samples": self.n_samples,
+                              "note": self.interval_note,
+                              "metrics": {i.metric: i.to_dict() for i in self.intervals}}}
+
+
+def check_fit(basis: FitBasis | None, accept_poor_fit: bool = False) -> str | None:
+    """Refuse a poor fit unless accepted; returns the note to record when it was accepted.
+
+    Raises
+    ------
+    PoorFitError
+        The fit behind the model is poor and ``accept_poor_fit`` is False.
+    """
+    if basis is None or basis.status != "poor":
+        return None
+    why = "; ".join(basis.reasons) or "goodness of fit failed"
+    if not accept_poor_fit:
+        raise PoorFitError(
+            f"the model comes from fit {basis.fit_id}, a poor fit ({why}); a prediction from "
+            "it would not describe this patient. Refit (other maps, 'fieldbank fit --fit "
+            "km,alpha,beta,q_rest'), or give --accept-poor-fit to run it anyway (recorded in "
+            "the output).")
+    return f"poor fit accepted by the user (--accept-poor-fit): fit {basis.fit_id}: {why}"
+
+
+def acted_on(plan: Plan) -> list[tuple[int, str, str, tuple[str, ...]]]:
+    """(step number, step description, what it changes, fitted parameters that size it)."""
+    out = []
+    for i, step in enumerate(plan.steps, 1):
+        seen: dict[tuple[str, str], tuple[str, ...]] = {}
+        for effect in step.EFFECTS:
+            if effect not in _FORCE_OF:
+                continue
+            force, kinds = _FORCE_OF[effect]
+            for g in step.targets():
+                seen[(force, g)] = tuple(f"{k}_{g}" for k in kinds)
+        for (force, g), names in seen.items():
+            out.append((i, step.describe(), f"{_WHAT[force]} of {g}", names))
+    return out
+
+
+def guesses(basis: FitBasis | None, params: ArmParams) -> tuple[Guess, ...]:
+    """The parameters the fit did not identify, valued in ``params`` (the model before)."""
+    if basis is None:
+        return ()
+    values = _values(params)
+    held = set(basis.held)
+    return tuple(Guess(n, values.get(n, float("nan")), n in held, r)
+                 for n, r in basis.unidentified)
+
+
+def plan_warnings(plan: Plan, basis: FitBasis | None, params: ArmParams) -> tuple[str, ...]:
+    """One warning per plan step and muscle group whose change rests on a guessed parameter."""
+    if basis is None:
+        return ()
+    unid = dict(basis.unidentified)
+    held = set(basis.held)
+    values = _values(params)
+    out = []
+    for i, desc, what, names in acted_on(plan):
+        guessed = [n for n in names if n in unid]
+        if not guessed:
+            continue
+        vals = ", ".join(f"{n} = {values.get(n, float('nan')):.3g}" for n in guessed)
+        how = ("held at the unimpaired value" if all(n in held for n in guessed) else
+               "not identified")
+        out.append(
+            f"step {i} ({desc}) acts on the {what}, which fit {basis.fit_id} did not identify "
+            f"({how}: {vals}): the predicted change rests on a guess, not on this patient's "
+            f"maps. Why: {unid[guessed[0]]}.")
+    return tuple(out)
+
+
+def headline_metrics(arm: Arm, cond: Conditions) -> dict[str, tuple[float, str]]:
+    """The metrics given intervals: metric -> (value, unit).
+
+    Peak resisting torque and its reflex part of each fast joint stretch, the peak force of
+    each probing motion, and the RMS endpoint force of each standard speed.
+    """
+    out: dict[str, tuple[float, str]] = {}
+    for s in standard_stretches(arm):
+        out[f"{s.name} peak torque"] = (s.peak_torque_n_m, "N·m")
+        out[f"{s.name} reflex torque"] = (s.reflex_torque_n_m, "N·m")
+    for m in cond.probes:
+        out[f"{m.name} peak force"] = (profile(arm, m).peak_force_n, "N")
+    forces, _ = fields_per_velocity(arm, cond)
+    for speed, f in zip(cond.speeds_m_per_s, forces, strict=True):
+        rms = float(np.sqrt(np.mean(np.sum(f * f, axis=1))))
+        out[f"RMS |F| at {speed:g} m/s"] = (rms, "N")
+    return out
+
+
+def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
+                         cond: Conditions, arms: ArmCache,
+                         n_samples: int = DEFAULT_INTERVAL_SAMPLES
+                         ) -> tuple[tuple[Interval, ...], str, int]:
+    """The plan applied to each of the fit's samples: (intervals, note, samples used)."""
+    if basis is None:
+        return (), "the model is not a fitted model: no fit uncertainty to carry", 0
+    if basis.samples is None:
+        return (), f"fit {basis.fit_id} stored no parameter samples (refit to get them)", 0
+    if not basis.same_model:
+        return (), (f"the model before is derived from fitted model {basis.fitted_model_id} by "
+                    "earlier plans: intervals need the fitted model itself"), 0
+    point_b = headline_metrics(arms(before), cond)
+    point_a = headline_metrics(arms(plan.apply(before)), cond)
+    samples = basis.samples.params(before, n_samples)
+    keys = list(point_b)
+    vb = np.empty((len(samples), len(keys)))
+    va = np.empty_like(vb)
+    for j, p in enumerate(samples):
+        mb = headline_metrics(Arm.from_params(p), cond)
+        ma = headline_metrics(Arm.from_params(plan.apply(p)), cond)
+        vb[j] = [mb[k][0] for k in keys]
+        va[j] = [ma[k][0] for k in keys]
+    lo, hi = INTERVAL_PERCENTILES
+    bl, bh = np.percentile(vb, [lo, hi], axis=0)
+    al, ah = np.percentile(va, [lo, hi], axis=0)
+    cl, ch = np.percentile(va - vb, [lo, hi], axis=0)
+    out = tuple(Interval(k, point_b[k][1], point_b[k][0], point_a[k][0], float(bl[i]),
+                         float(bh[i]), float(al[i]), float(ah[i]), float(cl[i]), float(ch[i]))
+                for i, k in enumerate(keys))
+    note = (f"95% intervals over {len(samples)} parameter samples of fit {basis.fit_id}; "
+            "parameters held at the unimpaired value stay held (see warnings)")
+    return out, note, len(samples)
+
+
+def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *,
+            accept_poor_fit: bool = False,
+            n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
+    """Everything above for one what-if (raises :class:`PoorFitError` first)."""
+    return examine_basis(FitBasis.of(source), source.params, plan, cond, arms,
+                         accept_poor_fit=accept_poor_fit, n_samples=n_samples)
+
+
+def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
+                  arms: ArmCache, *, accept_poor_fit: bool = False,
+                  n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
+    """:func:`examine` for a model ``before`` whose fit basis is known (reports)."""
+    note = check_fit(basis, accept_poor_fit)
+    intervals, inote, used = (prediction_intervals(basis, before, plan, cond, arms, n_samples)
+                              if n_samples > 0 else ((), "intervals not asked for", 0))
+    warn = list(plan_warnings(plan, basis, before))
+    if note:
+        warn.insert(0, note)
+    return Guesses(basis, guesses(basis, before), tuple(warn), intervals, inote, used,
+                   note is not None)
+
+
+def _values(params: ArmParams) -> dict[str, float]:
+    out = {}
+    for kind, attr in (("km", "km_n_per_m"), ("alpha", "alpha_n"), ("beta", "beta")):
+        for g, v in zip(("sf", "se", "ef", "ee", "bf", "be"), getattr(params, attr),
+                        strict=True):
+            out[f"{kind}_{g}"] = float(v)
+    out["q_rest_shoulder"], out["q_rest_elbow"] = (float(v) for v in params.q_rest_rad)
+    return out
+
+
+def summary_lines(g: Guesses) -> Sequence[str]:
+    """Plain-text lines for the what-if: fit, guesses, warnings, intervals."""
+    lines: list[str] = []
+    b = g.basis
+    if b is None:
+        lines.append("Fit: none behind this model (no fit uncertainty, nothing guessed).")
+    else:
+        state = " (accepted by the user)" if g.accepted_poor_fit else ""
+        lines.append(f"Fit {b.fit_id} behind the model: status {b.status}{state}; goodness of "
+                     f"fit {b.verdict}")
+    if g.guesses:
+        lines.append(f"Parameters the fit did not identify ({len(g.guesses)}; the prediction "
+                     "depends on them):")
+        lines += [f"  {x.name} = {x.value:.4g}" + (" (held at unimpaired)" if x.held else "")
+                  for x in g.guesses]
+    for w in g.warnings:
+        lines.append(f"WARNING: {w}")
+    if g.intervals:
+        lines.append("")
+        lines.append(f"Predicted metrics with 95% intervals ({g.interval_note}):")
+        lines.append(f"  {'metric':<40}{'before':>22}{'after':>22}{'change':>24}")
+        for i in g.intervals:
+            lines.append(
+                f"  {i.metric + ', ' + i.unit:<40}"
+                f"{_iv(i.before, i.before_low, i.before_high):>22}"
+                f"{_iv(i.after, i.after_low, i.after_high):>22}"
+                f"{_iv(i.change, i.change_low, i.change_high, True):>24}")
+    elif g.interval_note:
+        lines.append(f"No intervals: {g.interval_note}.")
+    return lines
+
+
+def _iv(v: float, lo: float, hi: float, signed: bool = False) -> str:
+    f = "+.2f" if signed else ".2f"
+    return f"{v:{f}} [{lo:{f}}, {hi:{f}}]"

@@ -1,0 +1,87 @@
+"""What a report case rests on, and whether its prediction held: the columns and JSON parts.
+
+For each case (:func:`case_trust`): the status of the fit behind the model before, the
+parameters it did not identify, the warnings of :mod:`fieldbank.interventions.guesses` (a step
+acting on a guessed parameter; an accepted poor fit), 95% intervals of the headline metrics
+(the fit's samples through the plan), and - when the plan was given and the patient has maps
+measured after it - the check of :mod:`fieldbank.interventions.validate` per later session.
+The metrics table gets :data:`TRUST_COLUMNS`; the case's JSON gets everything.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.compare import Conditions
+from fieldbank.interventions.guesses import FitBasis, examine_basis
+from fieldbank.interventions.report.select import CaseSpec
+from fieldbank.interventions.validate import check_plan
+
+#: Columns after the metrics: (key, heading).
+TRUST_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("fit_status", "fit status"),
+    ("unidentified", "not identified by the fit"),
+    ("pull_peak_after_low_n", "pull peak after, 95% low (N)"),
+    ("pull_peak_after_high_n", "pull peak after, 95% high (N)"),
+    ("semi_ellipse_peak_after_low_n", "semi-ellipse peak after, 95% low (N)"),
+    ("semi_ellipse_peak_after_high_n", "semi-ellipse peak after, 95% high (N)"),
+    ("elbow_extension_reflex_after_low_n_m", "elbow ext. reflex after, 95% low (N·m)"),
+    ("elbow_extension_reflex_after_high_n_m", "elbow ext. reflex after, 95% high (N·m)"),
+    ("validation", "prediction check"),
+    ("validation_sessions", "checked against sessions"),
+    ("validation_chi2_per_value_max", "check: largest χ²/n"),
+    ("validation_r2_min", "check: lowest R²"),
+    ("realised_change_fraction", "measured / predicted change"),
+)
+#: Interval columns: headline metric -> (low column, high column).
+_INTERVAL_COLUMNS = {
+    "pull peak force": ("pull_peak_after_low_n", "pull_peak_after_high_n"),
+    "semi-ellipse peak force": ("semi_ellipse_peak_after_low_n",
+                                "semi_ellipse_peak_after_high_n"),
+    "elbow extension reflex torque": ("elbow_extension_reflex_after_low_n_m",
+                                      "elbow_extension_reflex_after_high_n_m"),
+}
+
+
+def basis_of(spec: CaseSpec) -> FitBasis | None:
+    """The fit behind a case's model before, from what the selection read."""
+    if spec.fit_report is None or spec.fit_id is None or spec.fitted_model_id is None:
+        return None
+    return FitBasis.from_report(spec.fit_id, spec.fitted_model_id,
+                                spec.fitted_model_id == spec.base_model_id, spec.fit_report)
+
+
+def case_trust(spec: CaseSpec, cond: Conditions,
+               arms: ArmCache) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The case's :data:`TRUST_COLUMNS` values and its JSON parts (``fit``,
+    ``unidentified``, ``warnings``, ``intervals``, ``validation``)."""
+    row: dict[str, Any] = dict.fromkeys(k for k, _ in TRUST_COLUMNS)
+    detail: dict[str, Any] = {}
+    basis = basis_of(spec)
+    if spec.plan is not None:
+        g = examine_basis(basis, spec.before, spec.plan, cond, arms,
+                          accept_poor_fit=spec.accept_poor_fit)
+        detail.update(g.to_dict())
+        row["fit_status"] = (basis.status + (" (accepted)" if g.accepted_poor_fit else "")
+                             if basis is not None else "not fitted")
+        row["unidentified"] = " ".join(x.name for x in g.guesses)
+        row["warnings"] = " | ".join(g.warnings)
+        by_metric = {i.metric: i for i in g.intervals}
+        for metric, (lo, hi) in _INTERVAL_COLUMNS.items():
+            if metric in by_metric:
+                row[lo], row[hi] = by_metric[metric].after_low, by_metric[metric].after_high
+    if spec.checks is not None:
+        v = check_plan(spec.checks)
+        detail["validation"] = v.to_dict()
+        row["validation"] = v.verdict
+        row["validation_sessions"] = " ".join(s.session for s in v.sessions)
+        if v.sessions:
+            row["validation_chi2_per_value_max"] = max(s.worst_chi2_per_value
+                                                       for s in v.sessions)
+            row["validation_r2_min"] = min(s.lowest_r2 for s in v.sessions)
+            fr = [s.realised_fraction for s in v.sessions if s.realised_fraction is not None]
+            row["realised_change_fraction"] = fr[0] if len(fr) == 1 else (
+                None if not fr else math.fsum(fr) / len(fr))
+    return row, detail
