@@ -35,13 +35,20 @@ from typing import Any
 
 import numpy as np
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.compare import Conditions, fields_per_velocity
-from fieldbank.evaluate.probing import profile, standard_stretches
+from fieldbank.evaluate.compare import Conditions
+from fieldbank.evaluate.probing import (
+    Profiles,
+    profile,
+    standard_stretches,
+    stretch_profiles,
+    unimpaired_reference,
+)
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.model import Arm
+from fieldbank.model import Arm, FloatArray
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import ArmParams
 
@@ -153,6 +160,9 @@ class Guesses:
     n_samples: int = 0
     accepted_poor_fit: bool = False
     notes: tuple[str, ...] = field(default_factory=tuple)
+    #: 95% bands of the fast-stretch torque curves (:func:`prediction_intervals`), for
+    #: figures; not part of the JSON (the intervals of their peaks are).
+    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = field(default_factory=dict)
 
     def fit_dict(self) -> dict[str, Any] | None:
         b = self.basis
@@ -241,20 +251,37 @@ def plan_warnings(plan: Plan, basis: FitBasis | None, params: ArmParams) -> tupl
     return tuple(out)
 
 
-def headline_metrics(arm: Arm, cond: Conditions) -> dict[str, tuple[float, str]]:
+def headline_metrics(arm: Arm, cond: Conditions,
+                     curves: dict[str, FloatArray] | None = None,
+                     references: dict[ArmParams, tuple[Arm, Profiles]] | None = None
+                     ) -> dict[str, tuple[float, str]]:
     """The metrics given intervals: metric -> (value, unit).
 
     Peak resisting torque and its reflex part of each fast joint stretch, the peak force of
-    each probing motion, and the RMS endpoint force of each standard speed.
+    each probing motion, and the RMS endpoint force of each standard speed. ``curves``, when
+    given, receives each stretch's torque resisting the fast stretch along the joint angle
+    (stretch name -> (T,) N·m), the curve the figures draw. ``references`` keeps the
+    unimpaired reference arm and its stretch profiles (the catch threshold) per geometry, for
+    callers that evaluate many arms of one geometry.
     """
     out: dict[str, tuple[float, str]] = {}
-    for s in standard_stretches(arm):
+    profiles = stretch_profiles(arm)
+    if curves is not None:
+        curves.update({f"{j} {d}": p.fast_n_m for (j, d), p in profiles.items()})
+    ref_params = arm.params.with_unimpaired_muscles()
+    known = references.get(ref_params) if references is not None else None
+    if known is None:
+        ref = unimpaired_reference(arm)
+        known = (ref, profiles if ref is arm else stretch_profiles(ref))
+        if references is not None:
+            references[ref_params] = known
+    for s in standard_stretches(arm, known[0], profiles, known[1]):
         out[f"{s.name} peak torque"] = (s.peak_torque_n_m, "N·m")
         out[f"{s.name} reflex torque"] = (s.reflex_torque_n_m, "N·m")
     for m in cond.probes:
         out[f"{m.name} peak force"] = (profile(arm, m).peak_force_n, "N")
-    forces, _ = fields_per_velocity(arm, cond)
-    for speed, f in zip(cond.speeds_m_per_s, forces, strict=True):
+    for k, speed in enumerate(cond.speeds_m_per_s):
+        f = arm.endpoint_force(*cond.points(k))  # the force alone: no stiffness needed
         rms = float(np.sqrt(np.mean(np.sum(f * f, axis=1))))
         out[f"RMS |F| at {speed:g} m/s"] = (rms, "N")
     return out
@@ -262,9 +289,14 @@ def headline_metrics(arm: Arm, cond: Conditions) -> dict[str, tuple[float, str]]
 
 def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
                          cond: Conditions, arms: ArmCache,
-                         n_samples: int = DEFAULT_INTERVAL_SAMPLES
-                         ) -> tuple[tuple[Interval, ...], str, int]:
-    """The plan applied to each of the fit's samples: (intervals, note, samples used)."""
+                         n_samples: int = DEFAULT_INTERVAL_SAMPLES,
+                         bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]]
+                         | None = None) -> tuple[tuple[Interval, ...], str, int]:
+    """The plan applied to each of the fit's samples: (intervals, note, samples used).
+
+    ``bands``, when given, receives the 95% band of each fast-stretch torque curve before and
+    after: ``{"before" | "after": {stretch name: (low, high)}}`` (N·m along the angle).
+    """
     if basis is None:
         return (), "the model is not a fitted model: no fit uncertainty to carry", 0
     if basis.samples is None:
@@ -278,12 +310,31 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
     keys = list(point_b)
     vb = np.empty((len(samples), len(keys)))
     va = np.empty_like(vb)
+    curves: dict[str, list[dict[str, FloatArray]]] = {"before": [], "after": []}
+    references: dict[ArmParams, tuple[Arm, Profiles]] = {}
     for j, p in enumerate(samples):
-        mb = headline_metrics(Arm.from_params(p), cond)
-        ma = headline_metrics(Arm.from_params(plan.apply(p)), cond)
+        cb: dict[str, FloatArray] = {}
+        ca: dict[str, FloatArray] = {}
+        arm_p = Arm.from_params(p)
+        after_p = plan.apply(p)
+        try:  # a plan changes muscle values only: the geometry is compiled once
+            arm_pa = arm_p.with_muscles(after_p)
+        except ParameterError:
+            arm_pa = Arm.from_params(after_p)
+        mb = headline_metrics(arm_p, cond, cb, references)
+        ma = headline_metrics(arm_pa, cond, ca, references)
         vb[j] = [mb[k][0] for k in keys]
         va[j] = [ma[k][0] for k in keys]
+        curves["before"].append(cb)
+        curves["after"].append(ca)
     lo, hi = INTERVAL_PERCENTILES
+    if bands is not None and samples:
+        for when, per_sample in curves.items():
+            bands[when] = {}
+            for name in per_sample[0]:
+                stack = np.stack([c[name] for c in per_sample])
+                low, high = np.percentile(stack, [lo, hi], axis=0)
+                bands[when][name] = (low, high)
     bl, bh = np.percentile(vb, [lo, hi], axis=0)
     al, ah = np.percentile(va, [lo, hi], axis=0)
     cl, ch = np.percentile(va - vb, [lo, hi], axis=0)
@@ -308,13 +359,15 @@ def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: C
                   n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
     """:func:`examine` for a model ``before`` whose fit basis is known (reports)."""
     note = check_fit(basis, accept_poor_fit)
-    intervals, inote, used = (prediction_intervals(basis, before, plan, cond, arms, n_samples)
+    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = {}
+    intervals, inote, used = (prediction_intervals(basis, before, plan, cond, arms, n_samples,
+                                                   bands)
                               if n_samples > 0 else ((), "intervals not asked for", 0))
     warn = list(plan_warnings(plan, basis, before))
     if note:
         warn.insert(0, note)
     return Guesses(basis, guesses(basis, before), tuple(warn), intervals, inote, used,
-                   note is not None)
+                   note is not None, bands=bands)
 
 
 def _values(params: ArmParams) -> dict[str, float]:

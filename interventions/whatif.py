@@ -257,7 +257,8 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
                       n_samples=interval_samples)
     course = time_course(arm_b, plan, conditions=cond, arms=arms) if timecourse else None
     if plot_path:
-        plot_comparison(arm_b, arm_a, comparison, plan, plot_path, title=source.description)
+        plot_comparison(arm_b, arm_a, comparison, plan, plot_path, title=source.description,
+                        bands=guesses.bands)
     if out_dir:
         d = Path(out_dir)
         write_atomic(d / "plan.json", plan.to_json() + "\n")

@@ -48,9 +48,14 @@ def test_stored_batch_reports_byte_identically(batch: dict[str, Any], tmp_path: 
     n_fig = html.count('<svg xmlns="http://www.w3.org/2000/svg"')
     # botulinum: stretches, moving field, grades, probes, time course (the static field
     # unchanged: a sentence); lengthening: stretches, moving and static field, stiffness,
-    # grades, probes; a batch: one cohort figure
+    # grades, probes; a plan checked against later maps: the check; a batch: the cohort
+    # figure and, with checked plans, the cohort's check
     n_bot = sum("botulinum" in r["kinds"] for r in rows)
-    assert n_fig == 5 * n_bot + 6 * (len(rows) - n_bot) + 1
+    n_checked = sum(bool(r["validation_sessions"]) for r in rows)
+    assert n_checked >= 1
+    assert n_fig == 5 * n_bot + 6 * (len(rows) - n_bot) + n_checked + 2
+    assert html.count('<figure data-figure="validation">') == n_checked
+    assert html.count('<figure data-figure="cohort-validation">') == 1
     assert html.count('class="nochange"') == n_bot
     # self-contained: no address but the SVG namespace
     assert "https://" not in html

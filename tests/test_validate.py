@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from datetime import date
 from pathlib import Path
 from typing import Any
@@ -159,6 +160,27 @@ def test_the_report_carries_the_same_check(samples_db: dict[str, Any], tmp_path:
     assert {"r2", "rms_error", "chi2_per_value", "realised_fraction"} <= set(maps[0])
     assert cases["SYN-001"]["fit"]["status"] in ("good", "under-determined")
     assert "intervals" in cases["SYN-001"] and "warnings" in cases["SYN-001"]
+    # every stretch's intervals, not only one
+    for stretch in ("elbow_flexion", "shoulder_extension", "shoulder_flexion"):
+        assert float(rows["SYN-001"][f"{stretch}_peak_after_low_n_m"]) <= \
+            float(rows["SYN-001"][f"{stretch}_peak_after_high_n_m"])
+    # the figures: the check per case and across patients; the 95% band of the fast stretch
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    sections = {code: html[html.index(f'id="plan-{pid}"'):] for code, pid in
+                (("SYN-001", given[0]), ("SYN-003", given[1]))}
+    for code, sec in sections.items():
+        sec = sec[:sec.index("</section>")]
+        fig = sec[sec.index('<figure data-figure="validation">'):]
+        fig = fig[:fig.index("</figure>")]
+        assert 'data-verdict="good"' in fig
+        if code == "SYN-003":  # the wrong prediction: a map poor against it, said in words
+            assert 'data-verdict="poor"' in fig
+            assert "prediction failed" in sec
+        else:
+            assert 'data-band="fast after"' in sec  # intervals drawn as a band
+            # grades resting on a parameter the fit held at unimpaired say so
+            assert re.search(r"(unimpaired|mild|moderate|severe)\+?\* → ", sec)
+    assert '<figure data-figure="cohort-validation">' in html
 
 
 def test_leave_one_map_out(samples_db: dict[str, Any]) -> None:

@@ -28,7 +28,11 @@ from typing import Any
 from fieldbank.files import write_atomic
 from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
-from fieldbank.interventions.report.figures import CohortPoint, cohort_change_figure
+from fieldbank.interventions.report.figures import (
+    CohortPoint,
+    cohort_change_figure,
+    validation_figure,
+)
 from fieldbank.interventions.report.html import case_stretches, render
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
 from fieldbank.interventions.report.trust import TRUST_COLUMNS
@@ -116,7 +120,8 @@ def cohort_points(results: Iterable[CaseResult]) -> list[CohortPoint]:
 
 
 def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
-    """The summary's figures (key, caption, SVG) of a batch of two or more cases."""
+    """The summary's figures (key, caption, SVG) of a batch of two or more cases: the change
+    per kind and treated group, and the predictions checked against later maps."""
     if len(results) < 2:
         return []
     out = []
@@ -129,6 +134,17 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
                     "group is graded on, after against before; one dot per case and group, "
                     "bar: median.",
                     cohort_change_figure(points).to_svg("cohort1")))
+    checks = [c for r in results for c in r.checks]
+    if checks:
+        n = len({c.case for c in checks})
+        out.append(("cohort-validation",
+                    f"Predictions checked against maps measured after the plan ({n} plan"
+                    f"{'s' if n != 1 else ''}): per map, the RMS of the measured change against "
+                    "the RMS of the predicted change (on the dashed identity line the change "
+                    "came as predicted), and the measured change along the predicted one "
+                    "(realised fraction, ±1 SE) against the check's tolerance.",
+                    validation_figure(checks, "Predicted against measured change, across "
+                                      "patients").to_svg("cohort2")))
     return out
 
 

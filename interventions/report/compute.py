@@ -18,9 +18,14 @@ from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
 from fieldbank.interventions.plan import dose_warnings
-from fieldbank.interventions.report.figures import case_figures, treated_groups
+from fieldbank.interventions.report.figures import (
+    CheckPoint,
+    case_figures,
+    check_points,
+    treated_groups,
+)
 from fieldbank.interventions.report.select import CaseSpec
-from fieldbank.interventions.report.trust import case_trust
+from fieldbank.interventions.report.trust import basis_of, case_trust
 from fieldbank.params import GROUPS
 from fieldbank.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
 
@@ -93,12 +98,15 @@ class Figure:
 
 @dataclass(frozen=True)
 class CaseResult:
-    """Computed case: ``row`` (metrics table row), ``detail`` (JSON), ``figures``."""
+    """Computed case: ``row`` (metrics table row), ``detail`` (JSON), ``figures``,
+    ``checks``."""
 
     spec: CaseSpec
     row: dict[str, Any]
     detail: dict[str, Any]
     figures: tuple[Figure, ...]
+    #: The plan checked against maps measured after it, per map (cohort figure).
+    checks: tuple[CheckPoint, ...] = ()
 
 
 def _clinical(c: Comparison) -> dict[str, Any]:
@@ -127,7 +135,9 @@ def compute_case(spec: CaseSpec) -> CaseResult:
     arms = ArmCache()
     arm_b, arm_a = arms(spec.before), arms(spec.after)
     cond = Conditions.standard(arm_b)
-    c = compare(arm_b, arm_a, cond)
+    basis = basis_of(spec)
+    # grades resting on a parameter the fit did not identify say so (the '*')
+    c = compare(arm_b, arm_a, cond, [n for n, _ in basis.unidentified] if basis else ())
     plan = spec.plan
     course = None
     if plan is not None and any(isinstance(s, Botulinum) for s in plan.steps):
@@ -184,16 +194,20 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "timecourse": course.to_dict() if course is not None else None,
         "warnings": warnings,
     }
-    trust_row, trust_detail = case_trust(spec, cond, arms)
-    row.update(trust_row)
-    detail.update(trust_detail)
+    trust = case_trust(spec, cond, arms)
+    row.update(trust.row)
+    detail.update(trust.detail)
     # what the prediction rests on first, then the plan's own warnings (dose above the limit)
-    every = list(trust_detail.get("warnings", ())) + list(warnings)
+    every = list(trust.detail.get("warnings", ())) + list(warnings)
     detail["warnings"] = every
     row["warnings"] = " | ".join(every)
+    who = f"{spec.patient_code or '-'} plan {spec.plan_id}"
+    checks = (tuple(check_points(trust.validation, who)) if trust.validation is not None
+              else ())
+    bands = trust.guesses.bands if trust.guesses is not None else None
     # clip-path ids must be unique in the page: plan id and figure number
     figs = tuple(
         Figure(f.key, f.caption,
                "" if f.scene is None else f.scene.to_svg(f"p{spec.plan_id}f{k}"))
-        for k, f in enumerate(case_figures(arm_b, arm_a, c, plan, course)))
-    return CaseResult(spec, json_finite(row), json_finite(detail), figs)
+        for k, f in enumerate(case_figures(arm_b, arm_a, c, plan, course, bands, checks)))
+    return CaseResult(spec, json_finite(row), json_finite(detail), figs, checks)

@@ -41,6 +41,7 @@ from fieldbank.evaluate.probing import (
 )
 from fieldbank.interventions.course import StretchCourse
 from fieldbank.interventions.plan import Plan
+from fieldbank.interventions.validate import CHANGE_TOLERANCE, PlanValidation
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS
 from fieldbank.severity import GRADED_STRETCH, LEVELS, MUSCLE_GROUP_NAMES, GroupSeverity
@@ -424,10 +425,11 @@ def cohort_change_figure(points: Sequence[CohortPoint]) -> Scene:
 @dataclass(frozen=True)
 class CheckPoint:
     """One map measured after a plan: RMS of the predicted and of the measured change (N or
-    N/m), the realised fraction f (measured along predicted) with its SE, and the verdict."""
+    N/m), the realised fraction f (measured along predicted) with its SE, and the verdict of
+    the map against the prediction."""
 
     case: str
-    kind: str
+    label: str
     unit: str
     predicted_rms: float
     measured_rms: float
@@ -436,37 +438,74 @@ class CheckPoint:
     verdict: str
 
 
-def validation_points_figure(points: Sequence[CheckPoint], title: str) -> Scene:
-    """Measured against predicted change per map (RMS over the map's values), on the identity
-    line; one panel per unit (N: postural maps, N/m: stiffness maps)."""
+def check_points(v: PlanValidation, case: str) -> list[CheckPoint]:
+    """The maps of every later session of a checked plan."""
+    out = []
+    for s in v.sessions:
+        for m in s.maps:
+            moving = "moving" if any(m.velocity_m_per_s) else "static"
+            out.append(CheckPoint(case, f"{case}: {s.session} map {m.map_id} ({m.kind}, "
+                                  f"{moving})", m.unit, m.predicted_change_rms,
+                                  m.measured_change_rms, m.realised_fraction, m.realised_se,
+                                  m.prediction.verdict))
+    return out
+
+
+def validation_figure(points: Sequence[CheckPoint], title: str,
+                      tolerance: float = CHANGE_TOLERANCE) -> Scene:
+    """Measured against predicted change per map (RMS over the map's values) on the identity
+    line, one panel per unit (N: postural maps, N/m: stiffness maps), and the realised
+    fraction per map (measured change along the predicted one, ±1 SE) against the tolerance
+    of :mod:`fieldbank.interventions.validate`."""
     units = sorted({p.unit for p in points})
-    block = WIDTH / max(len(units), 1)
-    left, ps = 80.0, 220.0
+    npanel = len(units) + 1
+    block = WIDTH / npanel
+    left, ps = 78.0, min(230.0, block - 110.0)
     scene = Scene(WIDTH, ps + 150, title)
     scene.data["figure"] = "validation"
     scene.text(10, 20, title, FONT_TITLE, bold=True)
+    colour_of = {"good": ACCENT_OK, "poor": AFTER}
     for k, unit in enumerate(units):
         mine = [p for p in points if p.unit == unit]
-        top = max([p.predicted_rms for p in mine] + [p.measured_rms for p in mine] + [1e-9])
-        top *= 1.1
+        top = 1.1 * max([p.predicted_rms for p in mine] + [p.measured_rms for p in mine]
+                        + [1e-9])
         x0 = k * block + left
         panel = Panel.at(scene, (x0, 50, ps, ps), (0.0, top), (0.0, top))
         panel.frame("", f"predicted change, RMS ({unit})", f"measured change, RMS ({unit})")
         panel.line([0, top], [0, top], GREY, 1.0, (4, 3))
-        for p in mine:
-            colour = {"good": ACCENT_OK, "poor": AFTER}.get(p.verdict, TEXT)
-            panel.markers([p.predicted_rms], [p.measured_rms], "circle", colour, 5.0,
-                          {"case": p.case, "kind": p.kind, "verdict": p.verdict})
-        scene.text(x0 + ps + 14, 60, f"{len(mine)} map(s)", FONT_SMALL)
-    scene.legend(left, ps + 128, [("map agrees with the prediction", {"marker": "circle",
-                                                                      "colour": ACCENT_OK}),
-                                  ("map poor against the prediction", {"marker": "circle",
-                                                                       "colour": AFTER}),
-                                  ("identity (measured = predicted)",
-                                   {"stroke": GREY, "dash": (4, 3)})])
+        for verdict in sorted({p.verdict for p in mine}):
+            sel = [p for p in mine if p.verdict == verdict]
+            panel.markers([p.predicted_rms for p in sel], [p.measured_rms for p in sel],
+                          "circle", colour_of.get(verdict, TEXT), 5.0,
+                          {"verdict": verdict, "unit": unit, "maps": str(len(sel))})
+    frac = [p for p in points if p.fraction is not None]
+    x0 = len(units) * block + left + 40
+    pw = block - left - 60
+    if frac:
+        vals = [p.fraction for p in frac if p.fraction is not None]
+        ses = [p.fraction_se or 0.0 for p in frac]
+        lo, hi = limits(vals, [v - e for v, e in zip(vals, ses, strict=True)],
+                        [v + e for v, e in zip(vals, ses, strict=True)],
+                        [1.0 - tolerance, 1.0 + tolerance, 0.0])
+        panel = Panel.at(scene, (x0, 50, pw, ps), (lo, hi), (0.0, float(len(frac))))
+        panel.frame("", "measured ÷ predicted change", "", yticks=[], grid=False)
+        panel.band([1.0 - tolerance, 1.0 + tolerance], [0.0, 0.0],
+                   [float(len(frac))] * 2, ACCENT_OK, 0.12)
+        panel.vline(1.0, ACCENT_OK, 1.0, None)
+        panel.vline(0.0, GREY, 1.0, (4, 3))
+        for i, p in enumerate(frac):
+            y = len(frac) - i - 0.5
+            f, e = float(p.fraction or 0.0), float(p.fraction_se or 0.0)
+            colour = colour_of.get(p.verdict, TEXT)
+            panel.line([f - e, f + e], [y, y], colour, 1.5)
+            panel.markers([f], [y], "circle", colour, 4.5, {"map": p.label})
+        scene.text(x0, 42, "realised fraction per map (±1 SE)", FONT_SMALL, bold=True)
+    scene.legend(left, ps + 128, [
+        ("map agrees with the prediction", {"marker": "circle", "colour": ACCENT_OK}),
+        ("map poor against the prediction", {"marker": "circle", "colour": AFTER}),
+        ("identity (measured = predicted)", {"stroke": GREY, "dash": (4, 3)}),
+        (f"tolerance 1 ± {tolerance:g}", {"fill": "#d4eee6"})])
     return scene
-
-
 
 
 # --- one case: the figures, in order ---------------------------------------------------------
@@ -606,6 +645,8 @@ def case_figures(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
             "The prediction against maps measured after the plan: per map, the RMS of the "
             "measured change (later map − model before) against the RMS of the predicted "
             "change (model after − model before) at the same points; on the dashed identity "
-            "line the change came as predicted.",
-            validation_points_figure(checks, "Predicted against measured change, per map")))
+            "line the change came as predicted. Right: the measured change along the "
+            "predicted one (1: as predicted, 0: none), ±1 SE, and the tolerance of the check.",
+            validation_figure(checks, "The prediction against maps measured after the "
+                                      "plan")))
     return out

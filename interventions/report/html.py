@@ -47,6 +47,7 @@ td.t, th.t { text-align: left; }
 tr.treated td, tr.treated th { background: #fdf0e6; }
 .note { color: #844; font-size: 0.92em; }
 .warn { color: #a00; font-weight: bold; font-size: 0.95em; }
+.rests { font-size: 0.92em; }
 .legend, .nochange { color: #555; font-size: 0.88em; max-width: 70em; }
 .nochange { border-left: 3px solid #ccd; padding-left: 0.6em; }
 .inputs td, .inputs th { text-align: left; }
@@ -167,9 +168,16 @@ def _overview(results: Sequence[CaseResult], patient_ids: Mapping[str, str]) -> 
                else escape(code or "—"))
         out.append("<tr>")
         out.append(f'<td class="t">{who}</td>')
+        extra = [str(row.get("plan_label") or "")]
+        if row.get("fit_status") not in (None, "", "not fitted"):
+            extra.append(f"fit {row['fit_status']}")
+        if row.get("validation") not in (None, "", "not checked"):
+            extra.append(str(row["validation"]))
+        if row.get("warnings"):
+            extra.append(f"{len(str(row['warnings']).split(' | '))} warning(s)")
         out.append(f'<td class="t"><a href="#plan-{row["plan_id"]}">{row["plan_id"]}</a>'
-                   f'<br><span class="sub">{escape(str(row.get("plan_label") or ""))}</span>'
-                   "</td>")
+                   + "".join(f'<br><span class="sub">{escape(e)}</span>' for e in extra if e)
+                   + "</td>")
         out.append(f'<td class="t">{escape(str(row.get("kinds") or ""))}: '
                    f'{escape(" ".join(treated) or "—")}</td>')
         out.append(f'<td class="t">{lines([escape(f"{j} {d}") for j, d in stretches])}</td>')
@@ -252,6 +260,70 @@ def _clinical_tables(row: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def _iv(v: Any, interval: Any, signed: bool = False) -> str:
+    """'v [low, high]' to two decimals, '—' when a part is missing."""
+    f = "+.2f" if signed else ".2f"
+    lo, hi = interval if isinstance(interval, (list, tuple)) and len(interval) == 2 else (None,
+                                                                                      None)
+    if not all(isinstance(x, (int, float)) for x in (v, lo, hi)):
+        return "—"
+    return f"{v:{f}} [{lo:{f}}, {hi:{f}}]".replace("-", "−")
+
+
+def _trust(detail: Mapping[str, Any]) -> list[str]:
+    """What the prediction rests on: the fit, the guessed parameters, the 95% intervals, and
+    the check against maps measured after the plan."""
+    out: list[str] = []
+    fit = detail.get("fit")
+    if fit:
+        accepted = " (poor fit accepted by the user)" if fit.get("accepted_poor_fit") else ""
+        out.append(f'<p class="rests">Fit {fit.get("fit_id")} behind the model: status '
+                   f'{escape(str(fit.get("status")))}{accepted}; goodness of fit '
+                   f'{escape(str(fit.get("goodness_of_fit")))}.')
+    else:
+        out.append('<p class="rests">No fit behind this model (a synthetic or stored model): '
+                   "no fit uncertainty, nothing guessed by a fit.")
+    guesses = detail.get("unidentified") or []
+    if guesses:
+        names = ", ".join(f"{g['name']} = {g['value']:.3g}" + (" (held)" if
+                          g.get("held_at_unimpaired") else "") for g in guesses)
+        out.append(f" Not identified by the fit (the prediction rests on these guesses): "
+                   f"{escape(names)}.")
+    out.append("</p>")
+    iv = detail.get("intervals") or {}
+    metrics = iv.get("metrics") or {}
+    if metrics:
+        out.append('<table class="clinical intervals"><tr><th class="t">95% intervals '
+                   f'({escape(str(iv.get("samples")))} fit samples)</th><th>before</th>'
+                   "<th>after</th><th>change</th></tr>")
+        for name, m in metrics.items():
+            cells = [_iv(m.get(k), m.get(f"{k}_interval"), k == "change")
+                     for k in ("before", "after", "change")]
+            out.append(f'<tr><th class="t">{escape(name)} ({escape(str(m.get("unit")))})</th>'
+                       + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+        out.append("</table>")
+    elif iv.get("note"):
+        out.append(f'<p class="legend">No intervals: {escape(str(iv["note"]))}.</p>')
+    v = detail.get("validation")
+    if v:
+        if v.get("not_checked"):
+            out.append(f'<p class="legend">Prediction not checked: '
+                       f'{escape(str(v["not_checked"]).rstrip("."))}.</p>')
+        else:
+            cls = "warn" if v.get("verdict") == "prediction failed" else "rests"
+            out.append(f'<p class="{cls}">Checked against maps measured after the plan: '
+                       f'{escape(str(v.get("verdict")))}.</p><ul class="steps">')
+            for sess in v.get("sessions") or []:
+                why = "; ".join(str(x) for x in sess.get("reasons") or [])
+                out.append(f"<li>{escape(str(sess.get('session')))} "
+                           f"({escape(str(sess.get('date')))}, "
+                           f"{float(sess.get('weeks_after') or 0):.1f} weeks after): "
+                           f"{escape(str(sess.get('verdict')))}"
+                           + (f" - {escape(why)}" if why else "") + "</li>")
+            out.append("</ul>")
+    return out
+
+
 def _figure(key: str, caption: str, svg: str) -> str:
     if not svg:
         return f'<p class="nochange" data-figure="{escape(key)}">{escape(caption)}</p>'
@@ -324,8 +396,9 @@ def _case(r: CaseResult) -> list[str]:
                f"Sessions fitted: {escape(sess or 'none recorded')}. "
                f"Case date {escape(s.case_date)}.</p>")
     out += _steps(r.detail.get("steps") or [])
-    out += [f'<p class="warn">Warning: {escape(w)}.</p>'
+    out += [f'<p class="warn">Warning: {escape(w.rstrip("."))}.</p>'
             for w in r.detail.get("warnings") or []]
+    out += _trust(r.detail)
     out += _clinical_tables(r.row)
     out += [_figure(f.key, f.caption, f.svg) for f in r.figures]
     out += _case_table(r.row)

@@ -3,7 +3,8 @@
 For each case (:func:`case_trust`): the status of the fit behind the model before, the
 parameters it did not identify, the warnings of :mod:`fieldbank.interventions.guesses` (a step
 acting on a guessed parameter; an accepted poor fit), 95% intervals of the headline metrics
-(the fit's samples through the plan), and - when the plan was given and the patient has maps
+(the fit's samples through the plan; for every joint stretch, the probing motions), and - when
+the plan was given and the patient has maps
 measured after it - the check of :mod:`fieldbank.interventions.validate` per later session.
 The metrics table gets :data:`TRUST_COLUMNS`; the case's JSON gets everything.
 """
@@ -11,38 +12,53 @@ The metrics table gets :data:`TRUST_COLUMNS`; the case's JSON gets everything.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions
-from fieldbank.interventions.guesses import FitBasis, examine_basis
+from fieldbank.evaluate.probing import STRETCHES
+from fieldbank.interventions.guesses import FitBasis, Guesses, examine_basis
 from fieldbank.interventions.report.select import CaseSpec
-from fieldbank.interventions.validate import check_plan
+from fieldbank.interventions.validate import PlanValidation, check_plan
 
+#: Headline metrics with interval columns: metric of
+#: :func:`fieldbank.interventions.guesses.headline_metrics` -> (column stem, heading, unit).
+_INTERVALS: tuple[tuple[str, str, str, str], ...] = (
+    ("pull peak force", "pull_peak", "pull peak", "N"),
+    ("semi-ellipse peak force", "semi_ellipse_peak", "semi-ellipse peak", "N"),
+    *((f"{j} {d} {what} torque", f"{j}_{d}_{what}", f"{j} {d} {label}", "N·m")
+      for j, d in STRETCHES
+      for what, label in (("peak", "fast-stretch peak"), ("reflex", "reflex"))))
+#: Interval columns: headline metric -> (low column, high column).
+_INTERVAL_COLUMNS = {
+    metric: (f"{stem}_after_low_{'n' if unit == 'N' else 'n_m'}",
+             f"{stem}_after_high_{'n' if unit == 'N' else 'n_m'}")
+    for metric, stem, _, unit in _INTERVALS}
 #: Columns after the metrics: (key, heading).
 TRUST_COLUMNS: tuple[tuple[str, str], ...] = (
     ("fit_status", "fit status"),
     ("unidentified", "not identified by the fit"),
-    ("pull_peak_after_low_n", "pull peak after, 95% low (N)"),
-    ("pull_peak_after_high_n", "pull peak after, 95% high (N)"),
-    ("semi_ellipse_peak_after_low_n", "semi-ellipse peak after, 95% low (N)"),
-    ("semi_ellipse_peak_after_high_n", "semi-ellipse peak after, 95% high (N)"),
-    ("elbow_extension_reflex_after_low_n_m", "elbow ext. reflex after, 95% low (N·m)"),
-    ("elbow_extension_reflex_after_high_n_m", "elbow ext. reflex after, 95% high (N·m)"),
+    *((col, f"{head} after, 95% {side} ({unit})")
+      for metric, _, head, unit in _INTERVALS
+      for col, side in zip(_INTERVAL_COLUMNS[metric], ("low", "high"), strict=True)),
     ("validation", "prediction check"),
     ("validation_sessions", "checked against sessions"),
     ("validation_chi2_per_value_max", "check: largest χ²/n"),
     ("validation_r2_min", "check: lowest R²"),
     ("realised_change_fraction", "measured / predicted change"),
 )
-#: Interval columns: headline metric -> (low column, high column).
-_INTERVAL_COLUMNS = {
-    "pull peak force": ("pull_peak_after_low_n", "pull_peak_after_high_n"),
-    "semi-ellipse peak force": ("semi_ellipse_peak_after_low_n",
-                                "semi_ellipse_peak_after_high_n"),
-    "elbow extension reflex torque": ("elbow_extension_reflex_after_low_n_m",
-                                      "elbow_extension_reflex_after_high_n_m"),
-}
+
+
+@dataclass(frozen=True, eq=False)
+class CaseTrust:
+    """A case's :data:`TRUST_COLUMNS` values (``row``), its JSON parts (``detail``), and for
+    the figures the guesses (intervals, curve bands) and the check against later maps."""
+
+    row: dict[str, Any]
+    detail: dict[str, Any]
+    guesses: Guesses | None
+    validation: PlanValidation | None
 
 
 def basis_of(spec: CaseSpec) -> FitBasis | None:
@@ -53,13 +69,13 @@ def basis_of(spec: CaseSpec) -> FitBasis | None:
                                 spec.fitted_model_id == spec.base_model_id, spec.fit_report)
 
 
-def case_trust(spec: CaseSpec, cond: Conditions,
-               arms: ArmCache) -> tuple[dict[str, Any], dict[str, Any]]:
+def case_trust(spec: CaseSpec, cond: Conditions, arms: ArmCache) -> CaseTrust:
     """The case's :data:`TRUST_COLUMNS` values and its JSON parts (``fit``,
     ``unidentified``, ``warnings``, ``intervals``, ``validation``)."""
     row: dict[str, Any] = dict.fromkeys(k for k, _ in TRUST_COLUMNS)
     detail: dict[str, Any] = {}
     basis = basis_of(spec)
+    g = v = None
     if spec.plan is not None:
         g = examine_basis(basis, spec.before, spec.plan, cond, arms,
                           accept_poor_fit=spec.accept_poor_fit)
@@ -84,4 +100,4 @@ def case_trust(spec: CaseSpec, cond: Conditions,
             fr = [s.realised_fraction for s in v.sessions if s.realised_fraction is not None]
             row["realised_change_fraction"] = fr[0] if len(fr) == 1 else (
                 None if not fr else math.fsum(fr) / len(fr))
-    return row, detail
+    return CaseTrust(row, detail, g, v)
