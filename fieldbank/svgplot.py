@@ -809,11 +809,16 @@ _PT_PER_PX = 0.75  # CSS pixels are 1/96 in, points 1/72 in
 def _render_matplotlib(scene: Scene, fmt: str, scale: float = 2.0) -> bytes:
     """Draw the scene's primitives with matplotlib (Agg for PNG, its PDF backend for PDF) on
     a canvas of the scene's size; deterministic bytes (no software tag, no date)."""
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")
+    with matplotlib.rc_context({"lines.scale_dashes": False}):  # dashes in px, as in SVG
+        return _draw_matplotlib(scene, fmt, scale)
+
+
+def _draw_matplotlib(scene: Scene, fmt: str, scale: float) -> bytes:
+    import io
+
     from matplotlib.collections import EllipseCollection, PathCollection, PolyCollection
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle

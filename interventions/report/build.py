@@ -75,8 +75,20 @@ def compute_all(cases: list[CaseSpec], jobs: int,
         return list(wrap(it, len(cases)) if wrap else it), 1
     chunk = max(1, len(cases) // (jobs * 8))
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        it = pool.map(compute_case, cases, chunksize=chunk)
+        # the workers send back what they computed, not the case (its models, plan and later
+        # maps): the parent has it already
+        parts = pool.map(_computed, cases, chunksize=chunk)
+        it = (dataclasses.replace(p, spec=c) for c, p in zip(cases, parts, strict=True))
         return list(wrap(it, len(cases)) if wrap else it), jobs
+
+
+def _computed(spec: CaseSpec) -> CaseResult:
+    """:func:`compute_case` in a worker, its result without the case spec."""
+    return dataclasses.replace(compute_case(spec), spec=_NO_SPEC)
+
+
+#: Stands in for the case spec in a worker's result (the parent puts the real one back).
+_NO_SPEC: Any = None
 
 
 def metrics_csv(results: Iterable[CaseResult]) -> str:
