@@ -24,7 +24,7 @@ import shutil
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from datetime import date
+from datetime import date, datetime
 from pathlib import Path
 from typing import Any
 
@@ -150,7 +150,8 @@ def run_demo(out_dir: str | Path, home: str | Path | None = None, force: bool = 
         t = time.perf_counter()
         say("[6/7] report over every stored plan")
         rep = build_report(db, Selection(), res.report_dir, jobs=jobs or default_jobs(),
-                           progress=True, title="fieldbank demo report")
+                           progress=True, title="fieldbank demo report",
+                           stamp=datetime.now().astimezone().isoformat(timespec="seconds"))
         res.timings_s["report"] = time.perf_counter() - t
         say(f"wrote {rep.html} ({rep.n_cases} cases, {rep.jobs_used} process(es)), "
             f"{rep.csv.name}, {rep.json.name}")

@@ -80,7 +80,9 @@ def plot_fit(
                 ax.text(0.02, 0.02, f"R² = {r2[k]:.3f}", transform=ax.transAxes)
             ax.set_aspect("equal")
             ax.autoscale_view()
-            ax.plot([0.0], [0.0], "k+", markersize=10)  # the shoulder
+            # the shoulder, marked as in every field figure (fieldbank.fieldplot): a dot
+            ax.plot([0.0], [0.0], "o", color="#222222", markeredgecolor="white",
+                    markersize=7, label="shoulder")
             ax.set_xlabel("x (m)")
             ax.set_ylabel("y (m)")
             ax.legend(loc="upper right", fontsize=8)
