@@ -11,9 +11,9 @@ from click.testing import CliRunner
 
 from fieldbank.cli.main import COMMANDS, cli
 from fieldbank.evaluate.design import Stroke, equilibrium, severity_candidates
-from fieldbank.evaluate.probing import ProbePath
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
+from fieldbank.probepath import ProbePath
 from fieldbank.severity import synthesize
 from fieldbank.storage import Database
 
@@ -114,10 +114,7 @@ def test_classify_a_trace_file_with_a_plot(trace_file: Path, tmp_path: Path) -> 
     text = _run("probe", "classify", str(trace_file), "--levels", "mild,severe")
     assert "most probable: shoulder mild" in text.stdout and "next probe: stroke" in text.stdout
     # the suggested probe, performed on the same arm, and both recordings together
-    nxt = ProbePath(drawing["name"], drawing["description"], tuple(drawing["times_s"]),
-                    tuple((x, y) for x, y in drawing["points_m"]),
-                    tuple(drawing["shoulder_offset_m"]))
-    res = probe_path(synthesize({"shoulder": "mild"}), nxt, seed=1)
+    res = probe_path(synthesize({"shoulder": "mild"}), ProbePath.from_dict(drawing), seed=1)
     second = tmp_path / "next.h5"
     write_trace_h5(res.trace, second)
     r = _run("probe", "classify", str(trace_file), str(second), "--levels", "mild,severe",
