@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import logging
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -28,6 +29,7 @@ from fieldbank.haptic.station.launch import StationOptions
 from fieldbank.haptic.training import TrainingProtocol, accuracy_text
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.probepath import MAX_DRAWN_PROBES, read_probes
 
 
 def _pair(x: str | None, name: str) -> tuple[float, float]:
@@ -58,6 +60,16 @@ def protocol_named(text: str) -> TrainingProtocol:
         return TrainingProtocol.from_dict(json.loads(path.read_text(encoding="utf-8")))
     except ValueError as exc:
         raise click.BadParameter(f"{path}: {exc}", param_hint="--training-protocol") from None
+
+
+def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
+    """The protocol the station's 'Start training' begins: :func:`protocol_named`, with the
+    designed probes of ``probes_file`` (``fieldbank probe design --out``) as its further
+    probes when given."""
+    protocol = protocol_named(text)
+    if probes_file is None:
+        return protocol
+    return replace(protocol, extra_probes=read_probes(probes_file, MAX_DRAWN_PROBES))
 
 
 @click.command("serve")
@@ -103,6 +115,10 @@ def protocol_named(text: str) -> TrainingProtocol:
               "behind the patient.")
 @click.option("--training-protocol", default="seed", show_default=True,
               help="What the station's 'Start training' runs: seed, short, or a JSON file.")
+@click.option("--training-probes", type=click.Path(dir_okay=False, path_type=Path),
+              help="Designed probes the station's instructed training draws besides the "
+                   "seed's (the file 'fieldbank probe design --out' writes), in place of any "
+                   "the protocol names.")
 @json_option
 def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path | None,
           after_file: Path | None, before_severity: str | None, after_severity: str | None,
@@ -111,7 +127,8 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
           trace_dir: Path | None, socket_path: Path | None, db_url: str | None,
           patient: str | None, patient_note: str | None, no_db: bool, station: bool,
           station_host: str, station_port: int, station_allow_remote: bool,
-          station_view: str, training_protocol: str, as_json: bool) -> None:
+          station_view: str, training_protocol: str, training_probes: Path | None,
+          as_json: bool) -> None:
     """Run the real-time renderer on ROBOT with models A (before) and B (after).
 
     The session's trace is written to an HDF5 file in --trace-dir and recorded in the field
@@ -127,7 +144,9 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
     opts = None
     if station:
         opts = StationOptions(station_host, station_port, station_allow_remote, station_view,
-                              protocol_named(training_protocol).to_dict())
+                              station_protocol(training_protocol, training_probes).to_dict())
+    elif training_probes is not None:
+        raise click.UsageError("--training-probes is for the station's training; add --station")
     res = session.serve(
         robot, before, after, model_ids=ids, patient_code=patient, patient_note=patient_note,
         model_info=info, duration_s=duration_s, config=cfg,

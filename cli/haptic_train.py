@@ -18,6 +18,7 @@ from fieldbank.cli.haptic import socket_option
 from fieldbank.cli.lazy import LazyCommand, LazyGroup
 from fieldbank.cli.options import emit, json_option
 from fieldbank.haptic.client import ControlClient
+from fieldbank.probepath import MAX_DRAWN_PROBES, read_probes
 
 _RUN = "fieldbank.cli.haptic_train_run"
 #: subcommands that load the loop or the database, with their one-line help
@@ -46,8 +47,33 @@ def _state_text(st: dict[str, Any]) -> str:
             + (" - answer shoulder, elbow or both" if st.get("phase") == "assessment" else ""))
 
 
+def probes_option(f: Any) -> Any:
+    """``--probes FILE`` and ``--seed-probes/--no-seed-probes``: which probes instructed
+    training draws."""
+    f = click.option("--seed-probes/--no-seed-probes", default=True, show_default=True,
+                     help="Draw the seed's pull and semi-ellipse in instructed mode.")(f)
+    return click.option("--probes", "probes_file", type=click.Path(dir_okay=False,
+                                                                   path_type=Path),
+                        help="Also draw these designed probes (the file 'fieldbank probe "
+                             "design --out' writes; at most "
+                             f"{MAX_DRAWN_PROBES}); implies --instructed.")(f)
+
+
+def probe_choice(probes_file: Path | None, seed_probes: bool) -> dict[str, Any]:
+    """The protocol fields for ``--probes`` and ``--no-seed-probes``: read and checked here,
+    so a bad file is refused naming the file and the field before anything starts."""
+    out: dict[str, Any] = {}
+    if probes_file is not None:
+        out["extra_probes"] = [p.to_dict() for p in read_probes(probes_file, MAX_DRAWN_PROBES)]
+        out["instruction"] = "instructed"
+    if not seed_probes:
+        out["probes"] = []
+    return out
+
+
 @train.command("start")
 @click.option("--instructed", is_flag=True, help="Draw the probing paths to follow.")
+@probes_option
 @click.option("--short", is_flag=True, help="1 familiarisation round, 1 repetition of each "
               "group and severity (16 trials).")
 @click.option("--familiarisation-rounds", type=click.IntRange(0, 50), default=None,
@@ -62,14 +88,15 @@ def _state_text(st: dict[str, Any]) -> str:
               help="Order of the assessment trials (default: random).")
 @socket_option
 @json_option
-def train_start(instructed: bool, short: bool, familiarisation_rounds: int | None,
-                familiarisation_s: float | None, repetitions: int | None,
-                assessment_s: float | None, seed: int | None, socket_path: Path | None,
-                as_json: bool) -> None:
+def train_start(instructed: bool, probes_file: Path | None, seed_probes: bool, short: bool,
+                familiarisation_rounds: int | None, familiarisation_s: float | None,
+                repetitions: int | None, assessment_s: float | None, seed: int | None,
+                socket_path: Path | None, as_json: bool) -> None:
     """Start the training protocol on the running renderer (then 'train next')."""
     proto: dict[str, Any] = {"instruction": "instructed" if instructed else "non-instructed",
                              "seed": seed if seed is not None
                              else int.from_bytes(os.urandom(4), "little")}
+    proto.update(probe_choice(probes_file, seed_probes))
     if short:
         proto.update(familiarisation_rounds=1, assessment_repetitions=1)
     for k, v in (("familiarisation_rounds", familiarisation_rounds),

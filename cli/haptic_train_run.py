@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from fieldbank.cli.haptic_train import probe_choice, probes_option
 from fieldbank.cli.options import db_option, emit, json_option, open_db
 from fieldbank.files import write_atomic
 from fieldbank.haptic import trainee
@@ -29,6 +30,7 @@ def _say(msg: str) -> None:
 @click.command("simulate")
 @click.option("--instructed/--non-instructed", default=True, show_default=True,
               help="Follow the drawn probing paths, or explore freely.")
+@probes_option
 @click.option("--short", is_flag=True, help="1 familiarisation round, 1 repetition (16 trials).")
 @click.option("--familiarisation-rounds", type=click.IntRange(0, 50), default=None)
 @click.option("--repetitions", type=click.IntRange(0, 50), default=None)
@@ -40,19 +42,23 @@ def _say(msg: str) -> None:
 @db_option
 @click.option("--no-db", is_flag=True, help="Do not record the session in the database.")
 @json_option
-def simulate(instructed: bool, short: bool, familiarisation_rounds: int | None,
-             repetitions: int | None, noise_deg: float, seed: int, html_out: Path | None,
-             db_url: str | None, no_db: bool, as_json: bool) -> None:
+def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, short: bool,
+             familiarisation_rounds: int | None, repetitions: int | None, noise_deg: float,
+             seed: int, html_out: Path | None, db_url: str | None, no_db: bool,
+             as_json: bool) -> None:
     """Run the protocol with a simulated trainee on the simulated robot."""
     kw: dict[str, Any] = {"instruction": "instructed" if instructed else "non-instructed",
                           "seed": seed}
+    if probes_file is not None and not instructed:
+        raise click.UsageError("--probes draws probes to follow; it needs --instructed")
+    kw.update(probe_choice(probes_file, seed_probes))
     if short:
         kw.update(familiarisation_rounds=1, assessment_repetitions=1)
     if familiarisation_rounds is not None:
         kw["familiarisation_rounds"] = familiarisation_rounds
     if repetitions is not None:
         kw["assessment_repetitions"] = repetitions
-    protocol = TrainingProtocol(**kw)
+    protocol = TrainingProtocol.from_dict(kw)
     res = trainee.simulate(protocol, trainee.DirectionRule(noise_deg, seed), say=_say)
     out: dict[str, Any] = {"simulated_s": res.simulated_s, **res.result}
     if not no_db:

@@ -40,6 +40,7 @@ from fieldbank.haptic.identify import designed_vs_seed
 from fieldbank.haptic.probe import observation_from_trace
 from fieldbank.haptic.recording import read_trace_h5
 from fieldbank.params import JOINT_GROUPS, ArmParams
+from fieldbank.probepath import probes_document
 from fieldbank.severity import LEVELS, group_name, level_name
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -274,9 +275,8 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
                         limits=limits)
     doc = rep.to_dict(offset)
     if out is not None:
-        write_atomic(out, to_json({"format": "fieldbank-probes", "version": 1,
-                                   "probes": [m.path(offset).to_dict()
-                                              for m in rep.design.motions]}) + "\n")
+        write_atomic(out, to_json(probes_document([m.path(offset)
+                                                   for m in rep.design.motions])) + "\n")
         _say(f"probes: {out}")
     if plot_path is not None:
         _save_plot(probe_figure(rep.design.score, cands, "designed probes"), plot_path)

@@ -47,7 +47,6 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
 from fieldbank.haptic.errors import CommandError, HapticError
 from fieldbank.haptic.training import (
-    ProbePath,
     TrainingProtocol,
     TrainingSession,
     Trial,
@@ -55,6 +54,7 @@ from fieldbank.haptic.training import (
 )
 from fieldbank.model import Arm as CompiledArm
 from fieldbank.params import ArmParams
+from fieldbank.probepath import ProbePath
 
 if TYPE_CHECKING:  # typing only
     from fieldbank.sim import ArmSim

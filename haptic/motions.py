@@ -14,7 +14,7 @@ The seed's probing motions (Melendez-Calderon et al., Fig. 3):
 - circle: circles through the rest position at a set frequency, speed ramped in;
 - explore: free exploration, a seeded sum of slow sinusoids around the rest position;
 - path: any probe given as a polyline of hand positions with times (a designed stroke, the
-  seed's probes: :class:`fieldbank.evaluate.probing.ProbePath`), followed through a smooth
+  seed's probes: :class:`fieldbank.probepath.ProbePath`), followed through a smooth
   cubic Hermite interpolation of its points.
 
 Any motion can carry a seeded, smooth wander of the hand off the path (:func:`wander`): the

@@ -7,7 +7,7 @@ static field prediction of the model at the handle positions (:meth:`Arm.endpoin
 the rendering can be checked against the model.
 
 Any probe of :mod:`fieldbank.evaluate` - a designed stroke, the seed's pull or semi-ellipse -
-runs the same way (:func:`probe_path`): its :class:`~fieldbank.evaluate.probing.ProbePath`
+runs the same way (:func:`probe_path`): its :class:`~fieldbank.probepath.ProbePath`
 becomes the simulated operator's ``path`` motion, optionally with the hand's wander. A recorded
 trace becomes an :class:`~fieldbank.evaluate.classify.Observation` for the classifier
 (:func:`observation_from_trace`).
@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fieldbank.evaluate.classify import Observation
-from fieldbank.evaluate.probing import ProbeMotion, ProbePath
+from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
@@ -34,6 +34,7 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.probepath import ProbePath
 from fieldbank.redact import mask_url
 
 

@@ -48,7 +48,8 @@ from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import Trace
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.simrobot import SimDevice
-from fieldbank.haptic.training import ProbePath, TrainingProtocol
+from fieldbank.haptic.training import TrainingProtocol
+from fieldbank.probepath import ProbePath
 from fieldbank.validation import Interval, check_number
 
 #: Allowed range of each field of :class:`DirectionRule` and :class:`TraineeMotion`.
@@ -169,7 +170,7 @@ def _approach(x0: float, y0: float, path: ProbePath, m: TraineeMotion) -> ProbeP
     """Move from (x0, y0) to the path's start, hold, follow it, settle (one reference path)."""
     ts: list[float] = []
     ps: list[tuple[float, float]] = []
-    sx, sy = path.positions_m[0]
+    sx, sy = path.points_m[0]
     n = 20
     for k in range(n + 1):
         tau = k / n
@@ -177,12 +178,12 @@ def _approach(x0: float, y0: float, path: ProbePath, m: TraineeMotion) -> ProbeP
         ts.append(m.approach_s * tau)
         ps.append((x0 + (sx - x0) * s, y0 + (sy - y0) * s))
     t0 = m.approach_s + m.hold_s
-    for t, p in zip(path.times_s, path.positions_m, strict=True):
+    for t, p in zip(path.times_s, path.points_m, strict=True):
         ts.append(t0 + t - path.times_s[0])
         ps.append(p)
     ts.append(ts[-1] + m.settle_s)
     ps.append(ps[-1])
-    return ProbePath(path.name, tuple(ts), tuple(ps))
+    return ProbePath(path.name, path.description, tuple(ts), tuple(ps))
 
 
 class _Driver:
@@ -322,7 +323,8 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
                                      seed=protocol.seed * 100_003 + trial.index)
                     n = round(m.explore_s * rate_hz)
                     ts = tuple(k / rate_hz for k in range(0, n + 1, 5))
-                    path = ProbePath("explore", ts, tuple(wander(t)[:2] for t in ts))
+                    path = ProbePath("explore", "free exploration", ts,
+                                     tuple(wander(t)[:2] for t in ts))
                     directions.append(drive.follow(path, offset, 0.0, path.duration_s)[0])
                 if trial.phase == "familiarisation":
                     if protocol.instruction == "instructed":

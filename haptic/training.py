@@ -11,8 +11,8 @@ Melendez-Calderon et al., "Experimental protocol":
   answer is *shoulder*, *elbow* or *both* (bi-articular), with no time limit;
 - **instruction** - *non-instructed* trainees explore freely; *instructed* ones follow the
   probing motions drawn on the screen (the fast pull and the semi-ellipse,
-  :mod:`fieldbank.evaluate.probing`, and any further probe given as a polyline of hand positions
-  with timing and a name);
+  :mod:`fieldbank.evaluate.probing`, and any further probe - a designed one, e.g. from the file
+  ``fieldbank probe design --out`` writes - as a :class:`fieldbank.probepath.ProbePath`);
 - **results** - the confusion matrix of true against answered group and the accuracy per
   severity (:func:`summarise`), on the station's screen, in ``fieldbank haptic train results``
   and as a self-contained HTML section (:func:`results_html`).
@@ -40,6 +40,7 @@ from fieldbank.evaluate import probing
 from fieldbank.haptic.errors import CommandError
 from fieldbank.model import Arm
 from fieldbank.params import JOINT_GROUPS, ArmParams
+from fieldbank.probepath import MAX_DRAWN_PROBES, ProbePath
 from fieldbank.severity import LEVELS, group_name, level_name, synthesize
 from fieldbank.validation import Interval, check_number
 
@@ -53,10 +54,7 @@ PHASES: tuple[str, ...] = ("familiarisation", "assessment")
 PROBES: dict[str, Callable[[Arm], probing.ProbeMotion]] = {
     "pull": probing.pull, "semi-ellipse": probing.semi_ellipse,
 }
-#: Most points of one probe path kept for display (the path is resampled evenly in time).
-PATH_POINTS = 40
-MAX_EXTRA_PROBES = 8
-MAX_PROBE_POINTS = 2000
+MAX_EXTRA_PROBES = MAX_DRAWN_PROBES
 
 #: Allowed range of each numeric field of :class:`TrainingProtocol` (messages are generated).
 TRAINING_BOUNDS: dict[str, Interval] = {
@@ -68,94 +66,12 @@ TRAINING_BOUNDS: dict[str, Interval] = {
 }
 
 
-@dataclass(frozen=True)
-class ProbePath:
-    """A probing motion to draw and follow: hand positions (shoulder frame, m) with times (s).
-
-    The form the probing work exposes for designed probes; :func:`probe_paths` makes the seed's.
-    """
-
-    name: str
-    times_s: tuple[float, ...]
-    positions_m: tuple[tuple[float, float], ...]
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not 0 < len(self.name) <= 64:
-            raise ParameterError(f"a probe path needs a name of 1-64 characters; got "
-                                 f"{self.name!r}")
-        n = len(self.times_s)
-        if not 2 <= n <= MAX_PROBE_POINTS or len(self.positions_m) != n:
-            raise ParameterError(f"probe {self.name!r}: 2-{MAX_PROBE_POINTS} times and as many "
-                                 f"positions; got {n} and {len(self.positions_m)}")
-        for t in self.times_s:
-            check_number("times_s", t, Interval(0.0, 600.0, "s"), what=f"probe {self.name!r}")
-        if any(b < a for a, b in zip(self.times_s, self.times_s[1:], strict=False)):
-            raise ParameterError(f"probe {self.name!r}: times must not decrease")
-        for p in self.positions_m:
-            if len(p) != 2:
-                raise ParameterError(f"probe {self.name!r}: positions are (x, y) pairs in m")
-            for v in p:
-                check_number("positions_m", v, Interval(-2.0, 2.0, "m"),
-                             what=f"probe {self.name!r}")
-
-    @classmethod
-    def from_motion(cls, motion: probing.ProbeMotion) -> ProbePath:
-        """The path of a :class:`fieldbank.evaluate.probing.ProbeMotion` (or any object with
-        ``name``, ``times_s`` (T,) and ``positions_m`` (T, 2))."""
-        return cls(str(motion.name), tuple(float(t) for t in motion.times_s),
-                   tuple((float(x), float(y)) for x, y in motion.positions_m))
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> ProbePath:
-        try:
-            return cls(d["name"], tuple(float(t) for t in d["times_s"]),
-                       tuple((float(p[0]), float(p[1])) for p in d["positions_m"]))
-        except (KeyError, TypeError, IndexError, ValueError) as exc:
-            raise ParameterError(f"a probe path is {{name, times_s, positions_m}}: {exc}") \
-                from None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "times_s": list(self.times_s),
-                "positions_m": [list(p) for p in self.positions_m]}
-
-    @property
-    def duration_s(self) -> float:
-        return self.times_s[-1] - self.times_s[0]
-
-    def at(self, t_s: float) -> tuple[float, float, float, float]:
-        """Position and velocity (x, y, vx, vy) at ``t_s`` from the path's start (linear
-        between samples; held at the ends)."""
-        ts, ps = self.times_s, self.positions_m
-        t = ts[0] + t_s
-        if t <= ts[0]:
-            return ps[0][0], ps[0][1], 0.0, 0.0
-        if t >= ts[-1]:
-            return ps[-1][0], ps[-1][1], 0.0, 0.0
-        lo, hi = 0, len(ts) - 1
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if ts[mid] <= t:
-                lo = mid
-            else:
-                hi = mid
-        dt = ts[hi] - ts[lo]
-        if dt <= 0.0:
-            return ps[hi][0], ps[hi][1], 0.0, 0.0
-        s = (t - ts[lo]) / dt
-        (x0, y0), (x1, y1) = ps[lo], ps[hi]
-        return x0 + s * (x1 - x0), y0 + s * (y1 - y0), (x1 - x0) / dt, (y1 - y0) / dt
-
-    def display(self, points: int = PATH_POINTS) -> dict[str, Any]:
-        """The path for a screen: at most ``points`` positions, evenly spaced in time."""
-        n = min(points, len(self.times_s))
-        pts = [list(self.at(self.duration_s * k / (n - 1))[:2]) for k in range(n)]
-        return {"name": self.name, "duration_s": self.duration_s, "points_m": pts}
-
-
 def probe_paths(arm: Arm, names: Sequence[str],
                 extra: Sequence[ProbePath] = ()) -> tuple[ProbePath, ...]:
-    """The named probing motions for ``arm`` (from its rest hand position), then ``extra``."""
-    return tuple(ProbePath.from_motion(PROBES[n](arm)) for n in names) + tuple(extra)
+    """The named probing motions for ``arm`` (from its rest hand position), then ``extra``;
+    all in the shoulder frame (the renderer places them on the robot)."""
+    return (tuple(PROBES[n](arm).path() for n in names)
+            + tuple(p.in_shoulder_frame() for p in extra))
 
 
 @dataclass(frozen=True)
@@ -227,7 +143,9 @@ class TrainingProtocol:
     probes : tuple of str
         Probing motions drawn in instructed mode (:data:`PROBES`).
     extra_probes : tuple of ProbePath
-        Further probes to draw and follow (designed probes), shoulder frame.
+        Further probes to draw and follow (designed probes, e.g. read with
+        :func:`fieldbank.probepath.read_probes`); each is drawn and followed relative to the
+        shoulder (its points minus its shoulder offset), wherever the renderer puts it.
     seed : int
         Seeds the order of the assessment trials.
     body_mass_kg, height_m : float
@@ -278,6 +196,11 @@ class TrainingProtocol:
         if len(self.extra_probes) > MAX_EXTRA_PROBES:
             raise ParameterError(f"at most {MAX_EXTRA_PROBES} extra probes; got "
                                  f"{len(self.extra_probes)}")
+        if not all(isinstance(p, ProbePath) for p in self.extra_probes):
+            raise ParameterError("training extra_probes: probe paths (ProbePath)")
+        if self.instruction == "instructed" and not self.probes and not self.extra_probes:
+            raise ParameterError("instructed training draws probes to follow; give the seed's "
+                                 f"({', '.join(PROBES)}) or further ones (extra_probes)")
         if self.side not in ("right", "left"):
             raise ParameterError(f"The 'side' training parameter must be 'right' or 'left'; "
                                  f"got {self.side!r} instead.")
@@ -347,8 +270,9 @@ class TrainingProtocol:
         if "extra_probes" in kw:
             if not isinstance(kw["extra_probes"], (list, tuple)):
                 raise ParameterError("training extra_probes: a list of probe paths")
-            kw["extra_probes"] = tuple(ProbePath.from_dict(p) for p in
-                                       kw["extra_probes"][:MAX_EXTRA_PROBES + 1])
+            kw["extra_probes"] = tuple(
+                ProbePath.from_dict(p, f"training extra_probes[{k}]")
+                for k, p in enumerate(kw["extra_probes"][:MAX_EXTRA_PROBES + 1]))
         return cls(**kw)
 
 

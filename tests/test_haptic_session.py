@@ -17,6 +17,7 @@ import serial
 from click.testing import CliRunner
 
 from fieldbank.cli.haptic import haptic
+from fieldbank.cli.main import cli
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.haptic import motions
 from fieldbank.haptic.abx import AbxSession
@@ -30,6 +31,7 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.replay import rerun
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
+from fieldbank.probepath import ProbePath, probes_document
 from fieldbank.severity import parse_severity_options, synthesize
 from tests.haptic_util import rest_hand, severe_shoulder, unimpaired
 
@@ -486,6 +488,40 @@ def test_live_commands_load_nothing_heavy(served, argv: list[str]) -> None:  # t
                         json.dumps(HEAVY)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stderr.rsplit("LOADED ", 1)[1]) == []
+
+
+def test_train_start_draws_designed_probes_and_refuses_a_bad_file(served,  # type: ignore[no-untyped-def]
+                                                                  tmp_path: Path) -> None:
+    """``train start --probes FILE`` reads the file 'fieldbank probe design --out' writes,
+    loads nothing heavy doing so, and the trials draw the designed probe (relative to the
+    shoulder) after the seed's; a bad file is refused, naming the file and the field, before
+    anything starts."""
+    _rd, sock = served
+    probe = ProbePath("designed", "a short stroke toward the body", (0.0, 0.3, 0.6),
+                      ((0.12, 0.65), (0.12, 0.6), (0.12, 0.55)), (0.02, 0.1))
+    good = tmp_path / "probes.json"
+    good.write_text(json.dumps(probes_document([probe])), encoding="utf-8")
+    args = ["haptic", "train", "start", "--short", "--probes", str(good), "--socket", str(sock),
+            "--json"]
+    r = subprocess.run([sys.executable, "-c", _LOADED_AT_EXIT, json.dumps(args),
+                        json.dumps(HEAVY)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stderr.rsplit("LOADED ", 1)[1]) == []
+    assert json.loads(r.stdout)["instruction"] == "instructed"
+    run = CliRunner()
+    st = json.loads(run.invoke(haptic, ["train", "next", "--socket", str(sock), "--json"])
+                    .stdout)
+    assert [p["name"] for p in st["paths"]] == ["pull", "semi-ellipse", "designed"]
+    assert st["paths"][2]["points_m"][0] == pytest.approx([0.10, 0.55])
+    assert run.invoke(haptic, ["train", "stop", "--socket", str(sock)]).exit_code == 0
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**probes_document([probe]), "version": 7}), encoding="utf-8")
+    r = run.invoke(cli, ["haptic", "train", "start", "--probes", str(bad), "--socket",
+                         str(sock)])
+    assert r.exit_code == 1
+    assert f"{bad}: version: 7 is newer than this fieldbank reads (1)" in r.output
+    st = json.loads(run.invoke(haptic, ["status", "--socket", str(sock), "--json"]).stdout)
+    assert st["training"]["done"] and st["training"]["abandoned"]  # the stopped one, still
 
 
 def test_registered_help_lines_are_the_commands_own() -> None:

@@ -13,6 +13,7 @@ from fieldbank.cli.main import COMMANDS, cli
 from fieldbank.evaluate.design import Stroke, equilibrium, severity_candidates
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
+from fieldbank.probepath import ProbePath
 from fieldbank.severity import synthesize
 from fieldbank.storage import Database
 
@@ -84,17 +85,45 @@ def trace_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_classify_a_trace_file_with_a_plot(trace_file: Path, tmp_path: Path) -> None:
+    """A mild shoulder probed once is most probably a mild shoulder, not yet for certain; the
+    next probe the classifier suggests, performed on the same arm, settles it.
+
+    On the per-group scale the mild shoulder and the mild elbow feel alike on this stroke: it
+    extends the shoulder by ≈ 13° and flexes the elbow by ≈ 26°, stretching the shoulder
+    flexors by 0.04 m × 0.23 rad ≈ 9 mm and the elbow extensors by 0.025 m × 0.45 rad ≈ 11 mm;
+    Km 2,344 N/m against 600 N/m in one or the other gives ≈ 3.4 N at the hand for both, ≈ 25°
+    apart, |ΔF| ≈ 1.5 N at the end. Over the 0.4 s stroke (minimum jerk, ∫s² = 0.39) and the
+    0.2 s after it, at σ = 2 N and τ = 50 ms: D ≈ (8 × 0.39 + 4) × 1.5² / 8 ≈ 2 nats, odds
+    ≈ 7 : 1 - so a probability near 0.9, short of the 0.99 at which the classifier stops.
+    """
     png = tmp_path / "classified.png"
     r = _run("probe", "classify", str(trace_file), "--levels", "mild,severe", "--json",
              "--plot", str(png))
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
+    assert doc["best"]["candidate"] == "shoulder mild"
+    assert 0.7 < doc["best"]["probability"] < 0.99
+    assert doc["group_posterior"]["shoulder"] == pytest.approx(doc["best"]["probability"],
+                                                               abs=1e-3)
+    assert doc["candidates"][1]["candidate"] == "elbow mild"  # the runner-up
+    assert 1.0 < doc["log10_likelihood_ratio"] * 2.302585 < 4.0  # ≈ 2 nats
+    assert "still in play" in doc["next_reason"]
+    drawing = doc["next_probe"]["probes"][0]["drawing"]
+    assert drawing["frame"] == "robot"
+    assert png.stat().st_size > 10_000
+    text = _run("probe", "classify", str(trace_file), "--levels", "mild,severe")
+    assert "most probable: shoulder mild" in text.stdout and "next probe: stroke" in text.stdout
+    # the suggested probe, performed on the same arm, and both recordings together
+    res = probe_path(synthesize({"shoulder": "mild"}), ProbePath.from_dict(drawing), seed=1)
+    second = tmp_path / "next.h5"
+    write_trace_h5(res.trace, second)
+    r = _run("probe", "classify", str(trace_file), str(second), "--levels", "mild,severe",
+             "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
     assert doc["best"]["candidate"] == "shoulder mild" and doc["best"]["probability"] > 0.99
     assert doc["group_posterior"]["shoulder"] > 0.99
     assert doc["next_probe"] is None and doc["next_reason"].startswith("none needed")
-    assert png.stat().st_size > 10_000
-    text = _run("probe", "classify", str(trace_file), "--levels", "mild,severe")
-    assert "most probable: shoulder mild" in text.stdout
 
 
 def test_classify_an_exported_csv_in_the_robot_frame(trace_file: Path, tmp_path: Path) -> None:
@@ -117,18 +146,30 @@ def test_classify_errors_say_what_and_where(tmp_path: Path) -> None:
 
 
 def test_paths_reports_both_paradigms() -> None:
+    """Both paradigms' sets, in JSON and in words, and whether they separate every pair - for
+    three candidates, exactly when every pair is ≥ 1 JND apart on one of the paths (two paths
+    cover what any choice of paths covers). On the per-group scale the fixed paths leave the
+    severe elbow and bi-articular arms within a JND of orientation (tests/test_probe_design.py),
+    and the read-out says so."""
     r = _run("probe", "paths", "--json")
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
     assert [p["name"] for p in doc["probes"]] == ["pull", "semi-ellipse", "circle 4 cm",
                                                   "circle 6 cm", "circle 8 cm"]
-    assert doc["orientation_set"] == {"paths": ["semi-ellipse"], "separates_all": True}
-    assert len(doc["minmax_set"]["paths"]) <= 2
+    text = _run("probe", "paths").stdout
+    for what, key, measure in (("min-max", "minmax_set", "minmax_jnd"),
+                               ("orientation", "orientation_set", "orientation_jnd")):
+        chosen = doc[key]
+        assert len(chosen["paths"]) <= 2
+        assert chosen["separates_all"] == all(p[measure] >= 1.0 for p in doc["pairs"])
+        words = "separates every pair" if chosen["separates_all"] else \
+            "does not separate every pair"
+        assert f"{what} paradigm: {', '.join(chosen['paths']) or 'no path'} {words}" in text
+    pair = next(p for p in doc["pairs"] if p["pair"] == ["elbow severe", "biarticular severe"])
+    assert pair["orientation_jnd"] < 1.0 and not doc["orientation_set"]["separates_all"]
     feats = doc["probes"][0]["features"]
     assert {f["candidate"] for f in feats} == {"shoulder severe", "elbow severe",
                                                "biarticular severe"}
-    r = _run("probe", "paths")
-    assert "orientation paradigm: semi-ellipse separates every pair" in r.stdout
 
 
 def test_bad_options_are_clean_errors() -> None:

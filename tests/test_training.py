@@ -21,7 +21,6 @@ from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.trainee import DirectionRule, DirectionTrainee, simulate
 from fieldbank.haptic.training import (
-    ProbePath,
     TrainingProtocol,
     TrainingSession,
     probe_paths,
@@ -30,6 +29,7 @@ from fieldbank.haptic.training import (
 )
 from fieldbank.model import Arm
 from fieldbank.params import JOINT_GROUPS, ArmParams
+from fieldbank.probepath import ProbePath
 from fieldbank.severity import classify
 
 
@@ -79,17 +79,22 @@ def test_protocol_bounds_name_the_field(kw: dict[str, object], message: str) -> 
 def test_protocol_json_round_trip_refuses_unknown_keys() -> None:
     p = TrainingProtocol(instruction="instructed", familiarisation_rounds=1,
                          severities=("mild", "severe"),
-                         extra_probes=(ProbePath("designed", (0.0, 0.5), ((0.1, 0.5),
-                                                                          (0.1, 0.4))),))
+                         extra_probes=(ProbePath("designed", "a stroke", (0.0, 0.5),
+                                                 ((0.1, 0.5), (0.1, 0.4)), (0.0, 0.1)),))
     assert TrainingProtocol.from_dict(p.to_dict()) == p
+    # a protocol written with the earlier form of a probe (shoulder frame) still reads
+    old = {**p.to_dict(), "extra_probes": [{"name": "designed", "times_s": [0.0, 0.5],
+                                            "positions_m": [[0.1, 0.4], [0.1, 0.3]]}]}
+    assert TrainingProtocol.from_dict(old).extra_probes == (
+        ProbePath("designed", "", (0.0, 0.5), ((0.1, 0.4), (0.1, 0.3))),)
     with pytest.raises(ParameterError, match="unknown training parameter"):
         TrainingProtocol.from_dict({"speed": 3})
 
 
 def test_probe_paths_are_the_seed_probes_and_accept_designed_ones() -> None:
     arm = Arm.from_params(ArmParams.from_anthropometry())
-    pull = ProbePath.from_motion(probing.pull(arm))
-    assert pull.positions_m[0] == pytest.approx(tuple(arm.rest_position()))
+    pull = probing.pull(arm).path()
+    assert pull.points_m[0] == pytest.approx(tuple(arm.rest_position()))
     # the pull goes 15 cm toward the body (−y) in 0.3 s (fieldbank.evaluate.probing)
     x, y, vx, vy = pull.at(pull.duration_s)
     assert (vx, vy) == (0.0, 0.0)  # held at the end
@@ -99,16 +104,22 @@ def test_probe_paths_are_the_seed_probes_and_accept_designed_ones() -> None:
     mid = pull.at(0.15)
     assert mid[1] == pytest.approx(arm.rest_position()[1] - 0.075, abs=2e-3)
     assert mid[3] < -0.5 and pull.at(-1.0)[2:] == (0.0, 0.0)
-    designed = ProbePath("designed: diagonal", (0.0, 0.4), ((0.08, 0.55), (0.0, 0.45)))
+    # a designed probe drawn for a robot whose shoulder sits at (0.05, 0.1) is drawn and
+    # followed relative to the shoulder
+    designed = ProbePath("designed: diagonal", "a diagonal stroke", (0.0, 0.4),
+                         ((0.13, 0.65), (0.05, 0.55)), (0.05, 0.1))
     tr = TrainingSession(TrainingProtocol(instruction="instructed", familiarisation_rounds=1,
                                           extra_probes=(designed,)))
     paths = probe_paths(arm, tr.protocol.probes, tr.protocol.extra_probes)
+    assert np.array(paths[2].points_m) == pytest.approx(np.array([[0.08, 0.55], [0.0, 0.45]]))
+    assert paths[2].shoulder_offset_m == (0.0, 0.0)
     tr.begin(0, 0.0, paths)
     shown = tr.state(0.0)["paths"]
     assert [p["name"] for p in shown] == ["pull", "semi-ellipse", "designed: diagonal"]
     assert all(2 <= len(p["points_m"]) <= 40 for p in shown)
+    assert shown[2]["points_m"][0] == pytest.approx([0.08, 0.55])
     with pytest.raises(ParameterError, match="times must not decrease"):
-        ProbePath("bad", (0.0, 1.0, 0.5), ((0, 0), (0, 0), (0, 0)))
+        ProbePath("bad", "", (0.0, 1.0, 0.5), ((0, 0), (0, 0), (0, 0)))
 
 
 def test_the_session_state_machine_blinds_and_records() -> None:

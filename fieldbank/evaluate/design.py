@@ -137,6 +137,11 @@ ROM_MARGIN_DEG = 10.0
 
 #: Samples per path during the search; reports use :data:`PROBE_SAMPLES`.
 DESIGN_SAMPLES = 16
+#: Samples per path at which the limits of a path the search keeps are checked: every point of
+#: the delivered polyline (:data:`PROBE_SAMPLES`) and of the search's samples, and three more
+#: between neighbouring points of the polyline - so that no execution of the drawn path leaves
+#: the workspace, the range of motion or the speed limit between the points scored.
+LIMIT_SAMPLES = 4 * math.lcm(DESIGN_SAMPLES - 1, PROBE_SAMPLES - 1) + 1
 #: Grid points polished with nlopt, and the evaluations each polish may take.
 POLISH_STARTS = 2
 POLISH_EVALS = 30
@@ -1277,12 +1282,25 @@ def _combine(sep: dict[str, FloatArray], kl: FloatArray,
     return {k: np.maximum(psep[k][:, None], v) for k, v in sep.items()}, both
 
 
+def _within_limits(ctx: _Context, fam: _Family, start: FloatArray, v: FloatArray,
+                   samples: int = LIMIT_SAMPLES) -> np.ndarray:
+    """Which of S paths (rows of v) keep every limit in every execution of the motion noise,
+    sampled at ``samples`` points: mask (S,).
+
+    At :data:`LIMIT_SAMPLES` the check holds for every point of the drawn polyline and of the
+    search; at :data:`DESIGN_SAMPLES` (points among those) it is a cheap necessary condition.
+    """
+    pos, vel, t = fam.make(start, v, samples)
+    pe, ve, _ = _execute(pos, vel, t, ctx.deltas, fam.closed)
+    return feasible(ctx.candidates, pe, ve, ctx.limits)
+
+
 def _robust_score(ctx: _Context, fam: _Family, start: FloatArray, v: FloatArray,
                   prev: tuple[dict[str, FloatArray], FloatArray] | None) -> FloatArray:
-    """Score of S paths (rows of v) added to the set ``prev``; infeasible paths score −1."""
+    """Score of S paths (rows of v) added to the set ``prev``; paths that break a limit score
+    −1 (a feasible path scores ≥ 0)."""
+    ok = _within_limits(ctx, fam, start, v)
     pos, vel, t = fam.make(start, v, DESIGN_SAMPLES)
-    pe, ve, _ = _execute(pos, vel, t, ctx.deltas, fam.closed)
-    ok = feasible(ctx.candidates, pe, ve, ctx.limits)
     out = np.full(v.shape[0], -1.0)
     if ok.any():
         sep, kl = ctx.evaluate(pos[ok], vel[ok], t[ok], fam.closed, robust=True)
@@ -1296,8 +1314,8 @@ def _search_one(ctx: _Context, fam: _Family, start: FloatArray,
                 starts: int, evals: int) -> tuple[FloatArray | None, float]:
     grid = fam.grid(ctx.limits)
     pos, vel, t = fam.make(start, grid, DESIGN_SAMPLES)
-    pe, ve, _ = _execute(pos, vel, t, ctx.deltas, fam.closed)
-    ok = feasible(ctx.candidates, pe, ve, ctx.limits)
+    # the coarse check filters the grid; a start is checked at full resolution before polish
+    ok = _within_limits(ctx, fam, start, grid, DESIGN_SAMPLES)
     if not ok.any():
         return None, -np.inf
     grid = grid[ok]
@@ -1310,6 +1328,8 @@ def _search_one(ctx: _Context, fam: _Family, start: FloatArray,
         if fam.name == "stroke" and any(
                 abs(((g[0] - c[0]) + 180.0) % 360.0 - 180.0) < 30.0 for c in chosen):
             continue
+        if not _within_limits(ctx, fam, start, g[None])[0]:
+            continue
         chosen.append(g)
         if len(chosen) == starts:
             break
@@ -1320,6 +1340,8 @@ def _search_one(ctx: _Context, fam: _Family, start: FloatArray,
             (g, float(_robust_score(ctx, fam, start, g[None], prev)[0]))
         if val > best:
             best_v, best = v, val
+    if best < 0.0:  # no start kept every limit
+        return None, -np.inf
     if best_v is not None and fam.name == "stroke":
         best_v = best_v.copy()
         best_v[0] = ((best_v[0] + 180.0) % 360.0) - 180.0

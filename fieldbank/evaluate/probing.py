@@ -15,9 +15,10 @@ The force felt is the model's endpoint force F(x, v) along the path with the pat
 a quasi-static kinematic probe (the handle imposes the motion; the reflex sees the velocity;
 the arm's inertia is left out, as the clinician's feel of tone is about the muscles).
 
-Every motion can be handed on as a :class:`ProbePath` (:meth:`ProbeMotion.path`): a name, a
-plain-words description and a polyline of hand positions in the robot frame with their times —
-what a station draws and what the simulated operator of :mod:`fieldbank.haptic` follows.
+Every motion can be handed on as a :class:`fieldbank.probepath.ProbePath`
+(:meth:`ProbeMotion.path`): a name, a plain-words description and a polyline of hand positions
+in the robot frame with their times - what a station draws and what the simulated operator of
+:mod:`fieldbank.haptic` follows.
 
 Joint stretches complement the strokes with the clinic's single-joint tests (Modified Ashworth,
 Tardieu): one joint swept through its whole range, the other held at the rest posture, once slowly
@@ -55,6 +56,7 @@ import numpy as np
 
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS
+from fieldbank.probepath import ProbePath
 
 PULL_DISTANCE_M = 0.15
 PULL_DURATION_S = 0.3
@@ -81,41 +83,6 @@ def min_jerk(tau: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 def _min_jerk(samples: int) -> tuple[FloatArray, FloatArray]:
     return min_jerk(np.linspace(0.0, 1.0, samples))
-
-
-@dataclass(frozen=True)
-class ProbePath:
-    """A probe as plain data: a polyline of hand positions with timing, in the robot frame.
-
-    Attributes
-    ----------
-    name : str
-        Short name ("pull", "stroke 1").
-    description : str
-        What to do, in words.
-    times_s : tuple of float, s
-        Time of each point from the start of the motion (increasing, first 0).
-    points_m : tuple of (x, y), m
-        Hand positions in the robot frame (shoulder frame + ``shoulder_offset_m``).
-    shoulder_offset_m : (x, y), m
-        Where the shoulder is in robot coordinates.
-    """
-
-    name: str
-    description: str
-    times_s: tuple[float, ...]
-    points_m: tuple[tuple[float, float], ...]
-    shoulder_offset_m: tuple[float, float] = (0.0, 0.0)
-
-    @property
-    def duration_s(self) -> float:
-        return self.times_s[-1] if self.times_s else 0.0
-
-    def to_dict(self) -> dict[str, object]:
-        return {"name": self.name, "description": self.description, "frame": "robot",
-                "shoulder_offset_m": list(self.shoulder_offset_m),
-                "times_s": [round(t, 6) for t in self.times_s],
-                "points_m": [[round(x, 6), round(y, 6)] for x, y in self.points_m]}
 
 
 @dataclass(frozen=True, eq=False)
