@@ -139,6 +139,8 @@ def _decimals(step: float) -> int:
 
 def tick_label(v: float, ticks: Sequence[float]) -> str:
     """A tick's label with as many decimals as the tick step needs; '−' as minus sign."""
+    if v == 0:
+        return "0"
     step = min((abs(b - a) for a, b in itertools.pairwise(ticks)), default=1.0)
     text = f"{v:.{_decimals(step) if step > 0 else 0}f}"
     return text.replace("-", "−")
