@@ -16,10 +16,12 @@ import numpy as np
 import pytest
 
 from fieldbank import fieldplot, svgplot
+from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES, lengthening_direction
 from fieldbank.interventions import Botulinum, Lengthening, Plan
 from fieldbank.interventions.course import stretch_course, time_course
 from fieldbank.interventions.report.compute import ALL_COLUMNS, STRETCH_READOUTS
+from fieldbank.interventions.report.figures import case_figures
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.severity import COMPONENTS, synthesize
@@ -286,3 +288,20 @@ def test_no_figure_uses_tiny_type(cohort: dict[str, Any]) -> None:
 def test_figures_stay_within_the_size_budget(cohort: dict[str, Any]) -> None:
     for plan_id in cohort["ids"]:
         assert len(_section(cohort["html"], plan_id).encode("utf-8")) < 100_000
+
+
+def test_probes_unchanged_by_the_plan_are_said_not_drawn() -> None:
+    """Botulinum into the elbow flexors leaves the seed's pull and semi-ellipse (which shorten
+    them) as they were: two identical curves would read as "the plan does nothing", so the
+    report says so in words; a lengthening changes the passive force along them: drawn."""
+    before = Arm.from_params(synthesize({"elbow": "severe"}))
+    for plan, drawn in ((Plan.of(Botulinum({"ef": 150.0}, weeks_since=6.0)), False),
+                        (Plan.of(Lengthening(group="ef", delta_m=0.01)), True)):
+        after = Arm.from_params(plan.apply(before.params))
+        c = compare(before, after, Conditions.standard(before))
+        diff = max(float(np.max(np.abs(a.force_n - b.force_n))) for _, b, a in c.probe_rows())
+        assert (diff > fieldplot.NO_CHANGE) is drawn
+        figs = {f.key: f for f in case_figures(before, after, c, plan)}
+        assert (figs["probes"].scene is not None) is drawn
+        if not drawn:
+            assert "no change" in figs["probes"].caption

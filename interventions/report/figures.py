@@ -626,9 +626,23 @@ def case_figures(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
         "(position-dependent, contracture) and dynamic grade (velocity-dependent, spasticity), "
         "on the seed's levels (Weber fraction 0.6 below a MAS-4 boundary of 10× unimpaired).",
         severity_figure(c.severity_rows())))
-    out.append(CaseFigure(
-        "probes", "Force felt along the seed's probing motions (Fig. 3b, 3c), before and "
-        "after, one force axis.", probes_figure(c.probe_rows())))
+    probe_rows = c.probe_rows()
+    probe_diff = max((float(np.max(np.abs(a.force_n - b.force_n))) for _, b, a in probe_rows),
+                     default=0.0)
+    if probe_diff < fieldplot.NO_CHANGE:
+        # the same curve twice would read as "the plan does nothing"; say what these motions
+        # miss instead (the stretches above show what changes)
+        out.append(CaseFigure(
+            "probes",
+            "Force felt along the seed's probing motions ("
+            + ", ".join(n for n, _, _ in probe_rows)
+            + f"): no change (largest |ΔF| {probe_diff:.2g} N): these motions do not engage "
+            "what the plan changes; the joint stretches above show it.",
+            None))
+    else:
+        out.append(CaseFigure(
+            "probes", "Force felt along the seed's probing motions (Fig. 3b, 3c), before and "
+            "after, one force axis.", probes_figure(probe_rows)))
     if course is not None:
         names = [f"{j} {dd}" for (j, dd) in {GRADED_STRETCH[g] for g in course.effect}]
         names = [n for n, _, _ in c.stretch_rows() if n in names]
