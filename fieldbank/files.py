@@ -65,6 +65,20 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
     parent directories are created.
     """
     p = Path(path)
+    tmp = _write_temp(p, data)
+    try:
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    fsync_dir(p.parent)
+    return p
+
+
+def _write_temp(p: Path, data: bytes | str) -> str:
+    """``data`` (text is UTF-8) written and synced to a new temporary file beside ``p``, with
+    the mode a plain ``open`` would give it (0666 less the umask); its path. Missing parent
+    directories are created; nothing is left behind on failure."""
     p.parent.mkdir(parents=True, exist_ok=True)
     raw = data.encode("utf-8") if isinstance(data, str) else data
     fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.")
@@ -74,12 +88,10 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
             fh.write(raw)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, p)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    fsync_dir(p.parent)
-    return p
+    return tmp
 
 
 def _kind(mode: int) -> str:
@@ -165,15 +177,8 @@ def write_new(path: str | Path, data: bytes | str, force: bool = False) -> Path:
             raise FileExistsError(errno.EEXIST, f"exists and is {_kind(st.st_mode)}", str(p))
         if not force:
             raise FileExistsError(errno.EEXIST, "exists; give --force to replace it", str(p))
-    p.parent.mkdir(parents=True, exist_ok=True)
-    raw = data.encode("utf-8") if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.")
+    tmp = _write_temp(p, data)
     try:
-        os.chmod(tmp, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(raw)
-            fh.flush()
-            os.fsync(fh.fileno())
         if force:
             os.replace(tmp, p)  # replaces the directory entry; never follows a link
         else:
