@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
@@ -13,6 +13,34 @@ from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.severity import synthesize
+
+
+class MemoryPort:
+    """A serial port in memory: the test appends incoming bytes to ``data`` (or gives them at
+    the start); each poll offers ``chunks()`` of them (all, by default); writes are accepted."""
+
+    def __init__(self, data: bytes = b"", chunks: Callable[[], int] | None = None) -> None:
+        self.data = bytearray(data)
+        self.chunks = chunks
+
+    @property
+    def in_waiting(self) -> int:
+        n = len(self.data)
+        return n if self.chunks is None else min(n, self.chunks())
+
+    def read(self, n: int = 1) -> bytes:
+        out = bytes(self.data[:n])
+        del self.data[:n]
+        return out
+
+    def write(self, b: bytes) -> int:
+        return len(b)
+
+    def fileno(self) -> int:
+        raise OSError("no fd")
+
+    def close(self) -> None:
+        pass
 
 
 def unimpaired() -> ArmParams:

@@ -21,38 +21,13 @@ from fieldbank.haptic.link import RESYNC_FRAMES, RobotLink
 from fieldbank.haptic.protocol import FaultCode
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import Mode
-from tests.haptic_util import rest_hand, severe_shoulder
-
-
-class ScriptedPort:
-    """A port whose incoming bytes the test appends tick by tick; writes are accepted."""
-
-    def __init__(self) -> None:
-        self.data = bytearray()
-
-    @property
-    def in_waiting(self) -> int:
-        return len(self.data)
-
-    def read(self, n: int = 1) -> bytes:
-        out = bytes(self.data[:n])
-        del self.data[:n]
-        return out
-
-    def write(self, b: bytes) -> int:
-        return len(b)
-
-    def fileno(self) -> int:
-        raise OSError("no fd")
-
-    def close(self) -> None:
-        pass
+from tests.haptic_util import MemoryPort, rest_hand, severe_shoulder
 
 
 class Device:
     """Frames as a robot numbers them, plus forgeries."""
 
-    def __init__(self, port: ScriptedPort, x: float, y: float) -> None:
+    def __init__(self, port: MemoryPort, x: float, y: float) -> None:
         self.port = port
         self.seq = 0
         self.x, self.y = x, y
@@ -67,7 +42,7 @@ class Device:
 
 def _renderer() -> tuple[Renderer, Device]:
     p = severe_shoulder()
-    port = ScriptedPort()
+    port = MemoryPort()
     x, y = rest_hand(p)
     dev = Device(port, x + 0.03, y - 0.02)  # off the rest position: the arm pulls (force > 0)
     link = RobotLink(port)  # type: ignore[arg-type]

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -20,7 +19,7 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimDevice
 from fieldbank.params import ArmParams
-from tests.haptic_util import pty_session, severe_shoulder
+from tests.haptic_util import MemoryPort, pty_session, severe_shoulder
 
 INJECT_AT = 800  # tick at which the fault is injected (handle moving, force well above zero)
 
@@ -194,32 +193,6 @@ def test_force_limit_holds_for_adversarial_models(kind: str) -> None:
 
 
 # --- fuzzing --------------------------------------------------------------------------------
-class _FuzzPort:
-    """A port that returns the given bytes in random-size pieces, accepts all writes."""
-
-    def __init__(self, data: bytes, chunks: Callable[[], int]) -> None:
-        self.data = bytearray(data)
-        self.chunks = chunks
-
-    @property
-    def in_waiting(self) -> int:
-        return min(len(self.data), self.chunks())
-
-    def read(self, n: int = 1) -> bytes:
-        out = bytes(self.data[:n])
-        del self.data[:n]
-        return out
-
-    def write(self, b: bytes) -> int:
-        return len(b)
-
-    def fileno(self) -> int:
-        raise OSError("no fd")
-
-    def close(self) -> None:
-        pass
-
-
 @settings(max_examples=40, deadline=None)
 @given(st.binary(min_size=0, max_size=3000), st.integers(1, 64))
 def test_random_bytes_on_the_link_never_crash_the_renderer(data: bytes, chunk: int) -> None:
@@ -227,7 +200,7 @@ def test_random_bytes_on_the_link_never_crash_the_renderer(data: bytes, chunk: i
     from fieldbank.haptic import protocol as P
 
     head = P.encode_frame(P.MsgType.STATE, 0, P.STATE_FMT.pack(0, 0.05, 0.5, 0.0, 0.0, 1, 0))
-    link = RobotLink(_FuzzPort(head + data, lambda: chunk))  # type: ignore[arg-type]
+    link = RobotLink(MemoryPort(head + data, lambda: chunk))  # type: ignore[arg-type]
     p = severe_shoulder()
     rd = Renderer(link, p, p, RendererConfig(), clock=VirtualClock())
     trace = rd.run(0.3)
