@@ -14,7 +14,7 @@ import click
 
 from fieldbank import modelsource
 from fieldbank.cli.haptic import resolve_sources, socket_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.cli.options import db_option, emit, json_option, open_db, say, xy_metres
 from fieldbank.files import write_atomic
 from fieldbank.haptic import session
 from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
@@ -30,20 +30,6 @@ from fieldbank.haptic.training import TrainingProtocol, accuracy_text
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.probepath import MAX_DRAWN_PROBES, read_probes
-
-
-def _pair(x: str | None, name: str) -> tuple[float, float]:
-    if x is None:
-        return (0.0, 0.0)
-    try:
-        a, b = (float(v) for v in x.split(","))
-    except ValueError:
-        raise click.BadParameter(f"{name} must read X,Y in metres; got {x!r}") from None
-    return (a, b)
-
-
-def _say(msg: str) -> None:
-    click.echo(msg, err=True)
 
 
 def protocol_named(text: str) -> TrainingProtocol:
@@ -139,7 +125,7 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
                                                (before_severity, after_severity),
                                                (before_id, after_id))
     cfg = RendererConfig(rate_hz=rate_hz, crossfade_s=crossfade_s,
-                         shoulder_offset_m=_pair(shoulder_offset, "--shoulder-offset"),
+                         shoulder_offset_m=xy_metres(shoulder_offset, "--shoulder-offset"),
                          arm_on_start=arm_on_start)
     opts = None
     if station:
@@ -152,7 +138,7 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
         model_info=info, duration_s=duration_s, config=cfg,
         safety=SafetyConfig(force_limit_n=force_limit_n), socket_path=socket_path,
         station=opts, trace_dir=trace_dir or session.default_trace_dir(),
-        db=None if no_db else (lambda: open_db(db_url)), say=_say)
+        db=None if no_db else (lambda: open_db(db_url)), say=say)
     summary, trace = res.summary(), res.trace
     st = trace.stats.get("period_error_us", {})
     emit(summary, as_json,
@@ -250,7 +236,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
 def sim_robot(motion: str, mode: str, start: str | None) -> None:
     """Run the simulated robot on a pty and print the port to give to 'serve --robot'."""
     if start:
-        x0, y0 = _pair(start, "--start")
+        x0, y0 = xy_metres(start, "--start")
     else:  # the rest hand position of the default (unimpaired) arm
         x0, y0 = (float(v) for v in Arm.from_params(ArmParams.from_anthropometry())
                   .rest_position())

@@ -9,7 +9,7 @@ from typing import Any
 import click
 
 from fieldbank.cli.haptic_train import probe_choice, probes_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.cli.options import db_option, emit, json_option, open_db, say
 from fieldbank.files import write_atomic
 from fieldbank.haptic import trainee
 from fieldbank.haptic.dbsink import DatabaseTraceSink
@@ -21,10 +21,6 @@ from fieldbank.haptic.training import (
     results_page,
     summarise,
 )
-
-
-def _say(msg: str) -> None:
-    click.echo(msg, err=True)
 
 
 @click.command("simulate")
@@ -59,7 +55,7 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
     if repetitions is not None:
         kw["assessment_repetitions"] = repetitions
     protocol = TrainingProtocol.from_dict(kw)
-    res = trainee.simulate(protocol, trainee.DirectionRule(noise_deg, seed), say=_say)
+    res = trainee.simulate(protocol, trainee.DirectionRule(noise_deg, seed), say=say)
     out: dict[str, Any] = {"simulated_s": res.simulated_s, **res.result}
     if not no_db:
         with open_db(db_url) as db:

@@ -50,3 +50,28 @@ def emit_json(data: Any) -> None:
 def emit(data: Any, as_json: bool, human: str) -> None:
     """``data`` as JSON with ``--json``, else the human text."""
     click.echo(to_json(data) if as_json else human)
+
+
+def say(msg: str) -> None:
+    """A message for the person at the terminal: on stderr, so stdout stays the output."""
+    click.echo(msg, err=True)
+
+
+def xy_metres(text: str | None, name: str) -> tuple[float, float]:
+    """``X,Y`` in metres from the option ``name`` (0,0 when not given)."""
+    if text is None:
+        return (0.0, 0.0)
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        raise click.BadParameter(f"{name} must read X,Y in metres; got {text!r}") from None
+    return (a, b)
+
+
+def option_group(*opts: Callable[[F], F]) -> Callable[[F], F]:
+    """Several click options as one decorator, listed in ``--help`` in the order given."""
+    def apply(f: F) -> F:
+        for o in reversed(opts):
+            f = o(f)
+        return f
+    return apply

@@ -10,7 +10,15 @@ from typing import Any, TypeVar
 import click
 
 from fieldbank import modelsource, plotting
-from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.cli.options import (
+    db_option,
+    emit,
+    json_option,
+    open_db,
+    option_group,
+    say,
+    xy_metres,
+)
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.classify import PREDICTORS, Classification, Observation, classify
@@ -47,18 +55,6 @@ F = TypeVar("F", bound=Callable[..., Any])
 ALL_LEVELS = ("very mild", "mild", "moderate", "severe")
 
 
-def _say(msg: str) -> None:
-    click.echo(msg, err=True)
-
-
-def _pair(text: str | None, name: str) -> tuple[float, float]:
-    if text is None:
-        return (0.0, 0.0)
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        raise click.BadParameter(f"{name} must read X,Y in metres; got {text!r}") from None
-    return (a, b)
 
 
 def _list(text: str | None, canon: Callable[[str], str], every: tuple[str, ...]) -> list[str]:
@@ -89,9 +85,7 @@ def candidate_options(f: F) -> F:
         click.option("--side", type=click.Choice(["right", "left"]),
                      help="Side of the synthetic arms (default right)."),
     ]
-    for o in reversed(opts):
-        f = o(f)
-    return f
+    return option_group(*opts)(f)
 
 
 def noise_options(f: F) -> F:
@@ -116,9 +110,7 @@ def noise_options(f: F) -> F:
         click.option("--free-exploration", is_flag=True,
                      help="Judge magnitudes with the free-exploration Weber fraction 0.6."),
     ]
-    for o in reversed(opts):
-        f = o(f)
-    return f
+    return option_group(*opts)(f)
 
 
 def limit_options(f: F) -> F:
@@ -133,9 +125,7 @@ def limit_options(f: F) -> F:
         click.option("--shoulder-offset", metavar="X,Y",
                      help="Shoulder position in robot coordinates, m (default 0,0)."),
     ]
-    for o in reversed(opts):
-        f = o(f)
-    return f
+    return option_group(*opts)(f)
 
 
 def build_candidates(groups: str, levels: str | None, unimpaired: bool,
@@ -177,7 +167,7 @@ def build_noise(force_sd_n: float, correlation_s: float, direction_sd_deg: float
 
 def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
                  shoulder_offset: str | None) -> tuple[ProbeLimits, tuple[float, float]]:
-    offset = _pair(shoulder_offset, "--shoulder-offset")
+    offset = xy_metres(shoulder_offset, "--shoulder-offset")
     box = None
     if workspace is not None:
         try:
@@ -192,7 +182,7 @@ def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
 
 def _save_plot(fig: Any, path: Path) -> None:
     plotting.save(fig, path)
-    _say(f"plot: {path}")
+    say(f"plot: {path}")
 
 
 # --- text read-outs ---------------------------------------------------------------------------
@@ -277,7 +267,7 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
     if out is not None:
         write_atomic(out, to_json(probes_document([m.path(offset)
                                                    for m in rep.design.motions])) + "\n")
-        _say(f"probes: {out}")
+        say(f"probes: {out}")
     if plot_path is not None:
         _save_plot(probe_figure(rep.design.score, cands, "designed probes"), plot_path)
     arm_side = "left" if cands[0].arm.mirror else "right"
@@ -449,7 +439,7 @@ def trials_cmd(groups: str, levels: str, reps: int, draws: int, max_probes: int,
     rep, res = designed_vs_seed(
         severity_candidates(gs, ls), groups=gs, levels=ls, repetitions=reps, noise_draws=draws,
         noise=noise, perception=perception, criterion=criterion, max_probes=max_probes,
-        seed=rng_seed, progress=lambda k, n: _say(f"trial {k}/{n}") if k % 60 == 0 else None)
+        seed=rng_seed, progress=lambda k, n: say(f"trial {k}/{n}") if k % 60 == 0 else None)
     doc = {"designed": rep.design.to_dict(), "seed_probes": rep.seed.to_dict(),
            "trials": res.to_dict()}
     head = ("designed: " + "; ".join(p.describe() for p in rep.design.paths)
