@@ -8,9 +8,7 @@ it, so there a missing browser fails instead of skipping).
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -18,6 +16,7 @@ import numpy as np
 import pytest
 
 from fieldbank.storage import Database
+from tests.browser_util import chromium
 from tests.report_helpers import run_cli, store_cohort
 
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -25,16 +24,6 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--disable-dev-shm-usage", "--hide-scrollbars")
 #: A4 with the page's 10 mm side margins, in CSS pixels (96 per inch).
 A4_CONTENT_PX = (210.0 - 2 * 10.0) / 25.4 * 96.0
-
-
-def _chromium() -> str:
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    if exe is None:
-        if os.environ.get("FIELDBANK_REQUIRE_BROWSER") == "1":
-            pytest.fail("FIELDBANK_REQUIRE_BROWSER=1 but no chromium on PATH "
-                        "(apt-get install -y chromium).")
-        pytest.skip("chromium not installed (apt-get install -y chromium)")
-    return exe
 
 
 def _png_pixels(path: Path) -> np.ndarray:
@@ -46,7 +35,7 @@ def _png_pixels(path: Path) -> np.ndarray:
 
 @pytest.mark.slow
 def test_a_20_patient_report_in_chromium(tmp_path: Path) -> None:
-    exe = _chromium()
+    exe = chromium()
     from playwright.sync_api import sync_playwright
 
     url = f"sqlite:///{tmp_path / 'cohort.sqlite3'}"

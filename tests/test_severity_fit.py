@@ -4,6 +4,7 @@ written as lab CSV files, ingested, fitted, and graded on the severity scale."""
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -14,11 +15,28 @@ from fieldbank.cli.fit import fit
 from fieldbank.cli.ingest import ingest
 from fieldbank.cli.whatif import whatif
 from fieldbank.fitting.synthetic import synthetic_patient
+from fieldbank.maps import FieldMap
 from fieldbank.params import ArmParams
 from fieldbank.severity import synthesize
 
 #: Stiffness positions per map (each static and at ±1 m/s), as the recovery tests use.
 N_STIFFNESS = 16
+
+
+def _ingested(tmp_path: Path, maps: Sequence[FieldMap], patient: str) -> str:
+    """The maps written as lab CSV files and ingested through the CLI into a new database of
+    ``patient``, session "pre"; the database URL."""
+    files = []
+    for k, m in enumerate(maps):
+        path = tmp_path / f"map{k}.csv"
+        path.write_text(m.to_csv(), encoding="utf-8")
+        files.append(str(path))
+    url = f"sqlite:///{tmp_path / 'fieldbank.sqlite3'}"
+    storage.Database.open(url).add_patient(patient, 75.0, 1.75, "right")
+    res = CliRunner().invoke(ingest, ["--db", url, "--patient", patient, "--session", "pre",
+                                      *files])
+    assert res.exit_code == 0, res.output
+    return url
 
 
 @pytest.mark.parametrize("level", ["severe", "moderate"])
@@ -30,16 +48,8 @@ def test_reflex_only_elbow_is_graded_dynamic_after_ingest_and_fit(tmp_path: Path
     patient = synthetic_patient(truth, seed=4, n_stiffness=N_STIFFNESS, patient="SPAS")
     kinds = [m.kind for m in patient.maps]
     assert "postural" in kinds and any(m.velocity_m_per_s != (0.0, 0.0) for m in patient.maps)
-    files = []
-    for k, m in enumerate(patient.maps):
-        path = tmp_path / f"map{k}.csv"
-        path.write_text(m.to_csv(), encoding="utf-8")
-        files.append(str(path))
-    url = f"sqlite:///{tmp_path / 'fieldbank.sqlite3'}"
-    storage.Database.open(url).add_patient("SPAS", 75.0, 1.75, "right")
+    url = _ingested(tmp_path, patient.maps, "SPAS")
     runner = CliRunner()
-    res = runner.invoke(ingest, ["--db", url, "--patient", "SPAS", "--session", "pre", *files])
-    assert res.exit_code == 0, res.output
     res = runner.invoke(fit, ["SPAS", "--db", url, "--json"])
     assert res.exit_code == 0, res.output
     report = json.loads(res.stdout)
@@ -64,16 +74,8 @@ def test_reflex_only_elbow_is_graded_dynamic_after_ingest_and_fit(tmp_path: Path
 def test_postural_only_fit_flags_the_reflex_grades(tmp_path: Path) -> None:
     truth = synthesize({"elbow": "moderate"})
     patient = synthetic_patient(truth, seed=2, moving=False, patient="STAT")
-    files = []
-    for k, m in enumerate(patient.maps):
-        path = tmp_path / f"map{k}.csv"
-        path.write_text(m.to_csv(), encoding="utf-8")
-        files.append(str(path))
-    url = f"sqlite:///{tmp_path / 'fieldbank.sqlite3'}"
-    storage.Database.open(url).add_patient("STAT", 75.0, 1.75, "right")
+    url = _ingested(tmp_path, patient.maps, "STAT")
     runner = CliRunner()
-    assert runner.invoke(ingest, ["--db", url, "--patient", "STAT", "--session", "pre",
-                                  *files]).exit_code == 0
     report = json.loads(runner.invoke(fit, ["STAT", "--db", url, "--json"]).stdout)
     ef = report["severity"]["ef"]
     assert ef["passive"]["level"] == "moderate" and not ef["passive"]["unidentified"]

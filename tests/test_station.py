@@ -12,7 +12,6 @@ import asyncio
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import threading
@@ -35,6 +34,7 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.snapshot import FIELDS, SnapshotReader, SnapshotWriter
 from fieldbank.haptic.station.launch import StationProcess
 from fieldbank.storage import Database
+from tests.browser_util import chromium
 from tests.haptic_util import severe_shoulder
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -233,16 +233,6 @@ def test_the_station_binds_locally_unless_told(tmp_path: Path) -> None:
 
 
 # --- the page in a real browser ---------------------------------------------------------------
-def _chromium() -> str:
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    if exe is None:
-        if os.environ.get("FIELDBANK_REQUIRE_BROWSER") == "1":
-            pytest.fail("FIELDBANK_REQUIRE_BROWSER=1 but no chromium on PATH "
-                        "(apt-get install -y chromium).")
-        pytest.skip("chromium not installed (apt-get install -y chromium)")
-    return exe
-
-
 class Serve:
     """``fieldbank haptic serve --station`` in its own process, as a clinician starts it."""
 
@@ -306,7 +296,7 @@ def _wait(page, expr: str, timeout_s: float = 10.0) -> object:  # type: ignore[n
 
 
 def test_the_station_page_in_chromium(tmp_path: Path) -> None:
-    exe = _chromium()
+    exe = chromium()
     from playwright.sync_api import sync_playwright
 
     serve = Serve(tmp_path)
