@@ -17,14 +17,13 @@ Run: python benchmarks/bench_probe_design.py [--trials]
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.timing import timeit
 from fieldbank.evaluate.design import (
     NoiseModel,
     design,
@@ -36,15 +35,6 @@ from fieldbank.evaluate.design import (
 TARGET_S = 2.0
 LEVELS = ("very mild", "mild", "moderate", "severe")
 
-
-def timeit(fn: Callable[[], object], repeat: int) -> float:
-    fn()  # warm-up
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def main() -> None:
@@ -68,9 +58,9 @@ def main() -> None:
     print(f"target: <= {TARGET_S:g} s per search; baseline: scoring the seed's pull + "
           "semi-ellipse on the same candidates")
     for label, cands, opts, targeted in cases:
-        base = timeit(lambda c=cands: score_probes(c, seed_probes(c)), 5)
+        base, _ = timeit(lambda c=cands: score_probes(c, seed_probes(c)), 5)
         found = design(cands, **opts)  # type: ignore[arg-type]
-        t = timeit(lambda c=cands, o=opts: design(c, **o), 3)  # type: ignore[arg-type]
+        t, _ = timeit(lambda c=cands, o=opts: design(c, **o), 3)  # type: ignore[arg-type]
         grid = design(cands, polish_evals=0, **opts)  # type: ignore[arg-type]
         crit = str(opts.get("criterion", "feel"))
         ok = ("OK" if t <= TARGET_S else "OVER") if targeted else "no target"

@@ -15,16 +15,14 @@ Run: python benchmarks/bench_whatif.py
 
 from __future__ import annotations
 
-import statistics
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np
 
+from benchmarks.timing import timeit
 from fieldbank.evaluate import ArmCache
 from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.fitting.uncertainty import FitSamples
@@ -36,16 +34,6 @@ from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.severity import synthesize
-
-
-def timeit(fn: Callable[[], object], repeat: int) -> tuple[float, float]:
-    fn()  # warm-up
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), max(times)
 
 
 def main() -> None:
