@@ -146,7 +146,10 @@ def compute_case(spec: CaseSpec) -> CaseResult:
     static, moving = c.fields[0], c.fields[min(1, len(c.fields) - 1)]
     probes = {n: (b, a) for n, b, a in c.probe_rows()}
     sev_b, sev_a = c.before.severity, c.after.severity
-    warnings = dose_warnings(plan) if plan is not None else []
+    trust = case_trust(spec, cond, arms)
+    # what the prediction rests on first, then the plan's own warnings (dose above the limit)
+    warnings = (list(trust.detail.get("warnings", ()))
+                + (dose_warnings(plan) if plan is not None else []))
     treated = treated_groups(plan)
     row: dict[str, Any] = {
         "patient": spec.patient_code or "",
@@ -172,7 +175,7 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "semi_ellipse_peak_after_n": probes["semi-ellipse"][1].peak_force_n,
         "severity_before": _levels(sev_b),
         "severity_after": _levels(sev_a),
-        "warnings": "; ".join(warnings),
+        "warnings": " | ".join(warnings),
         **_clinical(c),
     }
     detail: dict[str, Any] = {
@@ -194,13 +197,8 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         "timecourse": course.to_dict() if course is not None else None,
         "warnings": warnings,
     }
-    trust = case_trust(spec, cond, arms)
     row.update(trust.row)
-    detail.update(trust.detail)
-    # what the prediction rests on first, then the plan's own warnings (dose above the limit)
-    every = list(trust.detail.get("warnings", ())) + list(warnings)
-    detail["warnings"] = every
-    row["warnings"] = " | ".join(every)
+    detail.update({k: v for k, v in trust.detail.items() if k != "warnings"})
     who = f"{spec.patient_code or '-'} plan {spec.plan_id}"
     checks = (tuple(check_points(trust.validation, who)) if trust.validation is not None
               else ())

@@ -83,7 +83,6 @@ def case_trust(spec: CaseSpec, cond: Conditions, arms: ArmCache) -> CaseTrust:
         row["fit_status"] = (basis.status + (" (accepted)" if g.accepted_poor_fit else "")
                              if basis is not None else "not fitted")
         row["unidentified"] = " ".join(x.name for x in g.guesses)
-        row["warnings"] = " | ".join(g.warnings)
         by_metric = {i.metric: i for i in g.intervals}
         for metric, (lo, hi) in _INTERVAL_COLUMNS.items():
             if metric in by_metric:
