@@ -387,8 +387,13 @@ def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (),
                        + ", ".join(kinks) + " (the stretch reflex starts or stops firing at a "
                        "measured point)")
     skip = set(unidentified)
-    near = [s.names[k] for a, k in enumerate(fit) if s.names[k] not in skip and min(
-        theta[k] - s.lower[k], s.upper[k] - theta[k]) < BOUND_SDS * max(sd_gn[a], floor[a])]
+    near = []
+    for a, k in enumerate(fit):
+        lower, upper = float(s.lower[k]), float(s.upper[k])
+        bound = lower if theta[k] - lower <= upper - theta[k] else upper
+        if s.names[k] not in skip and abs(theta[k] - bound) < BOUND_SDS * max(sd_gn[a],
+                                                                             floor[a]):
+            near.append(f"{s.names[k]} = {theta[k]:.3g} (bound {bound:.3g})")
     if near:
         reasons.append("within 2 SD of a bound: " + ", ".join(near))
     use_boot = method == "bootstrap" or (method == "auto" and bool(reasons))
