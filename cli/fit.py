@@ -10,20 +10,27 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
+from fieldbank.cli.choices import (
+    FIT_ALGORITHMS,
+    FIT_DEFAULT_ALGORITHM,
+    FIT_DEFAULT_PRIOR_WEIGHT,
+    FIT_KINDS,
+    UNCERTAINTY_DEFAULT_METHOD,
+    UNCERTAINTY_DEFAULT_REPLICATES,
+    UNCERTAINTY_METHODS,
+)
 from fieldbank.cli.options import db_option, emit_json, json_option
-from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
-from fieldbank.fitting.plot import plot_fit
-from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
-from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
-from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
-StoreFactory = Callable[[str | None], FitStore]
+if TYPE_CHECKING:  # typing only: the library loads when a command runs
+    from fieldbank.fitting.records import FitOutcome, FitStore
+
+StoreFactory = Callable[[str | None], "FitStore"]
 
 
 def _store(ctx: click.Context, db_url: str | None) -> FitStore:
@@ -44,6 +51,8 @@ def _num(v: object, fmt: str = ".3g") -> str:
 def fit_quality_lines(report: Mapping[str, Any]) -> list[str]:
     """Status, goodness of fit per map and the parameters with their 95% intervals, from a
     stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`)."""
+    from fieldbank.fitting.space import ParamSpace
+
     lines = [f"  status: {report.get('status')}"]
     gof = report.get("goodness_of_fit")
     if isinstance(gof, Mapping):
@@ -122,18 +131,19 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @click.command("fit")
 @click.argument("patient")
 @click.option("--session", default=None, help="Fit the maps of this session only.")
-@click.option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
+@click.option("--algorithm", type=click.Choice(list(FIT_ALGORITHMS)), default=FIT_DEFAULT_ALGORITHM,
               show_default=True, help="nlopt global+local, or the dual annealing baseline.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--fit", "fit_kinds", default="km,alpha,beta", show_default=True,
               help=f"Comma-separated parameter kinds to fit ({', '.join(FIT_KINDS)}).")
-@click.option("--prior-weight", type=float, default=DEFAULT_PRIOR_WEIGHT, show_default=True)
+@click.option("--prior-weight", type=float, default=FIT_DEFAULT_PRIOR_WEIGHT, show_default=True)
 @click.option("--max-evals", type=click.IntRange(min=10), default=None)
-@click.option("--uncertainty", type=click.Choice(list(METHODS)), default=DEFAULT_METHOD,
+@click.option("--uncertainty", type=click.Choice(list(UNCERTAINTY_METHODS)),
+              default=UNCERTAINTY_DEFAULT_METHOD,
               show_default=True,
               help="Gauss-Newton where it holds else a parametric bootstrap ('auto'), or one "
                    "of the two always.")
-@click.option("--replicates", type=click.IntRange(min=2), default=DEFAULT_REPLICATES,
+@click.option("--replicates", type=click.IntRange(min=2), default=UNCERTAINTY_DEFAULT_REPLICATES,
               show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Write measured against fitted fields to this .png or .svg.")
@@ -144,6 +154,10 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
         fit_kinds: str, prior_weight: float, max_evals: int | None, uncertainty: str,
         replicates: int, plot_path: str | None, as_json: bool, db_url: str | None) -> None:
     """Fit PATIENT's arm model to the patient's measured maps and store it."""
+    from fieldbank.fitting import ArmFitter
+    from fieldbank.fitting.plot import plot_fit
+    from fieldbank.fitting.records import fit_patient
+
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
 
     def progress(n: int, best: float) -> None:
@@ -190,6 +204,8 @@ def models() -> None:
 def models_list(ctx: click.Context, patient: str | None, as_json: bool,
                 db_url: str | None) -> None:
     """List models with their origin and parent."""
+    from fieldbank.fitting.records import model_summary
+
     rows = list(_store(ctx, db_url).list_models(patient))
     if as_json:
         emit_json([model_summary(m) for m in rows])

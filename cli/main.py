@@ -49,6 +49,8 @@ COMMANDS: dict[str, LazyCommand] = {
     "validate": C("fieldbank.cli.validate", "validate",
                   "Check predictions against maps measured after the plan; --loo: leave maps "
                   "out of a fit."),
+    "config": C("fieldbank.cli.config", "config",
+                "Settings: fieldbank.toml, environment variables and their defaults."),
     "demo": C("fieldbank.cli.demo", "demo",
               "Run the whole product once on synthetic sample data, saying what it does."),
 }

@@ -8,7 +8,9 @@ switch``, ``--help`` - start at once.
 
 from __future__ import annotations
 
+import calendar
 from collections.abc import Callable
+from datetime import date
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
@@ -24,6 +26,34 @@ DB_HELP = ("SQLAlchemy database URL; default: $FIELDBANK_DB, else the embedded S
            "$FIELDBANK_HOME (or the platform's user data directory).")
 
 
+class DateParam(click.ParamType):
+    """A calendar date written YYYY-MM-DD, refused with the reason when it is not one
+    ("2024-02-30: February 2024 has 29 days", not "does not match the format")."""
+
+    name = "YYYY-MM-DD"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> date:
+        if isinstance(value, date):
+            return value
+        text = str(value).strip()
+        parts = text.split("-")
+        if len(parts) != 3 or not all(p.isdigit() for p in parts) or len(parts[0]) != 4:
+            self.fail(f"{text!r} is not a date written YYYY-MM-DD (e.g. 2024-02-21).",
+                      param, ctx)
+        y, m, d = (int(p) for p in parts)
+        if not 1 <= m <= 12:
+            self.fail(f"{text}: there is no month {m} (months run 01-12).", param, ctx)
+        days = calendar.monthrange(y, m)[1]
+        if not 1 <= d <= days:
+            self.fail(f"{text}: {calendar.month_name[m]} {y} has {days} days.", param, ctx)
+        return date(y, m, d)
+
+
+#: The one date option type (``--date``, ``--since``, ``--until``, ``--given-on``, ``--on``).
+DATE = DateParam()
+
+
 def db_option(f: F) -> F:
     """``--db URL`` → parameter ``db_url``."""
     return click.option("--db", "db_url", default=None, metavar="URL", help=DB_HELP)(f)
@@ -35,11 +65,16 @@ def json_option(f: F) -> F:
                         help="Machine-readable output: one JSON document on stdout.")(f)
 
 
-def open_db(db_url: str | None, upgrade: str = "auto") -> Database:
-    """The field database at ``db_url`` (see :meth:`fieldbank.storage.Database.open`)."""
+def open_db(db_url: str | None, upgrade: str = "auto", create: bool = False) -> Database:
+    """The field database at ``db_url`` (see :meth:`fieldbank.storage.Database.open`).
+
+    A database that does not exist is refused with its path and how to create it, unless
+    ``create`` (``patient add`` and ``db upgrade``, the commands that start one): reading or
+    adding to a database never creates an empty one by surprise.
+    """
     from fieldbank.storage import Database  # heavy; deferred so light commands stay instant
 
-    return Database.open(db_url, upgrade=upgrade)
+    return Database.open(db_url, upgrade=upgrade, create=create)
 
 
 def emit_json(data: Any) -> None:

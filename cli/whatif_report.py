@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from fieldbank.evaluate.compare import Comparison
-from fieldbank.evaluate.probing import JointStretch
-from fieldbank.interventions.course import TimeCourse
-from fieldbank.interventions.defaults import DOSE_UNIT
-from fieldbank.interventions.inverse import DoseSplitResult
-from fieldbank.interventions.plan import Plan
-from fieldbank.severity import ComponentGrade
+from fieldbank.cli.choices import DOSE_UNIT
+
+if TYPE_CHECKING:  # typing only: 'whatif --help' loads no numerics
+    from fieldbank.evaluate.compare import Comparison
+    from fieldbank.evaluate.probing import JointStretch
+    from fieldbank.interventions.course import TimeCourse
+    from fieldbank.interventions.inverse import DoseSplitResult
+    from fieldbank.interventions.plan import Plan
+    from fieldbank.severity import ComponentGrade
 
 
 def _pct(before: float, after: float) -> str:

@@ -59,7 +59,6 @@ from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import (
@@ -466,6 +465,8 @@ def _solve_dynamic(arm: Arm, ref_prof: StretchProfile, group: str, target: float
         raise ParameterError(
             f"{MUSCLE_GROUP_NAMES[group]}: no reflex on the synthesis path reaches a dynamic "
             f"ratio of {target:g} (largest {ratio(_S_MAX):.3g}).")
+    from scipy.optimize import brentq  # heavy: loaded where a level is synthesised
+
     return float(brentq(lambda s: math.log(ratio(s) / target), 0.0, _S_MAX, xtol=1e-10))
 
 

@@ -151,3 +151,17 @@ def test_cli_never_prints_password(pg_url: str) -> None:
     r = _cli("patient", "list", "--db", bad, env={"FIELDBANK_DB": bad})
     assert r.returncode != 0
     assert secret not in r.stdout + r.stderr
+
+
+def test_the_light_reading_of_the_revisions_is_alembic_s() -> None:
+    """Opening a database reads the revisions without alembic (start-up time); what it reads
+    must be what alembic itself reads: the same chain, head and titles."""
+    from alembic.script import ScriptDirectory
+
+    script = ScriptDirectory.from_config(migrate.alembic_config())
+    walked = [r.revision for r in reversed(list(script.walk_revisions()))]
+    assert migrate.known_revisions() == walked
+    assert migrate.head_revision() == script.get_current_head()
+    for rev in walked:
+        doc = (script.get_revision(rev).doc or "").strip()
+        assert migrate.revision_title(rev) == (doc.splitlines()[0].rstrip(".") if doc else rev)

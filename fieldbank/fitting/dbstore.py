@@ -56,5 +56,6 @@ class DatabaseFitStore:
 
 
 def open_fit_store(db_url: str | None) -> DatabaseFitStore:
-    """Open the field database (``db_url`` or the default) as a FitStore."""
-    return DatabaseFitStore(Database.open(db_url))
+    """Open the field database (``db_url`` or the default) as a FitStore; a database that does
+    not exist is refused (:class:`~fieldbank.errors.DatabaseMissing`), never created."""
+    return DatabaseFitStore(Database.open(db_url, create=False))

@@ -64,7 +64,6 @@ from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import nlopt
 import numpy as np
 
 from fieldbank.errors import FitError
@@ -300,6 +299,8 @@ def _conditional_sd(problem: FitProblem, theta: FloatArray, fit: np.ndarray, h: 
 def refit_local(problem: FitProblem, y: FloatArray, theta0: FloatArray,
                 seed: int = 0) -> tuple[FloatArray, int]:
     """Refit ``problem``'s fitted parameters to data ``y`` from ``theta0`` (see module doc)."""
+    import nlopt  # only when a bootstrap runs (start-up time of everything that imports fits)
+
     q = dataclasses.replace(problem, y=np.asarray(y, dtype=float), n_evals=0)
     idx = q.nonlinear_index()
     if idx.size == 0:

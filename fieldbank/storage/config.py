@@ -1,11 +1,13 @@
 """Where the database lives and how an engine is made.
 
-URL resolution, first match wins:
+URL resolution, first match wins (the setting ``db`` of :mod:`fieldbank.config`):
 
 1. an explicit URL (the CLI's ``--db``);
 2. the environment variable ``FIELDBANK_DB``;
-3. the embedded default: a SQLite file ``fieldbank.sqlite3`` in the data directory, which is
-   ``FIELDBANK_HOME`` when set, else the platform's user data directory (platformdirs).
+3. ``db`` in the configuration file ``fieldbank.toml``;
+4. the embedded default: a SQLite file ``fieldbank.sqlite3`` in the data directory, which is
+   ``FIELDBANK_HOME`` when set, else the file's ``home``, else the platform's user data
+   directory (platformdirs). :func:`url_source` says which, for messages.
 
 SQLite connections are opened with WAL journaling, ``synchronous=FULL`` (a committed ingest
 survives power loss), foreign keys on and a busy timeout so that several processes can write
@@ -37,20 +39,21 @@ from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import ArgumentError
 from sqlalchemy.pool import ConnectionPoolEntry
 
+from fieldbank.config import DEFAULT_DB_FILE, setting
 from fieldbank.errors import StorageError
 from fieldbank.home import data_home
 from fieldbank.redact import mask_url, quote_password, redact
 
 ENV_DB = "FIELDBANK_DB"
 ENV_ARRAYS = "FIELDBANK_ARRAYS"
-DEFAULT_DB_FILE = "fieldbank.sqlite3"
 #: How long a SQLite connection waits for another writer before giving up, ms.
 SQLITE_BUSY_TIMEOUT_MS = 60_000
 
 
 def resolve_url(explicit: str | None = None) -> URL:
-    """The database URL: ``explicit`` > ``FIELDBANK_DB`` > SQLite file in :func:`data_home`."""
-    text = explicit or os.environ.get(ENV_DB)
+    """The database URL: ``explicit`` > ``FIELDBANK_DB`` > the configuration file > SQLite
+    file in :func:`data_home`."""
+    text = setting("db", explicit or None).value
     if not text:
         home = data_home()
         return URL.create("sqlite", database=str(home / DEFAULT_DB_FILE))
@@ -63,13 +66,27 @@ def resolve_url(explicit: str | None = None) -> URL:
         ) from None
 
 
+def url_source(explicit: str | None = None) -> str:
+    """Where :func:`resolve_url` found the URL, in words for a message: 'flag --db',
+    'variable FIELDBANK_DB', 'file …/fieldbank.toml', or the default database file in the data
+    directory and where that directory came from."""
+    db = setting("db", explicit or None)
+    if db.value:
+        return db.source
+    home = setting("home")
+    if home.source == "default":
+        return ("the default database file in the platform's user data directory: neither "
+                "FIELDBANK_HOME nor FIELDBANK_DB is set, and no fieldbank.toml names one")
+    return f"the default database file in the data directory set by {home.source}"
+
+
 def default_store_root(url: URL) -> Path:
     """The array store directory of a database: ``FIELDBANK_ARRAYS``, else next to a SQLite
     file, else ``arrays/`` in the data directory (a server database keeps its arrays inside
     itself; there the directory only holds arrays written before revision 0002)."""
-    env = os.environ.get(ENV_ARRAYS)
-    if env:
-        return Path(env).expanduser()
+    configured: Path | None = setting("arrays").value
+    if configured is not None:
+        return configured
     if is_sqlite(url) and url.database not in (None, "", ":memory:"):
         return Path(str(url.database) + ".arrays")
     return data_home() / "arrays"

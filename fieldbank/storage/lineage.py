@@ -51,7 +51,7 @@ class Lineage(DatabaseCore):
             raise ParameterError(f"origin must be one of {', '.join(ORIGINS)}; got {origin!r}.")
         pid = self._optional_patient_id(s, patient_code)
         if parent_id is not None and s.get(ModelRow, parent_id) is None:
-            raise StorageError(f"No model with id {parent_id} (the parent).")
+            raise self._no_row(s, ModelRow, "model", parent_id, " (the parent)")
         row = ModelRow(patient_id=pid, parent_id=parent_id, origin=origin, label=label,
                        params_json=params.to_json(), created_at=now())
         s.add(row)
@@ -64,7 +64,7 @@ class Lineage(DatabaseCore):
         with self._read() as s:
             r = s.get(ModelRow, model_id)
             if r is None:
-                raise StorageError(f"No model with id {model_id}.")
+                raise self._no_row(s, ModelRow, "model", model_id)
             return _model(r, self._code_of(s, r.patient_id))
 
     def list_models(self, patient_code: str | None = None,
@@ -118,7 +118,7 @@ class Lineage(DatabaseCore):
                  result: Mapping[str, Any], map_ids: Sequence[int]) -> FitRecord:
         p = self._patient_row(s, patient_code)
         if s.get(ModelRow, model_id) is None:
-            raise StorageError(f"No model with id {model_id}.")
+            raise self._no_row(s, ModelRow, "model", model_id)
         found = set(s.scalars(select(MapRow.id).where(MapRow.id.in_(list(map_ids)),
                                                       MapRow.patient_id == p.id)))
         missing = [m for m in map_ids if m not in found]
@@ -149,7 +149,7 @@ class Lineage(DatabaseCore):
         with self._read() as s:
             r = s.get(FitRow, fit_id)
             if r is None:
-                raise StorageError(f"No fit with id {fit_id}.")
+                raise self._no_row(s, FitRow, "fit", fit_id)
             return self._fit(s, r)
 
     def list_fits(self, patient_code: str | None = None) -> list[FitRecord]:
@@ -193,7 +193,7 @@ class Lineage(DatabaseCore):
         pid = self._optional_patient_id(s, patient_code)
         for mid in (base_model_id, result_model_id):
             if s.get(ModelRow, mid) is None:
-                raise StorageError(f"No model with id {mid}.")
+                raise self._no_row(s, ModelRow, "model", mid)
         row = PlanRow(patient_id=pid, base_model_id=base_model_id,
                       result_model_id=result_model_id, label=label,
                       spec_json=json.dumps(dict(spec), sort_keys=True), created_at=now())
@@ -213,7 +213,7 @@ class Lineage(DatabaseCore):
         with self._read() as s:
             r = s.get(PlanRow, plan_id)
             if r is None:
-                raise StorageError(f"No plan with id {plan_id}.")
+                raise self._no_row(s, PlanRow, "plan", plan_id)
             return self._plan(s, r)
 
     def list_plans(self, patient_code: str | None = None) -> list[PlanRecord]:
