@@ -24,11 +24,12 @@ from fieldbank.cli.choices import (
     UNCERTAINTY_METHODS,
 )
 from fieldbank.cli.options import db_option, emit_json, json_option
-from fieldbank.params import GROUPS, ArmParams
+from fieldbank.params import GROUP_NAMES, GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
 if TYPE_CHECKING:  # typing only: the library loads when a command runs
     from fieldbank.fitting.records import FitOutcome, FitStore
+    from fieldbank.storage import StoredModel
 
 StoreFactory = Callable[[str | None], "FitStore"]
 
@@ -42,6 +43,13 @@ def _store(ctx: click.Context, db_url: str | None) -> FitStore:
 
         factory = open_fit_store
     return factory(db_url)
+
+
+def _plans_cell(m: StoredModel) -> str:
+    """'plan 4' (the plan that made it) and '-> 5,6' (plans applied to it)."""
+    parts = ([f"plan {m.plan_id}"] if m.plan_id is not None else []) + (
+        ["->" + ",".join(map(str, m.plans_from))] if m.plans_from else [])
+    return " ".join(parts) or "-"
 
 
 def _num(v: object, fmt: str = ".3g") -> str:
@@ -203,7 +211,8 @@ def models() -> None:
 @click.pass_context
 def models_list(ctx: click.Context, patient: str | None, as_json: bool,
                 db_url: str | None) -> None:
-    """List models with their origin and parent."""
+    """List models with their origin, parent and plans (the plan that made each, and the
+    plans applied to it: 'fieldbank plans show ID')."""
     from fieldbank.fitting.records import model_summary
 
     rows = list(_store(ctx, db_url).list_models(patient))
@@ -213,11 +222,11 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
     if not rows:
         click.echo("no models", err=True)
         return
-    click.echo(f"{'id':>5}  {'patient':<12} {'origin':<13} {'parent':>6}  label")
+    click.echo(f"{'id':>5}  {'patient':<12} {'origin':<13} {'parent':>6}  {'plans':<14} label")
     for m in rows:
         parent = "" if m.parent_id is None else str(m.parent_id)
         click.echo(f"{m.id!s:>5}  {m.patient_code or '-':<12} {m.origin:<13} "
-                   f"{parent:>6}  {printable(m.label)}")
+                   f"{parent:>6}  {_plans_cell(m):<14} {printable(m.label)}")
 
 
 @models.command("show")
@@ -226,7 +235,7 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
 @db_option
 @click.pass_context
 def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | None) -> None:
-    """Show a model's parameters, lineage and the fit that produced it."""
+    """Show a model's parameters, lineage, plans and the fit that produced it."""
     key: int | str = int(model_id) if model_id.isdigit() else model_id
     detail = _store(ctx, db_url).get_model(key)
     if as_json:
@@ -235,14 +244,18 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
     m = detail.model
     p = m.params
     click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}")
-    click.echo("  group        Km N/m    alpha N    beta")
+    click.echo("  group                        Km N/m    alpha N    beta")
     for i, g in enumerate(GROUPS):
-        click.echo(f"  {g:<6} {p.km_n_per_m[i]:>12.1f} {p.alpha_n[i]:>10.1f} "
+        click.echo(f"  {g} {GROUP_NAMES[g]:<24}{p.km_n_per_m[i]:>10.1f} {p.alpha_n[i]:>10.1f} "
                    f"{p.beta[i]:>7.3f}")
     q = [math.degrees(v) for v in p.q_rest_rad]
     click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
     if detail.lineage:
         click.echo("  lineage: " + " <- ".join(f"{a.id} ({a.origin})" for a in detail.lineage))
+    if m.plan_id is not None:
+        click.echo(f"  made by plan {m.plan_id} ('fieldbank plans show {m.plan_id}')")
+    if m.plans_from:
+        click.echo("  plans applied to it: " + ", ".join(map(str, m.plans_from)))
     fit_report = detail.fit
     if fit_report:
         click.echo(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, cost "

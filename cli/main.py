@@ -44,6 +44,8 @@ COMMANDS: dict[str, LazyCommand] = {
                 "replay."),
     "probe": C("fieldbank.cli.probe", "probe",
                "Design probing motions that tell candidate arms apart; classify recorded traces."),
+    "plans": C("fieldbank.cli.plans", "plans",
+               "Stored intervention plans: list, show, record the day one was given."),
     "report": C("fieldbank.cli.report", "report",
                 "Report the field changes of stored intervention plans (HTML + CSV + JSON)."),
     "validate": C("fieldbank.cli.validate", "validate",

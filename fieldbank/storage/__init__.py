@@ -30,6 +30,7 @@ leave this package)::
     db.add_plan_result(after, spec, label, patient_code=None, base_model_id=None, before=None,
                        before_label="") -> (base model id, after StoredModel, PlanRecord)
     db.list_plans(patient_code=None) / db.get_plan(id)
+    db.set_plan_given(plan_id, given_on) -> PlanRecord   # the day a stored plan was carried out
     # haptic sessions and traces (arrays go to the HDF5 array store)            traces.py
     db.start_haptic_session(model_a_id, robot_url, model_b_id=None, patient_code=None)
     db.end_haptic_session(id, stats) / db.get_haptic_session(id)

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from datetime import date
 from typing import Any
 
 from sqlalchemy import select
@@ -65,7 +67,8 @@ class Lineage(DatabaseCore):
             r = s.get(ModelRow, model_id)
             if r is None:
                 raise self._no_row(s, ModelRow, "model", model_id)
-            return _model(r, self._code_of(s, r.patient_id))
+            return _with_plans(_model(r, self._code_of(s, r.patient_id)),
+                               _plan_links(s, [r.id]))
 
     def list_models(self, patient_code: str | None = None,
                     origin: str | None = None) -> list[StoredModel]:
@@ -76,7 +79,9 @@ class Lineage(DatabaseCore):
         if origin is not None:
             q = q.where(ModelRow.origin == origin)
         with self._read() as s:
-            return [_model(r, code) for r, code in s.execute(q)]
+            rows = [_model(r, code) for r, code in s.execute(q)]
+            links = _plan_links(s, [m.id for m in rows])
+        return [_with_plans(m, links) for m in rows]
 
     def model_lineage(self, model_id: int) -> list[StoredModel]:
         """The model and its ancestors, newest first."""
@@ -216,6 +221,24 @@ class Lineage(DatabaseCore):
                 raise self._no_row(s, PlanRow, "plan", plan_id)
             return self._plan(s, r)
 
+    def set_plan_given(self, plan_id: int, given_on: date) -> PlanRecord:
+        """Record in plan ``plan_id``'s document the day it was carried out (``given_on``),
+        audited. A different day already recorded is refused: a stored record is added to,
+        never silently changed."""
+        with self._write() as s:
+            r = s.get(PlanRow, plan_id)
+            if r is None:
+                raise self._no_row(s, PlanRow, "plan", plan_id)
+            spec = json.loads(r.spec_json)
+            had = spec.get("given_on")
+            if had not in (None, given_on.isoformat()):
+                raise StorageError(f"Plan {plan_id} is already recorded as given on {had}.")
+            spec["given_on"] = given_on.isoformat()
+            r.spec_json = json.dumps(spec, sort_keys=True)
+            self._audit(s, "give", "plan", plan_id, {"given_on": given_on.isoformat()})
+            s.flush()
+            return self._plan(s, r)
+
     def list_plans(self, patient_code: str | None = None) -> list[PlanRecord]:
         q = (select(PlanRow).outerjoin(PatientRow, PlanRow.patient_id == PatientRow.id)
              .order_by(PlanRow.id))
@@ -223,3 +246,23 @@ class Lineage(DatabaseCore):
             q = q.where(PatientRow.code == patient_code)
         with self._read() as s:
             return [self._plan(s, r) for r in s.scalars(q)]
+
+
+def _plan_links(s: Session, model_ids: Sequence[int]) -> dict[int, tuple[int | None, list[int]]]:
+    """model id -> (the plan that made it, the plans applied to it), in one query."""
+    out: dict[int, tuple[int | None, list[int]]] = {m: (None, []) for m in model_ids}
+    if not model_ids:
+        return out
+    wanted = set(model_ids)
+    q = select(PlanRow.id, PlanRow.base_model_id, PlanRow.result_model_id).order_by(PlanRow.id)
+    for pid, base, result in s.execute(q):
+        if result in wanted:
+            out[result] = (pid, out[result][1])
+        if base in wanted:
+            out[base][1].append(pid)
+    return out
+
+
+def _with_plans(m: StoredModel, links: Mapping[int, tuple[int | None, list[int]]]) -> StoredModel:
+    made_by, applied = links.get(m.id, (None, []))
+    return replace(m, plan_id=made_by, plans_from=tuple(applied))
