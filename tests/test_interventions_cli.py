@@ -158,7 +158,7 @@ def test_option_parsers() -> None:
     assert parse_length("5 mm", "--x") == 0.005
     assert parse_length("0.02m", "--x") == 0.02
     # a bare number is refused, not read as metres (--botox's bare numbers are units of toxin)
-    with pytest.raises(InterventionError, match="give the unit, e.g. 1cm"):
+    with pytest.raises(InterventionError, match=r"give the unit, e\.g\. 1cm"):
         parse_length("1", "--lengthen bf=1")
 
 
