@@ -64,16 +64,18 @@ def parse_units(items: Sequence[str]) -> dict[str, float]:
     return out
 
 
-def parse_length(text: str, option: str) -> float:
+def parse_length(text: str, option: str, shown: str | None = None) -> float:
     """'1cm', '10 mm', '0.01m' → metres. The unit is required: a bare '1' could be 1 m or
-    1 cm (and --botox's bare numbers are units of toxin), so it is refused, not guessed."""
+    1 cm (and --botox's bare numbers are units of toxin), so it is refused, not guessed.
+    ``shown``: the text to quote in a message (the whole ``GROUP=LENGTH`` item)."""
     m = re.fullmatch(rf"{_NUM}\s*({_LENGTH_UNIT})?", text.strip())
+    quoted = repr(text if shown is None else shown)
     if not m:
         raise InterventionError(
-            f"{option} {text!r}: expected a length such as 1cm, 10mm or 0.01m.")
+            f"{option} {quoted}: expected a length such as 1cm, 10mm or 0.01m.")
     if m.group(2) is None:
         raise InterventionError(
-            f"{option} {text!r}: give the unit, e.g. {m.group(1)}cm or {m.group(1)}mm (a bare "
+            f"{option} {quoted}: give the unit, e.g. {m.group(1)}cm or {m.group(1)}mm (a bare "
             "number is not read as metres).")
     return float(m.group(1)) * LENGTH[m.group(2)]
 
@@ -86,7 +88,7 @@ def parse_group_lengths(items: Sequence[str], option: str,
     for part in _split_items(items):
         if "=" in part:
             g, length = part.split("=", 1)
-            out.append((g.strip(), parse_length(length, option)))
+            out.append((g.strip(), parse_length(length, option, part)))
         elif default_m is not None:
             out.append((part, default_m))
         else:
