@@ -73,7 +73,12 @@ class FieldbankGroup(LazyGroup):
              context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="fieldbank")
 def cli() -> None:
-    """fieldbank: force-field database and intervention what-if for hypertonic arms."""
+    """fieldbank: force-field database and intervention what-if for hypertonic arms.
+
+    Muscle groups: sf/se shoulder flexors/extensors, ef/ee elbow flexors/extensors, bf/be
+    bi-articular flexors/extensors. Terms (R1, R2, catch, χ²/n, JND, under-determined, ...):
+    docs/glossary.md. Settings in force: 'fieldbank config show'.
+    """
 
 
 def main() -> None:

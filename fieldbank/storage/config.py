@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import os
 import sqlite3
+import warnings
 import weakref
 from collections.abc import Callable
 from pathlib import Path
@@ -36,13 +37,13 @@ from urllib.parse import quote
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
-from sqlalchemy.exc import ArgumentError
+from sqlalchemy.exc import ArgumentError, SAWarning
 from sqlalchemy.pool import ConnectionPoolEntry
 
 from fieldbank.config import DEFAULT_DB_FILE, setting
 from fieldbank.errors import StorageError
 from fieldbank.home import data_home
-from fieldbank.redact import mask_url, quote_password, redact
+from fieldbank.redact import blank_password, mask_url, quote_password, redact
 
 ENV_DB = "FIELDBANK_DB"
 ENV_ARRAYS = "FIELDBANK_ARRAYS"
@@ -57,13 +58,40 @@ def resolve_url(explicit: str | None = None) -> URL:
     if not text:
         home = data_home()
         return URL.create("sqlite", database=str(home / DEFAULT_DB_FILE))
-    try:
-        return make_url(quote_password(text))
-    except ArgumentError:
-        raise StorageError(
-            "Not a database URL (expected e.g. sqlite:///path/file.sqlite3 or "
-            "postgresql+psycopg://user@host/db)."
-        ) from None
+    problem = _query_problem(text)
+    if problem is None:
+        try:
+            url = make_url(quote_password(text))
+        except (ArgumentError, ValueError) as exc:
+            # SQLAlchemy raises ValueError for a port that is not a number or a broken
+            # [IPv6] host; its message may quote the URL, so only the kind of fault is kept
+            problem = ("its host or port cannot be read (a port must be a number, an IPv6 "
+                       "host is written [::1])" if isinstance(exc, ValueError) else None)
+        else:
+            if url.port is not None and not 0 < url.port < 65536:
+                problem = f"port {url.port} is not a TCP port (1-65535)"
+            else:
+                return url
+    raise StorageError(
+        f"Not a database URL{': ' + problem if problem else ''} (expected e.g. "
+        "sqlite:///path/file.sqlite3 or postgresql+psycopg://user@host:5432/db; write '&', "
+        "'@', '/' and '#' inside a password or a query value as %26, %40, %2F and %23)."
+    ) from None
+
+
+def _query_problem(text: str) -> str | None:
+    """What is wrong with a URL's query part, or None: an item without '=' (an unencoded '&'
+    inside a value, or a stray one) would be dropped without a word by the URL parser.
+    The item itself is not quoted: it may be the tail of a password."""
+    text = blank_password(text)
+    if "?" not in text:
+        return None
+    items = text.split("?", 1)[1].split("#", 1)[0].split("&")
+    for k, item in enumerate(items, start=1):
+        if "=" not in item:
+            return (f"item {k} of its query part has no NAME=VALUE form (an unencoded '&' "
+                    "inside a value?)")
+    return None
 
 
 def url_source(explicit: str | None = None) -> str:
@@ -183,11 +211,16 @@ def make_engine(url: URL | str | None = None) -> Engine:
                         f"Cannot create the data directory {path.parent} ({exc.strerror})."
                     ) from None
     try:
-        if read_only:
-            assert path is not None
-            engine = create_engine(u, creator=_read_only_creator(path))
-        else:
-            engine = create_engine(u)
+        with warnings.catch_warnings():
+            # pysqlite ignores query arguments such as ?password= (a SQLite file has none) and
+            # says so on stderr; nothing is connected with them, so the note is only noise
+            warnings.filterwarnings("ignore", message="Query string argument",
+                                    category=SAWarning)
+            if read_only:
+                assert path is not None
+                engine = create_engine(u, creator=_read_only_creator(path))
+            else:
+                engine = create_engine(u)
     except (ArgumentError, ImportError) as exc:
         raise StorageError(f"Cannot open database {mask_url(u)}: "
                            f"{redact(str(exc), u)}") from None
