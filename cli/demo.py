@@ -206,13 +206,19 @@ def run_haptic(db: Database, patient: str, before_id: int, plan_id: int, duratio
 
 
 def _clear_demo_home(h: Path) -> None:
-    """Remove what a previous demo left in ``h`` (its database and array store only)."""
+    """Remove what a previous demo left in ``h``: its database and array store, and what
+    fieldbank's commands wrote into that data directory while the README's tours ran on it
+    (haptic trace files, a stale control socket, database backups). Anything else is refused
+    by name, with the way out."""
     known = {DB_FILE, f"{DB_FILE}-wal", f"{DB_FILE}-shm", f"{DB_FILE}-journal",
-             f"{DB_FILE}.arrays"}
-    strangers = sorted(p.name for p in h.iterdir() if p.name not in known)
+             f"{DB_FILE}.arrays", "traces", "haptic.sock", "backups"}
+    strangers = sorted(p.name for p in h.iterdir() if p.name not in known
+                       and not p.name.startswith(f"{DB_FILE}.backup-"))
     if strangers:
-        raise FieldbankError(f"{h} holds files the demo did not write ({', '.join(strangers)}); "
-                             "not deleting them. Choose another --home.")
+        raise FieldbankError(
+            f"{h} holds files neither the demo nor fieldbank wrote ({', '.join(strangers)}); "
+            "not deleting them. Move them out of it, or run the demo elsewhere: "
+            "'fieldbank demo --out OTHER' (or --home OTHER).")
     for p in h.iterdir():
         if p.is_dir():
             shutil.rmtree(p)

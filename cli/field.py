@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.options import json_option
+from fieldbank.cli.options import json_option, output_file
 from fieldbank.errors import FileRefused, ParameterError
 from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
 
@@ -80,6 +80,7 @@ def _read_positions(path: Path) -> np.ndarray:
               help="Output format (default from --out's suffix, else csv).")
 @json_option
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Output file (default stdout for csv/json; required for plots).")
 def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: float | None,
           height: float | None, side: str | None, grid_n: int, at: str | None,

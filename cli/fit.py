@@ -23,7 +23,7 @@ from fieldbank.cli.choices import (
     UNCERTAINTY_DEFAULT_REPLICATES,
     UNCERTAINTY_METHODS,
 )
-from fieldbank.cli.options import db_option, emit_json, json_option
+from fieldbank.cli.options import db_option, emit_json, json_option, output_file
 from fieldbank.params import GROUP_NAMES, GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
@@ -154,6 +154,7 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @click.option("--replicates", type=click.IntRange(min=2), default=UNCERTAINTY_DEFAULT_REPLICATES,
               show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              callback=output_file,
               help="Write measured against fitted fields to this .png or .svg.")
 @json_option
 @db_option

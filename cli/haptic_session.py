@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import click
 
 from fieldbank.cli.haptic import resolve_sources, socket_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db, say, xy_metres
+from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say, xy_metres
 from fieldbank.config import setting
 from fieldbank.files import write_atomic
 from fieldbank.haptic.errors import HapticError
@@ -176,6 +176,7 @@ def serve(robot: str | None, rate_hz: int, duration_s: float | None, before_file
 @click.option("--duration-s", type=click.FloatRange(min=0.01), default=None)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Write the full profile as CSV.")
 @json_option
 def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | None,
@@ -203,6 +204,7 @@ def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | 
 @click.command("replay")
 @click.argument("trace_ref", metavar="TRACE")
 @click.option("--csv", "csv_out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Export the trace as CSV.")
 @click.option("--rerun", is_flag=True, help="Recompute the model forces from the recorded "
               "handle motion and compare.")

@@ -9,7 +9,7 @@ from typing import Any
 import click
 
 from fieldbank.cli.haptic_train import probe_choice, probes_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db, say
+from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say
 from fieldbank.files import write_atomic
 
 # The loop, the trainee and the database load inside the commands: '--help' starts at once.
@@ -26,6 +26,7 @@ from fieldbank.files import write_atomic
               help="Error of each perceived force direction, degrees (sd).")
 @click.option("--seed", type=click.IntRange(0, 2**31), default=0, show_default=True)
 @click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Write the results as a small HTML page.")
 @db_option
 @click.option("--no-db", is_flag=True, help="Do not record the session in the database.")
@@ -81,6 +82,7 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
 @click.argument("sessions", nargs=-1, type=int)
 @click.option("--patient", help="Only sessions of this patient.")
 @click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Write the results as a small HTML page.")
 @db_option
 @json_option

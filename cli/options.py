@@ -11,6 +11,7 @@ from __future__ import annotations
 import calendar
 from collections.abc import Callable
 from datetime import date
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
@@ -90,6 +91,18 @@ def emit(data: Any, as_json: bool, human: str) -> None:
 def say(msg: str) -> None:
     """A message for the person at the terminal: on stderr, so stdout stays the output."""
     click.echo(msg, err=True)
+
+
+def output_file(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+    """Callback of an option naming a file the command writes: its directory must exist.
+    A typo in a directory name is refused with the directory, not created silently."""
+    if value is None:
+        return value
+    parent = Path(value).expanduser().parent
+    if not parent.is_dir():
+        raise click.BadParameter(f"the directory {parent} does not exist; create it first "
+                                 "(fieldbank does not create directories for a file you name).")
+    return value
 
 
 def xy_metres(text: str | None, name: str) -> tuple[float, float]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from datetime import date
 
 import click
@@ -9,6 +10,8 @@ import click
 from fieldbank.cli.options import DATE, db_option, emit, emit_json, json_option, open_db, say
 from fieldbank.sanitize import printable
 
+#: Widest line of the text output.
+WIDTH = 100
 KIND_HELP = ("A step of this kind: botulinum, lengthening, tenotomy, rhizotomy, baclofen, "
              "casting.")
 
@@ -41,8 +44,10 @@ def list_cmd(patient: str | None, kind: str | None, given: bool | None, db_url: 
     for p in rows:
         when = p.given_on.isoformat() if p.given_on else "explored"
         models = f"{p.base_model_id}->{p.result_model_id}"
-        click.echo(f"{p.id:>5}  {p.patient_code or '-':<10} {when:<10}  {models:<9}  "
-                   f"{printable('; '.join(p.steps))}")
+        head = f"{p.id:>5}  {p.patient_code or '-':<10} {when:<10}  {models:<9}  "
+        click.echo("\n".join(textwrap.wrap(printable("; ".join(p.steps)), WIDTH,
+                                            initial_indent=head,
+                                            subsequent_indent=" " * len(head))))
     say(f"{len(rows)} plan(s) in {where}")
 
 
@@ -52,7 +57,7 @@ def list_cmd(patient: str | None, kind: str | None, given: bool | None, db_url: 
 @json_option
 def show(plan_id: int, db_url: str | None, as_json: bool) -> None:
     """Show plan ID: steps, lineage, the fit behind it, its warnings, the day it was given."""
-    from fieldbank.interventions.plans import show_plan
+    from fieldbank.interventions.plandetail import show_plan
 
     with open_db(db_url) as db:
         d = show_plan(db, plan_id)
@@ -77,7 +82,9 @@ def show(plan_id: int, db_url: str | None, as_json: bool) -> None:
         lines.append("  not identified by the maps (the unimpaired value is a guess): "
                      + ", ".join(str(g.get("name")) for g in d.guesses))
     lines += [f"  WARNING: {printable(w)}" for w in d.warnings]
-    emit(d.to_dict(), as_json, "\n".join(lines))
+    emit(d.to_dict(), as_json, "\n".join(w for line in lines for w in textwrap.wrap(
+        line, WIDTH, subsequent_indent=" " * (len(line) - len(line.lstrip()) + 4),
+        break_on_hyphens=False) or [""]))
 
 
 @plans.command("give")

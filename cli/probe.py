@@ -22,6 +22,7 @@ from fieldbank.cli.options import (
     json_option,
     open_db,
     option_group,
+    output_file,
     say,
     xy_metres,
 )
@@ -243,8 +244,10 @@ def probe() -> None:
 @noise_options
 @limit_options
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Write the probes (polylines in the robot frame with timing) as JSON.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Figure of the paths and force profiles (.png or .svg).")
 @db_option
 @json_option
@@ -341,6 +344,7 @@ def _classification_text(cl: Classification) -> str:
               help="In a session that rendered two models, the ticks of this one.")
 @click.option("--no-next", is_flag=True, help="Do not design the next probe.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Figure of the recorded and predicted forces and the posterior.")
 @db_option
 @json_option
@@ -383,6 +387,7 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
 @noise_options
 @limit_options
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Figure of the paths and force profiles.")
 @db_option
 @json_option

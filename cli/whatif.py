@@ -21,7 +21,7 @@ from fieldbank.cli.choices import (
     DOSE_UNIT,
     WHATIF_INTERVAL_SAMPLES,
 )
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db, output_file
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.errors import FieldbankError
 from fieldbank.haptic.client import push_models
@@ -66,6 +66,7 @@ from fieldbank.haptic.client import push_models
 @click.option("--groups", "opt_groups", default=None, metavar="G1,G2",
               help="Groups --optimize may inject (default all six).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              callback=output_file,
               help="Write the figures (joint stretches, fields, grades) to this SVG, PNG or "
                    "PDF.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),

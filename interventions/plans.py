@@ -8,9 +8,8 @@ calls:
 
 * :func:`list_plans` - every stored plan, filtered by patient, intervention kind and whether it
   was given, as :class:`PlanSummary` rows;
-* :func:`show_plan` - one plan as a :class:`PlanDetail`: its steps in words and units, the
-  lineage (model before and after), the fit behind the model before, the parameters that fit
-  did not identify and the warnings of the steps that act on them (as ``whatif`` prints them);
+* :func:`fieldbank.interventions.plandetail.show_plan` - one plan with its lineage and what it
+  rests on (kept apart: it loads the fit's machinery, which listing plans does not need);
 * :func:`give_plan` - record that a stored plan was carried out on a day, without saving the
   plan again (audited; a different day already recorded is refused, so nothing stored is
   changed silently).
@@ -23,10 +22,8 @@ from dataclasses import dataclass
 from datetime import date, datetime
 from typing import Any
 
-from fieldbank import modelsource
 from fieldbank.interventions.catalogue import KINDS
 from fieldbank.interventions.errors import InterventionError
-from fieldbank.interventions.guesses import FitBasis, guesses, plan_warnings
 from fieldbank.interventions.plan import Plan
 from fieldbank.storage import Database, PlanRecord
 
@@ -58,7 +55,7 @@ class PlanSummary:
 
     @classmethod
     def of(cls, rec: PlanRecord) -> PlanSummary:
-        plan = _plan_of(rec)
+        plan = plan_of(rec)
         given = rec.spec.get("given_on")
         accepted = rec.spec.get("accepted_poor_fit")
         return cls(rec.id, rec.patient_code, rec.label,
@@ -76,36 +73,7 @@ class PlanSummary:
                 "accepted_poor_fit": self.accepted_poor_fit}
 
 
-@dataclass(frozen=True)
-class PlanDetail:
-    """One stored plan with its lineage and what its prediction rests on (``plans show``).
-
-    Attributes
-    ----------
-    base, result : dict
-        The models before and after: id, origin, label.
-    fit : dict or None
-        The fit behind the model before (id, fitted model, status, verdict, reasons); None
-        when the model before was not fitted (a severity or a parameter file).
-    guesses : tuple of dict
-        Every parameter that fit did not identify, with the reason.
-    warnings : tuple of str
-        Steps that act on a guessed parameter (their predictions rest on the default).
-    """
-
-    summary: PlanSummary
-    base: dict[str, Any]
-    result: dict[str, Any]
-    fit: dict[str, Any] | None
-    guesses: tuple[dict[str, Any], ...]
-    warnings: tuple[str, ...]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {**self.summary.to_dict(), "base_model": self.base, "result_model": self.result,
-                "fit": self.fit, "guesses": list(self.guesses), "warnings": list(self.warnings)}
-
-
-def _plan_of(rec: PlanRecord) -> Plan:
+def plan_of(rec: PlanRecord) -> Plan:
     doc = rec.spec.get("plan")
     if not isinstance(doc, Mapping):
         raise InterventionError(f"plan {rec.id}: its stored document holds no plan.")
@@ -127,27 +95,6 @@ def list_plans(db: Database, patient: str | None = None, kind: str | None = None
     if given is not None:
         out = [p for p in out if (p.given_on is not None) == given]
     return out
-
-
-def _model(db: Database, model_id: int) -> dict[str, Any]:
-    m = db.get_model(model_id)
-    return {"id": m.id, "origin": m.origin, "label": m.label, "patient": m.patient_code,
-            "parent_id": m.parent_id}
-
-
-def show_plan(db: Database, plan_id: int) -> PlanDetail:
-    """Plan ``plan_id`` with its lineage, the fit behind its model before and the warnings."""
-    rec = db.get_plan(plan_id)
-    summary = PlanSummary.of(rec)
-    source = modelsource.stored(db, rec.base_model_id)
-    basis = FitBasis.of(source)
-    plan = _plan_of(rec)
-    fit = None if basis is None else {
-        "id": basis.fit_id, "fitted_model_id": basis.fitted_model_id,
-        "status": basis.status, "verdict": basis.verdict, "reasons": list(basis.reasons)}
-    return PlanDetail(summary, _model(db, rec.base_model_id), _model(db, rec.result_model_id),
-                      fit, tuple(g.to_dict() for g in guesses(basis, source.params)),
-                      plan_warnings(plan, basis, source.params))
 
 
 def give_plan(db: Database, plan_id: int, on: date) -> tuple[PlanSummary, bool]:
