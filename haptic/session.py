@@ -121,8 +121,10 @@ class SessionResult:
     station_url: str | None = None
 
     def summary(self) -> dict[str, Any]:
-        """The trace's summary with where it was stored (``trace``, ``sha256``, ``database``)."""
+        """The trace's summary with the robot (as given, without secrets) and where it was
+        stored (``trace``, ``sha256``, ``database``)."""
         out = self.trace.summary()
+        out["robot"] = self.robot
         if self.trace_file is not None:
             out["trace"] = self.trace_file
             out["sha256"] = self.sha256

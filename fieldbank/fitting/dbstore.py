@@ -26,6 +26,8 @@ class DatabaseFitStore:
 
     def maps_for(self, patient: str, session: str | None = None) -> Sequence[PatientMap]:
         self.db.get_patient(patient)  # unknown patient -> the storage layer's clear error
+        if session is not None:
+            self.db.get_session(patient, session)  # unknown session -> its sessions listed
         stored = list(self.db.list_maps(patient_code=patient, session_label=session))
         if not stored:
             return []

@@ -10,7 +10,7 @@ leave this package)::
     db.add_patient(code, body_mass_kg, height_m, side, notes="") -> PatientInfo
     db.get_patient(code) / db.list_patients() / db.patient_by_id(id)
     db.ensure_session(patient_code, label, session_date=None) -> SessionInfo
-    db.list_sessions(patient_code=None)
+    db.get_session(patient_code, label) -> SessionInfo / db.list_sessions(patient_code=None)
     # measured maps and source files (written by fieldbank.ingest)              mapstore.py
     db.ingest_files(patient_code, session_label, files, session_date=None,
                     progress: IngestProgress | None = None) -> [IngestOutcome]

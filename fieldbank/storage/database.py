@@ -215,6 +215,14 @@ class Database(MapStore, Lineage, Traces):
             r = self._session_row(s, p, label, session_date, create=True)
             return SessionInfo(r.id, p.code, r.label, r.session_date, to_utc(r.created_at))
 
+    def get_session(self, patient_code: str, label: str) -> SessionInfo:
+        """Session ``label`` of a patient; an error naming the database and the patient's
+        sessions when there is none."""
+        with self._read() as s:
+            p = self._patient_row(s, patient_code)
+            r = self._session_row(s, p, label, None, create=False)
+            return SessionInfo(r.id, p.code, r.label, r.session_date, to_utc(r.created_at))
+
     def list_sessions(self, patient_code: str | None = None) -> list[SessionInfo]:
         """Sessions with their number of maps, by patient, date and id."""
         with self._read() as s:
