@@ -165,3 +165,27 @@ def test_the_light_reading_of_the_revisions_is_alembic_s() -> None:
     for rev in walked:
         doc = (script.get_revision(rev).doc or "").strip()
         assert migrate.revision_title(rev) == (doc.splitlines()[0].rstrip(".") if doc else rev)
+
+
+def test_a_downgrade_that_rebuilds_a_table_keeps_the_rows_that_point_at_it(
+        tmp_path: Path) -> None:
+    """Dropping a column rebuilds ``haptic_sessions`` on SQLite; the traces that point at it
+    used to make the downgrade fail ('FOREIGN KEY constraint failed')."""
+    import numpy as np
+
+    from fieldbank.params import ArmParams
+    from fieldbank.storage import Database
+
+    url = f"sqlite:///{tmp_path / 'fb.sqlite3'}"
+    with Database.open(url, store_root=tmp_path / "arrays") as db:
+        m = db.add_model(ArmParams.from_anthropometry(), "synthetic", "m")
+        hs = db.start_haptic_session(m.id, "sim://")
+        db.add_trace(hs.id, "t", np.zeros((10, 3)), "mixed", {})
+        engine = db.engine
+        assert migrate.downgrade(engine, "0002", tmp_path / "arrays") == ("0003", "0002")
+        with engine.connect() as conn:
+            assert conn.exec_driver_sql("PRAGMA foreign_key_check").all() == []
+            assert conn.exec_driver_sql("SELECT count(*) FROM traces").scalar() == 1
+            assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1  # on again
+        assert migrate.upgrade(engine, store_root=tmp_path / "arrays") == ("0002", "0003")
+        assert db.check().ok

@@ -166,6 +166,13 @@ def _locked(engine: Engine) -> Connection:
     conn = engine.connect()
     if engine.dialect.name == "sqlite":
         conn = conn.execution_options(fieldbank_begin="IMMEDIATE")
+    if engine.dialect.name == "sqlite":
+        # batch mode rebuilds a table (copy, drop, rename): dropping it must not trip the
+        # foreign keys of the rows that point at it. SQLite's procedure for altering a table:
+        # foreign keys off (only possible outside a transaction, so on the driver's connection
+        # before BEGIN), then a foreign_key_check before commit (:func:`_check_keys`); they
+        # are switched on again when the migration ends (:func:`_migrate`)
+        _sqlite_foreign_keys(conn, on=False)
     conn.begin()
     if engine.dialect.name == "postgresql":
         conn.execute(text("SELECT pg_advisory_xact_lock(:k)"), {"k": PG_LOCK_KEY})
@@ -214,13 +221,34 @@ def _migrate(engine: Engine, revision: str, down: bool,
         elif before != (head_revision() if revision == "head" else revision):
             command.upgrade(alembic_config(conn, store_root), revision)
         after = _current(conn)
+        _check_keys(conn)
         conn.commit()
     except Exception:
         conn.rollback()
         raise
     finally:
+        if engine.dialect.name == "sqlite":
+            _sqlite_foreign_keys(conn, on=True)
         conn.close()
     return before, after
+
+
+def _sqlite_foreign_keys(conn: Connection, on: bool) -> None:
+    """Switch SQLite's foreign keys on the driver's connection (outside any transaction)."""
+    raw = conn.connection.driver_connection
+    assert raw is not None  # an open connection
+    raw.execute(f"PRAGMA foreign_keys = {'ON' if on else 'OFF'}")
+
+
+def _check_keys(conn: Connection) -> None:
+    """Refuse to commit a SQLite migration that left a row pointing at nothing."""
+    if conn.engine.dialect.name != "sqlite":
+        return
+    bad = conn.execute(text("PRAGMA foreign_key_check")).all()
+    if bad:
+        tables = sorted({str(r[0]) for r in bad})
+        raise StorageError(f"The migration would leave {len(bad)} row(s) of "
+                           f"{', '.join(tables)} pointing at nothing; nothing was changed.")
 
 
 def check_drift(engine: Engine) -> None:
