@@ -239,6 +239,7 @@ class Serve:
     def __init__(self, tmp: Path, *args: str) -> None:
         self.sock = tmp / "run" / "h.sock"
         self.db_url = f"sqlite:///{tmp / 'fb.sqlite'}"
+        Database.open(self.db_url).close()  # serve records into a database, never creates one
         self.trace_dir = tmp / "traces"
         cmd = [sys.executable, "-m", "fieldbank.cli", "haptic", "serve",
                "--robot", "sim://?mode=realtime&motion=explore", "--station",
