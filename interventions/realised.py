@@ -39,10 +39,10 @@ effects between 0 and 1.2 (the truth within 2 SE in ≥ 90% of decided cases);
 ``benchmarks/bench_validate.py`` measures the verdicts' false-alarm rate.
 
 A realised fraction is only reported (a number) when the change is observable, the prediction
-does not rest on a parameter the fit did not identify (a guess the samples do not vary), and f
-lies in the physical range of the plan (:func:`physical_range`: the parameters the plan
-changes stay within their bounds, and an opposite change is at most as large as the predicted
-one).
+does not rest on a parameter the fit did not identify (a guess the samples do not vary), its SE
+is at most :data:`MAX_REPORTED_SE` (0.5), and f lies in the physical range of the plan
+(:func:`physical_range`: the parameters the plan changes stay within their bounds, and an
+opposite change is at most as large as the predicted one).
 
 The verdict (:class:`Rules`, every number a documented default)
 ---------------------------------------------------------------
@@ -103,6 +103,9 @@ MAX_CHANGE_SE = 0.25
 CHANGE_TOLERANCE = 0.2
 #: A confirmation needs at least this fraction of the predicted change, at 2 SE.
 CONFIRM_FLOOR = 0.5
+#: A realised fraction whose SE exceeds this is not printed: its 2-SE interval spans two whole
+#: predicted changes and says nothing.
+MAX_REPORTED_SE = 0.5
 #: Fractions reported at most: an opposite change as large as the predicted one (-1), and
 #: 3 × the predicted one (a plan's bounds usually stop it earlier: :func:`physical_range`).
 FRACTION_LIMITS = (-1.0, 3.0)
@@ -158,6 +161,34 @@ DEFAULT_RULES = Rules()
 
 
 # --- what is known about the model before ------------------------------------------------------
+#: A later map is "like" a map the fit used when it has the same kind, a hand velocity within
+#: this much (m/s) and every position within :data:`COVER_DISTANCE_M` of one of its positions.
+COVER_SPEED_M_PER_S = 0.05
+COVER_DISTANCE_M = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class Footprint:
+    """Where and how a map the fit used was measured: kind, hand velocity (m/s), positions
+    (N, 2) m."""
+
+    kind: str
+    velocity_m_per_s: tuple[float, float]
+    positions_m: FloatArray
+
+    @classmethod
+    def of(cls, m: FieldMap) -> Footprint:
+        return cls(m.kind, m.velocity_m_per_s, np.asarray(m.positions_m, dtype=float))
+
+    def covers(self, m: FieldMap) -> bool:
+        """``m`` was measured like this map: same kind and velocity, positions among its."""
+        if m.kind != self.kind or math.dist(m.velocity_m_per_s,
+                                            self.velocity_m_per_s) > COVER_SPEED_M_PER_S:
+            return False
+        d = np.linalg.norm(m.positions_m[:, None, :] - self.positions_m[None, :, :], axis=2)
+        return bool(np.all(d.min(axis=1) <= COVER_DISTANCE_M))
+
+
 @dataclass(frozen=True, eq=False)
 class FitSpread:
     """How sure the model before is: the fit's parameter samples written into it, the
@@ -172,19 +203,29 @@ class FitSpread:
     varied: frozenset[str] = frozenset()
     held: tuple[str, ...] = ()
     note: str = "the model before is not a fitted model: no fit uncertainty to carry"
+    #: The maps the fit used (None: no fit lies behind the model, which is taken as it is).
+    footprints: tuple[Footprint, ...] | None = None
+
+    def covers(self, m: FieldMap) -> bool:
+        """The model before was fitted to a map measured like ``m`` (always, without a fit):
+        where it was not, a misfit may be the model's, not a change."""
+        return self.footprints is None or any(f.covers(m) for f in self.footprints)
 
     @classmethod
     def from_report(cls, fit_id: int, report: Mapping[str, Any], before: ArmParams,
-                    same_model: bool, fitted_model_id: int | None = None) -> FitSpread:
-        """From a stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`)."""
+                    same_model: bool, fitted_model_id: int | None = None,
+                    fit_maps: Sequence[FieldMap] = ()) -> FitSpread:
+        """From a stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`) and the maps
+        the fit used (none given: no later map counts as measured like them)."""
         unid = tuple(str(u.get("name")) for u in report.get("unidentified", [])
                      if isinstance(u, Mapping))
         held = tuple(str(h) for h in report.get("held_at_unimpaired", []) or [])
+        prints = tuple(Footprint.of(m.as_arm_on_handle()) for m in fit_maps)
         found = FitSamples.from_report(report)
         if found is None:
             return cls(fit_id, (), unid, frozenset(), held,
                        f"fit {fit_id} stored no parameter samples (refit to get them): the SE "
-                       "counts the later maps' noise only")
+                       "counts the later maps' noise only", prints)
         if not same_model:
             return cls(fit_id, (), unid, frozenset(), held,
                        f"the model before is derived from fitted model {fitted_model_id} by "
@@ -192,7 +233,7 @@ class FitSpread:
         spread = np.ptp(found.values, axis=0) if found.values.size else np.zeros(0)
         varied = frozenset(n for n, s in zip(found.names, spread, strict=True) if s > 0)
         return cls(fit_id, tuple(found.params(before)), unid, varied, held,
-                   f"{found.values.shape[0]} parameter samples of fit {fit_id}")
+                   f"{found.values.shape[0]} parameter samples of fit {fit_id}", prints)
 
 
 NO_FIT = FitSpread()
@@ -311,12 +352,15 @@ class Fraction:
     fit_se: float | None
     sensitivity_sd: float
     n_samples: int
+    #: √(χ²/dof) of the maps that see the change against the model before + f × the change
+    #: (sd widened by the fit's spread), when above 1: misfit neither explains widens the SE.
+    misfit: float = 1.0
 
     @property
     def se(self) -> float | None:
         if self.noise_se is None:
             return None
-        return math.hypot(self.noise_se, self.fit_se or 0.0)
+        return math.hypot(self.noise_se, self.fit_se or 0.0) * self.misfit
 
 
 def fraction_of(changes: Sequence[MapChange]) -> Fraction:
@@ -344,7 +388,22 @@ def fraction_of(changes: Sequence[MapChange]) -> Fraction:
         fs = np.where(ok, a_s / np.where(ok, b_s, 1.0), _UNKNOWN)
         lo, hi = np.percentile(fs, _SPREAD_PERCENTILES)
         fit_se = float((hi - lo) / 2.0) if hi < _UNKNOWN / 2 else math.inf
-    return Fraction(f, 1.0 / sens, fit_se, sens, n)
+    return Fraction(f, 1.0 / sens, fit_se, sens, n, misfit_scale(used, f))
+
+
+def misfit_scale(changes: Sequence[MapChange], fraction: float) -> float:
+    """√(χ²/(n - 1)), at least 1, of the maps the predicted change moves by ≥ 1 sd against the
+    model before + ``fraction`` × the change, the sd widened by the fit's spread (a Birge
+    ratio: what neither the noise nor the fit's uncertainty explains widens the SE)."""
+    chi2, n = 0.0, 0
+    for c in changes:
+        if float(np.sum(c.weights * (c.after - c.before) ** 2)) < 1.0:
+            continue
+        sd2 = c.sd**2 + c.spread_of(fraction) ** 2
+        r = c.y - c.before - fraction * (c.after - c.before)
+        chi2 += float(np.sum(r * r / sd2))
+        n += r.size
+    return math.sqrt(max(1.0, chi2 / (n - 1))) if n > 1 else 1.0
 
 
 def physical_range(before: ArmParams, after: ArmParams) -> tuple[float, float]:

@@ -10,9 +10,10 @@ group (100-200 onabotulinumtoxinA units, seen 3-8 weeks later). Its first sessio
 with one of :data:`MAP_SETS`, the model before is fitted to it (the fit's parameter samples
 travel with it, :class:`~fieldbank.interventions.realised.FitSpread`), and a later session is
 measured from the truth with a chosen fraction of the toxin's predicted effect (the catalogue's
-``emax`` scaled, so the force change is exactly that fraction), with the same map set at new
-positions and new noise. Noise: each value's sd is ``noise`` × the size of the value at its
-position (:func:`fieldbank.fitting.problem.relative_scale`), stored with the map.
+``emax`` scaled, so the force change is exactly that fraction), with the same map set at the
+same positions (the protocol repeated) or at new ones, and new noise. Noise: each value's sd
+is ``noise`` × the size of the value at its position
+(:func:`fieldbank.fitting.problem.relative_scale`), stored with the map.
 
 Seeds and positions are the cohort's own (:data:`COHORT_SEED`), apart from those of the
 project's other tests and of the shipped samples.
@@ -151,6 +152,8 @@ class Fitted:
     before: ArmParams
     spread: FitSpread
     status: str
+    #: The first session's positions (postural, stiffness), m.
+    positions: tuple[FloatArray, FloatArray]
 
 
 def fit_first_session(p: CheckPatient, map_set: str, noise: float,
@@ -159,27 +162,33 @@ def fit_first_session(p: CheckPatient, map_set: str, noise: float,
     rng = np.random.default_rng([p.seed, 1, round(noise * 1000), _key(map_set)])
     maps = measure(p.truth, MAP_SETS[map_set], noise, rng)
     fit = ArmFitter(seed=p.seed % 10_000, replicates=replicates).fit(maps, p.base)
-    spread = FitSpread.from_report(1, fit.report(), fit.params_, True, 1)
-    return Fitted(p, map_set, noise, fit.params_, spread, fit.status_)
+    spread = FitSpread.from_report(1, fit.report(), fit.params_, True, 1, maps)
+    return Fitted(p, map_set, noise, fit.params_, spread, fit.status_,
+                  (maps[0].positions_m, maps[1].positions_m))
 
 
-def later_session(fitted: Fitted, fraction: float, repeat: int = 0) -> LaterSession:
+def later_session(fitted: Fitted, fraction: float, repeat: int = 0,
+                  new_positions: bool = False) -> LaterSession:
     """The later session: the truth with ``fraction`` of the predicted effect, measured with
-    the first session's map set at new positions and with new noise (``repeat`` draws
-    another)."""
+    the first session's map set and positions (the protocol repeated; ``new_positions``: at
+    positions of its own) and with new noise (``repeat`` draws another)."""
     p = fitted.patient
     rng = np.random.default_rng([p.seed, 2, round(fitted.noise * 1000),
                                  _key(fitted.map_set), round(fraction * 1000), repeat])
-    maps = measure(p.truth_after(fraction), MAP_SETS[fitted.map_set], fitted.noise, rng)
+    maps = measure(p.truth_after(fraction), MAP_SETS[fitted.map_set], fitted.noise, rng,
+                   None if new_positions else fitted.positions)
     day = GIVEN_ON + timedelta(days=round(7 * p.weeks))
     return LaterSession(f"after-{repeat}", day, tuple(enumerate(maps, 1)))
 
 
-def check(fitted: Fitted, fraction: float, repeat: int = 0) -> SessionCheck:
-    """``fieldbank validate``'s check of the patient's plan against a later session."""
+def check(fitted: Fitted, fraction: float, repeat: int = 0,
+          new_positions: bool = False) -> SessionCheck:
+    """``fieldbank validate``'s check of the patient's plan against a later session
+    (:func:`later_session`)."""
     plan = fitted.patient.plan
     return check_session(fitted.before, plan, plan.apply(fitted.before), GIVEN_ON,
-                         later_session(fitted, fraction, repeat), spread=fitted.spread)
+                         later_session(fitted, fraction, repeat, new_positions),
+                         spread=fitted.spread)
 
 
 def _key(name: str) -> int:

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from fieldbank.errors import FieldbankError
 from fieldbank.fitting.quality import DEFAULT_THRESHOLDS, MapFit, Thresholds
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.errors import InterventionError
@@ -54,6 +55,7 @@ from fieldbank.interventions.realised import (
     FAILED,
     INCONCLUSIVE,
     MAX_CHANGE_SE,
+    MAX_REPORTED_SE,
     NO_FIT,
     NOT_CHECKED,
     PARTIAL,
@@ -306,7 +308,7 @@ def _reportable(f: Fraction, rules: Rules, guessed: Sequence[str],
                 limits: tuple[float, float]) -> bool:
     return (f.value is not None and f.sensitivity_sd >= rules.min_sensitivity and not guessed
             and limits[0] <= f.value <= limits[1] and f.se is not None
-            and math.isfinite(f.se))
+            and f.se <= max(MAX_REPORTED_SE, rules.max_se))
 
 
 def _map_check(c: MapChange, rules: Rules, thresholds: Thresholds, guessed: Sequence[str],
@@ -360,11 +362,13 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
     seen = f.value is not None and f.sensitivity_sd >= rules.min_sensitivity
     scale = (min(max(f.value, max(limits[0], 0.0)), limits[1])
              if seen and f.value is not None else 1.0)
-    unexplained = [c.check(scale, thresholds, f"map {c.map_id}") for c in changes
-                   if c.duplicate_of is None]
-    unexplained = [u for u in unexplained if u.verdict == "poor"]
+    poor = [(c, c.check(scale, thresholds, f"map {c.map_id}")) for c in changes
+            if c.duplicate_of is None]
+    unexplained = [u for _, u in poor if u.verdict == "poor"]
     untested = (guesses_explain(changes, before, spread.held, scale, thresholds)
                 if unexplained else ())
+    # a misfit where the model before was never fitted may be the model's, not a change
+    elsewhere = [c.map_id for c, u in poor if u.verdict == "poor" and not spread.covers(c.measured)]
     interval = None
     decided = False
     se = _num(f.se)
@@ -383,6 +387,16 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
                        f"{' and '.join(untested)}, which fit {spread.fit_id} held at the "
                        "unimpaired value (a guess), explains the difference: it may be that "
                        "guess, not the plan; refit with maps like these to decide")
+    elif unexplained and len(elsewhere) == len(unexplained):
+        verdict = INCONCLUSIVE
+        reasons += [r for u in unexplained for r in u.reasons]
+        reasons.append(f"these maps differ from the model before + the predicted change by "
+                       f"more than their noise and the fit's uncertainty, but fit "
+                       f"{spread.fit_id} used no map measured like map(s) "
+                       f"{', '.join(map(str, elsewhere))} (kind, hand velocity and positions): "
+                       "the model may not describe the arm there, so the difference cannot be "
+                       "laid on the plan; measure the later maps as the first session's to "
+                       "decide")
     elif unexplained:
         verdict = FAILED
         at = (f"{scale:.2f} × the predicted change" if seen else "the predicted change")
@@ -406,9 +420,9 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
                        f"measure the guess, not the plan; {advice} and refit to decide")
     elif se is None or se > rules.max_se:
         verdict = INCONCLUSIVE
-        parts = f"noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)}"
+        parts = f"noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)}" + _misfit(f)
         value = (f"{f.value:.2f} ± {_f2(se)}" if shown else
-                 f"unknown (its SE {_f2(se)} reaches beyond the plan's physical range)")
+                 f"not known to better than ± {_f2(se)}")
         bigger = ("the fit before the plan is too uncertain about the " + words
                   if (f.fit_se or 0.0) > (f.noise_se or 0.0) else
                   "the later maps are too noisy for this change")
@@ -427,14 +441,18 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
             why = (f"the measured change along the predicted one is beyond what the plan can "
                    f"produce (a fraction outside {lo:.2f} to {hi:.2f})")
         reasons.append(f"realised fraction {_f2(f.value) if shown else 'not reported'}"
-                       + (f" ± {se:.2f} (noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)})"
-                          if shown else "") + f": {why}")
+                       + (f" ± {se:.2f} (noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)}"
+                          f"{_misfit(f)})" if shown else "") + f": {why}")
     return SessionCheck(later.label, later.session_date.isoformat(), weeks, retimed, checks,
                         f.value if shown else None, se if shown else None, verdict,
                         tuple(reasons), _num(f.noise_se) if seen else None,
                         _num(f.fit_se) if seen else None, f.sensitivity_sd,
                         interval, limits, tuple(t.words for t in what), guessed, advice, note,
                         rules, decided)
+
+
+def _misfit(f: Fraction) -> str:
+    return f"; × {f.misfit:.2f} for misfit" if f.misfit > 1.0 else ""
 
 
 def _f2(v: float | None) -> str:
@@ -457,6 +475,14 @@ class PlanInputs:
     spread: FitSpread = NO_FIT
 
 
+def _fit_maps(db: Database, map_ids: Sequence[int]) -> tuple[FieldMap, ...]:
+    """The maps a fit used; none when one of them is gone."""
+    try:
+        return tuple(db.get_maps(list(map_ids)))
+    except FieldbankError:
+        return ()
+
+
 def read_plan_inputs(db: Database, record: PlanRecord) -> PlanInputs:
     """The plan, its two models, the fit behind it and the later sessions with their maps."""
     doc = record.spec.get("plan", record.spec)
@@ -469,7 +495,8 @@ def read_plan_inputs(db: Database, record: PlanRecord) -> PlanInputs:
     found = fit_behind(db, record.base_model_id)
     fit = found[0] if found else None
     spread = NO_FIT if found is None else FitSpread.from_report(
-        found[0].id, found[0].result, before, found[1] == record.base_model_id, found[1])
+        found[0].id, found[0].result, before, found[1] == record.base_model_id, found[1],
+        _fit_maps(db, found[0].map_ids))
     day = given_on(record.spec)
     if record.patient_code is None:
         return PlanInputs(record, plan, before, after, day, None, (),
