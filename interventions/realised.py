@@ -34,6 +34,10 @@ has two parts, added in quadrature:
   the 15.9-84.1 percentiles of f_s (one SD for a normal spread, robust to a few samples whose
   predicted change the maps barely see).
 
+When the maps that see the change still differ from the model before + f × the change by more
+than the noise and the fit's spread explain (χ²/dof > 1), the SE is multiplied by √(χ²/dof)
+(:func:`misfit_scale`, a Birge ratio), as a fit's residual scale widens its intervals.
+
 ``tests/test_validate_calibration.py`` checks the result on a seeded cohort with realised
 effects between 0 and 1.2 (the truth within 2 SE in ≥ 90% of decided cases);
 ``benchmarks/bench_validate.py`` measures the verdicts' false-alarm rate.
@@ -59,7 +63,10 @@ With SE ≤ :data:`MAX_CHANGE_SE` and the interval f ± 2 SE = [lo, hi]:
   :mod:`fieldbank.fitting.quality`): the maps changed in a way the plan does not predict;
 * **inconclusive** otherwise: the change is not observable (S < 4 sd), rests on a guess, its
   SE exceeds 0.25, or the interval reaches both below 0.5 and up to 0.8 (partial or as
-  predicted: the maps cannot tell).
+  predicted: the maps cannot tell). A misfit as above is not laid on the plan either where the
+  fit used no map measured like the misfitting one (:class:`Footprint`: the model may not
+  describe the arm there) or where a change of a group the fit held at the unimpaired value
+  explains it (:func:`guesses_explain`).
 
 With a calibrated SE a change that came as predicted is called failed or partial only when f
 falls more than 2 SE + 0.2 below 1 or above 1.2: well under 5% of such cases.
@@ -153,7 +160,9 @@ class Rules:
             f"{1 + t:g} (stronger); or a map changed in a way the plan does not predict "
             "(χ²/n above its limit at the realised fraction, fit uncertainty allowed for)",
             f"  {INCONCLUSIVE}: the maps cannot see the change, it rests on a guess, SE > "
-            f"{self.max_se:g}, or the interval spans below {lo:g} and up to {hi:g}",
+            f"{self.max_se:g}, or the interval spans below {lo:g} and up to {hi:g}; or the "
+            "maps differ from the model where the fit saw no map like them, or in a way a "
+            "parameter the fit guessed explains",
         ]
 
 

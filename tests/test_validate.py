@@ -258,6 +258,14 @@ def test_a_partial_effect_is_said_and_contradicts_the_prediction(
     (s,) = js["plans"][0]["sessions"]
     assert s["verdict"] == "partial effect" and 0.3 < s["realised_fraction"] < 0.7
     assert 0 < s["interval"][0] and s["interval"][1] < 0.8
+    # the report flags it as it flags a failed prediction
+    out = tmp_path / "report"
+    rep = run_cli("report", "--db", url, "--out", str(out), "--jobs", "1", "--plan",
+                  str(plan_id))
+    assert rep.exit_code == 0, rep.output
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert ('<p class="warn">Checked against maps measured after the plan: partial effect.'
+            in html)
 
 
 def test_the_report_carries_the_same_check(samples_db: dict[str, Any], tmp_path: Path) -> None:

@@ -37,10 +37,10 @@ from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.fitting.problem import map_sd
 from fieldbank.fitting.quality import MapFit, map_fit
 from fieldbank.fitting.records import FitStore, PatientMap
+from fieldbank.fitting.space import named_values
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.maps import model_map_like
 from fieldbank.model import Arm
-from fieldbank.params import ArmParams
 
 GENERALISES = "generalises"
 NOT_GENERALISED = "does not generalise"
@@ -156,7 +156,7 @@ def cross_validate(store: FitStore, model_id: int | str,
                        "one out needs at least two.")
     base = store.patient_params(patient)
     kinds = tuple(report.get("fitted") or ("km", "alpha", "beta"))
-    full = _values(detail.model.params)
+    full = named_values(detail.model.params)
     full_sd = {n: float(v.get("sd", math.nan)) for n, v in (report.get("intervals") or {}).items()
                if isinstance(v, Mapping)}
     full_unid = {str(u.get("name")) for u in report.get("unidentified", [])
@@ -182,7 +182,7 @@ def cross_validate(store: FitStore, model_id: int | str,
         moving = target.speed_m_per_s > 0
         others_moving = any(m.speed_m_per_s > 0 for m in others)
         unid = tuple(u.name for u in fitter.unidentified_)
-        shifts = _shifts(full, full_sd, _values(fitter.params_), set(full_unid) | set(unid))
+        shifts = _shifts(full, full_sd, named_values(fitter.params_), set(full_unid) | set(unid))
         if mf.verdict == "good":
             outcome, note = PREDICTED, ""
         elif moving and not others_moving:
@@ -211,14 +211,6 @@ def _prediction_spread(fitter: ArmFitter, target: Any) -> np.ndarray:
             arm_p = Arm.from_params(p)
         ys.append(model_map_like(arm_p, target).values)
     return np.asarray(np.std(np.array(ys), axis=0, ddof=1))
-
-
-def _values(p: ArmParams) -> dict[str, float]:
-    out = {}
-    for kind, attr in (("km", "km_n_per_m"), ("alpha", "alpha_n"), ("beta", "beta")):
-        for g, v in zip(("sf", "se", "ef", "ee", "bf", "be"), getattr(p, attr), strict=True):
-            out[f"{kind}_{g}"] = float(v)
-    return out
 
 
 def _shifts(full: dict[str, float], sd: dict[str, float], without: dict[str, float],
