@@ -452,7 +452,7 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
 
 
 def _misfit(f: Fraction) -> str:
-    return f"; × {f.misfit:.2f} for misfit" if f.misfit > 1.0 else ""
+    return f"; × {f.misfit:.2f} for misfit" if f.misfit >= 1.005 else ""
 
 
 def _f2(v: float | None) -> str:
