@@ -12,16 +12,16 @@ import numpy as np
 from fieldbank import fieldplot, modelsource
 from fieldbank.cli.options import json_option
 from fieldbank.errors import FileRefused, ParameterError
-from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
-from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
-from fieldbank.model import Arm
-from fieldbank.severity import (
+from fieldbank.evaluate.severity import (
     classify,
     parse_severity_options,
     severity_dict,
     summary,
     synthesize,
 )
+from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
+from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
+from fieldbank.model import Arm
 
 
 def _parse_pairs(text: str, what: str) -> np.ndarray:

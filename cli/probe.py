@@ -42,6 +42,7 @@ from fieldbank.evaluate.design import (
     severity_candidates,
 )
 from fieldbank.evaluate.plot import classification_figure, probe_figure
+from fieldbank.evaluate.severity import LEVELS, group_name, level_name
 from fieldbank.files import to_json, write_atomic
 from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
 from fieldbank.haptic.identify import designed_vs_seed
@@ -49,7 +50,6 @@ from fieldbank.haptic.probe import observation_from_trace
 from fieldbank.haptic.recording import read_trace_h5
 from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.probepath import probes_document
-from fieldbank.severity import LEVELS, group_name, level_name
 
 F = TypeVar("F", bound=Callable[..., Any])
 ALL_LEVELS = ("very mild", "mild", "moderate", "severe")

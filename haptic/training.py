@@ -7,8 +7,8 @@ Melendez-Calderon et al., "Experimental protocol":
   condition being felt. The seed says the conditions came "sequentially"; here each round
   presents the four in that order and the rounds repeat (interpretation);
 - **assessment** - 3 impaired groups × 4 severities (very mild … severe, Weber fraction 0.6,
-  :mod:`fieldbank.severity`) × 9 repetitions = 108 trials of 15 s in random (seeded) order; the
-  answer is *shoulder*, *elbow* or *both* (bi-articular), with no time limit;
+  :mod:`fieldbank.evaluate.severity`) × 9 repetitions = 108 trials of 15 s in random (seeded) order;
+  the answer is *shoulder*, *elbow* or *both* (bi-articular), with no time limit;
 - **instruction** - *non-instructed* trainees explore freely; *instructed* ones follow the
   probing motions drawn on the screen (the fast pull and the semi-ellipse,
   :mod:`fieldbank.evaluate.probing`, and any further probe - a designed one, e.g. from the file
@@ -37,11 +37,11 @@ from typing import Any
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate import probing
+from fieldbank.evaluate.severity import LEVELS, group_name, level_name, synthesize
 from fieldbank.haptic.errors import CommandError
 from fieldbank.model import Arm
 from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.probepath import MAX_DRAWN_PROBES, ProbePath
-from fieldbank.severity import LEVELS, group_name, level_name, synthesize
 from fieldbank.validation import Interval, check_number
 
 #: What a trainee answers for each impaired group (the seed's three buttons).

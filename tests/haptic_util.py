@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable, Iterator
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.renderer import Renderer, RendererConfig
@@ -12,7 +13,6 @@ from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from fieldbank.severity import synthesize
 
 
 class MemoryPort:
@@ -48,7 +48,7 @@ def unimpaired() -> ArmParams:
 
 
 def severe_shoulder() -> ArmParams:
-    """The shoulder group at "severe" on the one severity scale (fieldbank.severity)."""
+    """The shoulder group at "severe" on the one severity scale (fieldbank.evaluate.severity)."""
     return synthesize({"shoulder": "severe"})
 
 

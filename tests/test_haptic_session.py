@@ -19,6 +19,7 @@ from click.testing import CliRunner
 from fieldbank.cli.haptic import haptic
 from fieldbank.cli.main import cli
 from fieldbank.errors import ParameterError, StorageError
+from fieldbank.evaluate.severity import parse_severity_options, synthesize
 from fieldbank.haptic import motions
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.clock import VirtualClock
@@ -32,7 +33,6 @@ from fieldbank.haptic.replay import rerun
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.probepath import ProbePath, probes_document
-from fieldbank.severity import parse_severity_options, synthesize
 from tests.haptic_util import rest_hand, severe_shoulder, unimpaired
 
 

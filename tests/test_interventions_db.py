@@ -12,8 +12,8 @@ from click.testing import CliRunner
 
 import fieldbank.storage as storage
 from fieldbank.cli.whatif import whatif
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.interventions.plan import Plan, params_sha256
-from fieldbank.severity import synthesize
 
 
 def _db(tmp_path: Path) -> str:

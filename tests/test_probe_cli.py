@@ -11,10 +11,10 @@ from click.testing import CliRunner
 
 from fieldbank.cli.main import COMMANDS, cli
 from fieldbank.evaluate.design import Stroke, equilibrium, severity_candidates
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
 from fieldbank.probepath import ProbePath
-from fieldbank.severity import synthesize
 from fieldbank.storage import Database
 
 

@@ -18,13 +18,13 @@ import pytest
 from fieldbank import fieldplot, svgplot
 from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES, lengthening_direction
+from fieldbank.evaluate.severity import COMPONENTS, synthesize
 from fieldbank.interventions import Botulinum, Lengthening, Plan
 from fieldbank.interventions.course import stretch_course, time_course
 from fieldbank.interventions.report.compute import ALL_COLUMNS, STRETCH_READOUTS
 from fieldbank.interventions.report.figures import case_figures
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
-from fieldbank.severity import COMPONENTS, synthesize
 from fieldbank.storage import Database
 from tests.report_helpers import decode_path, run_cli, store_cohort, svg_paths
 

@@ -14,10 +14,10 @@ from fieldbank import storage
 from fieldbank.cli.fit import fit
 from fieldbank.cli.ingest import ingest
 from fieldbank.cli.whatif import whatif
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.fitting.synthetic import synthetic_patient
 from fieldbank.maps import FieldMap
 from fieldbank.params import ArmParams
-from fieldbank.severity import synthesize
 
 #: Stiffness positions per map (each static and at ±1 m/s), as the recovery tests use.
 N_STIFFNESS = 16

@@ -14,6 +14,7 @@ from typing import Any
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Comparison, Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES
+from fieldbank.evaluate.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
@@ -27,7 +28,6 @@ from fieldbank.interventions.report.figures import (
 from fieldbank.interventions.report.select import CaseSpec
 from fieldbank.interventions.report.trust import basis_of, case_trust
 from fieldbank.params import GROUPS
-from fieldbank.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
 
 #: Weeks after the most recent injection at which the time course is evaluated.
 TIMECOURSE_WEEKS: tuple[float, ...] = tuple(float(w) for w in range(0, 25))

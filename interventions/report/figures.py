@@ -39,12 +39,12 @@ from fieldbank.evaluate.probing import (
     StretchProfile,
     lengthening_direction,
 )
+from fieldbank.evaluate.severity import GRADED_STRETCH, LEVELS, MUSCLE_GROUP_NAMES, GroupSeverity
 from fieldbank.interventions.course import StretchCourse
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.validate import CHANGE_TOLERANCE, PlanValidation
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS
-from fieldbank.severity import GRADED_STRETCH, LEVELS, MUSCLE_GROUP_NAMES, GroupSeverity
 from fieldbank.svgplot import (
     AFTER,
     BEFORE,
