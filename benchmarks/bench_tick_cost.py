@@ -25,9 +25,10 @@ from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.pair import build_sim
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import NCOL, TraceBuffer
-from fieldbank.haptic.renderer import Renderer, RendererConfig, build_sim
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import Safety, SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.params import ArmParams

@@ -19,6 +19,7 @@ from fieldbank.cli.options import db_option, emit_json, json_option, open_db
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.errors import FieldbankError
 from fieldbank.haptic.client import push_models
+from fieldbank.haptic.modelinfo import ModelInfo
 from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES, summary_lines
 from fieldbank.interventions.spec import build_plan
@@ -129,10 +130,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
                    (source.model_id, None))
             plan_text = plan_label(res.plan)
-            info = {"A": {"label": source.description, "model_id": ids[0],
-                          "patient": source.patient_code, "plan": None},
-                    "B": {"label": f"after: {plan_text}"[:200], "model_id": ids[1],
-                          "patient": source.patient_code, "plan": plan_text[:200]}}
+            info = {"A": ModelInfo.describe(source.description, ids[0], source.patient_code),
+                    "B": ModelInfo.describe(f"after: {plan_text}", ids[1], source.patient_code,
+                                            plan_text)}
             doc["rendered"] = push_models(res.before, res.after, control_path, model_ids=ids,
                                           model_info=info)
     except FieldbankError as exc:

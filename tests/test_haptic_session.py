@@ -147,7 +147,7 @@ def test_abx_through_the_renderer_hides_and_records() -> None:
         for _ in range(600):
             rd.tick()
         expected_w = float(rd.abx.model_for("X")) if rd.abx else None
-        assert rd.blend.value == pytest.approx(expected_w)
+        assert rd.pair.blend.value == pytest.approx(expected_w)
         cmds.append(rd.submit("abx_answer", answer=ans))
         rd.tick()
     for c in cmds:
@@ -457,6 +457,9 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     assert a == before
     assert b != before and b.km_n_per_m == before.km_n_per_m  # botulinum acts on α, β only
     assert b.alpha_n[2] < before.alpha_n[2]
+    told = rd.metadata["model_info"]  # built through haptic.modelinfo.ModelInfo
+    assert told["A"]["plan"] is None and told["B"]["label"].startswith("after: ")
+    assert told["B"]["plan"] and "botulinum" in told["B"]["plan"].lower()
     # no renderer: a clean error, not a traceback
     r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
                                     "--render", "--socket", str(tmp_path / "none.sock")])
