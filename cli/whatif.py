@@ -15,7 +15,7 @@ from typing import Any
 import click
 
 from fieldbank import modelsource
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import db_option, emit_json, figure_path, json_option, open_db
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.haptic.client import push_models
 from fieldbank.haptic.modelinfo import ModelInfo
@@ -60,9 +60,9 @@ from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
               help=f"Dose limit for --optimize, {DOSE_UNIT}.")
 @click.option("--groups", "opt_groups", default=None, metavar="G1,G2",
               help="Groups --optimize may inject (default all six).")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
-              help="Write the figures (joint stretches, fields, grades) to this SVG, PNG or "
-                   "PDF.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), callback=figure_path,
+              help="Write the figures (joint stretches, fields, grades) to this .svg, .png or "
+                   ".pdf.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,

@@ -18,8 +18,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from fieldbank.haptic.commands import ModelIds, SimPair
-from fieldbank.haptic.modelinfo import ModelInfoPair, to_wire
+from fieldbank.haptic.commands import SimPair
+from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair, to_wire
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig

@@ -45,11 +45,11 @@ from fieldbank.haptic import commands, readouts
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.assemble import assemble_trace, close_blocks, utc_now
 from fieldbank.haptic.clock import Clock, RealClock, realtime
-from fieldbank.haptic.commands import ModelIds, RendererCommand, Request, Result, SimPair
+from fieldbank.haptic.commands import RendererCommand, Request, Result, SimPair
 from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.loopstats import LoopTimes, loop_stats
-from fieldbank.haptic.modelinfo import ModelInfoPair
+from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair
 from fieldbank.haptic.pair import ModelPair
 from fieldbank.haptic.protocol import FLAG_FAULT, FaultCode
 from fieldbank.haptic.recording import Trace, TraceBuffer

@@ -15,6 +15,7 @@ from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Comparison, Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES
 from fieldbank.evaluate.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
+from fieldbank.figures import svg
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
@@ -206,6 +207,6 @@ def compute_case(spec: CaseSpec) -> CaseResult:
     # clip-path ids must be unique in the page: plan id and figure number
     figs = tuple(
         Figure(f.key, f.caption,
-               "" if f.scene is None else f.scene.to_svg(f"p{spec.plan_id}f{k}"))
+               "" if f.scene is None else svg.write(f.scene, f"p{spec.plan_id}f{k}"))
         for k, f in enumerate(case_figures(arm_b, arm_a, c, plan, course, bands, checks)))
     return CaseResult(spec, json_finite(row), json_finite(detail), figs, checks)

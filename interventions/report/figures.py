@@ -1,7 +1,8 @@
-"""The figures of a what-if case, as vector graphics (:mod:`fieldbank.svgplot`,
-:mod:`fieldbank.fieldplot`): the report's, ``whatif --plot``'s - one set of figures.
+"""The figures of a what-if case, as vector graphics (:mod:`fieldbank.figures`,
+:mod:`fieldbank.figures.fields`): the report's, ``whatif --plot``'s - one set of figures.
 
-Each function takes already computed values and returns a :class:`~fieldbank.svgplot.Scene`;
+Each function takes already computed values and returns a
+:class:`~fieldbank.figures.scene.Scene`;
 what the plan changes comes first:
 
 * :func:`stretch_figure` - the clinic's joint stretches (Tardieu-style): torque resisting the
@@ -31,7 +32,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fieldbank import fieldplot
 from fieldbank.evaluate.compare import Comparison, standard_grid
 from fieldbank.evaluate.probing import (
     JointStretch,
@@ -40,12 +40,10 @@ from fieldbank.evaluate.probing import (
     lengthening_direction,
 )
 from fieldbank.evaluate.severity import GRADED_STRETCH, LEVELS, MUSCLE_GROUP_NAMES, GroupSeverity
-from fieldbank.interventions.course import StretchCourse
-from fieldbank.interventions.plan import Plan
-from fieldbank.interventions.validate import CHANGE_TOLERANCE, PlanValidation
-from fieldbank.model import Arm, FloatArray
-from fieldbank.params import GROUPS
-from fieldbank.svgplot import (
+from fieldbank.figures import fields
+from fieldbank.figures.panel import Panel
+from fieldbank.figures.scene import Scene
+from fieldbank.figures.style import (
     AFTER,
     BEFORE,
     CHANGE,
@@ -55,12 +53,15 @@ from fieldbank.svgplot import (
     GREY,
     SERIES,
     TEXT,
-    Panel,
-    Scene,
     limits,
     nice_ticks,
     text_width,
 )
+from fieldbank.interventions.course import StretchCourse
+from fieldbank.interventions.plan import Plan
+from fieldbank.interventions.validate import CHANGE_TOLERANCE, PlanValidation
+from fieldbank.model import Arm, FloatArray
+from fieldbank.params import GROUPS
 
 WIDTH = 1080.0
 #: Colour of a check that held.
@@ -198,12 +199,12 @@ def moving_field_figure(arm_b: Arm, arm_a: Arm, grid_m: FloatArray, direction: F
     v = np.tile(np.asarray(direction, dtype=float) * speed_m_per_s, (len(grid_m), 1))
     fb, fa = arm_b.endpoint_force(grid_m, v), arm_a.endpoint_force(grid_m, v)
     rest = arm_b.rest_position()
-    h = fieldplot.row_height(grid_m, rest)
+    h = fields.row_height(grid_m, rest)
     scene = Scene(WIDTH, h + 58, "moving field before, after and the change")
     scene.data["figure"] = "moving-field"
     scene.text(62, 16, f"Hand moving {speed_m_per_s:g} m/s {direction_label(direction)}: "
                f"{why}", FONT_TITLE, bold=True)
-    info = fieldplot.field_row(scene, 30, grid_m, fb, fa, "moving field", rest_m=rest,
+    info = fields.field_row(scene, 30, grid_m, fb, fa, "moving field", rest_m=rest,
                                data="moving-")
     scene.data["change-max-n"] = f"{info.diff_max_n:.6g}"
     _arrow_legend(scene, h + 40, "cells: change of |F| (N), blue weaker, red stronger")
@@ -215,12 +216,12 @@ def static_field_figure(arm_b: Arm, arm_a: Arm, grid_m: FloatArray) -> Scene:
     change with ΔU on a diverging map."""
     fb, fa = arm_b.endpoint_force(grid_m), arm_a.endpoint_force(grid_m)
     rest = arm_b.rest_position()
-    h = fieldplot.row_height(grid_m, rest)
+    h = fields.row_height(grid_m, rest)
     scene = Scene(WIDTH, h + 58, "static field before, after and the change")
     scene.data["figure"] = "static-field"
     scene.text(62, 16, "Static (passive, position-dependent) field over the passive "
                "potential U", FONT_TITLE, bold=True)
-    info = fieldplot.field_row(scene, 30, grid_m, fb, fa, "static field",
+    info = fields.field_row(scene, 30, grid_m, fb, fa, "static field",
                                potential_before_j=arm_b.potential(grid_m),
                                potential_after_j=arm_a.potential(grid_m), rest_m=rest,
                                data="static-")
@@ -233,7 +234,7 @@ def _arrow_legend(scene: Scene, y: float, cells: str) -> None:
     scene.legend(62, y, [("before", {"stroke": BEFORE, "width": 2}),
                          ("after", {"stroke": AFTER, "width": 2}),
                          ("after − before", {"stroke": CHANGE, "width": 2}),
-                         *fieldplot.MARKER_LEGEND, (cells, {"fill": "#f4a582"})])
+                         *fields.MARKER_LEGEND, (cells, {"fill": "#f4a582"})])
 
 
 def ellipse_figure(arm_b: Arm, grid_m: FloatArray, k_before: FloatArray,
@@ -241,16 +242,16 @@ def ellipse_figure(arm_b: Arm, grid_m: FloatArray, k_before: FloatArray,
     """Static stiffness ellipses before and after on one scale, and the ratio of the larger
     stiffness after / before."""
     rest = arm_b.rest_position()
-    h = fieldplot.row_height(grid_m, rest)
+    h = fields.row_height(grid_m, rest)
     scene = Scene(WIDTH, h + 58, "static endpoint stiffness before and after")
     scene.data["figure"] = "stiffness"
     scene.text(62, 16, "Static endpoint stiffness (symmetric part of K)", FONT_TITLE,
                bold=True)
-    fieldplot.ellipse_row(scene, 30, grid_m, k_before, k_after, "stiffness", rest)
+    fields.ellipse_row(scene, 30, grid_m, k_before, k_after, "stiffness", rest)
     scene.legend(62, h + 40, [("before", {"stroke": BEFORE, "width": 1.5}),
                               ("after", {"stroke": AFTER, "width": 1.5}),
                               ("dashed: a negative eigenvalue",
-                               {"stroke": TEXT, "dash": (3, 2)}), *fieldplot.MARKER_LEGEND])
+                               {"stroke": TEXT, "dash": (3, 2)}), *fields.MARKER_LEGEND])
     return scene
 
 
@@ -599,7 +600,7 @@ def case_figures(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
         "keys); cells: the change of its magnitude.",
         moving_field_figure(arm_b, arm_a, grid, d, why)))
     static = c.fields[0]
-    if static.diff_max_n < fieldplot.NO_CHANGE and c.potential.max_abs_j < fieldplot.NO_CHANGE:
+    if static.diff_max_n < fields.NO_CHANGE and c.potential.max_abs_j < fields.NO_CHANGE:
         out.append(CaseFigure(
             "static-field",
             "Static (passive, position-dependent) field, potential and stiffness: no change "
@@ -629,7 +630,7 @@ def case_figures(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
     probe_rows = c.probe_rows()
     probe_diff = max((float(np.max(np.abs(a.force_n - b.force_n))) for _, b, a in probe_rows),
                      default=0.0)
-    if probe_diff < fieldplot.NO_CHANGE:
+    if probe_diff < fields.NO_CHANGE:
         # the same curve twice would read as "the plan does nothing"; say what these motions
         # miss instead (the stretches above show what changes)
         out.append(CaseFigure(
