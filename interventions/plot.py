@@ -1,6 +1,6 @@
 """``whatif --plot``: the report's figures of one what-if, on one page.
 
-The same figures as a report case (:func:`fieldbank.interventions.report.figures.case_figures`:
+The same figures as a report case (:func:`fieldbank.interventions.report.figures.case.case_figures`:
 the joint stretches, the moving field in the direction that lengthens the treated groups, the
 static field and stiffness when the plan changes them, the grades, the probing motions, the
 botulinum time course), stacked under a title, saved by :func:`fieldbank.figures.save`
@@ -20,7 +20,8 @@ from fieldbank.figures.style import FONT, FONT_TITLE, GREY
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
 from fieldbank.interventions.plan import Plan
-from fieldbank.interventions.report.figures import WIDTH, case_figures
+from fieldbank.interventions.report.figures.case import case_figures
+from fieldbank.interventions.report.figures.common import WIDTH
 from fieldbank.model import Arm, FloatArray
 
 #: Characters per line of a note in a figure page (12 px type over the page's width).

@@ -20,8 +20,6 @@ from fieldbank.cli.options import figure_path
 from fieldbank.errors import ValidationError
 from fieldbank.evaluate.classify import classify
 from fieldbank.evaluate.design import (
-    Stroke,
-    equilibrium,
     score_probes,
     seed_probes,
     severity_candidates,
@@ -35,11 +33,10 @@ from fieldbank.figures.probes import classification_figure, probe_figure
 from fieldbank.figures.scene import Scene
 from fieldbank.fitting import ArmFitter
 from fieldbank.fitting.synthetic import impaired_params, synthetic_patient
-from fieldbank.haptic.probe import probe_path
-from fieldbank.haptic.recording import write_trace_h5
 from fieldbank.maps import postural_map
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from tests.haptic_util import mild_shoulder_trace
 from tests.report_helpers import svg_paths
 
 MAGIC = {"svg": b"<?xml", "png": b"\x89PNG\r\n\x1a\n", "pdf": b"%PDF-"}
@@ -68,12 +65,7 @@ def test_every_plot_option_checks_its_format_before_any_work() -> None:
 
 @pytest.fixture(scope="module")
 def trace(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cands = severity_candidates(levels=("mild", "severe"))
-    stroke = Stroke(tuple(equilibrium(cands)), -100.0, 0.1, 0.4, 0.2)
-    res = probe_path(synthesize({"shoulder": "mild"}), stroke.motion(), seed=1)
-    path = tmp_path_factory.mktemp("traces") / "probe.h5"
-    write_trace_h5(res.trace, path)
-    return path
+    return mild_shoulder_trace(tmp_path_factory.mktemp("traces") / "probe.h5")
 
 
 CASES = {

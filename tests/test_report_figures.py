@@ -25,7 +25,7 @@ from fieldbank.figures.scene import Scene
 from fieldbank.interventions import Botulinum, Lengthening, Plan
 from fieldbank.interventions.course import stretch_course, time_course
 from fieldbank.interventions.report.compute import ALL_COLUMNS, STRETCH_READOUTS
-from fieldbank.interventions.report.figures import case_figures
+from fieldbank.interventions.report.figures.case import case_figures
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.storage import Database

@@ -29,7 +29,7 @@ from fieldbank.figures import svg
 from fieldbank.files import write_atomic
 from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
-from fieldbank.interventions.report.figures import (
+from fieldbank.interventions.report.figures.cohort import (
     CohortPoint,
     cohort_change_figure,
     validation_figure,

@@ -20,12 +20,8 @@ from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
 from fieldbank.interventions.plan import dose_warnings
-from fieldbank.interventions.report.figures import (
-    CheckPoint,
-    case_figures,
-    check_points,
-    treated_groups,
-)
+from fieldbank.interventions.report.figures.case import case_figures, treated_groups
+from fieldbank.interventions.report.figures.cohort import CheckPoint, check_points
 from fieldbank.interventions.report.select import CaseSpec
 from fieldbank.interventions.report.trust import basis_of, case_trust
 from fieldbank.params import GROUPS
