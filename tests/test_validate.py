@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pytest
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from fieldbank.severity import synthesize
 from tests.report_helpers import run_cli
 
 if TYPE_CHECKING:
