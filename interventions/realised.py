@@ -18,8 +18,8 @@ norm: the maps' sensitivity to the treated parameter times the predicted change 
 noise alone leaves f known to ±1/S, so a change is **observable** only when S ≥
 :data:`MIN_SENSITIVITY` (4 sd: f known to ±0.25 from the noise). Static maps do not see a
 change of the stretch reflex (it acts only while the arm moves), whatever their noise: for
-them S = 0, and the check says which map or stretch would see it (:func:`suggestion`) rather
-than print a number.
+them S = 0, and the check says which map or stretch would see it
+(:func:`fieldbank.interventions.suggest.suggestion`) rather than print a number.
 
 How sure: the maps' noise and the fit's uncertainty together
 ------------------------------------------------------------
@@ -82,14 +82,13 @@ from typing import Any
 import numpy as np
 
 from fieldbank.errors import ParameterError
-from fieldbank.evaluate.probing import STRETCH_SPEED_RAD_S, lengthening_direction
-from fieldbank.fitting.problem import DEFAULT_RELATIVE_SD, map_sd
+from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, synthesize
+from fieldbank.fitting.problem import map_sd
 from fieldbank.fitting.quality import MapFit, Thresholds, map_fit
 from fieldbank.fitting.uncertainty import FitSamples
-from fieldbank.maps import FieldMap, model_map_like, postural_map, stiffness_map
+from fieldbank.maps import FieldMap, model_map_like
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import BOUNDS, GROUPS, ArmParams
-from fieldbank.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES, synthesize
 
 #: Verdicts of a session, a plan and a whole check.
 CONFIRMED = "prediction confirmed"
@@ -117,8 +116,6 @@ MAX_REPORTED_SE = 0.5
 #: 3 × the predicted one (a plan's bounds usually stop it earlier: :func:`physical_range`).
 FRACTION_LIMITS = (-1.0, 3.0)
 #: The measurement a check proposes when its maps cannot see the change: a stiffness map while
-#: the hand moves this fast (the sample data's moving maps), with the default relative sd.
-SUGGESTED_SPEED_M_PER_S = 1.0
 #: Percentiles of the fit samples' realised fractions whose half-distance is the fit's SE.
 _SPREAD_PERCENTILES = (15.865525393145708, 84.1344746068543)
 #: Stands for the fraction of a sample that predicts no change at all (unknown).
@@ -301,7 +298,7 @@ class MapChange:
                        sd.reshape(self.measured.values.shape), thresholds, label=label)
 
 
-def _arm_like(compiled: Arm, p: ArmParams) -> Arm:
+def arm_like(compiled: Arm, p: ArmParams) -> Arm:
     try:  # a sample or a plan changes muscle values only: the geometry is compiled once
         return compiled.with_muscles(p)
     except ParameterError:
@@ -316,8 +313,8 @@ def map_changes(before: ArmParams, after: ArmParams, maps: Sequence[tuple[int, F
     with the reason. A map repeating another (same kind, velocity, positions and values: one
     measurement stored from two files) is marked ``duplicate_of`` and counted once."""
     arm_b = Arm.from_params(before)
-    arm_a = _arm_like(arm_b, after)
-    arms_s = [(_arm_like(arm_b, pb), _arm_like(arm_b, pa)) for pb, pa in samples]
+    arm_a = arm_like(arm_b, after)
+    arms_s = [(arm_like(arm_b, pb), arm_like(arm_b, pa)) for pb, pa in samples]
     out: list[MapChange] = []
     problems: list[str] = []
     for map_id, raw in maps:
@@ -497,7 +494,7 @@ def guesses_explain(changes: Sequence[MapChange], before: ArmParams, held: Seque
                             for c, s in zip(used, sds, strict=True)])
     cols, names = [], []
     for g, comp in pairs:
-        raised = _arm_like(arm_b, synthesize({f"{g}:{comp}": GUESS_PROBE_LEVEL}, before))
+        raised = arm_like(arm_b, synthesize({f"{g}:{comp}": GUESS_PROBE_LEVEL}, before))
         col = np.concatenate([((model_map_like(raised, c.measured).values.reshape(c.sd.shape)
                                 - c.before) / s).ravel() for c, s in zip(used, sds, strict=True)])
         if np.any(col != 0):
@@ -528,48 +525,6 @@ def _whitened(arm_b: Arm, arm_x: Arm, maps: Sequence[FieldMap]) -> float:
         d = model_map_like(arm_x, m).values - model_map_like(arm_b, m).values
         total += float(np.sum((d / sd) ** 2))
     return math.sqrt(total)
-
-
-def _sensitivity(arm_b: Arm, arm_a: Arm, m: FieldMap) -> float:
-    """Whitened size (sd) of the change from ``arm_b`` to ``arm_a`` on a map like ``m`` with
-    the default relative sd (:func:`fieldbank.fitting.problem.map_sd`)."""
-    yb = model_map_like(arm_b, m)
-    ya = model_map_like(arm_a, m).values
-    sd = map_sd(yb).reshape(yb.values.shape)
-    return float(np.sqrt(np.sum(((ya - yb.values) / sd) ** 2)))
-
-
-def suggestion(before: ArmParams, after: ArmParams, positions_m: FloatArray,
-               what: Sequence[Treated]) -> str:
-    """Which map or stretch would see the change of ``what`` (the first treated group): for a
-    reflex a stiffness map measured while the hand moves along the direction that lengthens
-    the group, for passive stiffness a static stiffness or postural map; each at
-    ``positions_m``, with the size of the predicted change there at the default relative sd,
-    and the clinical stretch that tests the group."""
-    if not what or len(positions_m) == 0:
-        return ("measure a stiffness map while the hand moves at "
-                f"{SUGGESTED_SPEED_M_PER_S:g} m/s along the direction that stretches the treated "
-                "groups")
-    arm_b = Arm.from_params(before)
-    arm_a = _arm_like(arm_b, after)
-    t = what[0]
-    joint, direction = GRADED_STRETCH[t.group]
-    noise = f"{100 * DEFAULT_RELATIVE_SD:g}%"
-    if t.force == "reflex":
-        d = lengthening_direction(arm_b, t.group)
-        v = (float(d[0] * SUGGESTED_SPEED_M_PER_S), float(d[1] * SUGGESTED_SPEED_M_PER_S))
-        s = _sensitivity(arm_b, arm_a, stiffness_map(arm_b, positions_m, v))
-        stretch = (f"a fast stretch of the {joint} into {direction} "
-                   f"(≈ {math.degrees(STRETCH_SPEED_RAD_S):.0f}°/s)")
-        return (f"measure a stiffness map while the hand moves at {SUGGESTED_SPEED_M_PER_S:g} "
-                f"m/s along ({d[0]:+.2f}, {d[1]:+.2f}) (shoulder frame; it lengthens the "
-                f"{MUSCLE_GROUP_NAMES[t.group]}), where the predicted change is ≈ {s:.0f} sd "
-                f"at {noise} noise on these {len(positions_m)} positions, or {stretch}")
-    cands = [("a static stiffness map", stiffness_map(arm_b, positions_m)),
-             ("a postural map", postural_map(arm_b, positions_m))]
-    name, s = max(((n, _sensitivity(arm_b, arm_a, m)) for n, m in cands), key=lambda x: x[1])
-    return (f"measure {name} (≈ {s:.0f} sd of predicted change at {noise} noise on these "
-            f"{len(positions_m)} positions) or a slow stretch of the {joint} into {direction}")
 
 
 def positions_of(changes: Sequence[MapChange]) -> FloatArray:

@@ -28,6 +28,7 @@ from datetime import date, timedelta
 
 import numpy as np
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.fitting import ArmFitter
 from fieldbank.fitting.problem import relative_scale
 from fieldbank.fitting.synthetic import MOVE_DIRECTION, scattered_positions
@@ -38,7 +39,6 @@ from fieldbank.interventions.validate import LaterSession, SessionCheck, check_s
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS, ArmParams
-from fieldbank.severity import synthesize
 
 #: The cohort's own seed (positions, noise, bodies, doses).
 COHORT_SEED = 24_240

@@ -69,9 +69,9 @@ from fieldbank.interventions.realised import (
     map_changes,
     physical_range,
     positions_of,
-    suggestion,
     treated,
 )
+from fieldbank.interventions.suggest import suggestion
 from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
 from fieldbank.params import ArmParams
