@@ -1,5 +1,5 @@
 """``fieldbank field postural|stiffness``: a model's maps as CSV, JSON or a figure (SVG, PNG or
-PDF: :func:`fieldbank.fieldplot.map_figure`, the conventions of the report's field figures)."""
+PDF: :func:`fieldbank.figures.fields.map_figure`, the conventions of the report's field figures)."""
 
 from __future__ import annotations
 
@@ -93,16 +93,18 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     """
     import numpy as np
 
-    from fieldbank import fieldplot, modelsource
-    from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
-    from fieldbank.model import Arm
-    from fieldbank.severity import (
+    from fieldbank import modelsource
+    from fieldbank.evaluate.severity import (
         classify,
         parse_severity_options,
         severity_dict,
         summary,
         synthesize,
     )
+    from fieldbank.figures import save
+    from fieldbank.figures.fields import map_figure
+    from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
+    from fieldbank.model import Arm
 
     if params_file is not None and (mass is not None or height is not None
                                     or side is not None):
@@ -143,7 +145,7 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     if fmt in ("svg", "png", "pdf"):
         if out is None:
             raise ParameterError("A plot needs --out FILE.svg, FILE.png or FILE.pdf.")
-        fieldplot.map_figure(arm, m).save(out, fmt)
+        save(map_figure(arm, m), out, fmt)
         click.echo(f"wrote {out}", err=True)
         return
     if fmt == "json":

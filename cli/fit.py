@@ -23,7 +23,7 @@ from fieldbank.cli.choices import (
     UNCERTAINTY_DEFAULT_REPLICATES,
     UNCERTAINTY_METHODS,
 )
-from fieldbank.cli.options import db_option, emit_json, json_option, output_file
+from fieldbank.cli.options import db_option, emit_json, figure_path, json_option
 from fieldbank.params import GROUP_NAMES, GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
@@ -154,8 +154,8 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @click.option("--replicates", type=click.IntRange(min=2), default=UNCERTAINTY_DEFAULT_REPLICATES,
               show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-              callback=output_file,
-              help="Write measured against fitted fields to this .png or .svg.")
+              callback=figure_path,
+              help="Write measured against fitted fields to this .svg, .png or .pdf.")
 @json_option
 @db_option
 @click.pass_context
@@ -163,8 +163,9 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
         fit_kinds: str, prior_weight: float, max_evals: int | None, uncertainty: str,
         replicates: int, plot_path: str | None, as_json: bool, db_url: str | None) -> None:
     """Fit PATIENT's arm model to the patient's measured maps and store it."""
+    from fieldbank.figures import save
+    from fieldbank.figures.fit import fit_figure
     from fieldbank.fitting import ArmFitter
-    from fieldbank.fitting.plot import plot_fit
     from fieldbank.fitting.records import fit_patient
 
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
@@ -180,8 +181,8 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
                       progress=lambda msg: click.echo(msg, err=True))
     if plot_path:
         f = out.fitter
-        path = plot_fit(f.maps_, f.predict(f.maps_), plot_path, f.r2_,
-                        title=f"patient {patient}: measured (black) and fitted (red)")
+        path = save(fit_figure(f.maps_, f.predict(f.maps_), f.r2_,
+                               f"patient {patient}: measured and fitted maps"), plot_path)
         click.echo(f"plot written to {path}", err=True)
     if as_json:
         report = dict(out.record.report)

@@ -4,7 +4,6 @@ so their ``--help`` starts at once)."""
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 from dataclasses import replace
@@ -16,7 +15,7 @@ import click
 from fieldbank.cli.haptic import resolve_sources, socket_option
 from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say, xy_metres
 from fieldbank.config import setting
-from fieldbank.files import write_atomic
+from fieldbank.files import read_json_document, write_atomic
 from fieldbank.haptic.errors import HapticError
 from fieldbank.params import ArmParams
 from fieldbank.probepath import MAX_DRAWN_PROBES, read_probes
@@ -38,7 +37,7 @@ def protocol_named(text: str) -> TrainingProtocol:
         raise click.BadParameter(f"a training protocol is seed, short or a JSON file; got "
                                  f"{text!r}", param_hint="--training-protocol")
     try:
-        return TrainingProtocol.from_dict(json.loads(path.read_text(encoding="utf-8")))
+        return TrainingProtocol.from_dict(read_json_document(path))
     except ValueError as exc:
         raise click.BadParameter(f"{path}: {exc}", param_hint="--training-protocol") from None
 

@@ -19,6 +19,7 @@ from fieldbank.cli.choices import (
 from fieldbank.cli.options import (
     db_option,
     emit,
+    figure_path,
     json_option,
     open_db,
     option_group,
@@ -41,6 +42,7 @@ if TYPE_CHECKING:  # typing only: the library loads when a command runs
         ProbeLimits,
         ProbeSetScore,
     )
+    from fieldbank.figures import Scene
 
 F = TypeVar("F", bound=Callable[..., Any])
 ALL_LEVELS = ("very mild", "mild", "moderate", "severe")
@@ -127,7 +129,7 @@ def build_candidates(groups: str, levels: str | None, unimpaired: bool,
     from fieldbank import modelsource
     from fieldbank.evaluate.arms import ArmCache
     from fieldbank.evaluate.design import Candidate, check_candidates, severity_candidates
-    from fieldbank.severity import group_name, level_name
+    from fieldbank.evaluate.severity import group_name, level_name
 
     cache = ArmCache()
     base = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
@@ -181,10 +183,10 @@ def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
                        workspace_m=box), offset
 
 
-def _save_plot(fig: Any, path: Path) -> None:
-    from fieldbank import plotting
+def _save_plot(fig: Scene, path: Path) -> None:
+    from fieldbank.figures import save
 
-    plotting.save(fig, path)
+    save(fig, path)
     say(f"plot: {path}")
 
 
@@ -243,12 +245,11 @@ def probe() -> None:
               help="At most this many probes (default: number of candidates - 1).")
 @noise_options
 @limit_options
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
-              callback=output_file,
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), callback=output_file,
               help="Write the probes (polylines in the robot frame with timing) as JSON.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              callback=output_file,
-              help="Figure of the paths and force profiles (.png or .svg).")
+              callback=figure_path,
+              help="Figure of the paths and force profiles (.svg, .png or .pdf).")
 @db_option
 @json_option
 def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tuple[Path, ...],
@@ -262,7 +263,7 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
                as_json: bool) -> None:
     """Find the probing motions that best tell the candidate arms apart."""
     from fieldbank.evaluate.design import design_report
-    from fieldbank.evaluate.plot import probe_figure
+    from fieldbank.figures.probes import probe_figure
 
     cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
                              side, db_url)
@@ -344,8 +345,9 @@ def _classification_text(cl: Classification) -> str:
               help="In a session that rendered two models, the ticks of this one.")
 @click.option("--no-next", is_flag=True, help="Do not design the next probe.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              callback=output_file,
-              help="Figure of the recorded and predicted forces and the posterior.")
+              callback=figure_path,
+              help="Figure of the recorded and predicted forces and the posterior (.svg, .png "
+                   "or .pdf).")
 @db_option
 @json_option
 def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimpaired: bool,
@@ -363,7 +365,7 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
     columns t_s,x_m,y_m,fx_n,fy_n (and vx_m_per_s,vy_m_per_s) and '# frame:' / '# sign:' lines.
     """
     from fieldbank.evaluate.classify import classify
-    from fieldbank.evaluate.plot import classification_figure
+    from fieldbank.figures.probes import classification_figure
 
     cands = build_candidates(groups, levels if levels is not None else
                              (None if param_files or model_ids else "all"), unimpaired,
@@ -387,8 +389,8 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
 @noise_options
 @limit_options
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              callback=output_file,
-              help="Figure of the paths and force profiles.")
+              callback=figure_path,
+              help="Figure of the paths and force profiles (.svg, .png or .pdf).")
 @db_option
 @json_option
 def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tuple[Path, ...],
@@ -400,7 +402,7 @@ def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tu
               plot_path: Path | None, db_url: str | None, as_json: bool) -> None:
     """The min-max and orientation paradigms on the seed's pull, semi-ellipse and circles."""
     from fieldbank.evaluate.design import circles, equilibrium, paradigms, seed_probes
-    from fieldbank.evaluate.plot import probe_figure
+    from fieldbank.figures.probes import probe_figure
 
     cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
                              side, db_url)
@@ -455,8 +457,8 @@ def trials_cmd(groups: str, levels: str, reps: int, draws: int, max_probes: int,
                as_json: bool) -> None:
     """Simulated identification trials: designed probes against the seed's, confusion matrices."""
     from fieldbank.evaluate.design import severity_candidates
+    from fieldbank.evaluate.severity import LEVELS, group_name, level_name
     from fieldbank.haptic.identify import designed_vs_seed
-    from fieldbank.severity import LEVELS, group_name, level_name
 
     gs = _list(groups, group_name, tuple(JOINT_GROUPS))
     ls = _list(levels, level_name, ALL_LEVELS)

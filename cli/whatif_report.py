@@ -21,9 +21,9 @@ from fieldbank.params import GROUP_NAMES
 if TYPE_CHECKING:  # typing only: 'whatif --help' loads no numerics
     from fieldbank.evaluate.compare import Comparison
     from fieldbank.evaluate.probing import JointStretch
+    from fieldbank.evaluate.severity import ComponentGrade
     from fieldbank.interventions.guesses import Guesses
     from fieldbank.interventions.whatif import WhatIf
-    from fieldbank.severity import ComponentGrade
 
 #: Widest line the text output uses (tables are laid out within it; prose is wrapped to it).
 WIDTH = 100

@@ -128,10 +128,10 @@ def test_patient_add_starts_the_database(clean_env: Path) -> None:
 @pytest.fixture
 def demo_like(tmp_path: Path) -> Iterator[str]:
     """A database with three patients, a fitted-like stored model and plans (fast: no fit)."""
+    from fieldbank.evaluate.severity import synthesize
     from fieldbank.interventions import Botulinum, Lengthening, Plan
     from fieldbank.interventions.whatif import save_plan
     from fieldbank.modelsource import stored
-    from fieldbank.severity import synthesize
     from fieldbank.storage import Database
 
     url = f"sqlite:///{tmp_path / 'fb.sqlite3'}"

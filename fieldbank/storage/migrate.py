@@ -39,7 +39,8 @@ from sqlalchemy import Connection, Engine, inspect, text
 from sqlalchemy import exc as sa_exc
 
 from fieldbank.errors import StorageError
-from fieldbank.storage.config import db_failure, mask_url
+from fieldbank.redact import mask_url
+from fieldbank.storage.config import db_failure
 
 if TYPE_CHECKING:  # alembic is heavy: imported where a migration runs (module docstring)
     from alembic.config import Config
