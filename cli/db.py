@@ -7,8 +7,8 @@ from pathlib import Path
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.storage import migrate
-from fieldbank.storage.backup import guarded_downgrade
+
+# The storage layer (SQLAlchemy) loads inside the commands, so 'db --help' starts at once.
 
 STATES = {
     "current": "up to date",
@@ -28,7 +28,9 @@ def db() -> None:
 @click.option("--revision", default="head", show_default=True, help="Target revision.")
 def upgrade(db_url: str | None, revision: str) -> None:
     """Migrate the database to REVISION (safe to run from several processes at once)."""
-    database = open_db(db_url, upgrade="never")
+    from fieldbank.storage import migrate
+
+    database = open_db(db_url, upgrade="never", create=True)
     try:
         before, after = migrate.upgrade(database.engine, revision, database.store.root)
     finally:
@@ -52,6 +54,8 @@ def downgrade(db_url: str | None, revision: str, yes: bool, no_backup: bool,
     Refused unless --yes. First a backup: SQLite, a copy of the file beside it; PostgreSQL,
     pg_dump (custom format) when it is installed, else refused with what to do.
     """
+    from fieldbank.storage.backup import guarded_downgrade
+
     database = open_db(db_url, upgrade="never")
     try:
         res = guarded_downgrade(database.engine, revision, confirmed=yes,
@@ -69,6 +73,8 @@ def downgrade(db_url: str | None, revision: str, yes: bool, no_backup: bool,
 @json_option
 def current(db_url: str | None, as_json: bool) -> None:
     """Show the database's schema revision and the newest one this program knows."""
+    from fieldbank.storage import migrate
+
     database = open_db(db_url, upgrade="never")
     try:
         cur = migrate.current_revision(database.engine)

@@ -26,23 +26,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import date, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
-from fieldbank import modelsource
 from fieldbank.errors import FieldbankError
-from fieldbank.fitting import ArmFitter
-from fieldbank.fitting.dbstore import DatabaseFitStore
-from fieldbank.fitting.records import fit_patient
-from fieldbank.haptic import session
-from fieldbank.haptic.renderer import RendererConfig
-from fieldbank.ingest import ingest_paths
-from fieldbank.interventions import Lengthening, Plan
-from fieldbank.interventions.report import Selection, build_report, default_jobs
-from fieldbank.interventions.samples import write_samples
-from fieldbank.interventions.whatif import save_plan
-from fieldbank.storage import Database
+
+if TYPE_CHECKING:  # typing only: the library loads when a command runs
+    from fieldbank.interventions import Plan
+    from fieldbank.storage import Database
 
 Say = Callable[[str], None]
 
@@ -71,6 +63,8 @@ class DemoResult:
 def demo_plans(entry: dict[str, Any]) -> list[tuple[Plan, date | None]]:
     """A sample patient's plans with the day each was given: the botulinum plan of the
     manifest (given), and a lengthening of the first hypertonic group (only explored)."""
+    from fieldbank.interventions import Lengthening, Plan
+
     groups = list(entry["hypertonic"])
     given = entry["treatment"]
     bot = Plan.from_dict(given["plan"], where=f"manifest, patient {entry['code']}")
@@ -87,6 +81,14 @@ def populate(db: Database, samples: Path, patients: Sequence[str] | None = None,
     model has origin 'intervention' and the fitted model as its parent.
     Returns {'patients': [...], 'fitted_models': {code: id}, 'plans': {code: [ids]}}.
     """
+    from fieldbank import modelsource
+    from fieldbank.fitting import ArmFitter
+    from fieldbank.fitting.dbstore import DatabaseFitStore
+    from fieldbank.fitting.records import fit_patient
+    from fieldbank.ingest import ingest_paths
+    from fieldbank.interventions.samples import write_samples
+    from fieldbank.interventions.whatif import save_plan
+
     manifest = write_samples(samples)
     say(f"wrote the synthetic sample files to {samples} (see its README.txt; not patient data)")
     out: dict[str, Any] = {"patients": [], "fitted_models": {}, "plans": {}}
@@ -128,6 +130,9 @@ def populate(db: Database, samples: Path, patients: Sequence[str] | None = None,
 def run_demo(out_dir: str | Path, home: str | Path | None = None, force: bool = False,
              jobs: int | None = None, haptic_s: float = 3.0, say: Say = _quiet) -> DemoResult:
     """Run every step (module docstring) under ``out_dir``; returns what was made."""
+    from fieldbank.interventions.report import Selection, build_report, default_jobs
+    from fieldbank.storage import Database
+
     out = Path(out_dir)
     h = Path(home) if home is not None else out / "home"
     if h.exists() and any(h.iterdir()) and not force:
@@ -149,7 +154,7 @@ def run_demo(out_dir: str | Path, home: str | Path | None = None, force: bool = 
         res.timings_s["populate"] = time.perf_counter() - t
         t = time.perf_counter()
         say("[6/7] report over every stored plan")
-        rep = build_report(db, Selection(), res.report_dir, jobs=jobs or default_jobs(),
+        rep = build_report(db, Selection(), res.report_dir, jobs=jobs or default_jobs(), force=True,
                            progress=True, title="fieldbank demo report",
                            stamp=datetime.now().astimezone().isoformat(timespec="seconds"))
         res.timings_s["report"] = time.perf_counter() - t
@@ -174,6 +179,9 @@ def run_haptic(db: Database, patient: str, before_id: int, plan_id: int, duratio
     back for the last quarter. The trace goes to the database (``haptic_sessions``, traces in
     the array store).
     """
+    from fieldbank.haptic import session
+    from fieldbank.haptic.renderer import RendererConfig
+
     before = db.get_model(before_id).params
     plan = db.get_plan(plan_id)
     after = db.get_model(plan.result_model_id).params
@@ -198,13 +206,19 @@ def run_haptic(db: Database, patient: str, before_id: int, plan_id: int, duratio
 
 
 def _clear_demo_home(h: Path) -> None:
-    """Remove what a previous demo left in ``h`` (its database and array store only)."""
+    """Remove what a previous demo left in ``h``: its database and array store, and what
+    fieldbank's commands wrote into that data directory while the README's tours ran on it
+    (haptic trace files, a stale control socket, database backups). Anything else is refused
+    by name, with the way out."""
     known = {DB_FILE, f"{DB_FILE}-wal", f"{DB_FILE}-shm", f"{DB_FILE}-journal",
-             f"{DB_FILE}.arrays"}
-    strangers = sorted(p.name for p in h.iterdir() if p.name not in known)
+             f"{DB_FILE}.arrays", "traces", "haptic.sock", "backups"}
+    strangers = sorted(p.name for p in h.iterdir() if p.name not in known
+                       and not p.name.startswith(f"{DB_FILE}.backup-"))
     if strangers:
-        raise FieldbankError(f"{h} holds files the demo did not write ({', '.join(strangers)}); "
-                             "not deleting them. Choose another --home.")
+        raise FieldbankError(
+            f"{h} holds files neither the demo nor fieldbank wrote ({', '.join(strangers)}); "
+            "not deleting them. Move them out of it, or run the demo elsewhere: "
+            "'fieldbank demo --out OTHER' (or --home OTHER).")
     for p in h.iterdir():
         if p.is_dir():
             shutil.rmtree(p)

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import date
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.exports import export_maps, export_raw
+from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
 
 
 @click.command("export")
@@ -15,8 +14,8 @@ from fieldbank.exports import export_maps, export_raw
 @click.option("--patient", "patient_code", help="Patient code.")
 @click.option("--session", "session_label", help="Session label.")
 @click.option("--kind", type=click.Choice(["postural", "stiffness"]))
-@click.option("--since", type=click.DateTime(["%Y-%m-%d"]))
-@click.option("--until", type=click.DateTime(["%Y-%m-%d"]))
+@click.option("--since", type=DATE)
+@click.option("--until", type=DATE)
 @click.option("--format", "fmt", type=click.Choice(["hdf5", "csv"]), default=None,
               help="Optional; must agree with the output's name: .h5/.hdf5 one HDF5 file, "
                    ".csv one map, no suffix a directory with one CSV per map.")
@@ -26,16 +25,17 @@ from fieldbank.exports import export_maps, export_raw
 @click.option("--force", is_flag=True, help="Replace existing files (never through a link).")
 @json_option
 def export(db_url: str | None, patient_code: str | None, session_label: str | None,
-           kind: str | None, since: datetime | None, until: datetime | None, fmt: str | None,
+           kind: str | None, since: date | None, until: date | None, fmt: str | None,
            raw_sha: str | None, output: str, force: bool, as_json: bool) -> None:
     """Export maps matching the filters (SI units, arm-on-handle as stored)."""
+    from fieldbank.exports import export_maps, export_raw  # numerics: when the command runs
+
     with open_db(db_url) as db:
         if raw_sha:
             click.echo(f"wrote {export_raw(db, raw_sha, output, force)}", err=True)
             return
         res = export_maps(db, output, patient_code=patient_code, session_label=session_label,
-                          kind=kind, since=since.date() if since else None,
-                          until=until.date() if until else None, fmt=fmt, force=force)
+                          kind=kind, since=since, until=until, fmt=fmt, force=force)
     if as_json:
         emit_json({"maps": list(res.map_ids), "files": list(res.files)})
     click.echo(f"exported {len(res.map_ids)} map(s) to {output}", err=True)

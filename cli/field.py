@@ -5,28 +5,21 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
-import numpy as np
 
-from fieldbank import modelsource
-from fieldbank.cli.options import json_option
+from fieldbank.cli.options import json_option, output_file
 from fieldbank.errors import FileRefused, ParameterError
-from fieldbank.evaluate.severity import (
-    classify,
-    parse_severity_options,
-    severity_dict,
-    summary,
-    synthesize,
-)
-from fieldbank.figures import save
-from fieldbank.figures.fields import map_figure
 from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
-from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
-from fieldbank.model import Arm
+
+if TYPE_CHECKING:  # typing only: the library loads when a command runs
+    import numpy as np
 
 
 def _parse_pairs(text: str, what: str) -> np.ndarray:
+    import numpy as np
+
     pts = []
     for i, item in enumerate(t for t in text.replace(";", " ").split() if t):
         parts = item.split(",")
@@ -42,6 +35,8 @@ def _parse_pairs(text: str, what: str) -> np.ndarray:
 
 
 def _read_positions(path: Path) -> np.ndarray:
+    import numpy as np
+
     rows = []
     try:
         text = read_regular_file(path, MAX_DOCUMENT_BYTES).decode("utf-8")
@@ -85,6 +80,7 @@ def _read_positions(path: Path) -> np.ndarray:
               help="Output format (default from --out's suffix, else csv).")
 @json_option
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Output file (default stdout for csv/json; required for plots).")
 def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: float | None,
           height: float | None, side: str | None, grid_n: int, at: str | None,
@@ -95,6 +91,21 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     Examples: ``fieldbank field postural --severity elbow=severe --out elbow.csv``;
     ``fieldbank field stiffness --params arm.json --at 0.05,0.45 --json``.
     """
+    import numpy as np
+
+    from fieldbank import modelsource
+    from fieldbank.evaluate.severity import (
+        classify,
+        parse_severity_options,
+        severity_dict,
+        summary,
+        synthesize,
+    )
+    from fieldbank.figures import save
+    from fieldbank.figures.fields import map_figure
+    from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
+    from fieldbank.model import Arm
+
     if params_file is not None and (mass is not None or height is not None
                                     or side is not None):
         raise ParameterError("--mass/--height/--side describe a synthetic arm; they cannot "

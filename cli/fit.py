@@ -10,21 +10,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
+from fieldbank.cli.choices import (
+    FIT_ALGORITHMS,
+    FIT_DEFAULT_ALGORITHM,
+    FIT_DEFAULT_PRIOR_WEIGHT,
+    FIT_KINDS,
+    UNCERTAINTY_DEFAULT_METHOD,
+    UNCERTAINTY_DEFAULT_REPLICATES,
+    UNCERTAINTY_METHODS,
+)
 from fieldbank.cli.options import db_option, emit_json, figure_path, json_option
-from fieldbank.figures import save
-from fieldbank.figures.fit import fit_figure
-from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
-from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
-from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
-from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
-from fieldbank.params import GROUPS, ArmParams
+from fieldbank.params import GROUP_NAMES, GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
-StoreFactory = Callable[[str | None], FitStore]
+if TYPE_CHECKING:  # typing only: the library loads when a command runs
+    from fieldbank.fitting.records import FitOutcome, FitStore
+    from fieldbank.storage import StoredModel
+
+StoreFactory = Callable[[str | None], "FitStore"]
 
 
 def _store(ctx: click.Context, db_url: str | None) -> FitStore:
@@ -38,6 +45,13 @@ def _store(ctx: click.Context, db_url: str | None) -> FitStore:
     return factory(db_url)
 
 
+def _plans_cell(m: StoredModel) -> str:
+    """'plan 4' (the plan that made it) and '-> 5,6' (plans applied to it)."""
+    parts = ([f"plan {m.plan_id}"] if m.plan_id is not None else []) + (
+        ["->" + ",".join(map(str, m.plans_from))] if m.plans_from else [])
+    return " ".join(parts) or "-"
+
+
 def _num(v: object, fmt: str = ".3g") -> str:
     return format(v, fmt) if isinstance(v, (int, float)) else "-"
 
@@ -45,6 +59,8 @@ def _num(v: object, fmt: str = ".3g") -> str:
 def fit_quality_lines(report: Mapping[str, Any]) -> list[str]:
     """Status, goodness of fit per map and the parameters with their 95% intervals, from a
     stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`)."""
+    from fieldbank.fitting.space import ParamSpace
+
     lines = [f"  status: {report.get('status')}"]
     gof = report.get("goodness_of_fit")
     if isinstance(gof, Mapping):
@@ -123,18 +139,19 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @click.command("fit")
 @click.argument("patient")
 @click.option("--session", default=None, help="Fit the maps of this session only.")
-@click.option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
+@click.option("--algorithm", type=click.Choice(list(FIT_ALGORITHMS)), default=FIT_DEFAULT_ALGORITHM,
               show_default=True, help="nlopt global+local, or the dual annealing baseline.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--fit", "fit_kinds", default="km,alpha,beta", show_default=True,
               help=f"Comma-separated parameter kinds to fit ({', '.join(FIT_KINDS)}).")
-@click.option("--prior-weight", type=float, default=DEFAULT_PRIOR_WEIGHT, show_default=True)
+@click.option("--prior-weight", type=float, default=FIT_DEFAULT_PRIOR_WEIGHT, show_default=True)
 @click.option("--max-evals", type=click.IntRange(min=10), default=None)
-@click.option("--uncertainty", type=click.Choice(list(METHODS)), default=DEFAULT_METHOD,
+@click.option("--uncertainty", type=click.Choice(list(UNCERTAINTY_METHODS)),
+              default=UNCERTAINTY_DEFAULT_METHOD,
               show_default=True,
               help="Gauss-Newton where it holds else a parametric bootstrap ('auto'), or one "
                    "of the two always.")
-@click.option("--replicates", type=click.IntRange(min=2), default=DEFAULT_REPLICATES,
+@click.option("--replicates", type=click.IntRange(min=2), default=UNCERTAINTY_DEFAULT_REPLICATES,
               show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               callback=figure_path,
@@ -146,6 +163,11 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
         fit_kinds: str, prior_weight: float, max_evals: int | None, uncertainty: str,
         replicates: int, plot_path: str | None, as_json: bool, db_url: str | None) -> None:
     """Fit PATIENT's arm model to the patient's measured maps and store it."""
+    from fieldbank.figures import save
+    from fieldbank.figures.fit import fit_figure
+    from fieldbank.fitting import ArmFitter
+    from fieldbank.fitting.records import fit_patient
+
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
 
     def progress(n: int, best: float) -> None:
@@ -191,7 +213,10 @@ def models() -> None:
 @click.pass_context
 def models_list(ctx: click.Context, patient: str | None, as_json: bool,
                 db_url: str | None) -> None:
-    """List models with their origin and parent."""
+    """List models with their origin, parent and plans (the plan that made each, and the
+    plans applied to it: 'fieldbank plans show ID')."""
+    from fieldbank.fitting.records import model_summary
+
     rows = list(_store(ctx, db_url).list_models(patient))
     if as_json:
         emit_json([model_summary(m) for m in rows])
@@ -199,11 +224,11 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
     if not rows:
         click.echo("no models", err=True)
         return
-    click.echo(f"{'id':>5}  {'patient':<12} {'origin':<13} {'parent':>6}  label")
+    click.echo(f"{'id':>5}  {'patient':<12} {'origin':<13} {'parent':>6}  {'plans':<14} label")
     for m in rows:
         parent = "" if m.parent_id is None else str(m.parent_id)
         click.echo(f"{m.id!s:>5}  {m.patient_code or '-':<12} {m.origin:<13} "
-                   f"{parent:>6}  {printable(m.label)}")
+                   f"{parent:>6}  {_plans_cell(m):<14} {printable(m.label)}")
 
 
 @models.command("show")
@@ -212,7 +237,7 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
 @db_option
 @click.pass_context
 def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | None) -> None:
-    """Show a model's parameters, lineage and the fit that produced it."""
+    """Show a model's parameters, lineage, plans and the fit that produced it."""
     key: int | str = int(model_id) if model_id.isdigit() else model_id
     detail = _store(ctx, db_url).get_model(key)
     if as_json:
@@ -221,14 +246,18 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
     m = detail.model
     p = m.params
     click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}")
-    click.echo("  group        Km N/m    alpha N    beta")
+    click.echo("  group                        Km N/m    alpha N    beta")
     for i, g in enumerate(GROUPS):
-        click.echo(f"  {g:<6} {p.km_n_per_m[i]:>12.1f} {p.alpha_n[i]:>10.1f} "
+        click.echo(f"  {g} {GROUP_NAMES[g]:<24}{p.km_n_per_m[i]:>10.1f} {p.alpha_n[i]:>10.1f} "
                    f"{p.beta[i]:>7.3f}")
     q = [math.degrees(v) for v in p.q_rest_rad]
     click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
     if detail.lineage:
         click.echo("  lineage: " + " <- ".join(f"{a.id} ({a.origin})" for a in detail.lineage))
+    if m.plan_id is not None:
+        click.echo(f"  made by plan {m.plan_id} ('fieldbank plans show {m.plan_id}')")
+    if m.plans_from:
+        click.echo("  plans applied to it: " + ", ".join(map(str, m.plans_from)))
     fit_report = detail.fit
     if fit_report:
         click.echo(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, cost "

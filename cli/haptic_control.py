@@ -161,7 +161,8 @@ def abx() -> None:
 @json_option
 def abx_start(trials: int, seed: int | None, show_labels: bool, socket_path: Path | None,
               as_json: bool) -> None:
-    """Start a block of TRIALS A/B/X trials."""
+    """Start a block of A/B/X trials (as many as --trials): X is A or B at random, hidden
+    unless --show-labels."""
     seed = seed if seed is not None else int.from_bytes(os.urandom(4), "little")
     r = _request(socket_path, "abx", action="start", n_trials=trials, seed=seed,
                  hide_labels=not show_labels)

@@ -1,6 +1,6 @@
 """The ``fieldbank haptic`` commands that run the loop or read traces: ``serve``, ``probe``,
-``replay``, ``sim-robot`` (numpy and the renderer load with this module; the database layer only
-when a command opens it)."""
+``replay``, ``sim-robot`` (numpy, the renderer and the database layer load inside the commands,
+so their ``--help`` starts at once)."""
 
 from __future__ import annotations
 
@@ -8,31 +8,26 @@ import logging
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank import modelsource
 from fieldbank.cli.haptic import resolve_sources, socket_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db, say, xy_metres
+from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say, xy_metres
+from fieldbank.config import setting
 from fieldbank.files import read_json_document, write_atomic
-from fieldbank.haptic import session
-from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
 from fieldbank.haptic.errors import HapticError
-from fieldbank.haptic.probe import probe
-from fieldbank.haptic.recording import read_trace_h5
-from fieldbank.haptic.renderer import RendererConfig
-from fieldbank.haptic.replay import rerun as do_rerun
-from fieldbank.haptic.safety import SafetyConfig
-from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
-from fieldbank.haptic.station.launch import StationOptions
-from fieldbank.haptic.training import TrainingProtocol, accuracy_text
-from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.probepath import MAX_DRAWN_PROBES, read_probes
+
+if TYPE_CHECKING:  # typing only: the library loads when a command runs
+    from fieldbank.haptic.training import TrainingProtocol
 
 
 def protocol_named(text: str) -> TrainingProtocol:
     """'seed' (the paper's protocol), 'short', or a JSON file of a TrainingProtocol."""
+    from fieldbank.haptic.training import TrainingProtocol
+
     if text == "seed":
         return TrainingProtocol.seed_protocol()
     if text == "short":
@@ -58,8 +53,9 @@ def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
 
 
 @click.command("serve")
-@click.option("--robot", required=True, help="Robot port URL: /dev/ttyUSB0, a pty path, "
-              "socket://host:port, or sim://?mode=realtime&motion=explore for the simulation.")
+@click.option("--robot", default=None, help="Robot port URL: /dev/ttyUSB0, a pty path, "
+              "socket://host:port, or sim://?mode=realtime&motion=explore for the simulation "
+              "(default: FIELDBANK_ROBOT, else robot in fieldbank.toml).")
 @click.option("--rate-hz", type=click.IntRange(500, 4000), default=1000, show_default=True)
 @click.option("--duration-s", type=click.FloatRange(min=0.001), default=None,
               help="Stop after this long (default: until 'fieldbank haptic stop' or Ctrl-C).")
@@ -105,7 +101,7 @@ def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
                    "seed's (the file 'fieldbank probe design --out' writes), in place of any "
                    "the protocol names.")
 @json_option
-def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path | None,
+def serve(robot: str | None, rate_hz: int, duration_s: float | None, before_file: Path | None,
           after_file: Path | None, before_severity: str | None, after_severity: str | None,
           before_id: int | None, after_id: int | None, force_limit_n: float,
           shoulder_offset: str | None, crossfade_s: float, arm_on_start: bool,
@@ -119,7 +115,24 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
     The session's trace is written to an HDF5 file in --trace-dir and recorded in the field
     database (unless --no-db). With --station, the clinician's station page is served.
     """
-    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
+    from fieldbank.haptic import session
+    from fieldbank.haptic.renderer import RendererConfig
+    from fieldbank.haptic.safety import SafetyConfig
+    from fieldbank.haptic.station.launch import StationOptions
+
+    robot = setting("robot", robot).value
+    if robot is None:
+        raise click.UsageError("no robot: give --robot PORT (e.g. /dev/ttyUSB0, or sim:// for "
+                               "the simulation), or set FIELDBANK_ROBOT or robot in "
+                               "fieldbank.toml.")
+    # fieldbank's own messages at INFO on stderr; other libraries' loggers (alembic's
+    # migration steps among them) keep their levels
+    log = logging.getLogger("fieldbank")
+    if not log.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
     before, after, ids, info = resolve_sources(db_url, (before_file, after_file),
                                                (before_severity, after_severity),
                                                (before_id, after_id))
@@ -162,12 +175,16 @@ def serve(robot: str, rate_hz: int, duration_s: float | None, before_file: Path 
 @click.option("--duration-s", type=click.FloatRange(min=0.01), default=None)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Write the full profile as CSV.")
 @json_option
 def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | None,
               rate_hz: int, duration_s: float | None, seed: int, out: Path | None,
               as_json: bool) -> None:
     """Run a scripted probing motion and report the force profile felt at the handle."""
+    from fieldbank import modelsource
+    from fieldbank.haptic.probe import probe
+
     params = modelsource.resolve(params_file=model_file, severity=[severity] if severity else [],
                                  default=modelsource.synthetic()).params
     res = probe(params, motion, robot, rate_hz, duration_s, seed)
@@ -186,6 +203,7 @@ def probe_cmd(motion: str, robot: str, model_file: Path | None, severity: str | 
 @click.command("replay")
 @click.argument("trace_ref", metavar="TRACE")
 @click.option("--csv", "csv_out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Export the trace as CSV.")
 @click.option("--rerun", is_flag=True, help="Recompute the model forces from the recorded "
               "handle motion and compare.")
@@ -197,6 +215,10 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
 
     TRACE is a trace file (.h5) or a database session, haptic_session:ID.
     """
+    from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
+    from fieldbank.haptic.recording import read_trace_h5
+    from fieldbank.haptic.replay import rerun as do_rerun
+
     if trace_ref.startswith(SESSION_PREFIX):
         try:
             sid = int(trace_ref[len(SESSION_PREFIX):])
@@ -234,6 +256,9 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
 @click.option("--start", help="Start of the motion X,Y in m (robot frame).")
 def sim_robot(motion: str, mode: str, start: str | None) -> None:
     """Run the simulated robot on a pty and print the port to give to 'serve --robot'."""
+    from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
+    from fieldbank.model import Arm
+
     if start:
         x0, y0 = xy_metres(start, "--start")
     else:  # the rest hand position of the default (unimpaired) arm
@@ -253,6 +278,8 @@ def sim_robot(motion: str, mode: str, start: str | None) -> None:
 
 def training_lines(result: dict[str, object]) -> list[str]:
     """A training session's result as terminal lines."""
+    from fieldbank.haptic.training import accuracy_text
+
     summary = result.get("summary")
     if not isinstance(summary, dict):
         return []

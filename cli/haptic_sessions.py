@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from fieldbank.cli.options import db_option, emit, json_option, open_db
-from fieldbank.haptic.training import accuracy_text, summarise
-from fieldbank.storage import Database, HapticSessionRecord, HapticTrialRecord
+
+if TYPE_CHECKING:  # typing only: the storage and training modules load when a command runs
+    from fieldbank.storage import Database, HapticSessionRecord, HapticTrialRecord
 
 
 @click.group("sessions")
@@ -75,6 +76,8 @@ def _trial_line(t: HapticTrialRecord) -> str:
 @json_option
 def show(session_id: int, db_url: str | None, as_json: bool) -> None:
     """One session: times, models, patient, every trial's answer, the results."""
+    from fieldbank.haptic.training import accuracy_text, summarise
+
     with open_db(db_url) as db:
         s = db.get_haptic_session(session_id)
         doc = _session_doc(db, s)

@@ -9,18 +9,10 @@ from typing import Any
 import click
 
 from fieldbank.cli.haptic_train import probe_choice, probes_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db, say
+from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say
 from fieldbank.files import write_atomic
-from fieldbank.haptic import trainee
-from fieldbank.haptic.dbsink import DatabaseTraceSink
-from fieldbank.haptic.session import trace_name_now
-from fieldbank.haptic.training import (
-    TrainingProtocol,
-    accuracy_text,
-    results_html,
-    results_page,
-    summarise,
-)
+
+# The loop, the trainee and the database load inside the commands: '--help' starts at once.
 
 
 @click.command("simulate")
@@ -34,6 +26,7 @@ from fieldbank.haptic.training import (
               help="Error of each perceived force direction, degrees (sd).")
 @click.option("--seed", type=click.IntRange(0, 2**31), default=0, show_default=True)
 @click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Write the results as a small HTML page.")
 @db_option
 @click.option("--no-db", is_flag=True, help="Do not record the session in the database.")
@@ -43,6 +36,16 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
              seed: int, html_out: Path | None, db_url: str | None, no_db: bool,
              as_json: bool) -> None:
     """Run the protocol with a simulated trainee on the simulated robot."""
+    from fieldbank.haptic import trainee
+    from fieldbank.haptic.dbsink import DatabaseTraceSink
+    from fieldbank.haptic.session import trace_name_now
+    from fieldbank.haptic.training import (
+        TrainingProtocol,
+        accuracy_text,
+        results_html,
+        results_page,
+    )
+
     kw: dict[str, Any] = {"instruction": "instructed" if instructed else "non-instructed",
                           "seed": seed}
     if probes_file is not None and not instructed:
@@ -79,6 +82,7 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
 @click.argument("sessions", nargs=-1, type=int)
 @click.option("--patient", help="Only sessions of this patient.")
 @click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
+              callback=output_file,
               help="Write the results as a small HTML page.")
 @db_option
 @json_option
@@ -88,6 +92,8 @@ def results(sessions: tuple[int, ...], patient: str | None, html_out: Path | Non
 
     SESSIONS are haptic session ids (default: every session with training trials).
     """
+    from fieldbank.haptic.training import accuracy_text, results_html, results_page, summarise
+
     with open_db(db_url) as db:
         chosen = {s.id for s in db.list_haptic_sessions(patient)}
         if sessions:

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import date
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.ingest import IngestLimits, ingest_paths
+from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
 from fieldbank.sanitize import printable
 
 if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to show a bar
@@ -25,7 +24,7 @@ PROGRESS_MIN_FILES = 20
 @click.option("--patient", "patient_code", required=True, help="Patient code.")
 @click.option("--session", "session_label", required=True,
               help="Session label, e.g. pre-BoNT (created if new).")
-@click.option("--date", "session_date", type=click.DateTime(["%Y-%m-%d"]),
+@click.option("--date", "session_date", type=DATE,
               help="Date of the session.")
 @click.option("--dry-run", is_flag=True, help="Validate and report; store nothing.")
 @click.option("--limit", "limit_items", multiple=True, metavar="NAME=VALUE",
@@ -34,13 +33,15 @@ PROGRESS_MIN_FILES = 20
                    "max_problems, max_force_n, max_stiffness_n_per_m (docs/formats.md).")
 @json_option
 def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, session_label: str,
-           session_date: datetime | None, dry_run: bool, limit_items: tuple[str, ...],
+           session_date: date | None, dry_run: bool, limit_items: tuple[str, ...],
            as_json: bool) -> None:
     """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3).
 
     Every file is validated first; any problem anywhere stores nothing. A file already
     stored (same SHA-256) is reported and not stored again.
     """
+    from fieldbank.ingest import IngestLimits, ingest_paths  # the readers: when it runs
+
     limits = IngestLimits.from_environment(limit_items)
     bar: tqdm | None = None
     if len(files) >= PROGRESS_MIN_FILES:
@@ -57,7 +58,7 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
     try:
         with open_db(db_url) as db:
             report = ingest_paths(db, [Path(f) for f in files], patient_code, session_label,
-                                  session_date.date() if session_date else None, dry_run,
+                                  session_date, dry_run,
                                   progress, limits)
     finally:
         if bar is not None:

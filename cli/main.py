@@ -44,11 +44,15 @@ COMMANDS: dict[str, LazyCommand] = {
                 "replay."),
     "probe": C("fieldbank.cli.probe", "probe",
                "Design probing motions that tell candidate arms apart; classify recorded traces."),
+    "plans": C("fieldbank.cli.plans", "plans",
+               "Stored intervention plans: list, show, record the day one was given."),
     "report": C("fieldbank.cli.report", "report",
                 "Report the field changes of stored intervention plans (HTML + CSV + JSON)."),
     "validate": C("fieldbank.cli.validate", "validate",
                   "Check predictions against maps measured after the plan; --loo: leave maps "
                   "out of a fit."),
+    "config": C("fieldbank.cli.config", "config",
+                "Settings: fieldbank.toml, environment variables and their defaults."),
     "demo": C("fieldbank.cli.demo", "demo",
               "Run the whole product once on synthetic sample data, saying what it does."),
 }
@@ -77,7 +81,12 @@ class FieldbankGroup(LazyGroup):
              context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="fieldbank")
 def cli() -> None:
-    """fieldbank: force-field database and intervention what-if for hypertonic arms."""
+    """fieldbank: force-field database and intervention what-if for hypertonic arms.
+
+    Muscle groups: sf/se shoulder flexors/extensors, ef/ee elbow flexors/extensors, bf/be
+    bi-articular flexors/extensors. Terms (R1, R2, catch, χ²/n, JND, under-determined, ...):
+    docs/glossary.md. Settings in force: 'fieldbank config show'.
+    """
 
 
 def main() -> None:

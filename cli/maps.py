@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
-from datetime import datetime
+from datetime import date
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
 from fieldbank.sanitize import printable
 
 
@@ -21,16 +21,15 @@ def maps() -> None:
 @click.option("--patient", "patient_code", help="Patient code.")
 @click.option("--session", "session_label", help="Session label, e.g. pre-BoNT.")
 @click.option("--kind", type=click.Choice(["postural", "stiffness"]))
-@click.option("--since", type=click.DateTime(["%Y-%m-%d"]), help="Sessions on or after.")
-@click.option("--until", type=click.DateTime(["%Y-%m-%d"]), help="Sessions on or before.")
+@click.option("--since", type=DATE, help="Sessions on or after.")
+@click.option("--until", type=DATE, help="Sessions on or before.")
 @json_option
 def list_(db_url: str | None, patient_code: str | None, session_label: str | None,
-          kind: str | None, since: datetime | None, until: datetime | None,
+          kind: str | None, since: date | None, until: date | None,
           as_json: bool) -> None:
     """List maps matching every filter given."""
     with open_db(db_url) as db:
-        rows = db.list_maps(patient_code, session_label, kind,
-                            since.date() if since else None, until.date() if until else None)
+        rows = db.list_maps(patient_code, session_label, kind, since, until)
     if as_json:
         emit_json([dataclasses.asdict(m) for m in rows])
         return

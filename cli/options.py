@@ -8,7 +8,10 @@ switch``, ``--help`` - start at once.
 
 from __future__ import annotations
 
+import calendar
 from collections.abc import Callable
+from datetime import date
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
@@ -24,6 +27,34 @@ DB_HELP = ("SQLAlchemy database URL; default: $FIELDBANK_DB, else the embedded S
            "$FIELDBANK_HOME (or the platform's user data directory).")
 
 
+class DateParam(click.ParamType):
+    """A calendar date written YYYY-MM-DD, refused with the reason when it is not one
+    ("2024-02-30: February 2024 has 29 days", not "does not match the format")."""
+
+    name = "YYYY-MM-DD"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> date:
+        if isinstance(value, date):
+            return value
+        text = str(value).strip()
+        parts = text.split("-")
+        if len(parts) != 3 or not all(p.isdigit() for p in parts) or len(parts[0]) != 4:
+            self.fail(f"{text!r} is not a date written YYYY-MM-DD (e.g. 2024-02-21).",
+                      param, ctx)
+        y, m, d = (int(p) for p in parts)
+        if not 1 <= m <= 12:
+            self.fail(f"{text}: there is no month {m} (months run 01-12).", param, ctx)
+        days = calendar.monthrange(y, m)[1]
+        if not 1 <= d <= days:
+            self.fail(f"{text}: {calendar.month_name[m]} {y} has {days} days.", param, ctx)
+        return date(y, m, d)
+
+
+#: The one date option type (``--date``, ``--since``, ``--until``, ``--given-on``, ``--on``).
+DATE = DateParam()
+
+
 def db_option(f: F) -> F:
     """``--db URL`` → parameter ``db_url``."""
     return click.option("--db", "db_url", default=None, metavar="URL", help=DB_HELP)(f)
@@ -35,11 +66,16 @@ def json_option(f: F) -> F:
                         help="Machine-readable output: one JSON document on stdout.")(f)
 
 
-def open_db(db_url: str | None, upgrade: str = "auto") -> Database:
-    """The field database at ``db_url`` (see :meth:`fieldbank.storage.Database.open`)."""
+def open_db(db_url: str | None, upgrade: str = "auto", create: bool = False) -> Database:
+    """The field database at ``db_url`` (see :meth:`fieldbank.storage.Database.open`).
+
+    A database that does not exist is refused with its path and how to create it, unless
+    ``create`` (``patient add`` and ``db upgrade``, the commands that start one): reading or
+    adding to a database never creates an empty one by surprise.
+    """
     from fieldbank.storage import Database  # heavy; deferred so light commands stay instant
 
-    return Database.open(db_url, upgrade=upgrade)
+    return Database.open(db_url, upgrade=upgrade, create=create)
 
 
 def emit_json(data: Any) -> None:
@@ -57,6 +93,18 @@ def say(msg: str) -> None:
     click.echo(msg, err=True)
 
 
+def output_file(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+    """Callback of an option naming a file the command writes: its directory must exist.
+    A typo in a directory name is refused with the directory, not created silently."""
+    if value is None:
+        return value
+    parent = Path(value).expanduser().parent
+    if not parent.is_dir():
+        raise click.BadParameter(f"the directory {parent} does not exist; create it first "
+                                 "(fieldbank does not create directories for a file you name).")
+    return value
+
+
 def xy_metres(text: str | None, name: str) -> tuple[float, float]:
     """``X,Y`` in metres from the option ``name`` (0,0 when not given)."""
     if text is None:
@@ -70,13 +118,13 @@ def xy_metres(text: str | None, name: str) -> tuple[float, float]:
 
 def figure_path(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
     """Callback of a ``--plot`` option: the figure's format (.svg, .png or .pdf) is checked
-    before any work is done; a wrong one is a library error, reported at the error edge."""
-    del ctx, param
+    before any work is done; a wrong one is a library error, reported at the error edge. Its
+    directory must exist (:func:`output_file`)."""
     if value is not None:
         from fieldbank.figures import figure_format  # numpy: only when a figure is asked for
 
         figure_format(value)
-    return value
+    return output_file(ctx, param, value)
 
 
 def option_group(*opts: Callable[[F], F]) -> Callable[[F], F]:

@@ -27,7 +27,7 @@ def patient() -> None:
 def add(db_url: str | None, code: str, mass_kg: float, height_m: float, side: str, notes: str,
         as_json: bool) -> None:
     """Register patient CODE (a pseudonym; never a name or birth date)."""
-    with open_db(db_url) as db:
+    with open_db(db_url, create=True) as db:
         p = db.add_patient(code, mass_kg, height_m, side, notes)
     if as_json:
         emit_json(dataclasses.asdict(p))
@@ -47,6 +47,7 @@ def list_(db_url: str | None, as_json: bool) -> None:
         return
     for p in rows:
         click.echo(f"{p.code:<16} {p.body_mass_kg:6.1f} kg {p.height_m:5.2f} m {p.side}")
+    click.echo(f"{len(rows)} patient(s) in {db.url_masked}", err=True)
 
 
 @patient.command("show")

@@ -5,11 +5,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from fieldbank import modelsource
+from fieldbank.cli import choices as ch
+from fieldbank.cli.choices import (
+    CLASSIFY_PREDICTORS,
+    PROBE_CRITERIA,
+    PROBE_FAMILIES,
+    PROBE_TARGETS,
+)
 from fieldbank.cli.options import (
     db_option,
     emit,
@@ -17,41 +23,26 @@ from fieldbank.cli.options import (
     json_option,
     open_db,
     option_group,
+    output_file,
     say,
     xy_metres,
 )
 from fieldbank.errors import ParameterError
-from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.classify import PREDICTORS, Classification, Observation, classify
-from fieldbank.evaluate.design import (
-    CRITERIA,
-    FAMILIES,
-    TARGETS,
-    Candidate,
-    DesignReport,
-    NoiseModel,
-    Perception,
-    ProbeLimits,
-    ProbeSetScore,
-    check_candidates,
-    circles,
-    design_report,
-    direction_words,
-    equilibrium,
-    paradigms,
-    seed_probes,
-    severity_candidates,
-)
-from fieldbank.evaluate.severity import LEVELS, group_name, level_name
-from fieldbank.figures import Scene, save
-from fieldbank.figures.probes import classification_figure, probe_figure
 from fieldbank.files import to_json, write_atomic
-from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
-from fieldbank.haptic.identify import designed_vs_seed
-from fieldbank.haptic.probe import observation_from_trace
-from fieldbank.haptic.recording import read_trace_h5
 from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.probepath import probes_document
+
+if TYPE_CHECKING:  # typing only: the library loads when a command runs
+    from fieldbank.evaluate.classify import Classification, Observation
+    from fieldbank.evaluate.design import (
+        Candidate,
+        DesignReport,
+        NoiseModel,
+        Perception,
+        ProbeLimits,
+        ProbeSetScore,
+    )
+    from fieldbank.figures import Scene
 
 F = TypeVar("F", bound=Callable[..., Any])
 ALL_LEVELS = ("very mild", "mild", "moderate", "severe")
@@ -92,22 +83,21 @@ def candidate_options(f: F) -> F:
 
 def noise_options(f: F) -> F:
     """The noise model and what a hand feels."""
-    d = NoiseModel()
-    p = Perception()
     opts = [
-        click.option("--force-sd-n", type=float, default=d.force_sd_n, show_default=True,
+        click.option("--force-sd-n", type=float, default=ch.NOISE_FORCE_SD_N, show_default=True,
                      help="Force noise per axis, N (assumption)."),
-        click.option("--correlation-s", type=float, default=d.correlation_s, show_default=True,
+        click.option("--correlation-s", type=float, default=ch.NOISE_CORRELATION_S,
+                     show_default=True,
                      help="Time over which force noise decorrelates, s (assumption)."),
-        click.option("--direction-sd-deg", type=float, default=d.direction_sd_deg,
+        click.option("--direction-sd-deg", type=float, default=ch.NOISE_DIRECTION_SD_DEG,
                      show_default=True, help="Operator's scatter of a probe's direction, °."),
-        click.option("--length-sd", type=float, default=d.length_sd, show_default=True,
+        click.option("--length-sd", type=float, default=ch.NOISE_LENGTH_SD, show_default=True,
                      help="Operator's relative scatter of a probe's length."),
-        click.option("--speed-sd", type=float, default=d.speed_sd, show_default=True,
+        click.option("--speed-sd", type=float, default=ch.NOISE_SPEED_SD, show_default=True,
                      help="Operator's relative scatter of a probe's speed."),
-        click.option("--force-jnd", type=float, default=p.force_jnd, show_default=True,
+        click.option("--force-jnd", type=float, default=ch.PERCEPTION_FORCE_JND, show_default=True,
                      help="Weber fraction of force magnitude."),
-        click.option("--direction-jnd-deg", type=float, default=p.direction_jnd_deg,
+        click.option("--direction-jnd-deg", type=float, default=ch.PERCEPTION_DIRECTION_JND_DEG,
                      show_default=True, help="Force-direction threshold, °."),
         click.option("--free-exploration", is_flag=True,
                      help="Judge magnitudes with the free-exploration Weber fraction 0.6."),
@@ -116,11 +106,13 @@ def noise_options(f: F) -> F:
 
 
 def limit_options(f: F) -> F:
-    d = ProbeLimits()
+    """The probe limits (defaults: ProbeLimits())."""
     opts = [
-        click.option("--max-speed", type=float, default=d.max_speed_m_per_s, show_default=True,
+        click.option("--max-speed", type=float, default=ch.PROBE_MAX_SPEED_M_PER_S,
+                     show_default=True,
                      help="Peak hand speed of a probe, m/s."),
-        click.option("--force-limit-n", type=float, default=d.force_limit_n, show_default=True,
+        click.option("--force-limit-n", type=float, default=ch.PROBE_FORCE_LIMIT_N,
+                     show_default=True,
                      help="The renderer's force saturation, N."),
         click.option("--workspace", metavar="XMIN,XMAX,YMIN,YMAX",
                      help="Box the handle must stay in, robot frame, m."),
@@ -134,6 +126,11 @@ def build_candidates(groups: str, levels: str | None, unimpaired: bool,
                      param_files: tuple[Path, ...], model_ids: tuple[int, ...],
                      mass: float | None, height: float | None, side: str | None,
                      db_url: str | None) -> list[Candidate]:
+    from fieldbank import modelsource
+    from fieldbank.evaluate.arms import ArmCache
+    from fieldbank.evaluate.design import Candidate, check_candidates, severity_candidates
+    from fieldbank.evaluate.severity import group_name, level_name
+
     cache = ArmCache()
     base = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
     out: list[Candidate] = []
@@ -159,6 +156,8 @@ def build_candidates(groups: str, levels: str | None, unimpaired: bool,
 def build_noise(force_sd_n: float, correlation_s: float, direction_sd_deg: float,
                 length_sd: float, speed_sd: float, force_jnd: float, direction_jnd_deg: float,
                 free_exploration: bool) -> tuple[NoiseModel, Perception]:
+    from fieldbank.evaluate.design import NoiseModel, Perception
+
     noise = NoiseModel(force_sd_n=force_sd_n, correlation_s=correlation_s,
                        direction_sd_deg=direction_sd_deg, length_sd=length_sd,
                        speed_sd=speed_sd)
@@ -169,6 +168,8 @@ def build_noise(force_sd_n: float, correlation_s: float, direction_sd_deg: float
 
 def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
                  shoulder_offset: str | None) -> tuple[ProbeLimits, tuple[float, float]]:
+    from fieldbank.evaluate.design import ProbeLimits
+
     offset = xy_metres(shoulder_offset, "--shoulder-offset")
     box = None
     if workspace is not None:
@@ -183,12 +184,16 @@ def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
 
 
 def _save_plot(fig: Scene, path: Path) -> None:
+    from fieldbank.figures import save
+
     save(fig, path)
     say(f"plot: {path}")
 
 
 # --- text read-outs ---------------------------------------------------------------------------
 def _set_text(score: ProbeSetScore, side: str) -> list[str]:
+    from fieldbank.evaluate.design import direction_words
+
     lines = []
     for p in score.probes:
         lines.append(f"  {p.name}: {p.motion.description} (peak speed "
@@ -229,18 +234,18 @@ def probe() -> None:
 
 @probe.command("design")
 @candidate_options
-@click.option("--criterion", type=click.Choice(CRITERIA), default="feel", show_default=True,
+@click.option("--criterion", type=click.Choice(PROBE_CRITERIA), default="feel", show_default=True,
               help="feel: felt differences in JNDs; information: bits; orientation / minmax: "
                    "the seed's paradigms alone.")
-@click.option("--family", type=click.Choice(list(FAMILIES)), default=None,
+@click.option("--family", type=click.Choice(PROBE_FAMILIES), default=None,
               help="stroke (default) or circle (default for --criterion minmax).")
-@click.option("--target", type=click.Choice(TARGETS), default="candidate", show_default=True,
+@click.option("--target", type=click.Choice(PROBE_TARGETS), default="candidate", show_default=True,
               help="Tell every candidate apart, or only the impaired groups.")
 @click.option("--max-probes", type=click.IntRange(min=1), default=None,
               help="At most this many probes (default: number of candidates - 1).")
 @noise_options
 @limit_options
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), callback=output_file,
               help="Write the probes (polylines in the robot frame with timing) as JSON.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               callback=figure_path,
@@ -257,6 +262,9 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
                out: Path | None, plot_path: Path | None, db_url: str | None,
                as_json: bool) -> None:
     """Find the probing motions that best tell the candidate arms apart."""
+    from fieldbank.evaluate.design import design_report
+    from fieldbank.figures.probes import probe_figure
+
     cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
                              side, db_url)
     noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
@@ -279,6 +287,11 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
 
 def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | None,
                        offset: tuple[float, float] | None) -> list[Observation]:
+    from fieldbank.evaluate.classify import Observation
+    from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
+    from fieldbank.haptic.probe import observation_from_trace
+    from fieldbank.haptic.recording import read_trace_h5
+
     out = []
     for ref in refs:
         if ref.startswith(SESSION_PREFIX):
@@ -323,7 +336,8 @@ def _classification_text(cl: Classification) -> str:
 @candidate_options
 @noise_options
 @limit_options
-@click.option("--predictor", type=click.Choice(PREDICTORS), default="replay", show_default=True,
+@click.option("--predictor", type=click.Choice(CLASSIFY_PREDICTORS), default="replay",
+              show_default=True,
               help="replay: the recorded motion drives each candidate's virtual arm (rendered "
                    "traces); rigid: muscles and inertia of a rigidly held arm (measured "
                    "traces); static: the muscles' force at the recorded position and velocity.")
@@ -350,6 +364,9 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
     A TRACE is a haptic trace file (.h5), a database session (haptic_session:ID) or a CSV with
     columns t_s,x_m,y_m,fx_n,fy_n (and vx_m_per_s,vy_m_per_s) and '# frame:' / '# sign:' lines.
     """
+    from fieldbank.evaluate.classify import classify
+    from fieldbank.figures.probes import classification_figure
+
     cands = build_candidates(groups, levels if levels is not None else
                              (None if param_files or model_ids else "all"), unimpaired,
                              param_files, model_ids, mass, height, side, db_url)
@@ -384,6 +401,9 @@ def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tu
               force_limit_n: float, workspace: str | None, shoulder_offset: str | None,
               plot_path: Path | None, db_url: str | None, as_json: bool) -> None:
     """The min-max and orientation paradigms on the seed's pull, semi-ellipse and circles."""
+    from fieldbank.evaluate.design import circles, equilibrium, paradigms, seed_probes
+    from fieldbank.figures.probes import probe_figure
+
     cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
                              side, db_url)
     noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
@@ -425,7 +445,7 @@ def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tu
               help="Force-noise draws met by each execution.")
 @click.option("--max-probes", type=click.IntRange(min=1), default=2, show_default=True,
               help="Probes in the designed set (the seed's set has 2).")
-@click.option("--criterion", type=click.Choice(CRITERIA), default="information",
+@click.option("--criterion", type=click.Choice(PROBE_CRITERIA), default="information",
               show_default=True)
 @noise_options
 @click.option("--seed", "rng_seed", type=int, default=0, show_default=True)
@@ -436,6 +456,10 @@ def trials_cmd(groups: str, levels: str, reps: int, draws: int, max_probes: int,
                direction_jnd_deg: float, free_exploration: bool, rng_seed: int,
                as_json: bool) -> None:
     """Simulated identification trials: designed probes against the seed's, confusion matrices."""
+    from fieldbank.evaluate.design import severity_candidates
+    from fieldbank.evaluate.severity import LEVELS, group_name, level_name
+    from fieldbank.haptic.identify import designed_vs_seed
+
     gs = _list(groups, group_name, tuple(JOINT_GROUPS))
     ls = _list(levels, level_name, ALL_LEVELS)
     if not gs or not ls or LEVELS[0] in ls:

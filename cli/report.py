@@ -9,13 +9,12 @@ exit status 1.
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import date, datetime
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.interventions.catalogue import KINDS
-from fieldbank.interventions.report import Selection, build_report, default_jobs
+from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
+from fieldbank.config import setting
 
 
 def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
@@ -32,26 +31,38 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
               help="One stored plan by id (repeatable).")
 @click.option("--session", "sessions", multiple=True, metavar="LABEL",
               help="Plans whose model was fitted to maps of this session (repeatable).")
-@click.option("--since", type=click.DateTime(["%Y-%m-%d"]), default=None,
+@click.option("--since", type=DATE, default=None,
               help="Cases dated on or after this day (session date, else plan date).")
-@click.option("--until", type=click.DateTime(["%Y-%m-%d"]), default=None,
+@click.option("--until", type=DATE, default=None,
               help="Cases dated on or before this day.")
 @click.option("--kind", "kinds", multiple=True, metavar="KIND",
               help="Plans with a step of this kind, e.g. botulinum, lengthening (repeatable).")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False),
-              help="Directory for report.html, metrics.csv and metrics.json.")
+              help="Directory for report.html, metrics.csv and metrics.json (a report "
+                   "already there is refused unless --force).")
+@click.option("--force", is_flag=True, help="Replace the report files already in --out.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
-              help="Worker processes for batches (default: the cores available).")
-@click.option("--no-date", "no_date", is_flag=True,
-              help="Leave the time of writing out, so that reruns give identical files.")
+              help="Worker processes for batches (default: report.jobs in fieldbank.toml, "
+                   "else the cores available).")
+@click.option("--no-date/--date", "no_date", default=None,
+              help="Leave the time of writing out, so that reruns give identical files "
+                   "(default: report.no_date in fieldbank.toml, else dated).")
 @click.option("--accept-poor-fit", is_flag=True,
               help="Report cases whose model comes from a poor fit anyway (recorded per case).")
 @json_option
 def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ...],
-           plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: datetime | None,
-           until: datetime | None, kinds: tuple[str, ...], out_dir: str, jobs: int | None,
-           no_date: bool, accept_poor_fit: bool, as_json: bool) -> None:
-    """Report the field changes of stored intervention plans (HTML + CSV + JSON)."""
+           plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: date | None,
+           until: date | None, kinds: tuple[str, ...], out_dir: str, force: bool,
+           jobs: int | None, no_date: bool | None, accept_poor_fit: bool,
+           as_json: bool) -> None:
+    """Report the field changes of stored intervention plans (HTML + CSV + JSON).
+
+    Terms (R1, R2, catch, χ²/n, under-determined, ...): docs/glossary.md.
+    """
+    # the report's numerics load when it runs, so 'report --help' starts at once
+    from fieldbank.interventions.catalogue import KINDS
+    from fieldbank.interventions.report import Selection, build_report, default_jobs
+
     bad = [k for k in kinds if k not in KINDS]
     if bad:
         raise click.UsageError(f"--kind {bad[0]!r} is not an intervention kind "
@@ -59,12 +70,13 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     if since and until and since > until:
         raise click.UsageError("--since is after --until: the selection would be empty.")
     sel = Selection(patients=_codes(patient + patients), plan_ids=tuple(plan_ids),
-                    sessions=tuple(sessions), since=since.date() if since else None,
-                    until=until.date() if until else None, kinds=tuple(kinds))
-    when = None if no_date else datetime.now().astimezone().isoformat(timespec="seconds")
+                    sessions=tuple(sessions), since=since, until=until, kinds=tuple(kinds))
+    jobs = setting("report.jobs", jobs).value
+    when = (None if setting("report.no_date", no_date).value
+            else datetime.now().astimezone().isoformat(timespec="seconds"))
     with open_db(db_url) as db:
         out = build_report(db, sel, out_dir, jobs=jobs or default_jobs(), progress=True,
-                           stamp=when, accept_poor_fit=accept_poor_fit)
+                           stamp=when, accept_poor_fit=accept_poor_fit, force=force)
     if as_json:
         emit_json({"cases": out.n_cases, "jobs": out.jobs_used, "html": str(out.html),
                    "csv": str(out.csv), "json": str(out.json)})

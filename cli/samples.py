@@ -5,7 +5,6 @@ from __future__ import annotations
 import click
 
 from fieldbank.cli.options import emit_json, json_option
-from fieldbank.interventions.samples import write_samples
 
 
 @click.command("samples")
@@ -14,6 +13,8 @@ from fieldbank.interventions.samples import write_samples
 @json_option
 def samples(directory: str, seed: int, as_json: bool) -> None:
     """Write lab-style map files of synthetic patients into DIRECTORY (seeded)."""
+    from fieldbank.interventions.samples import write_samples  # numerics: when it runs
+
     manifest = write_samples(directory, seed)
     if as_json:
         emit_json(manifest)

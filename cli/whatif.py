@@ -9,20 +9,21 @@ from ``--plan FILE`` and the intervention options (:mod:`fieldbank.interventions
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import date
 from typing import Any
 
 import click
 
-from fieldbank import modelsource
-from fieldbank.cli.options import db_option, emit_json, figure_path, json_option, open_db
+from fieldbank.cli.choices import (
+    BOTULINUM_SESSION_WARNING_UNITS,
+    BOTULINUM_WEEKS_SINCE,
+    CASTING_DELTA_M,
+    DOSE_UNIT,
+    WHATIF_INTERVAL_SAMPLES,
+)
+from fieldbank.cli.options import DATE, db_option, emit_json, figure_path, json_option, open_db
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.haptic.client import push_models
-from fieldbank.haptic.modelinfo import ModelInfo
-from fieldbank.interventions.defaults import DOSE_UNIT, value
-from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES, summary_lines
-from fieldbank.interventions.spec import build_plan
-from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
 
 
 @click.command("whatif")
@@ -38,43 +39,47 @@ from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
               help=f"Botulinum toxin A in {DOSE_UNIT}, e.g. ef=200U,ee=100U (one injection "
                    "session).")
 @click.option("--session-limit", "session_limit", type=float,
-              default=value("botulinum.session_warning_units"), show_default=True,
+              default=BOTULINUM_SESSION_WARNING_UNITS, show_default=True,
               help=f"Warn when a botulinum session exceeds this many {DOSE_UNIT} (adult "
                    "upper-limb label maximum 400).")
 @click.option("--weeks", type=float, default=None,
-              help=f"Weeks since the injection (default {value('botulinum.weeks_since'):g}, "
+              help=f"Weeks since the injection (default {BOTULINUM_WEEKS_SINCE:g}, "
                    "the peak).")
 @click.option("--lengthen", multiple=True, metavar="GROUP=LENGTH",
-              help="Lengthening surgery, e.g. bf=1cm.")
+              help="Lengthening surgery, e.g. bf=1cm (the unit is required: cm, mm or m).")
 @click.option("--tenotomy", multiple=True, metavar="GROUP", help="Tenotomy / release.")
 @click.option("--cast", multiple=True, metavar="GROUP[=LENGTH]",
-              help=f"Serial casting (default +{value('casting.delta_m') * 1000:g} mm).")
+              help=f"Serial casting (default +{CASTING_DELTA_M * 1000:g} mm).")
 @click.option("--rhizotomy", metavar="GROUPS[:FACTOR]",
               help="Selective dorsal rhizotomy: 'all' or e.g. ef,ee:0.4 (β × factor).")
 @click.option("--baclofen", metavar="GROUPS[:FACTOR]",
               help="Intrathecal baclofen: 'all' or e.g. ef,ee:0.5 (β × factor).")
 @click.option("--timecourse", is_flag=True, help="Also show the metrics week by week (0-24).")
+@click.option("--detail", is_flag=True,
+              help="Every table: field change, probing motions, 95% intervals, grade scores, "
+                   "the weeks (--timecourse); the default is the summary and the main tables.")
 @click.option("--optimize", is_flag=True,
               help="Search the botulinum split closest to unimpaired (model result).")
 @click.option("--total-units", type=float, default=None,
               help=f"Dose limit for --optimize, {DOSE_UNIT}.")
 @click.option("--groups", "opt_groups", default=None, metavar="G1,G2",
               help="Groups --optimize may inject (default all six).")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), callback=figure_path,
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
+              callback=figure_path,
               help="Write the figures (joint stretches, fields, grades) to this .svg, .png or "
                    ".pdf.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,
               help="Store the after model and the plan, with lineage, in the database.")
-@click.option("--given-on", type=click.DateTime(["%Y-%m-%d"]), default=None,
+@click.option("--given-on", type=DATE, default=None,
               help="With --save: the plan was carried out on this day ('fieldbank validate' "
                    "checks it against maps measured later).")
 @click.option("--accept-poor-fit", is_flag=True,
               help="Run on a model from a poor fit anyway (recorded in the output).")
 @click.option("--interval-samples", type=click.IntRange(min=0), default=None,
               help="Fit samples carried through the plan for 95% intervals (default "
-                   f"{DEFAULT_INTERVAL_SAMPLES}; 0: none).")
+                   f"{WHATIF_INTERVAL_SAMPLES}; 0: none).")
 @db_option
 @click.option("--render", is_flag=True,
               help="Push before and after to a running 'fieldbank haptic serve' (A = before, "
@@ -87,15 +92,29 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
            plan_file: str | None, botox: tuple[str, ...], session_limit: float,
            weeks: float | None,
            lengthen: tuple[str, ...], tenotomy: tuple[str, ...], cast: tuple[str, ...],
-           rhizotomy: str | None, baclofen: str | None, timecourse: bool, optimize: bool,
+           rhizotomy: str | None, baclofen: str | None, timecourse: bool, detail: bool,
+           optimize: bool,
            total_units: float | None, opt_groups: str | None, plot_path: str | None,
-           out_dir: str | None, save: bool, given_on: datetime | None, accept_poor_fit: bool,
+           out_dir: str | None, save: bool, given_on: date | None, accept_poor_fit: bool,
            interval_samples: int | None, db_url: str | None, render: bool,
            control_path: str | None, as_json: bool) -> None:
     """Apply clinical interventions to a model and compare the fields before and after.
 
+    The model: PATIENT (the patient's latest fitted model), --params FILE or --severity.
+    Muscle groups: sf = shoulder flexors, se = shoulder extensors, ef = elbow flexors,
+    ee = elbow extensors, bf = bi-articular flexors (biceps short head), be = bi-articular
+    extensors (triceps long head). The text opens with a three-line summary; --detail prints
+    every table, --json everything. Terms (R1, R2, catch, χ²/n, under-determined, ...):
+    docs/glossary.md.
+
     Results are model predictions, not treatment advice.
     """
+    from fieldbank import modelsource
+    from fieldbank.haptic.modelinfo import ModelInfo
+    from fieldbank.interventions.defaults import value
+    from fieldbank.interventions.spec import build_plan
+    from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
+
     if sum(bool(x) for x in (patient, params_file, severity)) != 1:
         raise click.UsageError(
             "Give exactly one model: PATIENT, --params FILE or --severity TARGET=LEVEL.")
@@ -120,9 +139,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
                      save_to=(lambda: open_db(db_url)) if save else None,
                      session_limit_units=session_limit,
                      accept_poor_fit=accept_poor_fit,
-                     interval_samples=(DEFAULT_INTERVAL_SAMPLES if interval_samples is None
+                     interval_samples=(WHATIF_INTERVAL_SAMPLES if interval_samples is None
                                        else interval_samples),
-                     given_on=given_on.date() if given_on else None)
+                     given_on=given_on)
     doc: dict[str, Any] = res.to_dict()
     if render:
         ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
@@ -136,11 +155,8 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     if as_json:
         emit_json(doc)
         return
-    click.echo(render_text(source.description, res.plan, res.comparison, res.course,
-                           res.inverse, res.warnings))
+    click.echo(render_text(res, detail=detail or timecourse))
     if res.guesses is not None:
-        click.echo("")
-        click.echo("\n".join(summary_lines(res.guesses)))
         if res.guesses.warnings:
             click.echo(f"warning: {len(res.guesses.warnings)} warning(s) in the output: the "
                        "prediction rests on parameters the fit did not identify, or on a poor "

@@ -41,7 +41,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -93,6 +92,8 @@ def encode_array(array: ArrayLike, unit: str,
     key = array_key(arr)
     ref = ArrayRef(key, relpath(key), int(arr.nbytes), tuple(arr.shape), arr.dtype.str, unit)
     buf = io.BytesIO()
+    import h5py  # heavy: only where an HDF5 image is built or read (start-up time)
+
     with h5py.File(buf, "w", track_order=True) as f:
         chunks = arr.size > 0 and arr.ndim > 0
         ds = f.create_dataset("data", data=arr, fletcher32=bool(chunks),
@@ -105,6 +106,8 @@ def encode_array(array: ArrayLike, unit: str,
 
 def decode_array(key: str, image: bytes, where: str) -> NDArray[Any]:
     """The array of an HDF5 file image, verified against ``key``; IntegrityError otherwise."""
+    import h5py
+
     try:
         with h5py.File(io.BytesIO(image), "r") as f:
             arr = np.asarray(f["data"][()])
@@ -117,6 +120,8 @@ def decode_array(key: str, image: bytes, where: str) -> NDArray[Any]:
 
 def image_attrs(image: bytes) -> dict[str, Any]:
     """The unit, sha256 and provenance (decoded) of an HDF5 file image."""
+    import h5py
+
     with h5py.File(io.BytesIO(image), "r") as f:
         a = dict(f["data"].attrs)
     a["provenance"] = json.loads(a.get("provenance", "{}"))

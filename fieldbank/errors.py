@@ -9,8 +9,10 @@ The whole tree, rooted in built-ins so callers may catch either::
     ├── ValidationError(FieldbankError, ValueError)   input with one or more located problems
     ├── FileRefused(FieldbankError, ValueError)       an input file refused before reading it
     │                                                 (not a regular file, too large)
+    ├── ConfigError(FieldbankError, ValueError)       fieldbank.toml or a setting is malformed
     ├── StorageError(FieldbankError, RuntimeError)    the database or the array store failed
-    │   └── IntegrityError(StorageError)              a stored reference or checksum is wrong
+    │   ├── IntegrityError(StorageError)              a stored reference or checksum is wrong
+    │   └── DatabaseMissing(StorageError)             no database where one was to be read
     ├── FitError(FieldbankError, RuntimeError)        a fit that cannot run or was refused
     ├── InterventionError(FieldbankError, ValueError) subtree in fieldbank.interventions.errors
     └── HapticError(FieldbankError, RuntimeError)     subtree in fieldbank.haptic.errors
@@ -86,12 +88,21 @@ class FileRefused(FieldbankError, ValueError):
     directory), larger than the limit, or unreadable. The message names the file."""
 
 
+class ConfigError(FieldbankError, ValueError):
+    """The configuration file, or a setting from a variable or a flag, is malformed."""
+
+
 class StorageError(FieldbankError, RuntimeError):
     """The database or the array store failed or refused an operation."""
 
 
 class IntegrityError(StorageError):
     """A stored reference, checksum or array does not match what was recorded."""
+
+
+class DatabaseMissing(StorageError):
+    """No database file where a command that only reads or adds to one looked: it is never
+    created by surprise (the message names the path and how to create it)."""
 
 
 class FitError(FieldbankError, RuntimeError):

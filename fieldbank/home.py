@@ -1,6 +1,7 @@
 """fieldbank's data directory, in a module light enough for every command to import.
 
-``$FIELDBANK_HOME``, else the platform's user data directory (platformdirs). The embedded
+``$FIELDBANK_HOME``, else ``home`` in ``fieldbank.toml``, else the platform's user data
+directory (platformdirs) - the setting ``home`` of :mod:`fieldbank.config`. The embedded
 SQLite database, its array store, haptic traces and the renderer's control socket live there
 unless configured elsewhere. Kept apart from :mod:`fieldbank.storage.config` so that the live
 haptic commands find the socket without loading SQLAlchemy.
@@ -8,17 +9,15 @@ haptic commands find the socket without loading SQLAlchemy.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-import platformdirs
+from fieldbank.config import setting
 
 ENV_HOME = "FIELDBANK_HOME"
 
 
 def data_home() -> Path:
-    """The data directory: ``FIELDBANK_HOME`` or the platform's user data directory."""
-    env = os.environ.get(ENV_HOME)
-    if env:
-        return Path(env).expanduser()
-    return Path(platformdirs.user_data_dir("fieldbank", appauthor=False))
+    """The data directory: ``FIELDBANK_HOME``, the configuration file's ``home``, or the
+    platform's user data directory."""
+    home: Path = setting("home").value
+    return home

@@ -41,7 +41,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import expit
 
 from fieldbank.errors import ParameterError, UnreachableError
 from fieldbank.params import GROUP_SIGN, ArmParams
@@ -322,8 +321,9 @@ class Arm:
         """Ψ and ∂Ψ/∂λ, each (N, 6): N and N/m."""
         d = lam - self.lam_slack
         z = d / self.w
-        sp = self.w * np.logaddexp(0.0, z)
-        sig = expit(z)
+        soft = np.logaddexp(0.0, z)  # ln(1 + e^z), without overflow
+        sp = self.w * soft
+        sig = np.exp(z - soft)  # the logistic function 1/(1 + e^-z), stable at both ends
         ell = self.excursion
         g = np.exp(-((d / ell) ** 2))
         psi = self.km * sp * g

@@ -36,6 +36,14 @@ from fieldbank.validation import Interval, check_number, check_tuple
 
 GROUPS: tuple[str, ...] = ("sf", "se", "ef", "ee", "bf", "be")
 GROUP_INDEX: dict[str, int] = {g: i for i, g in enumerate(GROUPS)}
+#: What each group code means, in the clinic's words.
+GROUP_NAMES: dict[str, str] = {
+    "sf": "shoulder flexors", "se": "shoulder extensors", "ef": "elbow flexors",
+    "ee": "elbow extensors", "bf": "bi-articular flexors", "be": "bi-articular extensors",
+}
+#: ``sf = shoulder flexors, se = ...``: the legend every help text and message that lists
+#: group codes carries.
+GROUP_LEGEND = ", ".join(f"{g} = {n}" for g, n in GROUP_NAMES.items())
 #: -1 for flexors (shorten under flexion, i.e. positive joint angle), +1 for extensors.
 GROUP_SIGN: tuple[int, ...] = (-1, 1, -1, 1, -1, 1)
 #: Hypertonia is described per joint group (BRIEF §5).
@@ -416,5 +424,5 @@ def group_index(group: str) -> int:
         return GROUP_INDEX[group]
     except KeyError:
         raise ParameterError(
-            f"Unknown muscle group {group!r}; known groups: {', '.join(GROUPS)}."
+            f"Unknown muscle group {group!r}; known groups: {GROUP_LEGEND}."
         ) from None

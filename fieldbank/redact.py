@@ -99,6 +99,17 @@ def mask_url(url: object) -> str:
     return "".join(out)
 
 
+def blank_password(text: str) -> str:
+    """URL text with its user-information password replaced by as many ``x`` (same length),
+    so the rest of the URL can be read without mistaking a ``?``, ``&`` or ``#`` of the
+    password for the query or the fragment."""
+    span = _userinfo_password(text)
+    if span is None:
+        return text
+    s, e = span
+    return text[:s] + "x" * (e - s) + text[e:]
+
+
 def quote_password(text: str) -> str:
     """URL text with each ``@`` inside its user-information password percent-encoded, so that
     a URL parser (SQLAlchemy's stops at the first ``@``) reads the password the user meant
@@ -131,3 +142,21 @@ def redact(message: str, *urls: object) -> str:
         for secret in url_secrets(url):
             message = message.replace(secret, MASK)
     return message
+
+
+def mask_port(port: str) -> str:
+    """A robot port as messages may show it: a URL (``socket://``, ``sim://``) as
+    :func:`mask_url` shows it; a device path by its directory only (``/dev/serial/by-id/…``),
+    since a device name can carry a serial number or a token."""
+    if "://" in port:
+        return mask_url(port)
+    head, sep, name = port.rpartition("/")
+    return f"{head}{sep}…" if name else port
+
+
+def redact_port(message: str, port: str) -> str:
+    """``message`` with the port (a device path whole, a URL's secrets) shown as
+    :func:`mask_port` shows it."""
+    if "://" in port:
+        return redact(message, port)
+    return message.replace(port, mask_port(port)) if port else message

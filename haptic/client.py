@@ -14,11 +14,11 @@ command answers at once (no numpy, no database layer).
 from __future__ import annotations
 
 import json
-import os
 import socket
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fieldbank.config import setting
 from fieldbank.haptic.errors import CommandError, ControlError
 from fieldbank.home import data_home
 
@@ -32,10 +32,11 @@ SOCKET_NAME = "haptic.sock"
 
 
 def default_socket_path() -> Path:
-    """``$FIELDBANK_HAPTIC_SOCKET``, else ``haptic.sock`` in :func:`data_home`."""
-    env = os.environ.get("FIELDBANK_HAPTIC_SOCKET")
-    if env:
-        return Path(env)
+    """``$FIELDBANK_HAPTIC_SOCKET``, else ``haptic_socket`` in ``fieldbank.toml``, else
+    ``haptic.sock`` in :func:`data_home`."""
+    configured: Path | None = setting("haptic_socket").value
+    if configured is not None:
+        return configured
     return data_home() / SOCKET_NAME
 
 

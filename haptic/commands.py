@@ -297,7 +297,8 @@ class Info(RendererCommand):
 
 def _abx(target: CommandTarget) -> AbxSession:
     if target.abx is None:
-        raise CommandError("no A/B/X block running; start one with abx_start")
+        raise CommandError("no A/B/X block running; start one with 'fieldbank haptic abx start' "
+                           "(or the station's A/B/X button)")
     return target.abx
 
 

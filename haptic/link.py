@@ -26,7 +26,7 @@ import serial
 
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.errors import HandshakeError, HapticError, LinkDown
-from fieldbank.redact import mask_url, redact
+from fieldbank.redact import mask_port, redact_port
 
 # pyserial resolves a URL scheme X to the module <package>.protocol_X: sim:// -> protocol_sim
 if "fieldbank.haptic" not in serial.protocol_handler_packages:
@@ -90,8 +90,8 @@ class RobotLink:
         try:
             port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0.05)
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise HapticError(f"cannot open robot port {mask_url(url)!r}: "
-                              f"{redact(str(exc), url)}") from None
+            raise HapticError(f"cannot open robot port {mask_port(url)!r}: "
+                              f"{redact_port(str(exc), url)}") from None
         if hasattr(port, "set_low_latency_mode"):
             try:
                 port.set_low_latency_mode(True)  # FTDI latency timer 16 ms -> 1 ms

@@ -122,8 +122,10 @@ class SessionResult:
     station_url: str | None = None
 
     def summary(self) -> dict[str, Any]:
-        """The trace's summary with where it was stored (``trace``, ``sha256``, ``database``)."""
+        """The trace's summary with the robot (as given, without secrets) and where it was
+        stored (``trace``, ``sha256``, ``database``)."""
         out = self.trace.summary()
+        out["robot"] = self.robot
         if self.trace_file is not None:
             out["trace"] = self.trace_file
             out["sha256"] = self.sha256
@@ -238,6 +240,9 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         patient_code = _with_store(db, lambda s: s.session_patient(model_ids, patient_code,
                                                                     patient_note))
         vet = _push_vet(db, patient_code, patient_note)
+    # what the user gave is what is shown and recorded; the simulated robot's start position
+    # and motion filled in here are details of the simulation, not of the robot asked for
+    given = robot
     if robot.startswith("sim://"):
         robot = sim_url(before, SIM_MOTION, cfg.shoulder_offset_m, robot)
     link = RobotLink.open(robot)
@@ -248,7 +253,7 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
             f"watchdog {device.watchdog_ms} ms")
         rd = Renderer(link, before, after, cfg, safety=safety)
         # the trace, its file, the database record and every printout keep the URL masked
-        rd.metadata["robot"] = mask_url(robot)
+        rd.metadata["robot"] = mask_url(given)
         if any(i is not None for i in model_ids):
             rd.metadata["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
         if info:
@@ -289,5 +294,5 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
     if db is not None:
         ref = _with_store(db, lambda s: DatabaseTraceSink(s, patient_code, patient_note)
                           .write_trace(trace, name))
-    return SessionResult(trace, mask_url(robot), device, name, trace_file, sha, ref,
+    return SessionResult(trace, mask_url(given), device, name, trace_file, sha, ref,
                          station_url)

@@ -43,12 +43,12 @@ from fieldbank.errors import ParameterError
 from fieldbank.interventions.defaults import DOSE_UNIT, TOXIN, value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.timecourse import dose_effect, shape_exponent, time_shape
-from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
+from fieldbank.params import GROUP_INDEX, GROUP_LEGEND, GROUPS, ArmParams
 from fieldbank.validation import Interval, bound_problem
 
 
 def _known_groups() -> str:
-    return ", ".join(GROUPS)
+    return GROUP_LEGEND
 
 
 def _check_bounds(problems: list[str], obj: Intervention, skip: tuple[str, ...] = ()) -> None:

@@ -40,7 +40,7 @@ from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, FloatArray
-from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
+from fieldbank.params import GROUP_INDEX, GROUP_LEGEND, GROUPS, ArmParams
 
 STIFFNESS_LENGTH_M = 0.01
 NOTICE = ("Model result: the dose split this model predicts brings the field closest to its "
@@ -142,7 +142,7 @@ def optimise_botulinum(
     bad = [g for g in gs if g not in GROUP_INDEX]
     if bad or not gs:
         raise InterventionError(
-            f"inverse what-if: unknown muscle group(s) {bad} (known: {', '.join(GROUPS)})"
+            f"inverse what-if: unknown muscle group(s) {bad} (known: {GROUP_LEGEND})"
             if bad else "inverse what-if: choose at least one muscle group.")
     if len(set(gs)) != len(gs):
         raise InterventionError("inverse what-if: a muscle group is named twice.")

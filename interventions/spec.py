@@ -8,7 +8,7 @@ order: plan file steps, lengthening, tenotomy, serial casting, rhizotomy, baclof
 kind            text                         meaning
 ==============  ===========================  ============================================
 botulinum       ``ef=200U,ee=100``           units per group (U; ``U``, ``units`` optional)
-lengthening     ``bf=1cm``                   group and Δ (m, cm or mm; bare number: m)
+lengthening     ``bf=1cm``                   group and Δ (m, cm or mm: the unit is required)
 tenotomy        ``ee``                       group
 casting         ``ef`` or ``ef=5mm``         group and Δ (default: the catalogue's)
 rhizotomy       ``all``, ``ef,ee:0.4``       groups and optional β factor
@@ -38,7 +38,7 @@ from fieldbank.interventions.catalogue import (
 from fieldbank.interventions.defaults import value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.params import GROUPS
+from fieldbank.params import GROUP_LEGEND, GROUPS
 from fieldbank.units import LENGTH
 
 _NUM = r"([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)"
@@ -57,20 +57,27 @@ def parse_units(items: Sequence[str]) -> dict[str, float]:
         if not m:
             raise InterventionError(
                 f"--botox {part!r}: expected GROUP=DOSE in units, e.g. ef=200U "
-                f"(groups: {', '.join(GROUPS)}).")
+                f"(groups: {GROUP_LEGEND}).")
         if m.group(1) in out:
             raise InterventionError(f"--botox: muscle group {m.group(1)!r} given twice.")
         out[m.group(1)] = float(m.group(2))
     return out
 
 
-def parse_length(text: str, option: str) -> float:
-    """'1cm', '10 mm', '0.01m', '0.01' (m) → metres."""
+def parse_length(text: str, option: str, shown: str | None = None) -> float:
+    """'1cm', '10 mm', '0.01m' → metres. The unit is required: a bare '1' could be 1 m or
+    1 cm (and --botox's bare numbers are units of toxin), so it is refused, not guessed.
+    ``shown``: the text to quote in a message (the whole ``GROUP=LENGTH`` item)."""
     m = re.fullmatch(rf"{_NUM}\s*({_LENGTH_UNIT})?", text.strip())
+    quoted = repr(text if shown is None else shown)
     if not m:
         raise InterventionError(
-            f"{option} {text!r}: expected a length such as 1cm, 10mm or 0.01m.")
-    return float(m.group(1)) * LENGTH[m.group(2) or "m"]
+            f"{option} {quoted}: expected a length such as 1cm, 10mm or 0.01m.")
+    if m.group(2) is None:
+        raise InterventionError(
+            f"{option} {quoted}: give the unit, e.g. {m.group(1)}cm or {m.group(1)}mm (a bare "
+            "number is not read as metres).")
+    return float(m.group(1)) * LENGTH[m.group(2)]
 
 
 def parse_group_lengths(items: Sequence[str], option: str,
@@ -81,7 +88,7 @@ def parse_group_lengths(items: Sequence[str], option: str,
     for part in _split_items(items):
         if "=" in part:
             g, length = part.split("=", 1)
-            out.append((g.strip(), parse_length(length, option)))
+            out.append((g.strip(), parse_length(length, option, part)))
         elif default_m is not None:
             out.append((part, default_m))
         else:

@@ -50,6 +50,7 @@ from fieldbank.interventions.guesses import (
 from fieldbank.interventions.inverse import DoseSplitResult, optimise_botulinum
 from fieldbank.interventions.plan import Derivation, Plan, dose_warnings, params_sha256
 from fieldbank.interventions.plot import plot_comparison
+from fieldbank.interventions.summary import WhatIfSummary, summarise
 from fieldbank.model import Arm
 from fieldbank.modelsource import DatabaseOpener, ModelSource
 from fieldbank.params import ArmParams
@@ -119,6 +120,10 @@ class WhatIf:
         first = list(self.guesses.warnings) if self.guesses is not None else []
         return first + list(self.warnings)
 
+    def summary(self) -> WhatIfSummary:
+        """The three lines a clinician reads first (:mod:`fieldbank.interventions.summary`)."""
+        return summarise(self.comparison, self.guesses, self.all_warnings())
+
     @property
     def before(self) -> ArmParams:
         return self.arm_before.params
@@ -130,7 +135,8 @@ class WhatIf:
     def to_dict(self) -> dict[str, Any]:
         """The ``whatif --json`` document (without what the command line adds)."""
         doc: dict[str, Any] = {"model": {"source": self.source.description,
-                                         "sha256": params_sha256(self.before)}}
+                                         "sha256": params_sha256(self.before)},
+                               "summary": self.summary().to_dict()}
         if self.inverse is not None:
             doc["inverse"] = self.inverse.to_dict()
         doc["plan"] = self.plan.to_dict()

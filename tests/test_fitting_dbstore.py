@@ -61,7 +61,8 @@ def test_fit_stored_patient_end_to_end(tmp_path: Path) -> None:
     res = CliRunner().invoke(cli, ["models", "list", "--db", url, "--json"])
     rows = json.loads(res.stdout)
     assert len(rows) == 2
-    assert list(rows[0]) == ["id", "patient", "origin", "label", "parent_id", "created_at"]
+    assert list(rows[0]) == ["id", "patient", "origin", "label", "parent_id", "created_at",
+                             "plan_id", "plans_from"]
     res = CliRunner().invoke(cli, ["models", "show", str(mid), "--db", url, "--json"])
     shown = json.loads(res.stdout)
     assert list(shown) == [*rows[0], "params", "lineage", "fit"]

@@ -108,7 +108,9 @@ def test_session_with_a_schedule_a_trace_file_and_a_database_opened_after(tmp_pa
                 trace_dir=tmp_path / "traces", trace_name="s1", db=open_db, say=lines.append)
     assert len(res.trace) == 1200
     assert [e["to"] for e in res.trace.events if e["event"] == "switch"] == [1.0, 0.0]
-    assert res.robot.startswith("sim://?") and "x0_m=" in res.robot
+    # the robot as given: the simulated operator's start and motion are not the user's URL
+    assert res.robot == "sim://?mode=realtime&motion=hold"
+    assert res.trace.metadata["robot"] == res.robot
     assert res.trace_file == str(tmp_path / "traces" / "s1.h5") and len(res.sha256 or "") == 64
     s = res.summary()
     assert s["trace"] == res.trace_file and s["database"] == res.database

@@ -236,6 +236,12 @@ def test_second_server_on_a_live_socket_is_refused(served) -> None:  # type: ign
 
 # --- real time on a pty ---------------------------------------------------------------------
 def test_realtime_pty_session_with_device_process() -> None:
+    """A second of real-time rendering against a device in another process.
+
+    Nothing here is a wall-clock bound (a loaded machine starves either process): the checks
+    are the loop's own schedule - no tick before its deadline, the ticks and the skipped ones
+    filling the span between the first and the last wake - and the link's bookkeeping.
+    """
     p = severe_shoulder()
     x0, y0 = rest_hand(p)
     with PtyRobot(SimRobotConfig(mode="realtime", motion="fastpull", x0_m=x0, y0_m=y0)) as robot:
@@ -243,23 +249,29 @@ def test_realtime_pty_session_with_device_process() -> None:
         link = RobotLink.open(robot.port)
         link.handshake(1000, 20, timeout_s=3.0)
         rd = Renderer(link, p, p, RendererConfig())
-        t0 = time.perf_counter()
         trace = rd.run(1.0)
-        wall = time.perf_counter() - t0
         link.close()
-    assert 0.95 < wall < 1.6
     assert len(trace) == 1000
+    wake = np.array(rd.times.wake_ns)
+    late = np.array(rd.times.late_ns)
+    assert wake.size == 1000 and (late >= 0).all()  # real time: never ahead of the schedule
+    # deadlines advance one period per tick and per skipped tick, so the first and the last
+    # wake are at least that far apart (the first may itself have woken late)
+    skipped = rd.times.skipped_ticks
+    assert wake[-1] - wake[0] >= (999 + skipped) * rd.period_ns - late[0]
     s = trace.stats
-    assert s["period_us"]["p50"] == pytest.approx(1000.0, abs=20.0)
+    assert s["skipped_ticks"] == skipped
+    assert s["period_us"]["p50"] == pytest.approx(
+        float(np.percentile(np.diff(wake), 50)) / 1e3, rel=1e-6)
     assert "p99" in s["period_error_us"] and "overruns" in s
-    assert s["link"]["states"] > 900
+    assert s["link"]["states"] > 0
     f = np.hypot(trace.column("fx_n"), trace.column("fy_n"))
     if not trace.faults:  # a loaded machine may starve the device: then the fault is recorded
         assert f.max() > 3.0  # the fast pull was felt
 
 
 def test_device_watchdog_over_a_pty_in_real_time() -> None:
-    """The host stops commanding: the device zeroes the force and reports it within 20 ms."""
+    """The host stops commanding: the device zeroes the force, disarms and reports it."""
     from fieldbank.haptic import protocol as P
 
     with PtyRobot(SimRobotConfig(mode="realtime", watchdog_ms=20)) as robot:
@@ -271,13 +283,13 @@ def test_device_watchdog_over_a_pty_in_real_time() -> None:
             link.send_force(5.0, 0.0)
             link.wait_state(0.01)
         assert robot.device.fx_cmd == 5.0
-        t0 = time.perf_counter()
-        while not link.flags & P.FLAG_WATCHDOG and time.perf_counter() - t0 < 1.0:
+        # a hang guard, not a bound: when the watchdog trips (20 ms after the last FORCE, on
+        # the device's clock) is checked on a virtual clock in tests/test_haptic_faults.py
+        deadline = time.monotonic() + 30.0
+        while not link.flags & P.FLAG_WATCHDOG and time.monotonic() < deadline:
             link.wait_state(0.01)
-        elapsed = time.perf_counter() - t0
         assert link.flags & P.FLAG_WATCHDOG and not link.flags & P.FLAG_ARMED
-        assert robot.device.fx_cmd == 0.0
-        assert elapsed < 0.2  # 20 ms watchdog + scheduling slack of a test machine
+        assert robot.device.fx_cmd == 0.0 and robot.device.watchdog_tripped
         link.close()
 
 

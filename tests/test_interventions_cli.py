@@ -35,7 +35,14 @@ def test_table_shows_before_and_after() -> None:
     assert code == 0, out
     assert ("botulinum toxin A (ef 200 U; onabotulinumtoxinA (Botox®) units), 5 weeks after "
             "injection") in out
-    assert "elbow extension" in out and "Probing motion" in out and "Severity" in out
+    assert "elbow extension" in out and "Severity" in out
+    # a summary first, every line within 100 columns; the rest with --detail
+    assert out.splitlines()[3] == "Summary" and "Most change: " in out
+    assert max(len(x) for x in out.splitlines()) <= 100
+    assert "Probing motion" not in out
+    code, detail, _ = run("--severity", "elbow=severe", "--botox", "ef=200U", "--detail")
+    assert code == 0 and "Probing motion" in detail and "Field change" in detail
+    assert max(len(x) for x in detail.splitlines()) <= 100
     line = next(x for x in out.splitlines() if x.strip().startswith("elbow extension"))
     # slow stretch unchanged, fast stretch and its velocity-dependent part lower
     cells = line.split()
@@ -156,7 +163,10 @@ def test_option_parsers() -> None:
                                                               "bf": 10.0}
     assert parse_length("1cm", "--x") == 0.01
     assert parse_length("5 mm", "--x") == 0.005
-    assert parse_length("0.02", "--x") == 0.02
+    assert parse_length("0.02m", "--x") == 0.02
+    # a bare number is refused, not read as metres (--botox's bare numbers are units of toxin)
+    with pytest.raises(InterventionError, match=r"give the unit, e\.g\. 1cm"):
+        parse_length("1", "--lengthen bf=1")
 
 
 @pytest.fixture
@@ -201,7 +211,8 @@ def test_optimize_compiles_each_model_once(compiled: Counter[ArmParams]) -> None
 def test_session_above_the_label_maximum_warns_in_text_and_json() -> None:
     code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=300U,ee=200U")
     assert code == 0, out
-    warning = next(x for x in out.splitlines() if x.startswith("Warning:"))
+    text = " ".join(out.split())  # the warning's wrapped lines as one
+    warning = text[text.index("WARNING: "):]
     assert "500 U" in warning and "400 U" in warning and "onabotulinumtoxinA" in warning
     code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=300U,ee=200U", "--json")
     doc = json.loads(out)
@@ -211,7 +222,7 @@ def test_session_above_the_label_maximum_warns_in_text_and_json() -> None:
                        "--session-limit", "500", "--json")
     assert json.loads(out)["warnings"] == []
     code, out, _ = run("--severity", "elbow=severe", "--botox", "ef=150U")
-    assert code == 0 and "Warning" not in out
+    assert code == 0 and "WARNING" not in out and "Warnings: none." in out
     # the doses name their unit wherever they are shown
     assert "onabotulinumtoxinA (Botox®) units" in out
 

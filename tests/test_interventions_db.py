@@ -17,7 +17,10 @@ from fieldbank.interventions.plan import Plan, params_sha256
 
 
 def _db(tmp_path: Path) -> str:
-    return f"sqlite:///{tmp_path / 'fb.sqlite'}"
+    """A new, empty database (commands refuse a missing one rather than create it)."""
+    url = f"sqlite:///{tmp_path / 'fb.sqlite'}"
+    storage.Database.open(url).close()
+    return url
 
 
 def test_patient_model_in_and_plan_with_lineage_out(tmp_path: Path) -> None:

@@ -24,7 +24,8 @@ from fieldbank.params import ArmParams
 @pytest.mark.parametrize(
     ("build", "words"),
     [
-        (lambda: Botulinum({"xx": 100.0}), ["botulinum", "unknown muscle group 'xx'", "sf, se"]),
+        (lambda: Botulinum({"xx": 100.0}), ["botulinum", "unknown muscle group 'xx'",
+                                            "sf = shoulder flexors, se = shoulder extensors"]),
         (lambda: Botulinum({"ef": -10.0}), ["botulinum", "'units[ef]'", ">= 0", "-10"]),
         (lambda: Botulinum({"ef": 100.0}, weeks_since=80.0), ["'weeks_since'", "<= 52", "80"]),
         (lambda: Botulinum({"ef": 100.0}, weeks_since=-1.0), ["'weeks_since'", ">= 0"]),

@@ -82,7 +82,7 @@ def test_embedded_default_is_created_at_head_on_first_use(tmp_path: Path) -> Non
 def test_concurrent_first_use_of_embedded_database(tmp_path: Path) -> None:
     env = {**os.environ, "FIELDBANK_HOME": str(tmp_path / "shared-home"),
            "PYTHONPATH": str(ROOT)}
-    procs = [subprocess.Popen([sys.executable, "-m", "fieldbank.cli", "patient", "list", "--json"],
+    procs = [subprocess.Popen([sys.executable, "-m", "fieldbank.cli", "db", "upgrade"],
                               env=env, cwd=ROOT, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE) for _ in range(4)]
     results = [p.communicate(timeout=120) for p in procs]
@@ -125,7 +125,7 @@ def _cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedP
 
 def test_cli_db_commands_on_sqlite(sqlite_url: str) -> None:
     r = _cli("db", "current", "--db", sqlite_url, "--json")
-    assert r.returncode == 0 and '"current": null' in r.stdout
+    assert r.returncode == 1 and "No database at" in r.stderr  # not created by a look
     r = _cli("db", "upgrade", "--db", sqlite_url)
     assert r.returncode == 0, r.stderr
     r = _cli("db", "current", "--db", sqlite_url, "--json")
@@ -151,3 +151,41 @@ def test_cli_never_prints_password(pg_url: str) -> None:
     r = _cli("patient", "list", "--db", bad, env={"FIELDBANK_DB": bad})
     assert r.returncode != 0
     assert secret not in r.stdout + r.stderr
+
+
+def test_the_light_reading_of_the_revisions_is_alembic_s() -> None:
+    """Opening a database reads the revisions without alembic (start-up time); what it reads
+    must be what alembic itself reads: the same chain, head and titles."""
+    from alembic.script import ScriptDirectory
+
+    script = ScriptDirectory.from_config(migrate.alembic_config())
+    walked = [r.revision for r in reversed(list(script.walk_revisions()))]
+    assert migrate.known_revisions() == walked
+    assert migrate.head_revision() == script.get_current_head()
+    for rev in walked:
+        doc = (script.get_revision(rev).doc or "").strip()
+        assert migrate.revision_title(rev) == (doc.splitlines()[0].rstrip(".") if doc else rev)
+
+
+def test_a_downgrade_that_rebuilds_a_table_keeps_the_rows_that_point_at_it(
+        tmp_path: Path) -> None:
+    """Dropping a column rebuilds ``haptic_sessions`` on SQLite; the traces that point at it
+    used to make the downgrade fail ('FOREIGN KEY constraint failed')."""
+    import numpy as np
+
+    from fieldbank.params import ArmParams
+    from fieldbank.storage import Database
+
+    url = f"sqlite:///{tmp_path / 'fb.sqlite3'}"
+    with Database.open(url, store_root=tmp_path / "arrays") as db:
+        m = db.add_model(ArmParams.from_anthropometry(), "synthetic", "m")
+        hs = db.start_haptic_session(m.id, "sim://")
+        db.add_trace(hs.id, "t", np.zeros((10, 3)), "mixed", {})
+        engine = db.engine
+        assert migrate.downgrade(engine, "0002", tmp_path / "arrays") == ("0003", "0002")
+        with engine.connect() as conn:
+            assert conn.exec_driver_sql("PRAGMA foreign_key_check").all() == []
+            assert conn.exec_driver_sql("SELECT count(*) FROM traces").scalar() == 1
+            assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1  # on again
+        assert migrate.upgrade(engine, store_root=tmp_path / "arrays") == ("0002", "0003")
+        assert db.check().ok

@@ -153,6 +153,10 @@ def test_missing_data_names_what_is_missing(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'empty.sqlite3'}"
     out = tmp_path / "out"
     res = run_cli("report", "--db", url, "--out", str(out))
+    assert res.exit_code == 1 and "No database at" in res.stderr  # never created by surprise
+    assert not (tmp_path / "empty.sqlite3").exists()
+    assert run_cli("db", "upgrade", "--db", url).exit_code == 0
+    res = run_cli("report", "--db", url, "--out", str(out))
     assert res.exit_code == 1
     assert "No stored plans in" in res.stderr and "--save" in res.stderr
     assert run_cli("patient", "add", "P-1", "--db", url, "--mass-kg", "70", "--height-m",

@@ -85,5 +85,5 @@ def test_postural_only_fit_flags_the_reflex_grades(tmp_path: Path) -> None:
     before = json.loads(res.stdout)["comparison"]["severity"]["before"]
     assert set(before["ef"]["dynamic"]["unidentified"]) == {"alpha_ef", "beta_ef"}
     res = runner.invoke(cli, ["whatif", "STAT", "--db", url, "--botox", "ef=150U"])
-    line = next(x for x in res.stdout.splitlines() if x.strip().startswith("elbow flexors"))
+    line = next(x for x in res.stdout.splitlines() if x.strip().startswith("ef elbow flexors"))
     assert "*" in line and "alpha_ef" in res.stdout

@@ -35,17 +35,50 @@ def _packages_in_tree() -> set[str]:
     return out
 
 
+def _python_dirs_in_tree() -> set[str]:
+    """Every folder holding Python files, as the package it installs as."""
+    out = set()
+    for folder, name in FOLDERS.items():
+        for py in (ROOT / folder).rglob("*.py"):
+            rel = py.parent.relative_to(ROOT / folder).parts
+            if "__pycache__" not in rel:
+                out.add(".".join((name, *rel)))
+    return out
+
+
+def test_every_folder_of_python_files_is_a_configured_package() -> None:
+    """A folder of modules missing from pyproject's ``packages`` makes setuptools print a
+    40-line warning on every install (and a wheel that ships it only as data)."""
+    import tomllib
+
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    packages = set(config["tool"]["setuptools"]["packages"])
+    assert _python_dirs_in_tree() <= packages, _python_dirs_in_tree() - packages
+
+
 @pytest.fixture(scope="module")
-def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """The wheel and what the build printed."""
     out = tmp_path_factory.mktemp("wheel")
     # built with the locked setuptools of this environment (requirements/dev.lock), not an
     # isolated build that would fetch whatever setuptools the registry holds today
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-                        "-q", "-w", str(out), str(ROOT)], capture_output=True, text=True,
+                        "-v", "-w", str(out), str(ROOT)], capture_output=True, text=True,
                        timeout=600)
     assert r.returncode == 0, "pip wheel failed:\n" + r.stderr[-3000:]
     (whl,) = out.glob("fieldbank-*.whl")
-    return whl
+    return whl, r.stdout + r.stderr
+
+
+@pytest.fixture(scope="module")
+def wheel(built: tuple[Path, str]) -> Path:
+    return built[0]
+
+
+def test_the_build_prints_no_packaging_warning(built: tuple[Path, str]) -> None:
+    log = built[1]
+    assert "absent from the `packages` configuration" not in log
+    assert "SetuptoolsDeprecationWarning" not in log
 
 
 @pytest.fixture(scope="module")

@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.model import Arm, FloatArray
-from fieldbank.params import GROUPS
+from fieldbank.params import GROUP_LEGEND, GROUPS
 from fieldbank.probepath import ProbePath
 
 PULL_DISTANCE_M = 0.15
@@ -150,7 +150,7 @@ def lengthening_direction(arm: Arm, group: str) -> FloatArray:
     rest posture: λ̇_g = J_λ,g J_q⁻¹ v is largest over |v| = 1 for v ∝ J_q⁻ᵀ J_λ,gᵀ (the
     direction a moving field shows that group's stretch reflex in)."""
     if group not in GROUPS:
-        raise ValueError(f"unknown muscle group {group!r} (known: {', '.join(GROUPS)}).")
+        raise ValueError(f"unknown muscle group {group!r} (known: {GROUP_LEGEND}).")
     jq = arm.jacobian(arm.q_rest)[0]
     w = np.linalg.solve(jq.T, arm.jl[GROUPS.index(group)])
     w = w / np.hypot(w[0], w[1])
@@ -303,9 +303,10 @@ class JointStretch:
     reflex_torque_n_m : largest velocity-dependent part (fast minus slow), N·m
     catch_threshold_n_m : the catch torque (CATCH_FACTOR × unimpaired slow peak), N·m
     catch_angle_deg : R1, where the fast stretch meets the catch torque; None: it never does
-    slow_stop_angle_deg : R2, where the slow stretch meets it; None: it never does (the
-        range-of-motion end then stands for R2)
-    dynamic_range_deg : R2 - R1 along the travel, ≥ 0 (0 without a catch)
+    slow_stop_angle_deg : R2, where the slow stretch meets it; None: it never does
+    dynamic_range_deg : R2 - R1 along the travel, ≥ 0; None unless both R1 and R2 exist (a
+        difference with an angle that was never reached would be a number the stretch did not
+        measure)
     stretched : muscle groups the motion lengthens (whose parameters the read-out rests on)
     """
 
@@ -320,7 +321,7 @@ class JointStretch:
     catch_threshold_n_m: float = 0.0
     catch_angle_deg: float | None = None
     slow_stop_angle_deg: float | None = None
-    dynamic_range_deg: float = 0.0
+    dynamic_range_deg: float | None = None
     stretched: tuple[str, ...] = ()
 
     @property
@@ -394,8 +395,7 @@ def _read_out(prof: StretchProfile, reference_slow_peak_n_m: float, arm: Arm) ->
     threshold = CATCH_FACTOR * reference_slow_peak_n_m
     r1 = _first_reaching(fast, prof.angles_rad, threshold)
     r2 = _first_reaching(slow, prof.angles_rad, threshold)
-    end = float(prof.angles_rad[-1])
-    dyn = 0.0 if r1 is None else abs((end if r2 is None else r2) - r1)
+    dyn = None if r1 is None or r2 is None else abs(r2 - r1)
     j = JOINTS.index(prof.joint)
     lever = DIRECTION_SIGN[prof.direction] * arm.jl[:, j]
     stretched = tuple(g for g, v in zip(GROUPS, lever, strict=True) if v > 0)
@@ -408,7 +408,7 @@ def _read_out(prof: StretchProfile, reference_slow_peak_n_m: float, arm: Arm) ->
         slow_torque_n_m=float(slow.max()), catch_threshold_n_m=threshold,
         catch_angle_deg=None if r1 is None else math.degrees(r1),
         slow_stop_angle_deg=None if r2 is None else math.degrees(r2),
-        dynamic_range_deg=math.degrees(dyn), stretched=stretched,
+        dynamic_range_deg=None if dyn is None else math.degrees(dyn), stretched=stretched,
     )
 
 

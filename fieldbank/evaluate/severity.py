@@ -59,7 +59,6 @@ from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import (
@@ -74,6 +73,8 @@ from fieldbank.params import (
     DEFAULT_ALPHA_N,
     DEFAULT_BETA,
     GROUP_INDEX,
+    GROUP_LEGEND,
+    GROUP_NAMES,
     GROUPS,
     JOINT_GROUPS,
     ArmParams,
@@ -85,10 +86,7 @@ BETA_SEVERE = 1.0
 LEVELS: tuple[str, ...] = ("unimpaired", "very mild", "mild", "moderate", "severe")
 COMPONENTS: tuple[str, ...] = ("passive", "dynamic")
 
-MUSCLE_GROUP_NAMES: dict[str, str] = {
-    "sf": "shoulder flexors", "se": "shoulder extensors", "ef": "elbow flexors",
-    "ee": "elbow extensors", "bf": "bi-articular flexors", "be": "bi-articular extensors",
-}
+MUSCLE_GROUP_NAMES: dict[str, str] = GROUP_NAMES
 #: The stretch each group is graded on: the single-joint stretch that lengthens it. The
 #: bi-articular groups (biceps short, triceps long) are graded at the elbow, where the clinic
 #: tests them and where their moment arm is the larger (BRIEF §3).
@@ -209,7 +207,7 @@ def group_name(text: str) -> str:
 
 
 def _target_help() -> str:
-    return (f"joint groups {', '.join(JOINT_GROUPS)}; muscle groups {', '.join(GROUPS)} or "
+    return (f"joint groups {', '.join(JOINT_GROUPS)}; muscle groups ({GROUP_LEGEND}) or "
             "e.g. elbow-flexors, shoulder-extensors, biarticular-flexors; optional "
             f":COMPONENT ({', '.join(COMPONENTS)})")
 
@@ -466,6 +464,8 @@ def _solve_dynamic(arm: Arm, ref_prof: StretchProfile, group: str, target: float
         raise ParameterError(
             f"{MUSCLE_GROUP_NAMES[group]}: no reflex on the synthesis path reaches a dynamic "
             f"ratio of {target:g} (largest {ratio(_S_MAX):.3g}).")
+    from scipy.optimize import brentq  # heavy: loaded where a level is synthesised
+
     return float(brentq(lambda s: math.log(ratio(s) / target), 0.0, _S_MAX, xtol=1e-10))
 
 

@@ -26,6 +26,8 @@ class DatabaseFitStore:
 
     def maps_for(self, patient: str, session: str | None = None) -> Sequence[PatientMap]:
         self.db.get_patient(patient)  # unknown patient -> the storage layer's clear error
+        if session is not None:
+            self.db.get_session(patient, session)  # unknown session -> its sessions listed
         stored = list(self.db.list_maps(patient_code=patient, session_label=session))
         if not stored:
             return []
@@ -56,5 +58,6 @@ class DatabaseFitStore:
 
 
 def open_fit_store(db_url: str | None) -> DatabaseFitStore:
-    """Open the field database (``db_url`` or the default) as a FitStore."""
-    return DatabaseFitStore(Database.open(db_url))
+    """Open the field database (``db_url`` or the default) as a FitStore; a database that does
+    not exist is refused (:class:`~fieldbank.errors.DatabaseMissing`), never created."""
+    return DatabaseFitStore(Database.open(db_url, create=False))

@@ -36,8 +36,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear, nnls
-from scipy.special import expit
 
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.maps import FieldMap
@@ -231,8 +229,9 @@ class FitProblem:
         d = self.lq - q_rest @ arm.jl.T
         wd = arm.w
         z = d / wd
-        sp = wd * np.logaddexp(0.0, z)
-        sig = expit(z)
+        soft = np.logaddexp(0.0, z)
+        sp = wd * soft
+        sig = np.exp(z - soft)  # the logistic function, as in fieldbank.model
         ell = arm.excursion
         g = np.exp(-((d / ell) ** 2))
         pb = (sp * g)[self.row_pt]
@@ -337,6 +336,8 @@ class FitProblem:
                 # Lower bounds are what binds (α >= 0 of quiet groups): NNLS on x - lo is ~15x
                 # faster than BVLS and solves the same strictly convex problem; BVLS only when
                 # an upper bound binds as well.
+                from scipy.optimize import lsq_linear, nnls  # heavy: where it solves
+
                 shifted, _ = nnls(aa, bb - aa @ lo)
                 sol = shifted + lo
                 if np.any(sol > hi):

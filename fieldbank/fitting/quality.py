@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 from fieldbank.fitting.problem import map_sd
 from fieldbank.maps import FieldMap
@@ -54,6 +53,13 @@ STATUSES: tuple[str, ...] = ("good", "under-determined", "poor")
 VALUE_UNIT = {"postural": "N", "stiffness": "N/m"}
 
 
+
+def chi2_quantile(level: float, dof: float) -> float:
+    """The χ² distribution's ``level`` quantile with ``dof`` degrees of freedom."""
+    from scipy.stats import chi2  # heavy (scipy.stats): loaded where a fit is judged
+
+    return float(chi2.ppf(level, dof))
+
 @dataclass(frozen=True)
 class Thresholds:
     """The verdict's thresholds (defaults: the module constants)."""
@@ -65,7 +71,7 @@ class Thresholds:
 
     def chi2_limit(self, n: int) -> float:
         """Largest χ²/n a map of n values may show and still be 'good'."""
-        return max(self.min_chi2_limit, float(chi2_dist.ppf(self.chi2_level, max(n, 1))) / n)
+        return max(self.min_chi2_limit, chi2_quantile(self.chi2_level, max(n, 1)) / n)
 
     def to_dict(self) -> dict[str, float]:
         return {"chi2_level": self.chi2_level, "min_chi2_limit": self.min_chi2_limit,
@@ -193,7 +199,7 @@ def assess(maps: Sequence[FieldMap], predicted: Sequence[FloatArray], p_eff: flo
     chi2 = sum(f.chi2 for f in fits)
     dof = max(1.0, n_values - p_eff)
     limit = max(thresholds.min_chi2_limit,
-                float(chi2_dist.ppf(thresholds.chi2_level, dof)) / dof)
+                chi2_quantile(thresholds.chi2_level, dof) / dof)
     reasons = [r for f in fits for r in f.reasons]
     if chi2 / dof > limit and not reasons:
         reasons.append(f"all maps together: χ²/dof {chi2 / dof:.2f} > {limit:.2f}")

@@ -71,7 +71,8 @@ class SavedFit:
 def model_summary(m: StoredModel) -> dict[str, Any]:
     """The JSON document of one model in ``fieldbank models list``."""
     return {"id": m.id, "patient": m.patient_code, "origin": m.origin, "label": m.label,
-            "parent_id": m.parent_id, "created_at": m.created_at}
+            "parent_id": m.parent_id, "created_at": m.created_at, "plan_id": m.plan_id,
+            "plans_from": list(m.plans_from)}
 
 
 @dataclass(frozen=True)

@@ -17,20 +17,20 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import nlopt
 import numpy as np
-from scipy.optimize import dual_annealing
 
 from fieldbank.errors import FitError
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.model import FloatArray
 
-#: name -> (nlopt global algorithm, nlopt local algorithm); the local one also polishes.
-ALGORITHMS: dict[str, tuple[int, int]] = {
-    "mlsl+lbfgs": (nlopt.G_MLSL_LDS, nlopt.LD_LBFGS),
-    "crs2+bobyqa": (nlopt.GN_CRS2_LM, nlopt.LN_BOBYQA),
-    "direct+lbfgs": (nlopt.GN_DIRECT_L, nlopt.LD_LBFGS),
-    "dual_annealing": (-1, -1),
+#: name -> (nlopt global algorithm, nlopt local algorithm), by their names in nlopt (looked up
+#: when a search runs: nlopt and scipy.optimize load only when something is fitted); the local
+#: one also polishes.
+ALGORITHMS: dict[str, tuple[str, str]] = {
+    "mlsl+lbfgs": ("G_MLSL_LDS", "LD_LBFGS"),
+    "crs2+bobyqa": ("GN_CRS2_LM", "LN_BOBYQA"),
+    "direct+lbfgs": ("GN_DIRECT_L", "LD_LBFGS"),
+    "dual_annealing": ("", ""),
 }
 DEFAULT_ALGORITHM = "mlsl+lbfgs"
 #: Default evaluation budgets: the global stage of nlopt, the polish, and dual annealing.
@@ -89,6 +89,8 @@ def nlopt_run(
 ) -> str:
     """One nlopt run (``local``: MLSL's local optimiser) minimising ``f`` from ``x0``; returns
     why it stopped. nlopt's failures are caught: the caller keeps its best point."""
+    import nlopt
+
     nlopt.srand(seed)
     opt = nlopt.opt(algorithm, x0.size)
     opt.set_lower_bounds(lo)
@@ -122,7 +124,9 @@ def run_nlopt(
     progress: Progress | None = None,
 ) -> SearchResult:
     """Global search over the nonlinear parameters, then a local polish from the best point."""
-    glob, loc = ALGORITHMS[name]
+    import nlopt
+
+    glob, loc = (getattr(nlopt, a) for a in ALGORITHMS[name])
     idx = problem.nonlinear_index()
     tracker = _Tracker(progress)
     start = problem.n_evals
@@ -183,6 +187,8 @@ def _polish(
 ) -> str:
     """Local search from the best point; after a gradient search stopped on a kink of the
     cost, finish without gradients (BOBYQA)."""
+    import nlopt
+
     assert tracker.best_x is not None
     reason = nlopt_run(algorithm, None, f, tracker.best_x, lo, hi, POLISH_EVALS, seed)
     if reason.startswith("stopped") and algorithm != nlopt.LN_BOBYQA:
@@ -240,6 +246,8 @@ def run_dual_annealing(
     long the baseline needs to match another fit). ``maxiter``: annealing iterations (scipy's
     default 1000).
     """
+    from scipy.optimize import dual_annealing
+
     s = problem.space
     idx = np.flatnonzero(s.fitted)
     tracker = _Tracker(progress, every=2000)

@@ -64,7 +64,6 @@ from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import nlopt
 import numpy as np
 
 from fieldbank.errors import FitError
@@ -300,6 +299,8 @@ def _conditional_sd(problem: FitProblem, theta: FloatArray, fit: np.ndarray, h: 
 def refit_local(problem: FitProblem, y: FloatArray, theta0: FloatArray,
                 seed: int = 0) -> tuple[FloatArray, int]:
     """Refit ``problem``'s fitted parameters to data ``y`` from ``theta0`` (see module doc)."""
+    import nlopt  # only when a bootstrap runs (start-up time of everything that imports fits)
+
     q = dataclasses.replace(problem, y=np.asarray(y, dtype=float), n_evals=0)
     idx = q.nonlinear_index()
     if idx.size == 0:
@@ -387,8 +388,13 @@ def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (),
                        + ", ".join(kinks) + " (the stretch reflex starts or stops firing at a "
                        "measured point)")
     skip = set(unidentified)
-    near = [s.names[k] for a, k in enumerate(fit) if s.names[k] not in skip and min(
-        theta[k] - s.lower[k], s.upper[k] - theta[k]) < BOUND_SDS * max(sd_gn[a], floor[a])]
+    near = []
+    for a, k in enumerate(fit):
+        lower, upper = float(s.lower[k]), float(s.upper[k])
+        bound = lower if theta[k] - lower <= upper - theta[k] else upper
+        if s.names[k] not in skip and abs(theta[k] - bound) < BOUND_SDS * max(sd_gn[a],
+                                                                             floor[a]):
+            near.append(f"{s.names[k]} = {theta[k]:.3g} (bound {bound:.3g})")
     if near:
         reasons.append("within 2 SD of a bound: " + ", ".join(near))
     use_boot = method == "bootstrap" or (method == "auto" and bool(reasons))

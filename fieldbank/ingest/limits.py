@@ -28,6 +28,7 @@ import os
 from collections.abc import Iterable
 from dataclasses import dataclass, fields, replace
 
+from fieldbank.config import file_setting
 from fieldbank.errors import ParameterError
 from fieldbank.validation import Interval, check_fields
 
@@ -111,9 +112,15 @@ class IngestLimits:
 
     @classmethod
     def from_environment(cls, items: Iterable[str] = ()) -> IngestLimits:
-        """The defaults, then ``FIELDBANK_INGEST_LIMITS``, then ``items`` (the command line)."""
+        """The defaults, then ``[ingest.limits]`` of the configuration file, then
+        ``FIELDBANK_INGEST_LIMITS``, then ``items`` (the command line)."""
+        base = cls()
+        configured = file_setting("ingest.limits")
+        if configured is not None:
+            base = cls.from_items([f"{k}={v!r}" for k, v in configured.value.items()], base,
+                                  where=configured.source)
         env = os.environ.get(ENV_LIMITS, "")
-        base = cls.from_items([p for p in env.split(",") if p.strip()], where=ENV_LIMITS)
+        base = cls.from_items([p for p in env.split(",") if p.strip()], base, where=ENV_LIMITS)
         return cls.from_items(items, base)
 
     def hint(self, name: str) -> str:

@@ -10,7 +10,7 @@ leave this package)::
     db.add_patient(code, body_mass_kg, height_m, side, notes="") -> PatientInfo
     db.get_patient(code) / db.list_patients() / db.patient_by_id(id)
     db.ensure_session(patient_code, label, session_date=None) -> SessionInfo
-    db.list_sessions(patient_code=None)
+    db.get_session(patient_code, label) -> SessionInfo / db.list_sessions(patient_code=None)
     # measured maps and source files (written by fieldbank.ingest)              mapstore.py
     db.ingest_files(patient_code, session_label, files, session_date=None,
                     progress: IngestProgress | None = None) -> [IngestOutcome]
@@ -30,6 +30,7 @@ leave this package)::
     db.add_plan_result(after, spec, label, patient_code=None, base_model_id=None, before=None,
                        before_label="") -> (base model id, after StoredModel, PlanRecord)
     db.list_plans(patient_code=None) / db.get_plan(id)
+    db.set_plan_given(plan_id, given_on) -> PlanRecord   # the day a stored plan was carried out
     # haptic sessions and traces (arrays go to the HDF5 array store)            traces.py
     db.start_haptic_session(model_a_id, robot_url, model_b_id=None, patient_code=None)
     db.end_haptic_session(id, stats) / db.get_haptic_session(id)

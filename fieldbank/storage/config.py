@@ -1,11 +1,13 @@
 """Where the database lives and how an engine is made.
 
-URL resolution, first match wins:
+URL resolution, first match wins (the setting ``db`` of :mod:`fieldbank.config`):
 
 1. an explicit URL (the CLI's ``--db``);
 2. the environment variable ``FIELDBANK_DB``;
-3. the embedded default: a SQLite file ``fieldbank.sqlite3`` in the data directory, which is
-   ``FIELDBANK_HOME`` when set, else the platform's user data directory (platformdirs).
+3. ``db`` in the configuration file ``fieldbank.toml``;
+4. the embedded default: a SQLite file ``fieldbank.sqlite3`` in the data directory, which is
+   ``FIELDBANK_HOME`` when set, else the file's ``home``, else the platform's user data
+   directory (platformdirs). :func:`url_source` says which, for messages.
 
 SQLite connections are opened with WAL journaling, ``synchronous=FULL`` (a committed ingest
 survives power loss), foreign keys on and a busy timeout so that several processes can write
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import os
 import sqlite3
+import warnings
 import weakref
 from collections.abc import Callable
 from pathlib import Path
@@ -34,42 +37,84 @@ from urllib.parse import quote
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
-from sqlalchemy.exc import ArgumentError
+from sqlalchemy.exc import ArgumentError, SAWarning
 from sqlalchemy.pool import ConnectionPoolEntry
 
+from fieldbank.config import DEFAULT_DB_FILE, setting
 from fieldbank.errors import StorageError
 from fieldbank.home import data_home
-from fieldbank.redact import mask_url, quote_password, redact
+from fieldbank.redact import blank_password, mask_url, quote_password, redact
 
 ENV_DB = "FIELDBANK_DB"
 ENV_ARRAYS = "FIELDBANK_ARRAYS"
-DEFAULT_DB_FILE = "fieldbank.sqlite3"
 #: How long a SQLite connection waits for another writer before giving up, ms.
 SQLITE_BUSY_TIMEOUT_MS = 60_000
 
 
 def resolve_url(explicit: str | None = None) -> URL:
-    """The database URL: ``explicit`` > ``FIELDBANK_DB`` > SQLite file in :func:`data_home`."""
-    text = explicit or os.environ.get(ENV_DB)
+    """The database URL: ``explicit`` > ``FIELDBANK_DB`` > the configuration file > SQLite
+    file in :func:`data_home`."""
+    text = setting("db", explicit or None).value
     if not text:
         home = data_home()
         return URL.create("sqlite", database=str(home / DEFAULT_DB_FILE))
-    try:
-        return make_url(quote_password(text))
-    except ArgumentError:
-        raise StorageError(
-            "Not a database URL (expected e.g. sqlite:///path/file.sqlite3 or "
-            "postgresql+psycopg://user@host/db)."
-        ) from None
+    problem = _query_problem(text)
+    if problem is None:
+        try:
+            url = make_url(quote_password(text))
+        except (ArgumentError, ValueError) as exc:
+            # SQLAlchemy raises ValueError for a port that is not a number or a broken
+            # [IPv6] host; its message may quote the URL, so only the kind of fault is kept
+            problem = ("its host or port cannot be read (a port must be a number, an IPv6 "
+                       "host is written [::1])" if isinstance(exc, ValueError) else None)
+        else:
+            if url.port is not None and not 0 < url.port < 65536:
+                problem = f"port {url.port} is not a TCP port (1-65535)"
+            else:
+                return url
+    raise StorageError(
+        f"Not a database URL{': ' + problem if problem else ''} (expected e.g. "
+        "sqlite:///path/file.sqlite3 or postgresql+psycopg://user@host:5432/db; write '&', "
+        "'@', '/' and '#' inside a password or a query value as %26, %40, %2F and %23)."
+    ) from None
+
+
+def _query_problem(text: str) -> str | None:
+    """What is wrong with a URL's query part, or None: an item without '=' (an unencoded '&'
+    inside a value, or a stray one) would be dropped without a word by the URL parser.
+    The item itself is not quoted: it may be the tail of a password."""
+    text = blank_password(text)
+    if "?" not in text:
+        return None
+    items = text.split("?", 1)[1].split("#", 1)[0].split("&")
+    for k, item in enumerate(items, start=1):
+        if "=" not in item:
+            return (f"item {k} of its query part has no NAME=VALUE form (an unencoded '&' "
+                    "inside a value?)")
+    return None
+
+
+def url_source(explicit: str | None = None) -> str:
+    """Where :func:`resolve_url` found the URL, in words for a message: 'flag --db',
+    'variable FIELDBANK_DB', 'file …/fieldbank.toml', or the default database file in the data
+    directory and where that directory came from."""
+    db = setting("db", explicit or None)
+    if db.value:
+        return db.source
+    home = setting("home")
+    if home.source == "default":
+        return ("the default database file in the platform's user data directory: neither "
+                "FIELDBANK_HOME nor FIELDBANK_DB is set, and no fieldbank.toml names one")
+    return f"the default database file in the data directory set by {home.source}"
 
 
 def default_store_root(url: URL) -> Path:
     """The array store directory of a database: ``FIELDBANK_ARRAYS``, else next to a SQLite
     file, else ``arrays/`` in the data directory (a server database keeps its arrays inside
     itself; there the directory only holds arrays written before revision 0002)."""
-    env = os.environ.get(ENV_ARRAYS)
-    if env:
-        return Path(env).expanduser()
+    configured: Path | None = setting("arrays").value
+    if configured is not None:
+        return configured
     if is_sqlite(url) and url.database not in (None, "", ":memory:"):
         return Path(str(url.database) + ".arrays")
     return data_home() / "arrays"
@@ -166,11 +211,16 @@ def make_engine(url: URL | str | None = None) -> Engine:
                         f"Cannot create the data directory {path.parent} ({exc.strerror})."
                     ) from None
     try:
-        if read_only:
-            assert path is not None
-            engine = create_engine(u, creator=_read_only_creator(path))
-        else:
-            engine = create_engine(u)
+        with warnings.catch_warnings():
+            # pysqlite ignores query arguments such as ?password= (a SQLite file has none) and
+            # says so on stderr; nothing is connected with them, so the note is only noise
+            warnings.filterwarnings("ignore", message="Query string argument",
+                                    category=SAWarning)
+            if read_only:
+                assert path is not None
+                engine = create_engine(u, creator=_read_only_creator(path))
+            else:
+                engine = create_engine(u)
     except (ArgumentError, ImportError) as exc:
         raise StorageError(f"Cannot open database {mask_url(u)}: "
                            f"{redact(str(exc), u)}") from None

@@ -15,6 +15,7 @@ timeout instead of failing when they upgrade a read lock. Database failures beco
 
 from __future__ import annotations
 
+import difflib
 import json
 import sqlite3
 from collections.abc import Iterator, Mapping
@@ -22,7 +23,7 @@ from contextlib import AbstractContextManager, contextmanager
 from datetime import UTC, date, datetime
 from typing import Any
 
-from sqlalchemy import Engine, select
+from sqlalchemy import Engine, func, select
 from sqlalchemy import exc as sa_exc
 from sqlalchemy.orm import Session
 
@@ -131,12 +132,31 @@ class DatabaseCore:
                        entity_id=str(entity_id),
                        detail_json=json.dumps(dict(detail or {}), sort_keys=True, default=str)))
 
+    # --- what is missing --------------------------------------------------------------------
+    def _no_row(self, s: Session, row: type[Any], what: str, key: object,
+                note: str = "") -> StorageError:
+        """The error for an id that is not there, naming the database looked in and what it
+        holds: 'No model with id 99 in <database>: it holds 12 models, ids 1-12.'"""
+        n, lo, hi = s.execute(select(func.count(), func.min(row.id), func.max(row.id))).one()
+        held = (f"it holds no {what}s" if not n else
+                f"it holds {n} {what}{'s' if n != 1 else ''}, "
+                + (f"id {lo}" if n == 1 else f"ids {lo}-{hi}"))
+        return StorageError(f"No {what} with id {key}{note} in {self.url_masked}: {held}.")
+
     # --- patient and session rows -----------------------------------------------------------
     def _patient_row(self, s: Session, code: str) -> PatientRow:
         row = s.scalar(select(PatientRow).where(PatientRow.code == code))
         if row is None:
-            raise StorageError(f"No patient with code {code!r} in the database; add it with "
-                               "'fieldbank patient add'.")
+            codes = list(s.scalars(select(PatientRow.code).order_by(PatientRow.code)))
+            if not codes:
+                held = ("it holds no patients (a new database, or not the one you meant: "
+                        "'fieldbank config show' says which is in force)")
+            else:
+                near = difflib.get_close_matches(code, codes, n=3, cutoff=0.5) or codes[:3]
+                held = (f"it holds {len(codes)} patient{'s' if len(codes) != 1 else ''}; "
+                        f"nearest: {', '.join(near)}")
+            raise StorageError(f"No patient with code {code!r} in {self.url_masked}: {held}. "
+                               "Add one with 'fieldbank patient add'.")
         return row
 
     def _optional_patient_id(self, s: Session, code: str | None) -> int | None:
@@ -164,7 +184,13 @@ class DatabaseCore:
                 self._audit(s, "date", "session", row.id, {"date": session_date.isoformat()})
             return row
         if not create:
-            raise StorageError(f"Patient {patient.code!r} has no session {label!r}.")
+            labels = list(s.scalars(select(SessionRow.label).where(
+                SessionRow.patient_id == patient.id).order_by(SessionRow.session_date,
+                                                              SessionRow.id)))
+            held = (f"its sessions: {', '.join(repr(x) for x in labels)}" if labels
+                    else "it has no sessions yet")
+            raise StorageError(f"Patient {patient.code!r} has no session {label!r} in "
+                               f"{self.url_masked}; {held}.")
         if not label.strip():
             raise ParameterError("A session label must not be empty.")
         row = SessionRow(patient_id=patient.id, label=label, session_date=session_date,

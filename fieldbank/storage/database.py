@@ -32,7 +32,7 @@ from sqlalchemy import func, select, text
 from sqlalchemy.engine import URL
 
 from fieldbank.arraystore import ArrayStore
-from fieldbank.errors import ParameterError, StorageError
+from fieldbank.errors import DatabaseMissing, ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.storage import migrate
 from fieldbank.storage.arrays import CollectReport
@@ -45,6 +45,8 @@ from fieldbank.storage.config import (
     make_engine,
     mask_url,
     resolve_url,
+    sqlite_path,
+    url_source,
 )
 from fieldbank.storage.core import now, to_utc
 from fieldbank.storage.lineage import Lineage
@@ -67,6 +69,15 @@ def default_actor() -> str:
         return "unknown"
 
 
+def missing_message(path: Path, source: str) -> str:
+    """Why there is no database at ``path`` and what to do (:class:`DatabaseMissing`)."""
+    return (f"No database at {path} ({source}); nothing was created. To start one there: "
+            "'fieldbank patient add CODE --mass-kg KG --height-m M --side right|left' or "
+            "'fieldbank db upgrade'. If you meant another database, set FIELDBANK_HOME or "
+            "FIELDBANK_DB, give --db, or name it in fieldbank.toml ('fieldbank config show' "
+            "prints what is in force).")
+
+
 def _patient_info(r: PatientRow) -> PatientInfo:
     return PatientInfo(r.id, r.code, r.body_mass_kg, r.height_m, r.side, r.notes,
                        to_utc(r.created_at))
@@ -84,6 +95,7 @@ class Database(MapStore, Lineage, Traces):
         upgrade: str = "auto",
         store_root: str | Path | None = None,
         actor: str | None = None,
+        create: bool = True,
     ) -> Database:
         """Open the database at ``url`` (resolved as in :mod:`fieldbank.storage.config`).
 
@@ -92,8 +104,17 @@ class Database(MapStore, Lineage, Traces):
         (``fieldbank db upgrade``); 'always' upgrades any backend; 'never' does not look.
         A read-only SQLite file is never migrated: it must be at head to be used. A database
         made by a newer fieldbank is refused (``created by a newer fieldbank``).
+
+        ``create=False``: a SQLite file that does not exist is refused
+        (:class:`~fieldbank.errors.DatabaseMissing`, naming the path, where it came from and
+        how to create it) instead of being created - what every command does except the two
+        that start a database (``patient add``, ``db upgrade``).
         """
         u = url if isinstance(url, URL) else resolve_url(url)
+        path = sqlite_path(u)
+        if not create and path is not None and not path.exists():
+            raise DatabaseMissing(missing_message(path, url_source(
+                url if isinstance(url, str) else None)))
         engine = make_engine(u)
         root = Path(store_root) if store_root is not None else default_store_root(u)
         db = cls(engine, ArrayStore(root), actor or default_actor())
@@ -177,7 +198,7 @@ class Database(MapStore, Lineage, Traces):
         with self._read() as s:
             row = s.get(PatientRow, patient_id)
             if row is None:
-                raise StorageError(f"No patient with id {patient_id}.")
+                raise self._no_row(s, PatientRow, "patient", patient_id)
             return _patient_info(row)
 
     def list_patients(self) -> list[PatientInfo]:
@@ -192,6 +213,14 @@ class Database(MapStore, Lineage, Traces):
         with self._write() as s:
             p = self._patient_row(s, patient_code)
             r = self._session_row(s, p, label, session_date, create=True)
+            return SessionInfo(r.id, p.code, r.label, r.session_date, to_utc(r.created_at))
+
+    def get_session(self, patient_code: str, label: str) -> SessionInfo:
+        """Session ``label`` of a patient; an error naming the database and the patient's
+        sessions when there is none."""
+        with self._read() as s:
+            p = self._patient_row(s, patient_code)
+            r = self._session_row(s, p, label, None, create=False)
             return SessionInfo(r.id, p.code, r.label, r.session_date, to_utc(r.created_at))
 
     def list_sessions(self, patient_code: str | None = None) -> list[SessionInfo]:

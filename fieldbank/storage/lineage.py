@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from datetime import date
 from typing import Any
 
 from sqlalchemy import select
@@ -51,7 +53,7 @@ class Lineage(DatabaseCore):
             raise ParameterError(f"origin must be one of {', '.join(ORIGINS)}; got {origin!r}.")
         pid = self._optional_patient_id(s, patient_code)
         if parent_id is not None and s.get(ModelRow, parent_id) is None:
-            raise StorageError(f"No model with id {parent_id} (the parent).")
+            raise self._no_row(s, ModelRow, "model", parent_id, " (the parent)")
         row = ModelRow(patient_id=pid, parent_id=parent_id, origin=origin, label=label,
                        params_json=params.to_json(), created_at=now())
         s.add(row)
@@ -64,8 +66,9 @@ class Lineage(DatabaseCore):
         with self._read() as s:
             r = s.get(ModelRow, model_id)
             if r is None:
-                raise StorageError(f"No model with id {model_id}.")
-            return _model(r, self._code_of(s, r.patient_id))
+                raise self._no_row(s, ModelRow, "model", model_id)
+            return _with_plans(_model(r, self._code_of(s, r.patient_id)),
+                               _plan_links(s, [r.id]))
 
     def list_models(self, patient_code: str | None = None,
                     origin: str | None = None) -> list[StoredModel]:
@@ -76,7 +79,9 @@ class Lineage(DatabaseCore):
         if origin is not None:
             q = q.where(ModelRow.origin == origin)
         with self._read() as s:
-            return [_model(r, code) for r, code in s.execute(q)]
+            rows = [_model(r, code) for r, code in s.execute(q)]
+            links = _plan_links(s, [m.id for m in rows])
+        return [_with_plans(m, links) for m in rows]
 
     def model_lineage(self, model_id: int) -> list[StoredModel]:
         """The model and its ancestors, newest first."""
@@ -118,7 +123,7 @@ class Lineage(DatabaseCore):
                  result: Mapping[str, Any], map_ids: Sequence[int]) -> FitRecord:
         p = self._patient_row(s, patient_code)
         if s.get(ModelRow, model_id) is None:
-            raise StorageError(f"No model with id {model_id}.")
+            raise self._no_row(s, ModelRow, "model", model_id)
         found = set(s.scalars(select(MapRow.id).where(MapRow.id.in_(list(map_ids)),
                                                       MapRow.patient_id == p.id)))
         missing = [m for m in map_ids if m not in found]
@@ -149,7 +154,7 @@ class Lineage(DatabaseCore):
         with self._read() as s:
             r = s.get(FitRow, fit_id)
             if r is None:
-                raise StorageError(f"No fit with id {fit_id}.")
+                raise self._no_row(s, FitRow, "fit", fit_id)
             return self._fit(s, r)
 
     def list_fits(self, patient_code: str | None = None) -> list[FitRecord]:
@@ -193,7 +198,7 @@ class Lineage(DatabaseCore):
         pid = self._optional_patient_id(s, patient_code)
         for mid in (base_model_id, result_model_id):
             if s.get(ModelRow, mid) is None:
-                raise StorageError(f"No model with id {mid}.")
+                raise self._no_row(s, ModelRow, "model", mid)
         row = PlanRow(patient_id=pid, base_model_id=base_model_id,
                       result_model_id=result_model_id, label=label,
                       spec_json=json.dumps(dict(spec), sort_keys=True), created_at=now())
@@ -213,7 +218,25 @@ class Lineage(DatabaseCore):
         with self._read() as s:
             r = s.get(PlanRow, plan_id)
             if r is None:
-                raise StorageError(f"No plan with id {plan_id}.")
+                raise self._no_row(s, PlanRow, "plan", plan_id)
+            return self._plan(s, r)
+
+    def set_plan_given(self, plan_id: int, given_on: date) -> PlanRecord:
+        """Record in plan ``plan_id``'s document the day it was carried out (``given_on``),
+        audited. A different day already recorded is refused: a stored record is added to,
+        never silently changed."""
+        with self._write() as s:
+            r = s.get(PlanRow, plan_id)
+            if r is None:
+                raise self._no_row(s, PlanRow, "plan", plan_id)
+            spec = json.loads(r.spec_json)
+            had = spec.get("given_on")
+            if had not in (None, given_on.isoformat()):
+                raise StorageError(f"Plan {plan_id} is already recorded as given on {had}.")
+            spec["given_on"] = given_on.isoformat()
+            r.spec_json = json.dumps(spec, sort_keys=True)
+            self._audit(s, "give", "plan", plan_id, {"given_on": given_on.isoformat()})
+            s.flush()
             return self._plan(s, r)
 
     def list_plans(self, patient_code: str | None = None) -> list[PlanRecord]:
@@ -223,3 +246,23 @@ class Lineage(DatabaseCore):
             q = q.where(PatientRow.code == patient_code)
         with self._read() as s:
             return [self._plan(s, r) for r in s.scalars(q)]
+
+
+def _plan_links(s: Session, model_ids: Sequence[int]) -> dict[int, tuple[int | None, list[int]]]:
+    """model id -> (the plan that made it, the plans applied to it), in one query."""
+    out: dict[int, tuple[int | None, list[int]]] = {m: (None, []) for m in model_ids}
+    if not model_ids:
+        return out
+    wanted = set(model_ids)
+    q = select(PlanRow.id, PlanRow.base_model_id, PlanRow.result_model_id).order_by(PlanRow.id)
+    for pid, base, result in s.execute(q):
+        if result in wanted:
+            out[result] = (pid, out[result][1])
+        if base in wanted:
+            out[base][1].append(pid)
+    return out
+
+
+def _with_plans(m: StoredModel, links: Mapping[int, tuple[int | None, list[int]]]) -> StoredModel:
+    made_by, applied = links.get(m.id, (None, []))
+    return replace(m, plan_id=made_by, plans_from=tuple(applied))

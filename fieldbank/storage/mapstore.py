@@ -211,7 +211,7 @@ class MapStore(DatabaseCore):
         with self._read() as s:
             r = s.execute(_map_query().where(MapRow.id == map_id)).first()
             if r is None:
-                raise StorageError(f"No map with id {map_id}.")
+                raise self._no_row(s, MapRow, "map", map_id)
             return _stored_map(r)
 
     def get_map(self, map_id: int) -> FieldMap:
@@ -219,16 +219,16 @@ class MapStore(DatabaseCore):
         with self._read() as s:
             r = s.get(MapRow, map_id)
             if r is None:
-                raise StorageError(f"No map with id {map_id}.")
+                raise self._no_row(s, MapRow, "map", map_id)
             return _field_map(r)
 
     def get_maps(self, map_ids: Sequence[int]) -> list[FieldMap]:
         """The maps ``map_ids`` in that order; one query for all."""
         with self._read() as s:
             rows = {r.id: r for r in s.scalars(select(MapRow).where(MapRow.id.in_(map_ids)))}
-        missing = [i for i in map_ids if i not in rows]
-        if missing:
-            raise StorageError(f"No map with id {', '.join(map(str, missing))}.")
+            missing = [i for i in map_ids if i not in rows]
+            if missing:
+                raise self._no_row(s, MapRow, "map", ", ".join(map(str, missing)))
         return [_field_map(rows[i]) for i in map_ids]
 
     def source_file(self, sha256: str) -> SourceFileInfo:

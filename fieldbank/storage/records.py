@@ -89,6 +89,9 @@ class StoredModel:
     label: str
     params: ArmParams
     created_at: datetime
+    #: the stored plan that made this model (origin 'intervention'), and the plans applied to it
+    plan_id: int | None = None
+    plans_from: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)

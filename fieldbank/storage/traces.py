@@ -69,7 +69,7 @@ class Traces(DatabaseCore):
                 continue
             row = s.get(ModelRow, mid)
             if row is None:
-                raise StorageError(f"No model with id {mid}.")
+                raise self._no_row(s, ModelRow, "model", mid)
             owners[mid] = self._code_of(s, row.patient_id)
         if patient_code is not None:
             self._patient_row(s, patient_code)  # a clear error for an unknown patient
@@ -130,7 +130,7 @@ class Traces(DatabaseCore):
         with self._write() as s:
             row = s.get(HapticSessionRow, haptic_session_id)
             if row is None:
-                raise StorageError(f"No haptic session with id {haptic_session_id}.")
+                raise self._no_row(s, HapticSessionRow, "haptic session", haptic_session_id)
             if row.ended_at is not None:
                 raise StorageError(f"Haptic session {haptic_session_id} has already ended.")
             end = _stored_time(ended_at)
@@ -147,7 +147,7 @@ class Traces(DatabaseCore):
         with self._read() as s:
             r = s.get(HapticSessionRow, haptic_session_id)
             if r is None:
-                raise StorageError(f"No haptic session with id {haptic_session_id}.")
+                raise self._no_row(s, HapticSessionRow, "haptic session", haptic_session_id)
             return self._haptic(s, r)
 
     def list_haptic_sessions(self, patient_code: str | None = None) -> list[HapticSessionRecord]:
@@ -169,7 +169,7 @@ class Traces(DatabaseCore):
         """
         with self._write() as s:
             if s.get(HapticSessionRow, haptic_session_id) is None:
-                raise StorageError(f"No haptic session with id {haptic_session_id}.")
+                raise self._no_row(s, HapticSessionRow, "haptic session", haptic_session_id)
             for i, t in enumerate(trials):
                 missing = [k for k in ("kind", "block", "trial", "phase", "condition")
                            if t.get(k) is None]
@@ -222,7 +222,7 @@ class Traces(DatabaseCore):
         ref = pending.ref
         with self._write() as s:
             if s.get(HapticSessionRow, haptic_session_id) is None:
-                raise StorageError(f"No haptic session with id {haptic_session_id}.")
+                raise self._no_row(s, HapticSessionRow, "haptic session", haptic_session_id)
             self.arrays.record(s, pending, now())
             row = TraceRow(haptic_session_id=haptic_session_id, name=name,
                            array_sha256=ref.sha256, created_at=now())
@@ -243,7 +243,7 @@ class Traces(DatabaseCore):
         with self._read() as s:
             t = s.get(TraceRow, trace_id)
             if t is None:
-                raise StorageError(f"No trace with id {trace_id}.")
+                raise self._no_row(s, TraceRow, "trace", trace_id)
             return self.arrays.get(s, t.array_sha256)
 
     def trace_attrs(self, trace_id: int) -> dict[str, Any]:
@@ -251,7 +251,7 @@ class Traces(DatabaseCore):
         with self._read() as s:
             t = s.get(TraceRow, trace_id)
             if t is None:
-                raise StorageError(f"No trace with id {trace_id}.")
+                raise self._no_row(s, TraceRow, "trace", trace_id)
             return self.arrays.attrs(s, t.array_sha256)
 
 

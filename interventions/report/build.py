@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fieldbank.errors import FileRefused
 from fieldbank.figures import svg
 from fieldbank.files import write_atomic
 from fieldbank.interventions.errors import SelectionError
@@ -163,10 +164,16 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
 
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
-                 title: str | None = None, accept_poor_fit: bool = False) -> ReportOutput:
+                 title: str | None = None, accept_poor_fit: bool = False,
+                 force: bool = False) -> ReportOutput:
     """Select, compute and write the report; raises SelectionError for an empty selection,
     and for cases whose model comes from a poor fit unless ``accept_poor_fit`` (then each such
-    case records it)."""
+    case records it); FileRefused when ``out_dir`` already holds report files, unless
+    ``force`` (checked first: nothing is computed for a report that would be refused)."""
+    there = [f for f in FILES if os.path.lexists(Path(out_dir) / f)]
+    if there and not force:
+        raise FileRefused(f"{out_dir} already holds a report ({', '.join(there)}); give --force "
+                          "to replace it, or choose another --out.")
     cases = select_cases(db, selection)
     poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
     if poor and not accept_poor_fit:

@@ -47,6 +47,8 @@ th { background: #eef; }
 td.t, th.t { text-align: left; }
 tr.treated td, tr.treated th { background: #fdf0e6; }
 .note { color: #844; font-size: 0.92em; }
+.terms dt { font-weight: bold; margin-top: 0.4em; }
+.terms dd { margin: 0 0 0 1.5em; }
 .warn { color: #a00; font-weight: bold; font-size: 0.95em; }
 .rests { font-size: 0.92em; }
 .legend, .nochange { color: #555; font-size: 0.88em; max-width: 70em; }
@@ -339,6 +341,35 @@ def _patients(results: Sequence[CaseResult]) -> dict[str, list[CaseResult]]:
     return groups
 
 
+#: The terms the page uses, defined at its end (the full glossary: docs/glossary.md).
+TERMS: tuple[tuple[str, str], ...] = (
+    ("sf, se, ef, ee, bf, be", "muscle groups: shoulder flexors, shoulder extensors, elbow "
+     "flexors, elbow extensors, bi-articular flexors (biceps short head), bi-articular "
+     "extensors (triceps long head)"),
+    ("spasticity (dynamic)", "velocity-dependent resistance: the stretch reflex resists a fast "
+     "stretch more than a slow one"),
+    ("contracture (passive)", "position-dependent resistance: passive stiffness at any speed"),
+    ("velocity-dependent part", "resisting torque of the fast (180°/s) stretch minus that of "
+     "the slow (5°/s) one, N·m"),
+    ("catch, R1, R2", "the catch torque is twice the unimpaired arm's largest slow-stretch "
+     "torque; R1 is where the fast stretch meets it, R2 where the slow one does"),
+    ("R2 − R1", "the part of the range the reflex takes away; shown only where both R1 and R2 "
+     "are reached (— never reached)"),
+    ("χ²/n", "squared residuals over the measurement sd, per value: ≈ 1 when the model "
+     "describes a map within its noise"),
+    ("under-determined", "a parameter the maps do not identify: held at the unimpaired value, "
+     "a guess; every prediction resting on it says so"),
+    ("95% interval", "the range of a prediction over the fit's parameter samples"),
+    ("U", "units of onabotulinumtoxinA (Botox®); other toxins' units are not interchangeable"),
+)
+
+
+def _terms() -> list[str]:
+    rows = "".join(f"<dt>{escape(t)}</dt><dd>{escape(d)}.</dd>" for t, d in TERMS)
+    return ['<h2 id="terms">Terms</h2>', f'<dl class="terms">{rows}</dl>',
+            '<p class="note">The full glossary is docs/glossary.md of fieldbank.</p>']
+
+
 def render(results: Sequence[CaseResult], inputs: Mapping[str, Any],
            summary: Sequence[tuple[str, str, str]] = ()) -> str:
     """The whole page for ``results`` (in order); ``inputs`` are shown as generation inputs;
@@ -350,7 +381,8 @@ def render(results: Sequence[CaseResult], inputs: Mapping[str, Any],
            f"<script>{SCRIPT}</script>", "</head>", "<body>",
            f"<h1>{escape(title)}</h1>",
            '<p class="note">Model predictions from the fitted arm models, not treatment '
-           "advice.</p>", '<table class="inputs">']
+           'advice. Terms (R1, R2, catch, χ²/n, under-determined, …): '
+           '<a href="#terms">at the end of the page</a>.</p>', '<table class="inputs">']
     names = {"selection": "selection", "cases": "cases", "generated": "written"}
     for k, v in inputs.items():
         if k != "title":
@@ -384,7 +416,7 @@ def render(results: Sequence[CaseResult], inputs: Mapping[str, Any],
         for r in cases:
             out += _case(r)
         out.append("</section>")
-    out += ["</body>", "</html>", ""]
+    out += [*_terms(), "</body>", "</html>", ""]
     return "\n".join(out)
 
 

@@ -1,0 +1,164 @@
+"""Start-up: which modules a command loads (never how long it takes - loaded machines vary).
+
+* every command's and subcommand's ``--help`` loads none of the numerics, the database layer or
+  the plotting (numpy, scipy, nlopt, SQLAlchemy, alembic, h5py, matplotlib, pyserial);
+* a command that reads the database (``patient list``, ``models list``, ``maps list``,
+  ``plans list``) loads the storage layer and nothing of the fitting, the arrays or the
+  migrations (no scipy, nlopt, h5py, matplotlib, alembic) when the database is at head;
+* the choices and defaults the options show (``fieldbank.cli.choices``) are the library's.
+
+``benchmarks/bench_cli_startup.py`` measures the times, as ratios to ``import click``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Nothing of these may load for --help.
+HEAVY_FOR_HELP = ("numpy", "scipy", "nlopt", "sqlalchemy", "alembic", "h5py", "matplotlib",
+                  "serial")
+#: Nothing of these may load for a command that reads a database at head.
+HEAVY_FOR_READS = ("scipy", "nlopt", "alembic", "h5py", "matplotlib", "serial")
+#: Commands whose module this check does not cover yet (their --help still loads numerics).
+NOT_COVERED = {("validate",)}
+
+_WALK = """
+import json, sys
+import click
+from fieldbank.cli.main import cli
+
+heavy = json.loads(sys.argv[1])
+found = {}
+walked = []
+
+def run(path):
+    walked.append(" ".join(path))
+    try:
+        cli.main([*path, "--help"], prog_name="fieldbank", standalone_mode=False)
+    except SystemExit:
+        pass
+    loaded = sorted(h for h in heavy if h in sys.modules)
+    if loaded:
+        found[" ".join(path)] = loaded
+
+def walk(group, path):
+    ctx = click.Context(group, info_name="fieldbank")
+    for name in group.list_commands(ctx):
+        sub = path + [name]
+        if tuple(sub) in {tuple(x) for x in json.loads(sys.argv[2])}:
+            continue
+        run(sub)
+        if found:
+            return
+        cmd = group.get_command(ctx, name)
+        if isinstance(cmd, click.Group):
+            walk(cmd, sub)
+
+run([])
+walk(cli, [])
+print(json.dumps({"found": found, "walked": walked}))
+"""
+
+
+def _python(code: str, *args: str, env: dict[str, str] | None = None) -> dict[str, object]:
+    r = subprocess.run([sys.executable, "-c", code, *args], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return json.loads(r.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def test_no_help_loads_anything_heavy() -> None:
+    doc = _python(_WALK, json.dumps(HEAVY_FOR_HELP), json.dumps(sorted(NOT_COVERED)))
+    walked = doc["walked"]
+    assert isinstance(walked, list) and len(walked) > 40  # every command and subcommand
+    assert {"whatif", "plans show", "haptic train simulate", "db upgrade"} <= set(walked)
+    assert doc["found"] == {}, f"--help loaded heavy modules: {doc['found']}"
+
+
+_READ = """
+import json, sys
+from fieldbank.cli.main import cli
+try:
+    cli.main(sys.argv[2].split(), prog_name="fieldbank", standalone_mode=False)
+except SystemExit as exc:
+    if exc.code:
+        raise
+print(json.dumps(sorted(h for h in json.loads(sys.argv[1]) if h in sys.modules)))
+"""
+
+
+@pytest.fixture(scope="module")
+def stored_home(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A data directory with a database at head holding a patient, two models and a plan."""
+    from fieldbank.interventions import Botulinum, Plan
+    from fieldbank.interventions.whatif import save_plan
+    from fieldbank.modelsource import synthetic
+    from fieldbank.storage import Database
+
+    home = tmp_path_factory.mktemp("home")
+    with Database.open(f"sqlite:///{home / 'fieldbank.sqlite3'}") as db:
+        db.add_patient("P-1", 70.0, 1.7, "right")
+        source = synthetic(["elbow=severe"])
+        saved = save_plan(db, source, Plan((Botulinum({"ef": 100.0}),)))
+        assert saved.plan_id == 1
+    return home
+
+
+@pytest.mark.parametrize("command", ["patient list", "models list", "maps list",
+                                     "plans list"])
+def test_reading_the_database_loads_storage_only(stored_home: Path, command: str) -> None:
+    env = {**os.environ, "FIELDBANK_HOME": str(stored_home)}
+    env.pop("FIELDBANK_DB", None)
+    loaded = _python(_READ, json.dumps([*HEAVY_FOR_READS, "sqlalchemy"]), command, env=env)
+    assert "sqlalchemy" in loaded  # it did open the database
+    assert [m for m in loaded if m != "sqlalchemy"] == [], loaded
+
+
+def test_the_options_show_the_library_s_choices_and_defaults() -> None:
+    from fieldbank.cli import choices as ch
+    from fieldbank.evaluate.classify import PREDICTORS
+    from fieldbank.evaluate.design import (
+        CRITERIA,
+        FAMILIES,
+        TARGETS,
+        NoiseModel,
+        Perception,
+        ProbeLimits,
+    )
+    from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM
+    from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
+    from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
+    from fieldbank.interventions.defaults import DOSE_UNIT, value
+    from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
+
+    assert ch.FIT_ALGORITHMS == tuple(ALGORITHMS)
+    assert ch.FIT_DEFAULT_ALGORITHM == DEFAULT_ALGORITHM
+    assert ch.FIT_KINDS == tuple(FIT_KINDS)
+    assert ch.FIT_DEFAULT_PRIOR_WEIGHT == DEFAULT_PRIOR_WEIGHT
+    assert ch.UNCERTAINTY_METHODS == tuple(METHODS)
+    assert ch.UNCERTAINTY_DEFAULT_METHOD == DEFAULT_METHOD
+    assert ch.UNCERTAINTY_DEFAULT_REPLICATES == DEFAULT_REPLICATES
+    assert ch.PROBE_CRITERIA == tuple(CRITERIA)
+    assert ch.PROBE_FAMILIES == tuple(FAMILIES)
+    assert ch.PROBE_TARGETS == tuple(TARGETS)
+    assert ch.CLASSIFY_PREDICTORS == tuple(PREDICTORS)
+    assert ch.DOSE_UNIT == DOSE_UNIT
+    assert ch.BOTULINUM_SESSION_WARNING_UNITS == value("botulinum.session_warning_units")
+    assert ch.BOTULINUM_WEEKS_SINCE == value("botulinum.weeks_since")
+    assert ch.CASTING_DELTA_M == value("casting.delta_m")
+    assert ch.WHATIF_INTERVAL_SAMPLES == DEFAULT_INTERVAL_SAMPLES
+    n, p, lim = NoiseModel(), Perception(), ProbeLimits()
+    assert (ch.NOISE_FORCE_SD_N, ch.NOISE_CORRELATION_S, ch.NOISE_DIRECTION_SD_DEG,
+            ch.NOISE_LENGTH_SD, ch.NOISE_SPEED_SD) == (
+        n.force_sd_n, n.correlation_s, n.direction_sd_deg, n.length_sd, n.speed_sd)
+    assert (ch.PERCEPTION_FORCE_JND, ch.PERCEPTION_DIRECTION_JND_DEG) == (
+        p.force_jnd, p.direction_jnd_deg)
+    assert (ch.PROBE_MAX_SPEED_M_PER_S, ch.PROBE_FORCE_LIMIT_N) == (
+        lim.max_speed_m_per_s, lim.force_limit_n)
