@@ -36,7 +36,7 @@ def _grid(text: str) -> tuple[int, int]:
 @click.option("--grid", default="5x5", show_default=True, help="Postures, COLUMNSxROWS.")
 @click.option("--spacing-mm", type=float, default=40.0, show_default=True,
               help="Distance between postures.")
-@click.option("--centre", default="0,0.42", show_default=True,
+@click.option("--centre", default="0,0.50", show_default=True,
               help="Grid centre X,Y in m, shoulder frame.")
 @click.option("--directions", type=int, default=8, show_default=True,
               help="Displacement directions per posture (stiffness).")
@@ -78,6 +78,8 @@ def measure(db_url: str | None, url: str, patient_code: str, session_label: str,
                    "raw_sha256": res.raw_sha256, "trials": res.trials,
                    "trials_dropped": list(res.trials_dropped), **res.report.to_json_dict()})
     maps = sum(o.n_maps for o in res.report.outcomes)
+    for note in res.notes:
+        say(f"note: {note}")
     say(f"measured {patient_code} / {printable(session_label)}: {res.trials} trials in "
         f"{res.robot_time_s / 60:.1f} min of robot time; {maps} map(s) stored; raw recording "
         f"{printable(res.raw_file)}")

@@ -260,6 +260,7 @@ class MeasureResult:
     report: IngestReport
     trials: int
     trials_dropped: tuple[str, ...]
+    notes: tuple[str, ...] = ()
 
 
 def measure_session(db: Database, url: str, patient_code: str, session_label: str,
@@ -301,7 +302,7 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
     report = ingest_data(db, [(str(out), data)], patient_code, session_label, session_date)
     dropped = tuple(t.label + ": " + t.status for t in rec.trials if t.status)
     return MeasureResult(the_plan.duration_s, str(out), hashlib.sha256(data).hexdigest(),
-                         report, len(rec.trials), dropped)
+                         report, len(rec.trials), dropped, the_plan.notes)
 
 
 def _write_raw(path: Path, data: bytes, force: bool) -> None:

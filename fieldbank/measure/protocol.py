@@ -22,9 +22,12 @@ settles for ``settle_s``. Every choice is a documented, overridable default; the
 plan is :attr:`Plan.duration_s` (the driver adds nothing but the first approach).
 
 The grid is ``grid`` = (columns, rows) postures ``spacing_m`` apart, centred on ``centre_m``
-(shoulder frame; default (0, 0.42) m, so that the strokes of the stretch part, 36 cm long for a
-5 × 5 grid at 4 cm, stay in reach of an adult arm). :func:`plan` refuses a grid or a stroke
-the patient's arm cannot reach, naming the posture.
+(shoulder frame; default (0, 0.50) m: about the relaxed hand of an adult arm, so that the grid
+stretches the flexors and the extensors of both joints — a grid nearer the body leaves the
+elbow flexors slack everywhere and their stiffness unidentified). :func:`plan` refuses a grid
+the patient's arm cannot reach, naming the posture; a stretch stroke that would leave the reach
+(they run 10 cm past the grid to reach speed) leaves out the far postures of that stroke,
+said in :attr:`Plan.notes`.
 """
 
 from __future__ import annotations
@@ -66,7 +69,7 @@ class ProtocolConfig:
     parts: tuple[str, ...] = PARTS
     grid: tuple[int, int] = (5, 5)
     spacing_m: float = 0.04
-    centre_m: tuple[float, float] = (0.0, 0.42)
+    centre_m: tuple[float, float] = (0.0, 0.50)
     displacement_m: float = 0.005
     directions: int = 8
     hold_s: float = 0.45
@@ -168,6 +171,7 @@ class Plan:
     segments: tuple[Segment, ...]
     trials: tuple[PlannedTrial, ...]
     start_m: tuple[float, float] = field(default=(0.0, 0.0))
+    notes: tuple[str, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -198,6 +202,7 @@ class _Builder:
         self.at = start
         self.segments: list[Segment] = []
         self.trials: list[PlannedTrial] = []
+        self.notes: list[str] = []
 
     def move(self, to: tuple[float, float], duration: float | None = None) -> None:
         d = math.hypot(to[0] - self.at[0], to[1] - self.at[1])
@@ -281,42 +286,47 @@ def plan(config: ProtocolConfig, arm: Arm | None = None,
         _stretch(b, postures, nx, ny, arm)
     if not b.segments:
         b.hold(c.settle_s)
-    return Plan(c, postures, tuple(b.segments), tuple(b.trials), first)
+    return Plan(c, postures, tuple(b.segments), tuple(b.trials), first, tuple(b.notes))
+
+
+def _stroke_ends(c: ProtocolConfig, x: float, y_lo: float, y_hi: float, direction: int
+                 ) -> tuple[tuple[float, float], tuple[float, float]]:
+    ramp_d = 0.5 * c.stretch_speed_m_per_s * c.ramp_s
+    lead = min(0.05, 0.25 * c.ramp_s) * c.stretch_speed_m_per_s
+    lo, hi = y_lo - c.pass_margin_m, y_hi + c.pass_margin_m
+    if direction > 0:
+        return (x, lo - lead - ramp_d), (x, hi + ramp_d)
+    return (x, hi + lead + ramp_d), (x, lo - ramp_d)
 
 
 def _stretch(b: _Builder, postures: FloatArray, nx: int, ny: int, arm: Arm | None) -> None:
+    """Strokes through each column; rows whose stroke would leave the patient's reach are
+    left out of that stroke (from the far end), and said in the plan's notes."""
     c = b.c
-    ramp_d = 0.5 * c.stretch_speed_m_per_s * c.ramp_s
-    # a little flat run after each ramp lets the servo catch up before the plateau is read
     lead = min(0.05, 0.25 * c.ramp_s)
     for col in range(nx):
-        xs = postures[col::nx]
-        x_col = float(xs[0, 0])
-        y_lo, y_hi = float(xs[:, 1].min()), float(xs[:, 1].max())
+        ys = sorted(float(y) for y in postures[col::nx, 1])
+        x_col = float(postures[col, 0])
         for direction in (+1, -1):
+            rows = len(ys)
+            while rows > 0:
+                ends = [_stroke_ends(c, x_col + off, ys[0], ys[rows - 1], direction)
+                        for off in (-c.stretch_offset_m, c.stretch_offset_m)]
+                if arm is None or all(arm.reachable(np.array(e)).all() for e in ends):
+                    break
+                rows -= 1
+            word = "away from the body" if direction > 0 else "toward the body"
+            if rows < len(ys):
+                b.notes.append(f"column {col}, {word}: {len(ys) - rows} far posture(s) left "
+                               "out of the stretch (the stroke would leave the patient's "
+                               "reach)")
+            if rows == 0:
+                continue
             for off in (0.0, -c.stretch_offset_m, c.stretch_offset_m):
-                x = x_col + off
-                a = y_lo - c.pass_margin_m - lead * c.stretch_speed_m_per_s
-                z = y_hi + c.pass_margin_m
-                if direction > 0:
-                    start, end = (x, a - ramp_d), (x, z + ramp_d)
-                else:
-                    start, end = (x, z + lead * c.stretch_speed_m_per_s + ramp_d), \
-                        (x, y_lo - c.pass_margin_m - ramp_d)
-                if arm is not None:
-                    ends = np.array([start, end])
-                    if not arm.reachable(ends).all():
-                        raise ParameterError(
-                            f"the stretch stroke of column {col} from ({start[0]:.3f}, "
-                            f"{start[1]:.3f}) to ({end[0]:.3f}, {end[1]:.3f}) m leaves the "
-                            "patient's reach: move the grid (--centre), shrink it, or lower "
-                            "the stretch speed")
-                length = abs(end[1] - start[1])
-                plateau_len = length - 2 * ramp_d
+                start, end = _stroke_ends(c, x_col + off, ys[0], ys[rows - 1], direction)
+                ramp_d = 0.5 * c.stretch_speed_m_per_s * c.ramp_s
+                plateau_len = abs(end[1] - start[1]) - 2 * ramp_d
                 t_plateau = plateau_len / c.stretch_speed_m_per_s
-                w0 = c.ramp_s + lead
-                w1 = c.ramp_s + t_plateau
-                word = "away from the body" if direction > 0 else "toward the body"
-                b.stroke(start, end, (w0, w1),
+                b.stroke(start, end, (c.ramp_s + lead, c.ramp_s + t_plateau),
                          f"column {col} {word} at {c.stretch_speed_m_per_s:g} m/s, "
                          f"offset {off * 1000:+.0f} mm")
