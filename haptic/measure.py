@@ -288,6 +288,8 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
         / f"{file_component(patient_code)}_{file_component(session_label)}_{stamp}.nwb")
     info = RecordingInfo(patient_code, session_label, f"robot {mask_url(url)}",
                          start_time=started)
+    if out.exists() and not force:  # before the robot moves, not after
+        raise HapticError(f"{out}: exists; give another --raw file or --force")
     try:
         rec, commanded = run_protocol(url, the_plan, cfg)
     except MeasurementAborted as exc:
