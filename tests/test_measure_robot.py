@@ -128,14 +128,36 @@ def test_bad_raw_files_name_the_file_channel_and_reason(tmp_path: Path) -> None:
     good = tmp_path / "ok.c3d"
     good.write_bytes(data)
     runner = CliRunner()
-    res = runner.invoke(ingest, ["--db", url, "--patient", "BAD", "--session", "s", str(good),
+    res = runner.invoke(cli, ["ingest", "--db", url, "--patient", "BAD", "--session", "s",
+                              str(good),
                                  "--column", "fx=NoSuchChannel"])
     assert res.exit_code != 0
     assert "ok.c3d" in res.output and "NoSuchChannel" in res.output
     broken = tmp_path / "broken.c3d"
     broken.write_bytes(data[: len(data) // 3])
-    res = runner.invoke(ingest, ["--db", url, "--patient", "BAD", "--session", "s",
-                                 str(broken)])
+    res = runner.invoke(cli, ["ingest", "--db", url, "--patient", "BAD", "--session", "s",
+                              str(broken)])
     assert res.exit_code != 0 and "broken.c3d" in res.output
     with storage.Database.open(url) as db:
         assert db.list_maps("BAD") == []        # nothing half-written
+
+
+def test_raw_nwb_recording_passes_nwbinspector(tmp_path: Path) -> None:
+    from nwbinspector import Importance, inspect_nwbfile
+
+    from fieldbank.measure.nwbraw import RecordingInfo, read_recording, write_recording
+
+    src = resolve_patient("elbow=mild")
+    arm = Arm.from_params(src.params)
+    pl = plan(ProtocolConfig(parts=("postural",), grid=(2, 1)), arm)
+    rec, cmd = run_protocol("sim://?patient=elbow=mild", pl)
+    data = write_recording(rec, RecordingInfo("P1", "s1"), cmd, pl.postures_m)
+    path = tmp_path / "raw.nwb"
+    path.write_bytes(data)
+    found = list(inspect_nwbfile(nwbfile_path=str(path)))
+    bad = [m for m in found if m.importance in (Importance.CRITICAL, Importance.ERROR)]
+    assert not bad, bad
+    back, postures, prov = read_recording("raw.nwb", data)
+    assert prov["patient"] == "P1"
+    assert np.array_equal(back.force_n, rec.force_n) and len(back.trials) == len(rec.trials)
+    assert postures is not None and np.allclose(postures, pl.postures_m)

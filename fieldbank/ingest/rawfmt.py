@@ -84,7 +84,7 @@ def read_nwb(name: str, data: bytes, limits: IngestLimits, arm: Arm | None,
     try:
         rec, postures, prov = read_recording(name, data, channels)
     except MapError as exc:
-        return [], [Problem(name, str(exc))]
+        return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
     return maps_from_recording(name, "NWB", rec, arm, postures, prov)
 
 
@@ -96,5 +96,5 @@ def read_c3d(name: str, data: bytes, limits: IngestLimits, arm: Arm | None,
     try:
         rec, postures, prov = read_c3d_recording(name, data, channels)
     except MapError as exc:
-        return [], [Problem(name, str(exc))]
+        return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
     return maps_from_recording(name, "C3D", rec, arm, postures, prov)

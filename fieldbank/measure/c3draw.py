@@ -45,6 +45,9 @@ ANALOG_PER_FRAME = 10
 
 
 def _fixed(strings: list[str]) -> tuple[str, int, int]:
+    # C3D strings are bytes: keep them ASCII so a character is a byte
+    strings = [s.replace("°", " deg").encode("ascii", "replace").decode("ascii")
+               for s in strings]
     width = max(1, max((len(s) for s in strings), default=1))
     return "".join(s.ljust(width) for s in strings), width, len(strings)
 
@@ -61,6 +64,9 @@ def write_c3d(rec: Recording, postures_m: np.ndarray | None = None) -> bytes:
     n = rec.n - rec.n % ANALOG_PER_FRAME
     if n < ANALOG_PER_FRAME:
         raise MapError(f"a C3D file needs at least {ANALOG_PER_FRAME} samples; got {rec.n}")
+    if len(rec.trials) > 255:
+        raise MapError(f"a C3D parameter holds at most 255 entries per dimension; this "
+                       f"recording has {len(rec.trials)} trials: write it as NWB")
     rate = rec.rate_hz
     w = c3d.Writer(point_rate=rate / ANALOG_PER_FRAME, analog_rate=rate)
     analog = np.vstack([rec.position_m[:n].T, rec.velocity_m_per_s[:n].T,
@@ -79,10 +85,11 @@ def write_c3d(rec: Recording, postures_m: np.ndarray | None = None) -> bytes:
     ev = w.add_group(20, "EVENT", "trials: one event at the start of each")
     trials = list(rec.trials)
     t0 = float(rec.t_s[0])
-    ev.add_array("USED", "number of events", np.array(len(trials), dtype=np.int16))
-    times = np.array([[0.0] * len(trials), [t.start_s - t0 for t in trials]],
-                     dtype=np.float32)
-    ev.add_array("TIMES", "minutes, seconds from the first sample", times)
+    ev.add_array("USED", "number of events", np.array([len(trials)], dtype=np.int16))
+    pairs = np.array([[0.0, t.start_s - t0] for t in trials], dtype=np.float32)
+    # C3D arrays run first dimension fastest: dims [2, n] hold (minutes, seconds) per event
+    ev.add_array("TIMES", "minutes, seconds from the first sample",
+                 pairs.ravel().reshape(2, len(trials)))
     labels, lw, lc = _fixed([t.role for t in trials])
     ev.add_str("LABELS", "role", labels, lw, lc)
     desc = [f"posture={t.posture};stop={t.stop_s - t0:.6f};"
@@ -95,8 +102,9 @@ def write_c3d(rec: Recording, postures_m: np.ndarray | None = None) -> bytes:
     ev.add_str("DESCRIPTIONS", "posture, stop, window, velocity", d, dw, dc)
     if postures_m is not None and len(postures_m):
         g = w.add_group(21, "FIELDBANK", "fieldbank measurement")
-        g.add_array("POSTURES", "planned posture grid, m, shoulder frame",
-                    np.asarray(postures_m, dtype=np.float32))
+        pts = np.asarray(postures_m, dtype=np.float32)
+        g.add_array("POSTURES", "planned posture grid, m, shoulder frame (x, y per posture)",
+                    pts.ravel().reshape(2, len(pts)))
     buf = io.BytesIO()
     w.write(buf)
     return buf.getvalue()
@@ -173,6 +181,7 @@ def read_c3d_recording(name: str, data: bytes, channels: Mapping[str, str] | Non
     tp = reader.get("EVENT:TIMES")
     trials: list[Trial] = []
     if roles:
+        # EVENT:TIMES has dims [2, n]: the library gives (n, 2), minutes and seconds
         times = np.asarray(tp.float_array if tp is not None else [], dtype=float).reshape(-1, 2)
         if times.shape[0] != len(roles) or len(descs) != len(roles):
             raise MapError(f"{name}: EVENT:LABELS, TIMES and DESCRIPTIONS disagree in length "

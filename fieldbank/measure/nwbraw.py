@@ -11,7 +11,7 @@ Written (:func:`write_recording`), one file per measurement:
   ``window_start``, ``window_stop`` (s), ``vx``, ``vy`` (m/s, passes), ``label`` and
   ``status`` (why the robot dropped a trial, empty when kept);
 * ``postures`` (scratch): the planned grid, m;
-* subject (the patient code), session description and start time, the device.
+* the patient code (scratch ``patient``), session description and start time, the device.
 
 Read (:func:`read_recording`): the same layout, and a lab's own NWB file when it names its
 channels: any TimeSeries of shape (N, 2) (or two (N,) series) whose name the caller maps to
@@ -67,8 +67,9 @@ def write_recording(rec: Recording, info: RecordingInfo,
                   identifier=str(uuid.uuid4()), session_start_time=start,
                   session_id=info.session, source_script="fieldbank",
                   source_script_file_name="fieldbank")
-    nwb.subject = Subject(subject_id=info.patient, species="Homo sapiens",
-                          description="patient (pseudonymous code)")
+    # fieldbank keeps no ages: 'P0Y/' is NWB's open range "0 years or older", i.e. unknown
+    nwb.subject = Subject(subject_id=info.patient, species="Homo sapiens", age="P0Y/",
+                          sex="U", description="patient (pseudonymous code); age not kept")
     dev = nwb.create_device(name="robot", description=info.device)
     del dev
     t = rec.t_s
@@ -215,7 +216,11 @@ def read_recording(name: str, data: bytes,
         postures = None
         if "postures" in nwb.scratch:
             postures = np.asarray(nwb.scratch["postures"].data[:], dtype=float)
-        subject = nwb.subject.subject_id if nwb.subject is not None else ""
+        subject = ""
+        if "patient" in nwb.scratch:
+            subject = str(nwb.scratch["patient"].data)
+        elif nwb.subject is not None:
+            subject = str(nwb.subject.subject_id)
         prov = {"nwb_identifier": str(nwb.identifier),
                 "session_start": nwb.session_start_time.isoformat()}
         if subject:
