@@ -47,7 +47,8 @@ class RobotLink:
     ``flags``, ``echo_seq`` (last FORCE seq the device applied), ``states`` (STATE frames
     received so far). Newest force-sensor reading, once :meth:`sensor_on` was sent to a device
     that has one: ``sensor_t_us``, ``sensor_fx``, ``sensor_fy`` (N, force of the hand on the
-    handle, robot frame), ``sensors`` (SENSOR frames so far). Counters: ``frames_lost``, ``max_gap``, ``duplicates``, ``resyncs``,
+    handle, robot frame), ``sensors`` (SENSOR frames so far). Counters: ``frames_lost``,
+    ``max_gap``, ``duplicates``, ``resyncs``,
     ``device_faults`` (FAULT frames), ``fault_flag_frames`` and ``watchdog_flag_frames``
     (STATE frames with those flags), ``decode_errors`` (by kind, from the frame reader).
     """

@@ -38,11 +38,11 @@ from pathlib import Path
 import numpy as np
 
 from fieldbank.errors import ParameterError
+from fieldbank.files import write_new
 from fieldbank.haptic.errors import HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
-from fieldbank.files import write_new
 from fieldbank.home import data_home
 from fieldbank.ingest import IngestReport, ingest_data
 from fieldbank.measure.nwbraw import RecordingInfo, write_recording
@@ -141,7 +141,7 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
     approach = _approach((link.x - ox, link.y - oy), plan.start_m, cfg.approach_speed_m_per_s)
     t_off = approach.duration_s
     total = t_off + plan.duration_s
-    n_ticks = int(math.ceil(total / dt)) + 2
+    n_ticks = math.ceil(total / dt) + 2
     rows = np.empty((n_ticks, 9))
     k_s, b_s = cfg.servo_k_n_per_m, cfg.servo_b_n_s_per_m
     seg_i = 0

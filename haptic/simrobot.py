@@ -109,7 +109,7 @@ class SimRobotConfig:
     max_rate_hz: int = 4000
     substep_s: float = 2.5e-4
     device_id: str = "fieldbank-sim"
-    patient: str = ""                   # virtual patient (haptic.patient): model id, file:, severity
+    patient: str = ""                   # virtual patient (haptic.patient): id, file:, severity
     patient_x_m: float = 0.0            # the patient's shoulder in robot coordinates
     patient_y_m: float = 0.0
     force_noise_n: float = -1.0         # < 0: 0.2 N with a patient, else 0

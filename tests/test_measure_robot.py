@@ -16,8 +16,8 @@ from click.testing import CliRunner
 
 from fieldbank import storage
 from fieldbank.cli.fit import fit
-from fieldbank.cli.main import cli
 from fieldbank.cli.ingest import ingest
+from fieldbank.cli.main import cli
 from fieldbank.haptic.measure import run_protocol
 from fieldbank.haptic.patient import resolve_patient
 from fieldbank.maps import model_map_like

@@ -15,6 +15,5 @@ from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
 from fieldbank.ingest.matfmt import write_mat5, write_mat73
 from fieldbank.ingest.options import ReadOptions
 
-__all__ = ["DEFAULT_LIMITS", "IngestLimits", "IngestReport", "ReadOptions", "detect_format", "ingest_data",
-           "ingest_paths",
-           "read_file", "write_hdf5", "write_mat5", "write_mat73"]
+__all__ = ["DEFAULT_LIMITS", "IngestLimits", "IngestReport", "ReadOptions", "detect_format",
+           "ingest_data", "ingest_paths", "read_file", "write_hdf5", "write_mat5", "write_mat73"]

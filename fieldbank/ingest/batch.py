@@ -5,7 +5,8 @@
    without being read); its SHA-256 is taken over the exact bytes.
 2. The format is detected from the content (not the extension): fieldbank HDF5, MATLAB v5,
    MATLAB v7.3, CSV text, or a raw recording — NWB (an HDF5 file with ``nwb_version``) or C3D
-   — whose maps the estimator computes (:mod:`fieldbank.ingest.rawfmt`). Readers are bounded (:mod:`fieldbank.ingest.limits`); anything a
+   — whose maps the estimator computes (:mod:`fieldbank.ingest.rawfmt`). Readers are bounded
+   (:mod:`fieldbank.ingest.limits`); anything a
    reader did not foresee in a damaged file is still a located problem, never a traceback.
 3. Every map of every file is validated against the patient's arm and the plausibility
    limits, and must not name another patient; every problem of every file is collected,
@@ -30,8 +31,8 @@ from fieldbank.files import read_regular_file
 from fieldbank.ingest.csvfmt import read_csv
 from fieldbank.ingest.hdf5fmt import read_hdf5
 from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
-from fieldbank.ingest.options import ReadOptions
 from fieldbank.ingest.matfmt import read_mat5, read_mat73
+from fieldbank.ingest.options import ReadOptions
 from fieldbank.ingest.parsed import ParsedMap, validate_map
 from fieldbank.ingest.rawfmt import read_c3d, read_nwb
 from fieldbank.measure.c3draw import is_c3d

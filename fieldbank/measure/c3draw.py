@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -110,8 +111,8 @@ def write_c3d(rec: Recording, postures_m: np.ndarray | None = None) -> bytes:
     return buf.getvalue()
 
 
-def _strings(reader: object, key: str) -> list[str]:
-    p = getattr(reader, "get")(key)
+def _strings(reader: Any, key: str) -> list[str]:
+    p = reader.get(key)
     if p is None:
         return []
     arr = p.string_array

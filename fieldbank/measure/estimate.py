@@ -26,7 +26,8 @@ the handle along the pass — −J⁻ᵀ(H q̈ + C q̇) of the patient's segment
 :func:`fieldbank.dynamics.hand_inertial_force`) — is subtracted, with the acceleration from a
 Savitzky–Golay derivative of the velocity: at 1 m/s it is several newtons, which a map of the
 muscles' forces must not contain. The reflex makes the force steep in the velocity, so only
-the samples within ``sample_speed_tolerance`` (4 %) of the pass's velocity are read. Static holds need no correction (the hand is at rest).
+the samples within ``sample_speed_tolerance`` (4 %) of the pass's velocity are read. Static
+holds need no correction (the hand is at rest).
 
 Trials are dropped, each with its reason, when the source marked them (a safety fault, the
 force limit), when the window is shorter than ``min_window_s`` or holds a non-finite sample,
@@ -43,6 +44,7 @@ import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -148,7 +150,7 @@ def _batch_sd(f: FloatArray, blocks: int) -> FloatArray:
 
 
 def _regress(dx: FloatArray, f: FloatArray, dv: FloatArray | None = None
-             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+             ) -> tuple[Any, Any, Any, Any]:
     """F = c − K dx (− B dv) by least squares: (c, K, sd_c, sd_K)."""
     cols = [np.ones(len(dx)), dx] + ([dv] if dv is not None else [])
     a = np.column_stack(cols)
@@ -176,7 +178,7 @@ def _span_problem(dx: FloatArray) -> str:
 
 
 def estimate(rec: Recording, arm: Arm | None = None,
-             postures_m: Sequence[Sequence[float]] | None = None,
+             postures_m: Sequence[Sequence[float]] | FloatArray | None = None,
              config: EstimatorConfig | None = None, source: str = "",
              provenance: dict[str, str] | None = None) -> Estimate:
     """Estimate every map the recording holds (see the module docstring).
@@ -316,7 +318,7 @@ def _moving_map(rec: Recording, arm: Arm, group: list[tuple[Trial, slice]],
     for t, sl in group:
         whole = rec.span(t.start_s, t.stop_s)
         v = rec.velocity_m_per_s[whole]
-        win = max(5, int(round(0.02 / dt)) | 1)
+        win = max(5, round(0.02 / dt) | 1)
         if len(v) <= win:
             dropped.append(Dropped(_trial_name(t), "pass too short to differentiate"))
             continue

@@ -30,6 +30,7 @@ import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -84,7 +85,8 @@ def write_recording(rec: Recording, info: RecordingInfo,
         description="hand (handle) position, shoulder frame; columns x, y",
         comments=f"channels: {rec.channels.get('x', 'x')}, {rec.channels.get('y', 'y')}"))
     nwb.add_acquisition(TimeSeries(
-        name="hand_velocity", data=data(rec.velocity_m_per_s), timestamps=nwb.acquisition["hand_position"],
+        name="hand_velocity", data=data(rec.velocity_m_per_s),
+        timestamps=nwb.acquisition["hand_position"],
         unit="m/s",
         description="hand velocity, shoulder frame; columns vx, vy"
         + (" (differentiated from the position)" if rec.velocity_derived else "")))
@@ -124,8 +126,8 @@ def write_recording(rec: Recording, info: RecordingInfo,
         os.unlink(path)
 
 
-def _series(nwb: object, name: str) -> object:
-    acq = getattr(nwb, "acquisition")
+def _series(nwb: Any, name: str) -> Any:
+    acq = nwb.acquisition
     if name in acq:
         return acq[name]
     for ts in acq.values():
@@ -137,25 +139,25 @@ def _series(nwb: object, name: str) -> object:
                    f"{', '.join(sorted(acq)) or 'none'}")
 
 
-def _si(ts: object, where: str, quantity: str) -> np.ndarray:
-    data = np.asarray(getattr(ts, "data")[:], dtype=float)
+def _si(ts: Any, where: str, quantity: str) -> np.ndarray:
+    data = np.asarray(ts.data[:], dtype=float)
     unit = str(getattr(ts, "unit", "")).strip()
     scale = channel_factor(unit, quantity)
     if scale is None:
         raise MapError(f"{where}: unit {unit!r} is not a {quantity} unit fieldbank converts")
     conv = float(getattr(ts, "conversion", 1.0) or 1.0)
     off = float(getattr(ts, "offset", 0.0) or 0.0)
-    return (data * conv + off) * scale
+    return np.asarray((data * conv + off) * scale, dtype=float)
 
 
-def _times(ts: object) -> np.ndarray:
+def _times(ts: Any) -> np.ndarray:
     stamps = getattr(ts, "timestamps", None)
     if stamps is not None:
         if hasattr(stamps, "timestamps"):   # linked to another series
             stamps = stamps.timestamps
         return np.asarray(stamps[:], dtype=float)
-    rate = float(getattr(ts, "rate"))
-    n = len(getattr(ts, "data"))
+    rate = float(ts.rate)
+    n = len(ts.data)
     return float(getattr(ts, "starting_time", 0.0) or 0.0) + np.arange(n) / rate
 
 
