@@ -64,6 +64,7 @@ class EstimatorConfig:
     """Thresholds of trial selection (see the module docstring); SI."""
 
     min_window_s: float = 0.08
+    min_pass_window_s: float = 0.02
     settle_speed_m_per_s: float = 0.01
     min_displacement_m: float = 0.001
     max_displacement_m: float = 0.03
@@ -115,9 +116,10 @@ def _check_window(rec: Recording, t: Trial, cfg: EstimatorConfig) -> tuple[slice
     sl = rec.span(*t.window_s)
     n = sl.stop - sl.start
     dur = t.window_s[1] - t.window_s[0]
-    if dur < cfg.min_window_s or n < 5:
+    least = cfg.min_pass_window_s if t.role == "pass" else cfg.min_window_s
+    if dur < least or n < 5:
         return sl, (f"window of {dur:.3f} s and {n} samples is shorter than "
-                    f"{cfg.min_window_s:g} s (or 5 samples)")
+                    f"{least:g} s (or 5 samples)")
     block = np.concatenate([rec.position_m[sl], rec.velocity_m_per_s[sl], rec.force_n[sl]],
                            axis=1)
     if not np.all(np.isfinite(block)):
