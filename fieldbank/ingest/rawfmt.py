@@ -24,6 +24,7 @@ from fieldbank.measure.estimate import estimate
 from fieldbank.measure.nwbraw import read_recording
 from fieldbank.measure.recording import Recording
 from fieldbank.model import Arm
+from fieldbank.nwbexport import has_nwb_maps, read_nwb_maps
 
 RAW_FORMATS = ("nwb", "c3d")
 
@@ -39,6 +40,13 @@ def _parsed(name: str, m: FieldMap, k: int) -> ParsedMap:
     return ParsedMap(loc, m.kind, m.frame, m.sign, m.source, dict(m.metadata),
                      np.array(m.positions_m), np.array(m.values),
                      None if m.sd is None else np.array(m.sd), m.velocity_m_per_s, point)
+
+
+def _parsed_at(where: str, m: FieldMap) -> ParsedMap:
+    return ParsedMap(where, m.kind, m.frame, m.sign, m.source, dict(m.metadata),
+                     np.array(m.positions_m), np.array(m.values),
+                     None if m.sd is None else np.array(m.sd), m.velocity_m_per_s,
+                     lambda i: f"{where}: row {i}")
 
 
 def maps_from_recording(name: str, fmt: str, rec: Recording, arm: Arm | None,
@@ -81,6 +89,12 @@ def read_nwb(name: str, data: bytes, limits: IngestLimits, arm: Arm | None,
              ) -> tuple[list[ParsedMap], list[Problem]]:
     """Maps from a raw NWB recording."""
     del limits  # the file size was bounded before; the arrays are the file's own
+    if has_nwb_maps(data):  # a fieldbank export: its maps as they were stored
+        try:
+            found = read_nwb_maps(name, data)
+        except MapError as exc:
+            return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
+        return [_parsed_at(where, m) for m, where in found], []
     try:
         rec, postures, prov = read_recording(name, data, channels)
     except MapError as exc:
