@@ -1,6 +1,6 @@
 """``fieldbank export``: stored maps as fieldbank HDF5 or CSV, a patient as NWB, a haptic
-session's trace as OpenSim ``.mot``/``.sto``, a model as an OpenSim ``.osim``, or a source file
-as ingested.
+session's trace as OpenSim ``.mot``/``.sto``, a model as an OpenSim ``.osim``, or a source
+file as ingested.
 
 Where the output goes is decided here, once, and never surprises:
 
@@ -8,8 +8,8 @@ Where the output goes is decided here, once, and never surprises:
   ``.csv`` one CSV file, which holds exactly one map (BRIEF §11); no suffix a directory with
   one CSV per map; ``.nwb`` one patient's maps, models, fits and haptic sessions
   (:mod:`fieldbank.nwbexport`); ``.mot`` / ``.sto`` one haptic session's trace and ``.osim``
-  one stored model (:mod:`fieldbank.opensimio`). A ``--format`` that disagrees with the suffix, or another suffix, is
-  refused before anything is written;
+  one stored model (:mod:`fieldbank.opensimio`). A ``--format`` that disagrees with the
+  suffix, or another suffix, is refused before anything is written;
 * nothing is overwritten unless ``force``, and nothing is written through a symbolic link
   (:func:`fieldbank.files.write_new`); every file is written atomically;
 * in a directory export each file name is built from stored labels made safe

@@ -109,14 +109,14 @@ def patient_nwb(db: Database, patient_code: str) -> bytes:
             data = m.table()
             vectors = [VectorData(name=c, description=f"{c} in {COLUMN_UNITS[c]}",
                                   data=data[:, j]) for j, c in enumerate(cols)]
-            desc = {"kind": m.kind, "frame": m.frame, "sign": m.sign,
+            about: dict[str, object] = {"kind": m.kind, "frame": m.frame, "sign": m.sign,
                     "velocity_m_per_s": list(m.velocity_m_per_s), "session": row.session_label,
                     "session_date": str(row.session_date or ""), "source": m.source,
                     "source_file": row.source_file, "map_id": row.id,
                     "metadata": dict(m.metadata),
                     "units": {c: COLUMN_UNITS[c] for c in cols}}
             mod.add(DynamicTable(name=f"map_{row.id}", description=json.dumps(
-                {MAP_TAG: desc}, ensure_ascii=False), columns=vectors))
+                {MAP_TAG: about}, ensure_ascii=False), columns=vectors))
     # models and fits
     if models:
         mod = nwb.create_processing_module("models", "arm models and fits")
@@ -149,15 +149,15 @@ def patient_nwb(db: Database, patient_code: str) -> bytes:
                                ("basis", "what the interval rests on"),
                                ("identified", "identified by the maps (else a guess)")):
                 pt.add_column(name, desc)
-            for f in fits:
-                ft.add_row(fit_id=f.id, model_id=f.model_id, algorithm=f.algorithm,
-                           seed=f.seed if f.seed is not None else -1, cost=float(f.cost),
-                           status=str(f.result.get("status", "")),
-                           map_ids=json.dumps(list(f.map_ids)))
-                unid = {str(u.get("name")) for u in f.result.get("unidentified", ())
+            for fr in fits:
+                ft.add_row(fit_id=fr.id, model_id=fr.model_id, algorithm=fr.algorithm,
+                           seed=fr.seed if fr.seed is not None else -1, cost=float(fr.cost),
+                           status=str(fr.result.get("status", "")),
+                           map_ids=json.dumps(list(fr.map_ids)))
+                unid = {str(u.get("name")) for u in fr.result.get("unidentified", ())
                         if isinstance(u, dict)}
-                for pname, iv in dict(f.result.get("intervals", {})).items():
-                    pt.add_row(fit_id=f.id, parameter=pname, value=float(iv["value"]),
+                for pname, iv in dict(fr.result.get("intervals", {})).items():
+                    pt.add_row(fit_id=fr.id, parameter=pname, value=float(iv["value"]),
                                sd=float(iv["sd"]), low=float(iv["low"]),
                                high=float(iv["high"]), unit=_param_unit(pname),
                                basis=str(iv.get("basis", "")), identified=pname not in unid)
@@ -180,11 +180,11 @@ def patient_nwb(db: Database, patient_code: str) -> bytes:
         if "t_s" in traces:
             t_s = np.asarray(db.get_trace_array(traces["t_s"].id), dtype=float) + offset
             first: Any = None
-            for name, tr in traces.items():
+            for name, rec in traces.items():
                 if name == "t_s":
                     continue
-                arr = np.asarray(db.get_trace_array(tr.id))
-                unit = str(db.trace_attrs(tr.id).get("unit", "")) or "n.a."
+                arr = np.asarray(db.get_trace_array(rec.id))
+                unit = str(db.trace_attrs(rec.id).get("unit", "")) or "n.a."
                 ts = TimeSeries(name=f"haptic_{h.id}_{name}", data=arr,
                                 timestamps=t_s if first is None else first, unit=unit,
                                 description=f"haptic session {h.id}: {name} ({unit}), robot "

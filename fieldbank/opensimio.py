@@ -13,19 +13,24 @@ parameters, Winter 2004), joined to the ground at the shoulder and to each other
 pin joints about the vertical z axis (the arm moves in the horizontal x–y plane; gravity along
 −z does no work there); coordinates ``shoulder_flexion`` and ``elbow_flexion`` in rad, with the
 range of motion and the rest posture as defaults. The six muscle groups are path actuators
-(``PathActuator``: sf, se, ef, ee, bf, be) whose path length is the model's muscle length
-λ_rest + J_λ (q − q_rest) exactly — built of path points that move with the joint coordinates
-(``MovingPathPoint``), so OpenSim's moment arms are the model's constant ones (ρ for a flexor,
-−ρ for an extensor); ``optimal_force`` is the fitted reflex strength α (N). The passive stiffness is a ``PathSpring`` on the same path
-per group (``<group>_passive``: stiffness Km, N/m; resting length λ_rest, m). The stretch gain
-β and the rest lengths have no OpenSim property; they are written, with every other parameter,
-as the model's ``fieldbank.arm-params`` document in its ``publications`` text (read it back
-with :meth:`fieldbank.params.ArmParams.from_dict`). OpenSim's own muscle models do not follow
-the seed's reflex (eqs. 3–4): simulating the reflex needs fieldbank, not the ``.osim``.
+(``PathActuator``: sf, se, ef, ee, bf, be) whose path wraps a cylinder of the group's moment
+arm ρ about each joint it crosses, from a point just outside the cylinder on the parent segment
+to one on the child: while a path wraps, its length is a constant plus ρ times the wrap angle,
+which turns with the joint one for one, so OpenSim's moment arms are the model's constant ones
+(ρ for a flexor, −ρ for an extensor; exact to 1e-15 m over the whole range of motion,
+tests/test_measure_io.py). ``optimal_force`` is the fitted reflex strength α (N). The passive
+stiffness is a ``PathSpring`` on the same path per group (``<group>_passive``: stiffness Km,
+N/m, resting length the path's length at the rest posture — the linear part of eq. 5 at rest
+length; OpenSim has no element for its exp(−ε²) factor). The stretch gain β and every other
+parameter are written as the model's ``fieldbank.arm-params`` document in its
+``publications`` text (read back with :meth:`fieldbank.params.ArmParams.from_dict`); OpenSim's
+muscles do not follow the seed's reflex (eqs. 3–4), so simulating the reflex needs fieldbank.
+A left arm is written in the right-arm (model) frame: mirror x to get the patient's frame.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from xml.sax.saxutils import escape
 
@@ -85,34 +90,59 @@ def _v(*xs: float) -> str:
     return " ".join(f"{x:.17g}" for x in xs)
 
 
-def _const(v: float) -> str:
-    return f"<Constant><value>{v:.17g}</value></Constant>"
-
-
-def _moving(name: str, coord: str, slope: float, intercept: float) -> str:
-    """A path point on the ground at x = slope·q + intercept (q the coordinate)."""
-    return (f'<MovingPathPoint name="{name}"><socket_parent_frame>/ground'
-            f"</socket_parent_frame><socket_x_coordinate>{coord}</socket_x_coordinate>"
-            f"<socket_y_coordinate>{coord}</socket_y_coordinate>"
-            f"<socket_z_coordinate>{coord}</socket_z_coordinate>"
-            f"<x_location><LinearFunction><coefficients>{_v(slope, intercept)}</coefficients>"
-            f"</LinearFunction></x_location><y_location>{_const(0.0)}</y_location>"
-            f"<z_location>{_const(0.0)}</z_location></MovingPathPoint>")
-
-
 def _offset(name: str, parent: str, xyz: tuple[float, float, float]) -> str:
     return (f'<PhysicalOffsetFrame name="{name}"><socket_parent>{parent}</socket_parent>'
             f"<translation>{_v(*xyz)}</translation><orientation>0 0 0</orientation>"
             "</PhysicalOffsetFrame>")
 
 
-def _path(points: str) -> str:
-    return (f'<GeometryPath name="path"><PathPointSet><objects>{points}</objects>'
-            "</PathPointSet></GeometryPath>")
+#: Path points sit this far out from a wrap cylinder, in radii: close, so the path stays on the
+#: cylinder over a 150° range (it leaves it when the wrap angle drops under 2·acos(1/1.01) ≈
+#: 16°), and outside it, as OpenSim requires.
+POINT_RADII = 1.01
+#: Wrap angle at the end of the range where the path wraps least, and at most (degrees).
+LEAST_WRAP_DEG = 21.0
 
 
-SHOULDER = "/jointset/shoulder/shoulder_flexion"
-ELBOW = "/jointset/elbow/elbow_flexion"
+def _cylinder(name: str, centre: tuple[float, float], radius: float) -> str:
+    return (f'<WrapCylinder name="{name}"><xyz_body_rotation>0 0 0</xyz_body_rotation>'
+            f"<translation>{_v(centre[0], centre[1], 0.0)}</translation>"
+            f"<active>true</active><quadrant>all</quadrant><radius>{radius:.17g}</radius>"
+            f"<length>0.2</length></WrapCylinder>")
+
+
+def _point(name: str, frame: str, xy: tuple[float, float]) -> str:
+    return (f'<PathPoint name="{name}"><socket_parent_frame>{frame}</socket_parent_frame>'
+            f"<location>{_v(xy[0], xy[1], 0.0)}</location></PathPoint>")
+
+
+def _wrap_angles(rho: float, flexor: bool, lo: float, hi: float) -> tuple[float, float, float]:
+    """(angle of the point on the parent, angle of the point on the child, rad) around the
+    joint, and the path length across it at q = 0: the wrap angle is K − q for a flexor (it
+    shortens under flexion) and q − K' for an extensor, LEAST_WRAP_DEG at the far end."""
+    least = math.radians(LEAST_WRAP_DEG)
+    if flexor:
+        phi_o = math.pi / 2
+        phi_i = phi_o - (hi + least)              # separation phi_o − (phi_i + q) = hi + least − q
+    else:
+        phi_o = -math.pi / 2
+        phi_i = phi_o + least - lo                # separation (phi_i + q) − phi_o = q − lo + least
+    return phi_o, phi_i, 0.0
+
+
+def _path(points: list[str], wraps: list[tuple[str, int, int]]) -> str:
+    wr = "".join(f'<PathWrap name="w{k}"><wrap_object>{w}</wrap_object><method>hybrid</method>'
+                 f"<range>{r0} {r1}</range></PathWrap>" for k, (w, r0, r1) in enumerate(wraps))
+    return (f'<GeometryPath name="path"><PathPointSet><objects>{"".join(points)}</objects>'
+            f"</PathPointSet><PathWrapSet><objects>{wr}</objects></PathWrapSet></GeometryPath>")
+
+
+def _wrapped_length(rho: float, separation: float) -> float:
+    """Length of a path from a point POINT_RADII·ρ from a cylinder's axis around it to another
+    such point ``separation`` rad away: two tangent segments and the arc between them."""
+    d = POINT_RADII * rho
+    off = math.acos(rho / d)
+    return 2.0 * math.sqrt(d * d - rho * rho) + rho * (separation - 2.0 * off)
 
 
 def arm_osim(params: ArmParams, name: str = "fieldbank_arm") -> str:
@@ -126,35 +156,60 @@ def arm_osim(params: ArmParams, name: str = "fieldbank_arm") -> str:
     (s_lo, s_hi), (e_lo, e_hi) = p.shoulder_range_rad, p.elbow_range_rad
     q1r, q2r = (float(v) for v in arm.q_rest)
     jl = np.asarray(arm.jl, dtype=float)            # (6, 2): λ̇ = J_λ q̇
-    # Each path runs P1 → P0 → P2 along the ground's x axis: P1 at x = −(A + a·q1) left of the
-    # origin, P0 at the origin, P2 at x = B + b·q2 right of it, so its length is
-    # A + B + a·q1 + b·q2 = λ_rest + J_λ (q − q_rest) exactly: the model's muscle length, with
-    # its constant moment arms (OpenSim's moment arm −∂L/∂q is ρ for a flexor).
+    # Each group's path wraps a cylinder of its moment arm ρ about every joint it crosses, from
+    # a point just outside the cylinder on the parent to one on the child: while it wraps, its
+    # length is a constant plus ρ times the wrap angle, which follows the joint angle one for
+    # one — a constant moment arm, flexors on the side that shortens under flexion.
     forces = []
+    wraps_ground, wraps_upper = [], []
+    ranges = (p.shoulder_range_rad, p.elbow_range_rad)
+    centres = (("/ground", (0.0, 0.0)), ("/bodyset/upper_arm", (l1, 0.0)))
+    children = ("/bodyset/upper_arm", "/bodyset/forearm")
     for i, g in enumerate(GROUPS):
-        a, b = (float(v) for v in jl[i])
-        lam = float(arm.lam_rest[i])
-        big_a = 0.5 * lam - a * q1r
-        big_b = 0.5 * lam - b * q2r
-        pts = (_moving(f"{g}_shoulder", SHOULDER, -a, -big_a)
-               + f'<PathPoint name="{g}_origin"><socket_parent_frame>/ground'
-                 "</socket_parent_frame><location>0 0 0</location></PathPoint>"
-               + _moving(f"{g}_elbow", ELBOW, b, big_b))
+        points: list[str] = []
+        wraps: list[tuple[str, int, int]] = []
+        rest_length = 0.0
+        on_upper: list[tuple[float, float]] = []     # the points a bi-articular path has there
+        for j in (0, 1):
+            r = float(jl[i, j])
+            if r == 0.0:
+                continue
+            rho, flexor = abs(r), r < 0
+            lo, hi = ranges[j]
+            phi_o, phi_i, _ = _wrap_angles(rho, flexor, lo, hi)
+            frame, (cx, cy) = centres[j]
+            d = POINT_RADII * rho
+            wname = f"{g}_{'shoulder' if j == 0 else 'elbow'}_wrap"
+            (wraps_ground if j == 0 else wraps_upper).append(_cylinder(wname, (cx, cy), rho))
+            n0 = len(points) + 1                     # PathWrap ranges count points from 1
+            p_in = (cx + d * math.cos(phi_o), cy + d * math.sin(phi_o))
+            p_out = (d * math.cos(phi_i), d * math.sin(phi_i))
+            points.append(_point(f"{g}_{j}_in", frame, p_in))
+            points.append(_point(f"{g}_{j}_out", children[j], p_out))
+            on_upper.append(p_out if j == 0 else p_in)
+            wraps.append((wname, n0, n0 + 1))
+            q_r = (q1r, q2r)[j]
+            sep = (phi_o - phi_i - q_r) if flexor else (phi_i + q_r - phi_o)
+            rest_length += _wrapped_length(rho, sep)
+        if len(wraps) == 2:                          # the straight run along the upper arm
+            rest_length += math.dist(on_upper[0], on_upper[1])
+        path = _path(points, wraps)
         forces.append(f'<PathActuator name="{g}"><appliesForce>true</appliesForce>'
                       f"<optimal_force>{p.alpha_n[i]:.17g}</optimal_force>"
                       f"<min_control>0</min_control><max_control>1</max_control>"
-                      f"{_path(pts)}</PathActuator>")
+                      f"{path}</PathActuator>")
         forces.append(f'<PathSpring name="{g}_passive"><appliesForce>true</appliesForce>'
-                      f"<resting_length>{lam:.17g}</resting_length>"
+                      f"<resting_length>{rest_length:.17g}</resting_length>"
                       f"<stiffness>{p.km_n_per_m[i]:.17g}</stiffness>"
-                      f"<dissipation>0</dissipation>{_path(pts.replace(g + '_', g + '_p_'))}"
-                      "</PathSpring>")
+                      f"<dissipation>0</dissipation>{path}</PathSpring>")
     doc = escape(params.to_json())
 
-    def body(bname: str, mass: float, com: float, inertia: float) -> str:
+    def body(bname: str, mass: float, com: float, inertia: float, wraps: list[str]) -> str:
+        wrap_set = (f"<WrapObjectSet><objects>{''.join(wraps)}</objects></WrapObjectSet>"
+                    if wraps else "")
         return (f'<Body name="{bname}"><mass>{mass:.17g}</mass>'
                 f"<mass_center>{_v(com, 0, 0)}</mass_center>"
-                f"<inertia>{_v(1e-4, inertia, inertia, 0, 0, 0)}</inertia></Body>")
+                f"<inertia>{_v(1e-4, inertia, inertia, 0, 0, 0)}</inertia>{wrap_set}</Body>")
 
     def pin(jname: str, parent: str, at: float, child: str, coord: str, lo: float, hi: float,
             default: float) -> str:
@@ -178,10 +233,11 @@ def arm_osim(params: ArmParams, name: str = "fieldbank_arm") -> str:
         f"<publications>{doc}</publications>"
         "<length_units>meters</length_units><force_units>N</force_units>"
         f"<gravity>{_v(0, 0, -9.80665)}</gravity>"
-        '<Ground name="ground"/>'
+        f'<Ground name="ground"><WrapObjectSet><objects>{"".join(wraps_ground)}</objects>'
+        "</WrapObjectSet></Ground>"
         "<BodySet><objects>"
-        f"{body('upper_arm', m1, c1, i1)}"
-        f"{body('forearm', m2, c2, i2)}"
+        f"{body('upper_arm', m1, c1, i1, wraps_upper)}"
+        f"{body('forearm', m2, c2, i2, [])}"
         "</objects></BodySet>"
         "<JointSet><objects>"
         f"{pin('shoulder', 'ground', 0.0, 'upper_arm', 'shoulder_flexion', s_lo, s_hi, q1r)}"

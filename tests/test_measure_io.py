@@ -3,14 +3,16 @@ plain lab CSVs ingested with the flags that supply what they lack.
 
 Round trips say which fields survive, to what precision:
 
-* NWB export → ingest: every map's kind, frame, sign, velocity, source and provenance keys
-  exactly; positions, values and sd exactly (float64 both ways); the fitted parameters' value,
+* NWB export → ingest: every map's kind, frame, sign, velocity, source and provenance
+  keys exactly; positions, values and sd exactly (float64 both ways); the fitted parameters' value,
   sd and 95 % interval exactly; trace columns exactly (their stored dtype).
 * ``.mot``/``.sto``: time and every column to 10 significant digits (the text format), labels
   and units exactly.
 * ``.osim``: segment lengths, masses, centres of mass, the range of motion, the rest posture,
-  α, Km and λ_rest exactly (17 significant digits); the hand's position and every path length against
-  the model's kinematics and muscle lengths to 1e-9 m; the full parameter document exactly.
+  α and Km exactly (17 significant digits); the hand's position against the model's
+  kinematics to 1e-9 m; every group's moment arms against the model's constant ones, and its
+  change of path length against the change of muscle length, to 1e-9 m; the full parameter
+  document exactly.
 """
 
 from __future__ import annotations
@@ -147,23 +149,42 @@ def test_a_fitted_arm_as_osim_loads_in_opensim(tmp_path: Path) -> None:
     sh, el = coords.get("shoulder_flexion"), coords.get("elbow_flexion")
     assert sh.getRangeMin() == pytest.approx(params.shoulder_range_rad[0], rel=1e-9)
     forces = model.getForceSet()
-    for q in ((0.2, 0.4), (0.785, 1.22), (1.6, 2.2)):
+
+    def lengths(q: tuple[float, float]) -> list[float]:
         sh.setValue(state, q[0])
         el.setValue(state, q[1])
         model.realizePosition(state)
+        return [osim.PathActuator.safeDownCast(forces.get(g)).getGeometryPath().getLength(state)
+                for g in GROUPS]
+
+    rest = tuple(float(v) for v in arm.q_rest)
+    at_rest = lengths(rest)
+    lam_rest = arm.muscle_lengths(np.array([rest]))[0]
+    lo = (params.shoulder_range_rad[0], params.elbow_range_rad[0])
+    hi = (params.shoulder_range_rad[1], params.elbow_range_rad[1])
+    for f1, f2 in ((0.02, 0.02), (0.3, 0.7), (0.5, 0.5), (0.98, 0.98), (0.9, 0.1)):
+        q = (lo[0] + f1 * (hi[0] - lo[0]), lo[1] + f2 * (hi[1] - lo[1]))
+        now = lengths(q)
         hand = model.getMarkerSet().get("handle").getLocationInGround(state)
         assert [hand.get(0), hand.get(1)] == pytest.approx(list(arm.fk(np.array([q]))[0]),
                                                            abs=1e-9)
         lam = arm.muscle_lengths(np.array([q]))[0]
         for i, g in enumerate(GROUPS):
-            act = osim.PathActuator.safeDownCast(forces.get(g))
-            assert act.getGeometryPath().getLength(state) == pytest.approx(lam[i], abs=1e-9)
+            assert now[i] - at_rest[i] == pytest.approx(lam[i] - lam_rest[i], abs=1e-9), g
+            path = osim.PathActuator.safeDownCast(forces.get(g)).getGeometryPath()
+            assert path.computeMomentArm(state, sh) == pytest.approx(-arm.jl[i, 0], abs=1e-9)
+            assert path.computeMomentArm(state, el) == pytest.approx(-arm.jl[i, 1], abs=1e-9)
+    # the passive springs pull: a posture away from rest accelerates the arm back
+    sh.setValue(state, hi[0] - 0.1)
+    el.setValue(state, lo[1] + 0.1)
+    model.realizeAcceleration(state)
+    assert np.abs(np.array([state.getUDot().get(0), state.getUDot().get(1)])).max() > 0.1
     for i, g in enumerate(GROUPS):
         act = osim.PathActuator.safeDownCast(forces.get(g))
         assert act.getOptimalForce() == pytest.approx(params.alpha_n[i], rel=1e-9)
         spring = osim.PathSpring.safeDownCast(forces.get(f"{g}_passive"))
         assert spring.getStiffness() == pytest.approx(params.km_n_per_m[i], rel=1e-9)
-        assert spring.getRestingLength() == pytest.approx(arm.lam_rest[i], rel=1e-9)
+        assert spring.getRestingLength() == pytest.approx(at_rest[i], abs=1e-12)
     doc = ArmParams.from_dict(json.loads(model.get_publications()))
     assert doc == params
 
