@@ -116,10 +116,10 @@ def _point(name: str, frame: str, xy: tuple[float, float]) -> str:
             f"<location>{_v(xy[0], xy[1], 0.0)}</location></PathPoint>")
 
 
-def _wrap_angles(rho: float, flexor: bool, lo: float, hi: float) -> tuple[float, float, float]:
-    """(angle of the point on the parent, angle of the point on the child, rad) around the
-    joint, and the path length across it at q = 0: the wrap angle is K − q for a flexor (it
-    shortens under flexion) and q − K' for an extensor, LEAST_WRAP_DEG at the far end."""
+def _wrap_angles(flexor: bool, lo: float, hi: float) -> tuple[float, float]:
+    """(angle of the point on the parent, angle of the point on the child at q = 0), rad,
+    around the joint: the wrap angle is K − q for a flexor (it shortens under flexion) and
+    q − K' for an extensor, LEAST_WRAP_DEG at the end of the range [lo, hi] where it is least."""
     least = math.radians(LEAST_WRAP_DEG)
     if flexor:
         phi_o = math.pi / 2
@@ -127,7 +127,7 @@ def _wrap_angles(rho: float, flexor: bool, lo: float, hi: float) -> tuple[float,
     else:
         phi_o = -math.pi / 2
         phi_i = phi_o + least - lo                # separation (phi_i + q) − phi_o = q − lo + least
-    return phi_o, phi_i, 0.0
+    return phi_o, phi_i
 
 
 def _path(points: list[str], wraps: list[tuple[str, int, int]]) -> str:
@@ -161,7 +161,8 @@ def arm_osim(params: ArmParams, name: str = "fieldbank_arm") -> str:
     # length is a constant plus ρ times the wrap angle, which follows the joint angle one for
     # one — a constant moment arm, flexors on the side that shortens under flexion.
     forces = []
-    wraps_ground, wraps_upper = [], []
+    wraps_ground: list[str] = []
+    wraps_upper: list[str] = []
     ranges = (p.shoulder_range_rad, p.elbow_range_rad)
     centres = (("/ground", (0.0, 0.0)), ("/bodyset/upper_arm", (l1, 0.0)))
     children = ("/bodyset/upper_arm", "/bodyset/forearm")
@@ -176,7 +177,7 @@ def arm_osim(params: ArmParams, name: str = "fieldbank_arm") -> str:
                 continue
             rho, flexor = abs(r), r < 0
             lo, hi = ranges[j]
-            phi_o, phi_i, _ = _wrap_angles(rho, flexor, lo, hi)
+            phi_o, phi_i = _wrap_angles(flexor, lo, hi)
             frame, (cx, cy) = centres[j]
             d = POINT_RADII * rho
             wname = f"{g}_{'shoulder' if j == 0 else 'elbow'}_wrap"
