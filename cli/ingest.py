@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db, xy_metres
 from fieldbank.ingest import IngestLimits, ReadOptions, ingest_paths
 from fieldbank.sanitize import printable
 
@@ -44,19 +44,23 @@ PROGRESS_MIN_FILES = 20
               help="Read the file's column (or raw channel) HEADER as NAME, e.g. x_mm=HandX, "
                    "fx_n=ForceX; for C3D/NWB recordings NAME is x, y, vx, vy, fx, fy "
                    "(repeatable).")
+@click.option("--shoulder", metavar="X,Y",
+              help="Raw recordings: the shoulder's position in the file's coordinates, m "
+                   "(required for KINARM exams).")
 @json_option
 def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, session_label: str,
            session_date: datetime | None, dry_run: bool, limit_items: tuple[str, ...],
            kind: str | None, frame: str | None, sign: str | None, velocity: str | None,
-           columns: tuple[str, ...], as_json: bool) -> None:
+           columns: tuple[str, ...], shoulder: str | None, as_json: bool) -> None:
     """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3), or
-    raw NWB and C3D recordings whose maps are estimated (docs/measuring.md).
+    raw NWB, C3D and KINARM recordings whose maps are estimated (docs/measuring.md).
 
     Every file is validated first; any problem anywhere stores nothing. A file already
     stored (same SHA-256) is reported and not stored again.
     """
     limits = IngestLimits.from_environment(limit_items)
-    options = ReadOptions.from_flags(kind, frame, sign, velocity, columns)
+    options = ReadOptions.from_flags(kind, frame, sign, velocity, columns,
+                                     xy_metres(shoulder, "--shoulder") if shoulder else None)
     bar: tqdm | None = None
     if len(files) >= PROGRESS_MIN_FILES:
         from tqdm import tqdm

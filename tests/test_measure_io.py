@@ -226,3 +226,78 @@ def test_a_plain_lab_csv_is_ingested_with_flags_and_a_column_mapping(tmp_path: P
     assert res.exit_code == 1 and "HandX" in res.stderr
     with Database.open(url) as db:
         assert [r.session_label for r in db.list_maps("LAB")] == ["s"]
+
+
+def _kinarm_zip(rec: object, shoulder: tuple[float, float], n_files: int) -> bytes:
+    """An exam in Dexterit-E's layout (raw/common.c3d + one C3D per trial), written by the c3d
+    library: the hand as POINT data in KINARM's coordinates (m), the force sensor as analog
+    Right_FS_ForceX/Y with the handle-on-arm sign, TRIAL:TRIAL_NUM in each file."""
+    import io
+    import zipfile
+
+    import c3d
+
+    def c3d_file(pos: np.ndarray, force: np.ndarray, number: int) -> bytes:
+        w = c3d.Writer(point_rate=1000.0, analog_rate=1000.0, point_units="m   ")
+        frames = []
+        for k in range(len(pos)):
+            pts = np.zeros((2, 5), dtype=np.float32)
+            pts[0, :2] = pos[k]
+            analog = np.zeros((3, 1), dtype=np.float32)          # force x, y, z
+            analog[:2, 0] = force[k]
+            frames.append((pts, analog))
+        w.add_frames(frames)
+        w.set_point_labels(["Right_Hand", "Left_Hand"])
+        w.set_analog_labels(["Right_FS_ForceX", "Right_FS_ForceY", "Right_FS_ForceZ"])
+        w.analog_group.add_str("UNITS", "units", "N N N ", 2, 3)
+        g = w.add_group(30, "TRIAL", "trial")
+        g.add_array("TRIAL_NUM", "trial number", np.array([number], dtype=np.int16))
+        buf = io.BytesIO()
+        w.write(buf)
+        return buf.getvalue()
+
+    pos = rec.position_m + np.asarray(shoulder)  # type: ignore[attr-defined]
+    force = -rec.force_n                          # type: ignore[attr-defined]
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("raw/common.c3d", c3d_file(pos[:10], force[:10], 0))
+        for k, idx in enumerate(np.array_split(np.arange(len(pos)), n_files)):
+            # stored in reverse name order: the reader must sort by TRIAL_NUM
+            z.writestr(f"raw/trial_{n_files - k:02d}.c3d", c3d_file(pos[idx], force[idx], k + 1))
+        z.writestr("description.txt", "test exam")
+    return out.getvalue()
+
+
+def test_a_kinarm_exam_zip_is_read_with_its_holds_found(tmp_path: Path) -> None:
+    from fieldbank.haptic.measure import run_protocol
+    from fieldbank.haptic.patient import resolve_patient
+    from fieldbank.maps import model_map_like
+    from fieldbank.measure.protocol import ProtocolConfig, plan
+
+    src = resolve_patient("elbow=moderate")
+    arm = Arm.from_params(src.params)
+    pl = plan(ProtocolConfig(parts=("stiffness",), grid=(2, 1)), arm)
+    rec, _ = run_protocol("sim://?patient=elbow=moderate", pl)
+    shoulder = (0.05, -0.3)
+    path = tmp_path / "exam.zip"
+    path.write_bytes(_kinarm_zip(rec, shoulder, 3))
+    url = f"sqlite:///{tmp_path / 'db.sqlite3'}"
+    Database.open(url).add_patient("KIN", 75.0, 1.75, "right")
+    res = run_cli("ingest", "--db", url, "--patient", "KIN", "--session", "s", str(path))
+    assert res.exit_code == 1 and "exam.zip" in res.stderr and "--shoulder" in res.stderr
+    res = run_cli("ingest", "--db", url, "--patient", "KIN", "--session", "s", str(path),
+                  "--shoulder", "0.05,-0.3", "--sign", "handle-on-arm")
+    assert res.exit_code == 0, res.output
+    with Database.open(url) as db:
+        rows = db.list_maps("KIN")
+        maps = db.get_maps([r.id for r in rows])
+    stiff = next(m for m in maps if m.kind == "stiffness")
+    assert stiff.metadata["raw_format"] == "KINARM"
+    assert "stillness" in stiff.metadata["trials_found_by"]
+    assert stiff.n == 2
+    truth = model_map_like(arm, stiff)
+    err = (np.linalg.norm(stiff.values - truth.values, axis=(1, 2))
+           / np.linalg.norm(truth.values, axis=(1, 2)))
+    assert np.all(err < 0.15), err
+    post = next(m for m in maps if m.kind == "postural")
+    assert np.allclose(post.values, model_map_like(arm, post).values, atol=0.05)

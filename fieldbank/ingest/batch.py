@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import io
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import date
 from pathlib import Path
@@ -34,23 +34,24 @@ from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
 from fieldbank.ingest.matfmt import read_mat5, read_mat73
 from fieldbank.ingest.options import ReadOptions
 from fieldbank.ingest.parsed import ParsedMap, validate_map
-from fieldbank.ingest.rawfmt import read_c3d, read_nwb
+from fieldbank.ingest.rawfmt import read_c3d, read_kinarm, read_nwb
 from fieldbank.measure.c3draw import is_c3d
+from fieldbank.measure.kinarm import is_kinarm_zip
 from fieldbank.model import Arm
 from fieldbank.storage import Database, IncomingFile, IngestOutcome
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-FORMATS = ("csv", "hdf5", "mat5", "mat73", "nwb", "c3d")
+FORMATS = ("csv", "hdf5", "mat5", "mat73", "nwb", "c3d", "kinarm")
 FORMAT_NAMES = {"csv": "CSV", "hdf5": "HDF5", "mat5": "MATLAB v5", "mat73": "MATLAB v7.3",
-                "nwb": "NWB", "c3d": "C3D"}
+                "nwb": "NWB", "c3d": "C3D", "kinarm": "KINARM exam"}
 
 Reader = Callable[[str, bytes, IngestLimits], tuple[list[ParsedMap], list[Problem]]]
 READERS: dict[str, Reader] = {"csv": read_csv, "hdf5": read_hdf5, "mat5": read_mat5,
                               "mat73": read_mat73}
-RawReader = Callable[[str, bytes, IngestLimits, Arm | None, Mapping[str, str] | None],
+RawReader = Callable[[str, bytes, IngestLimits, Arm | None, ReadOptions | None],
                      tuple[list[ParsedMap], list[Problem]]]
-#: Raw recordings: the estimator needs the patient's arm and the channel names.
-RAW_READERS: dict[str, RawReader] = {"nwb": read_nwb, "c3d": read_c3d}
+#: Raw recordings: the estimator needs the patient's arm and the user's options.
+RAW_READERS: dict[str, RawReader] = {"nwb": read_nwb, "c3d": read_c3d, "kinarm": read_kinarm}
 
 
 def _is_nwb(data: bytes) -> bool:
@@ -73,6 +74,8 @@ def detect_format(data: bytes) -> str | None:
         return "nwb" if _is_nwb(data) else "hdf5"
     if is_c3d(data):
         return "c3d"
+    if is_kinarm_zip(data):
+        return "kinarm"
     if data[:1024].find(b"\0") >= 0:
         return None
     try:
@@ -134,11 +137,11 @@ def read_file(name: str, data: bytes, arm: Arm | None, patient: str = "",
     fmt = detect_format(data)
     if fmt is None:
         return None, [Problem(name, "unknown format: expected map CSV, fieldbank HDF5, "
-                              "MATLAB .mat v5/v7.3, or a raw NWB or C3D recording")]
+                              "MATLAB .mat v5/v7.3, or a raw NWB, C3D or KINARM recording")]
     opts = options or ReadOptions()
     try:
         if fmt in RAW_READERS:
-            parsed, problems = RAW_READERS[fmt](name, data, limits, arm, opts.columns)
+            parsed, problems = RAW_READERS[fmt](name, data, limits, arm, opts)
         elif fmt == "csv":
             parsed, problems = read_csv(name, data, limits, opts.csv_defaults(), opts.columns)
         else:

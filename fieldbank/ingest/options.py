@@ -6,7 +6,9 @@ A plain lab CSV often has no ``# kind/frame/sign/velocity`` lines and its own co
 lacks (a file that says otherwise is a problem, never silently overridden), and each
 ``--column NAME=HEADER`` reads the file's column HEADER as the quantity and unit NAME (for raw
 recordings, NAME is a channel role — x, y, vx, vy, fx, fy, or position/velocity/force for NWB
-series — and HEADER the file's channel or series name).
+series, hand for a KINARM exam — and HEADER the file's channel or series name). For raw
+recordings ``--sign`` says whose force the file holds and ``--shoulder X,Y`` where the
+shoulder is in the file's coordinates.
 """
 
 from __future__ import annotations
@@ -27,6 +29,9 @@ class ReadOptions:
 
     defaults: Mapping[str, str] = field(default_factory=dict)
     columns: Mapping[str, str] = field(default_factory=dict)
+    #: The shoulder's position in a raw recording's own coordinates (m); None: the file's
+    #: positions are in the shoulder frame already.
+    shoulder_m: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         bad = [k for k in self.defaults if k not in DEFAULT_KEYS]
@@ -42,7 +47,8 @@ class ReadOptions:
     @classmethod
     def from_flags(cls, kind: str | None = None, frame: str | None = None,
                    sign: str | None = None, velocity: str | None = None,
-                   columns: tuple[str, ...] = ()) -> ReadOptions:
+                   columns: tuple[str, ...] = (),
+                   shoulder_m: tuple[float, float] | None = None) -> ReadOptions:
         """From command-line values; ``velocity`` is a speed (m/s, '0' static) or 'vx,vy'."""
         d: dict[str, str] = {}
         for key, value in (("kind", kind), ("frame", frame), ("sign", sign)):
@@ -67,4 +73,4 @@ class ReadOptions:
                 raise ParameterError(f"--column {item!r}: expected NAME=HEADER, e.g. "
                                      "x_mm=HandX")
             cols[name.strip()] = header.strip()
-        return cls(d, cols)
+        return cls(d, cols, shoulder_m)

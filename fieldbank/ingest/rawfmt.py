@@ -12,21 +12,25 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
+from dataclasses import replace
 
 import numpy as np
 
 from fieldbank.errors import MapError, Problem
 from fieldbank.ingest.limits import IngestLimits
+from fieldbank.ingest.options import ReadOptions
 from fieldbank.ingest.parsed import ParsedMap
 from fieldbank.maps import FieldMap
 from fieldbank.measure.c3draw import read_c3d_recording
 from fieldbank.measure.estimate import estimate
+from fieldbank.measure.kinarm import read_kinarm_zip
 from fieldbank.measure.nwbraw import read_recording
-from fieldbank.measure.recording import Recording
+from fieldbank.measure.recording import Recording, in_convention
+from fieldbank.measure.segment import find_holds
 from fieldbank.model import Arm
 from fieldbank.nwbexport import has_nwb_maps, read_nwb_maps
 
-RAW_FORMATS = ("nwb", "c3d")
+RAW_FORMATS = ("nwb", "c3d", "kinarm")
 
 
 def _parsed(name: str, m: FieldMap, k: int) -> ParsedMap:
@@ -50,12 +54,30 @@ def _parsed_at(where: str, m: FieldMap) -> ParsedMap:
 
 
 def maps_from_recording(name: str, fmt: str, rec: Recording, arm: Arm | None,
-                        postures: np.ndarray | None,
-                        provenance: Mapping[str, str]) -> tuple[list[ParsedMap], list[Problem]]:
-    """The estimator's maps of ``rec`` as parsed maps with provenance, or the problems."""
+                        postures: np.ndarray | None, provenance: Mapping[str, str],
+                        options: ReadOptions | None = None
+                        ) -> tuple[list[ParsedMap], list[Problem]]:
+    """The estimator's maps of ``rec`` as parsed maps with provenance, or the problems.
+
+    ``options``: ``--shoulder`` and ``--sign`` put the file's coordinates and force into the
+    shoulder frame and the arm-on-handle sign; a recording without trials gets its holds found
+    by stillness (:func:`fieldbank.measure.segment.find_holds`)."""
+    opts = options or ReadOptions()
+    prov = dict(provenance)
+    sign = opts.defaults.get("sign", "arm-on-handle")
+    rec = in_convention(rec, opts.shoulder_m or (0.0, 0.0), sign == "handle-on-arm")
+    if opts.shoulder_m is not None:
+        prov["shoulder_in_file_m"] = f"{opts.shoulder_m[0]:g}, {opts.shoulder_m[1]:g}"
+    prov["sign_in_file"] = sign
     if not rec.trials:
-        return [], [Problem(name, "no trials: the file marks no holds or passes (an NWB "
-                            "trials table, C3D events) for the estimator to read")]
+        found = find_holds(rec)
+        if not found:
+            return [], [Problem(name, "no trials: the file marks none (an NWB trials table, "
+                                "C3D events) and no hold of the hand was found in it")]
+        rec = replace(rec, trials=tuple(found))
+        prov["trials_found_by"] = ("stillness: holds under 5 mm/s for 0.25 s or more, roles "
+                                   "by position (fieldbank.measure.segment)")
+    provenance = prov
     dropped_by_source = [t for t in rec.trials if t.status]
     prov = {"raw_format": fmt, "raw_file": name,
             "channels": json.dumps(dict(rec.channels), ensure_ascii=False),
@@ -85,8 +107,7 @@ def maps_from_recording(name: str, fmt: str, rec: Recording, arm: Arm | None,
 
 
 def read_nwb(name: str, data: bytes, limits: IngestLimits, arm: Arm | None,
-             channels: Mapping[str, str] | None = None
-             ) -> tuple[list[ParsedMap], list[Problem]]:
+             options: ReadOptions | None = None) -> tuple[list[ParsedMap], list[Problem]]:
     """Maps from a raw NWB recording."""
     del limits  # the file size was bounded before; the arrays are the file's own
     if has_nwb_maps(data):  # a fieldbank export: its maps as they were stored
@@ -96,19 +117,37 @@ def read_nwb(name: str, data: bytes, limits: IngestLimits, arm: Arm | None,
             return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
         return [_parsed_at(where, m) for m, where in found], []
     try:
-        rec, postures, prov = read_recording(name, data, channels)
+        rec, postures, prov = read_recording(name, data, (options or ReadOptions()).columns)
     except MapError as exc:
         return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
-    return maps_from_recording(name, "NWB", rec, arm, postures, prov)
+    return maps_from_recording(name, "NWB", rec, arm, postures, prov, options)
 
 
 def read_c3d(name: str, data: bytes, limits: IngestLimits, arm: Arm | None,
-             channels: Mapping[str, str] | None = None
-             ) -> tuple[list[ParsedMap], list[Problem]]:
+             options: ReadOptions | None = None) -> tuple[list[ParsedMap], list[Problem]]:
     """Maps from a raw C3D recording."""
     del limits
     try:
-        rec, postures, prov = read_c3d_recording(name, data, channels)
+        rec, postures, prov = read_c3d_recording(name, data, (options or ReadOptions()).columns)
     except MapError as exc:
         return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
-    return maps_from_recording(name, "C3D", rec, arm, postures, prov)
+    return maps_from_recording(name, "C3D", rec, arm, postures, prov, options)
+
+
+def read_kinarm(name: str, data: bytes, limits: IngestLimits, arm: Arm | None,
+                options: ReadOptions | None = None) -> tuple[list[ParsedMap], list[Problem]]:
+    """Maps from a KINARM (Dexterit-E) exam ZIP; the shoulder and the sign must be given."""
+    opts = options or ReadOptions()
+    missing = [f for f, ok in (("--shoulder X,Y (the shoulder in KINARM's coordinates)",
+                                opts.shoulder_m is not None),
+                               ("--sign (whose force KINARM's sensor channel holds)",
+                                "sign" in opts.defaults)) if not ok]
+    if missing:
+        return [], [Problem(name, "a KINARM exam is in the robot's own frame and sign: give "
+                            + " and ".join(missing))]
+    try:
+        rec, prov = read_kinarm_zip(name, data, opts.columns, limits.max_decompressed_bytes,
+                                    limits.max_compression_ratio)
+    except MapError as exc:
+        return [], [Problem(name, str(exc).removeprefix(f"{name}: "))]
+    return maps_from_recording(name, "KINARM", rec, arm, None, prov, opts)
