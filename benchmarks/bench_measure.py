@@ -199,14 +199,14 @@ def main() -> None:
 
     # 3. shortened protocols
     variants = [
-        ("full: 5×5, 8 directions, 0.45 s holds", FULL),
+        ("full: 5×5, 8 directions, 0.6 s holds", FULL),
         ("4×4 grid", replace(FULL, grid=(4, 4))),
         ("3×3 grid", replace(FULL, grid=(3, 3))),
         ("6 directions", replace(FULL, directions=6)),
         ("4 directions", replace(FULL, directions=4)),
-        ("0.3 s holds", replace(FULL, hold_s=0.3, transient_s=0.15)),
-        ("3×3, 4 directions, 0.3 s holds", replace(FULL, grid=(3, 3), directions=4,
-                                                   hold_s=0.3, transient_s=0.15)),
+        ("0.35 s holds", replace(FULL, hold_s=0.35, transient_s=0.15)),
+        ("3×3, 4 directions, 0.35 s holds", replace(FULL, grid=(3, 3), directions=4,
+                                                    hold_s=0.35, transient_s=0.15)),
     ]
     print(f"\n## Shortened protocols ({a.short_patients} virtual patients each; static parts: "
           "postural + stiffness)\n")

@@ -40,8 +40,8 @@ def _grid(text: str) -> tuple[int, int]:
               help="Grid centre X,Y in m, shoulder frame.")
 @click.option("--directions", type=int, default=8, show_default=True,
               help="Displacement directions per posture (stiffness).")
-@click.option("--displacement-mm", type=float, default=5.0, show_default=True)
-@click.option("--hold-s", type=float, default=0.45, show_default=True,
+@click.option("--displacement-mm", type=float, default=6.0, show_default=True)
+@click.option("--hold-s", type=float, default=0.6, show_default=True,
               help="Hold after each displacement (stiffness).")
 @click.option("--stretch-speed", type=float, default=1.0, show_default=True,
               help="Hand speed of the stretch passes, m/s.")

@@ -70,10 +70,10 @@ class ProtocolConfig:
     grid: tuple[int, int] = (5, 5)
     spacing_m: float = 0.04
     centre_m: tuple[float, float] = (0.0, 0.50)
-    displacement_m: float = 0.005
+    displacement_m: float = 0.006
     directions: int = 8
-    hold_s: float = 0.45
-    transient_s: float = 0.2
+    hold_s: float = 0.6
+    transient_s: float = 0.15
     move_s: float = 0.15
     postural_hold_s: float = 1.0
     transfer_speed_m_per_s: float = 0.2
