@@ -32,9 +32,10 @@ exerts it on the handle (the sensor's reading).
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, date, datetime
 from pathlib import Path
 
@@ -301,7 +302,7 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
         data_home() / "measurements"
         / f"{file_component(patient_code)}_{file_component(session_label)}_{stamp}.nwb")
     info = RecordingInfo(patient_code, session_label, f"robot {mask_url(url)}",
-                         start_time=started)
+                         start_time=started, protocol_json=json.dumps(asdict(protocol)))
     if out.exists() and not force:  # before the robot moves, not after
         raise HapticError(f"{out}: exists; give another --raw file or --force")
     try:

@@ -55,6 +55,7 @@ def test_severe_elbow_measured_on_the_robot_is_fitted_severe(tmp_path: Path) -> 
     assert ("stiffness", True) in kinds          # the stretch part: a moving map
     meta = full[0].metadata
     assert meta["raw_format"] == "NWB" and "trials_dropped" in meta
+    assert json.loads(meta["protocol"])["grid"] == [3, 3]
     assert json.loads(meta["channels"])["fx"].startswith("hand_force")
     # a second measurement never overwrites the raw file
     again = runner.invoke(cli, ["haptic", "measure", "--db", url, "--robot",
@@ -69,6 +70,20 @@ def test_severe_elbow_measured_on_the_robot_is_fitted_severe(tmp_path: Path) -> 
         assert sev[g]["passive"]["level"] == "severe", sev[g]
     for g in ("sf", "se"):
         assert sev[g]["passive"]["level"] == "unimpaired", sev[g]
+    # … what-if on the fitted arm, and feel it: before and after on the (simulated) robot
+    res = runner.invoke(cli, ["whatif", "SEV", "--db", url, "--botox", "ef=200U", "--save",
+                              "--weeks", "5", "--json"])
+    assert res.exit_code == 0, res.output
+    saved = json.loads(res.stdout)["saved"]
+    res = runner.invoke(cli, ["haptic", "serve", "--db", url, "--robot",
+                              "sim://?motion=pull", "--before-id",
+                              str(saved["base_model_id"]), "--after-id",
+                              str(saved["result_model_id"]), "--duration-s", "0.3",
+                              "--trace-dir", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    with storage.Database.open(url) as db:
+        sessions = db.list_haptic_sessions("SEV")
+        assert len(sessions) == 1 and sessions[0].model_a_id == saved["base_model_id"]
 
 
 def test_stiffness_and_postural_accuracy_at_default_noise() -> None:

@@ -10,7 +10,9 @@ Written (:func:`write_recording`), one file per measurement:
 * the ``trials`` table: start and stop time, and the columns ``role``, ``posture``,
   ``window_start``, ``window_stop`` (s), ``vx``, ``vy`` (m/s, passes), ``label`` and
   ``status`` (why the robot dropped a trial, empty when kept);
-* ``postures`` (scratch): the planned grid, m;
+* ``postures`` (scratch): the planned grid, m; ``protocol`` (scratch): the protocol's settings
+  (grid, displacement, directions, holds, transient window, speeds), JSON, which every map
+  estimated from the file carries as its ``protocol`` provenance;
 * the patient code (scratch ``patient``), session description and start time, the device.
 
 Read (:func:`read_recording`): the same layout, and a lab's own NWB file when it names its
@@ -52,6 +54,8 @@ class RecordingInfo:
     device: str = "fieldbank"
     description: str = "arm on a robot handle: holds, displacements and passes"
     start_time: datetime | None = None
+    #: The protocol's settings (``fieldbank.measure.protocol.ProtocolConfig``), JSON text.
+    protocol_json: str = ""
 
 
 def write_recording(rec: Recording, info: RecordingInfo,
@@ -99,6 +103,9 @@ def write_recording(rec: Recording, info: RecordingInfo,
             name="commanded_force", data=data(commanded_force_n),
             timestamps=nwb.acquisition["hand_position"], unit="N",
             description="force the host commanded to the robot's motors, shoulder frame"))
+    if info.protocol_json:
+        nwb.add_scratch(info.protocol_json, name="protocol",
+                        description="the measuring protocol's settings (SI units), JSON")
     if postures_m is not None and len(postures_m):
         nwb.add_scratch(np.asarray(postures_m, dtype=float), name="postures",
                         description="planned posture grid, m, shoulder frame; rows x, y")
@@ -218,6 +225,9 @@ def read_recording(name: str, data: bytes,
         postures = None
         if "postures" in nwb.scratch:
             postures = np.asarray(nwb.scratch["postures"].data[:], dtype=float)
+        protocol = ""
+        if "protocol" in nwb.scratch:
+            protocol = str(nwb.scratch["protocol"].data)
         subject = ""
         if "patient" in nwb.scratch:
             subject = str(nwb.scratch["patient"].data)
@@ -227,6 +237,8 @@ def read_recording(name: str, data: bytes,
                 "session_start": nwb.session_start_time.isoformat()}
         if subject:
             prov["patient"] = str(subject)
+        if protocol:
+            prov["protocol"] = protocol
         chans = {"x": f"{names['position']}[:, 0] ({pos_ts.unit})",
                  "y": f"{names['position']}[:, 1] ({pos_ts.unit})",
                  "fx": f"{names['force']}[:, 0] ({force_ts.unit})",
