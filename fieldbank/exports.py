@@ -1,11 +1,15 @@
-"""``fieldbank export``: stored maps as fieldbank HDF5 or CSV, or a source file as ingested.
+"""``fieldbank export``: stored maps as fieldbank HDF5 or CSV, a patient as NWB, a haptic
+session's trace as OpenSim ``.mot``/``.sto``, a model as an OpenSim ``.osim``, or a source
+file as ingested.
 
 Where the output goes is decided here, once, and never surprises:
 
 * the format follows the output's suffix: ``.h5`` / ``.hdf5`` one HDF5 file with every map;
   ``.csv`` one CSV file, which holds exactly one map (BRIEF §11); no suffix a directory with
-  one CSV per map. A ``--format`` that disagrees with the suffix, or another suffix, is
-  refused before anything is written;
+  one CSV per map; ``.nwb`` one patient's maps, models, fits and haptic sessions
+  (:mod:`fieldbank.nwbexport`); ``.mot`` / ``.sto`` one haptic session's trace and ``.osim``
+  one stored model (:mod:`fieldbank.opensimio`). A ``--format`` that disagrees with the
+  suffix, or another suffix, is refused before anything is written;
 * nothing is overwritten unless ``force``, and nothing is written through a symbolic link
   (:func:`fieldbank.files.write_new`); every file is written atomically;
 * in a directory export each file name is built from stored labels made safe
@@ -25,11 +29,13 @@ from pathlib import Path
 from fieldbank.errors import FieldbankError, StorageError
 from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, write_new
 from fieldbank.ingest import write_hdf5
+from fieldbank.nwbexport import patient_nwb
+from fieldbank.opensimio import arm_osim, storage_text
 from fieldbank.sanitize import file_component
 from fieldbank.storage import Database
 
 HDF5_SUFFIXES = (".h5", ".hdf5")
-FORMATS = ("hdf5", "csv")
+FORMATS = ("hdf5", "csv", "nwb", "mot", "sto", "osim")
 
 
 class ExportError(FieldbankError, ValueError):
@@ -51,11 +57,14 @@ def output_format(output: Path, fmt: str | None) -> str:
         found = "hdf5"
     elif suffix == ".csv":
         found = "csv"
+    elif suffix in (".nwb", ".mot", ".sto", ".osim"):
+        found = suffix[1:]
     elif suffix == "" or output.is_dir():
         found = "csvdir"
     else:
         raise ExportError(f"{output}: unknown export suffix {output.suffix!r}; use .h5 or "
-                          ".hdf5 (HDF5), .csv (one map) or a directory (one CSV per map).")
+                          ".hdf5 (HDF5), .csv (one map), a directory (one CSV per map), .nwb "
+                          "(a patient), .mot/.sto (a haptic trace) or .osim (a model).")
     if fmt is not None and fmt != ("csv" if found == "csvdir" else found):
         raise ExportError(f"{output}: --format {fmt} disagrees with the name, which says "
                           f"{'a CSV directory' if found == 'csvdir' else found}; nothing was "
@@ -80,6 +89,47 @@ def export_raw(db: Database, sha256: str, output: str | Path, force: bool = Fals
     return _write(Path(output), db.source_bytes(sha256), force)
 
 
+def export_nwb(db: Database, patient_code: str | None, output: str | Path,
+               force: bool = False) -> str:
+    """One patient's maps, models, fits and haptic sessions as an NWB file."""
+    out = Path(output)
+    output_format(out, "nwb")
+    if not patient_code:
+        raise ExportError(f"{out}: an NWB file holds one subject: give --patient.")
+    return _write(out, patient_nwb(db, patient_code), force)
+
+
+def export_trace(db: Database, haptic_session_id: int, output: str | Path,
+                 force: bool = False) -> str:
+    """A haptic session's recorded trace (every column, with time) as ``.mot``/``.sto``."""
+    out = Path(output)
+    fmt = output_format(out, None)
+    if fmt not in ("mot", "sto"):
+        raise ExportError(f"{out}: a trace is written as .mot or .sto.")
+    sess = db.get_haptic_session(haptic_session_id)
+    traces = {t.name: t for t in db.list_traces(sess.id)}
+    if "t_s" not in traces:
+        raise StorageError(f"Haptic session {sess.id} has no recorded trace (no t_s).")
+    t = db.get_trace_array(traces["t_s"].id)
+    cols, units = {}, {}
+    for name, tr in traces.items():
+        if name == "t_s":
+            continue
+        cols[name] = db.get_trace_array(tr.id)
+        units[name] = str(db.trace_attrs(tr.id).get("unit", ""))
+    text = storage_text(f"fieldbank haptic session {sess.id}", t, cols, units)
+    return _write(out, text, force)
+
+
+def export_osim(db: Database, model_id: int, output: str | Path, force: bool = False) -> str:
+    """A stored model as an OpenSim ``.osim`` model."""
+    out = Path(output)
+    if output_format(out, None) != "osim":
+        raise ExportError(f"{out}: a model is written as .osim.")
+    m = db.get_model(model_id)
+    return _write(out, arm_osim(m.params, f"fieldbank_model_{m.id}"), force)
+
+
 def export_maps(db: Database, output: str | Path, *, patient_code: str | None = None,
                 session_label: str | None = None, kind: str | None = None,
                 since: date | None = None, until: date | None = None, fmt: str | None = None,
@@ -87,6 +137,12 @@ def export_maps(db: Database, output: str | Path, *, patient_code: str | None = 
     """Export the maps matching every filter (see the module docstring)."""
     out = Path(output)
     form = output_format(out, fmt)
+    if form == "nwb":
+        return ExportResult(tuple(r.id for r in db.list_maps(patient_code)),
+                            (export_nwb(db, patient_code, out, force),))
+    if form in ("mot", "sto", "osim"):
+        raise ExportError(f"{out}: .{form} is written from a haptic session (--trace ID) or "
+                          "a model (--model ID), not from maps.")
     rows = db.list_maps(patient_code, session_label, kind, since, until)
     if not rows:
         raise StorageError("No map matches these filters; nothing exported.")

@@ -135,8 +135,10 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM
     from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
     from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
+    from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.interventions.defaults import DOSE_UNIT, value
     from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
+    from fieldbank.measure.protocol import PARTS, ProtocolConfig
 
     assert ch.FIT_ALGORITHMS == tuple(ALGORITHMS)
     assert ch.FIT_DEFAULT_ALGORITHM == DEFAULT_ALGORITHM
@@ -162,3 +164,11 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
         p.force_jnd, p.direction_jnd_deg)
     assert (ch.PROBE_MAX_SPEED_M_PER_S, ch.PROBE_FORCE_LIMIT_N) == (
         lim.max_speed_m_per_s, lim.force_limit_n)
+    pc = ProtocolConfig()
+    assert ch.MEASURE_PARTS == PARTS
+    assert (ch.MEASURE_SPACING_MM, ch.MEASURE_DISPLACEMENT_MM) == pytest.approx(
+        (pc.spacing_m * 1000, pc.displacement_m * 1000))
+    assert tuple(float(v) for v in ch.MEASURE_CENTRE.split(",")) == pc.centre_m
+    assert (ch.MEASURE_DIRECTIONS, ch.MEASURE_HOLD_S, ch.MEASURE_STRETCH_SPEED_M_PER_S) == (
+        pc.directions, pc.hold_s, pc.stretch_speed_m_per_s)
+    assert ch.MEASURE_FORCE_LIMIT_N == SafetyConfig().force_limit_n

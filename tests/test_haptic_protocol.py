@@ -68,6 +68,7 @@ def _payload(t: P.MsgType) -> bytes:
         P.MsgType.STATE: P.STATE_FMT.pack(123456, 0.1, 0.4, -0.2, 0.0, 1, 77),
         P.MsgType.FORCE: P.FORCE_FMT.pack(-3.5, 12.25),
         P.MsgType.FAULT: P.FAULT_FMT.pack(2, 9),
+        P.MsgType.SENSOR: P.SENSOR_FMT.pack(123456, -1.5, 0.25),
     }.get(t, b"")
 
 
