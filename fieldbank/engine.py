@@ -260,14 +260,16 @@ def _on_dask(db: Database, scheduler: str, kind: str, where: Where, tasks: Seque
                              f"{scheduler}' (docs/scale-out.md).") from None
     try:
         if say is not None:
-            n = len(client.scheduler_info(n_workers=-1).get("workers", {}))
-            say(f"{kind}: {len(tasks)} task(s) on {scheduler} ({n} worker(s)); dashboard: "
-                f"{client.dashboard_link}")
+            info = client.scheduler_info(n_workers=-1)
+            board = (client.dashboard_link if "dashboard" in info.get("services", {}) else
+                     "none (the scheduler runs without one)")
+            say(f"{kind}: {len(tasks)} task(s) on {scheduler} "
+                f"({len(info.get('workers', {}))} worker(s)); dashboard: {board}")
         keys = [(f"fieldbank-{kind}", where.run_id, i) for i in range(len(tasks))]
         futures = client.map(_execute, [travelling] * len(tasks), [fn] * len(tasks),
                              [options] * len(tasks), list(tasks), key=keys, pure=False)
         task_of = {f.key: t for f, t in zip(futures, tasks, strict=True)}
-        for fut in as_completed(futures):
+        for fut in as_completed(futures, loop=client.loop):
             task = task_of[fut.key]
             try:
                 out = fut.result()

@@ -21,7 +21,6 @@ def store_sessions(db: Any, n_patients: int, sessions: tuple[str, ...] = ("pre",
     from fieldbank.fitting.synthetic import synthetic_patient
     from fieldbank.params import ArmParams
     from fieldbank.severity import parse_severity_options, synthesize
-    from fieldbank.storage import IncomingFile
 
     rng = np.random.default_rng(seed)
     out = []
@@ -36,11 +35,21 @@ def store_sessions(db: Any, n_patients: int, sessions: tuple[str, ...] = ("pre",
         for k, label in enumerate(sessions):
             pat = synthetic_patient(truth, seed=seed * 10_000 + i * 10 + k, n_postural=n_postural,
                                     n_stiffness=n_stiffness, n_held_out=1, patient=code)
-            files = []
-            for j, m in enumerate(pat.maps):
-                data = m.to_csv().encode()
-                files.append(IncomingFile(f"{code}-{label}-{j}.csv",
-                                          hashlib.sha256(data).hexdigest(), "csv", data, (m,)))
-            db.ingest_files(code, label, files, date(2024, 1, 10) + timedelta(days=40 * k))
+            ingest_maps(db, code, label, pat.maps, date(2024, 1, 10) + timedelta(days=40 * k))
             out.append((code, label))
     return out
+
+
+def ingest_maps(db: Any, code: str, label: str, maps: Any, when: date | None = None) -> None:
+    """Ingest ``maps`` as CSV files into a session of patient ``code``."""
+    from dataclasses import replace
+
+    from fieldbank.storage import IncomingFile
+
+    files = []
+    for j, m in enumerate(maps):
+        m = replace(m, metadata={"patient": code})
+        data = m.to_csv().encode()
+        files.append(IncomingFile(f"{code}-{label}-{j}.csv", hashlib.sha256(data).hexdigest(),
+                                  "csv", data, (m,)))
+    db.ingest_files(code, label, files, when)

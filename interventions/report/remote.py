@@ -34,7 +34,9 @@ CASES_PER_TASK = 4
 
 
 def report_tasks(cases: list[CaseSpec], per_task: int = CASES_PER_TASK) -> list[Task]:
-    """Tasks of up to ``per_task`` consecutive cases (cases are ordered by patient)."""
+    """Tasks of up to ``per_task`` consecutive cases (cases are ordered by patient); fewer per
+    task for a small report, so that its cases still spread over the workers."""
+    per_task = max(1, min(per_task, len(cases) // 16))
     tasks = []
     for k in range(0, len(cases), per_task):
         part = cases[k:k + per_task]
