@@ -527,10 +527,11 @@ class ArmBatch:
         lam_min = lam_corners.min(axis=1)
         lam_max = lam_corners.max(axis=1)
         if np.any(lam_min <= 0):
-            k, i = np.unravel_index(int(np.argmin(lam_min)), lam_min.shape)
+            where = np.unravel_index(int(np.argmin(lam_min)), lam_min.shape)
             raise ParameterError(
-                f"ArmBatch: in parameter set {k}, muscle {i} would reach a non-positive "
-                f"length ({lam_min[k, i]:.4g} m) within the range of motion.")
+                f"ArmBatch: in parameter set {int(where[0])}, muscle {int(where[1])} would "
+                f"reach a non-positive length ({lam_min[where]:.4g} m) within the range of "
+                "motion.")
         arrays = {
             "q_rest": q_rest, "lam_rest": lam_rest,
             "lam_slack": lam_rest + np.array([p.slack_offset_m for p in sets], dtype=float),
@@ -551,10 +552,12 @@ class ArmBatch:
         qa = np.asarray(q, dtype=float)
         return self.lam_rest[:, None, :] + (qa - self.q_rest[:, None, :]) @ self.geometry.jl.T
 
-    def passive_force(self, lam: FloatArray) -> FloatArray:
-        """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only."""
-        return passive_force(lam, self.lam_slack[:, None, :], self.km[:, None, :],
-                             self.excursion[:, None, :], self.geometry.w)
+    def passive_force(self, lam: FloatArray, groups: ArrayLike | None = None) -> FloatArray:
+        """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only.
+        ``groups`` (indices): λ holds only these muscle groups' columns, and so does Ψ."""
+        g = slice(None) if groups is None else np.asarray(groups)
+        return passive_force(lam, self.lam_slack[:, None, g], self.km[:, None, g],
+                             self.excursion[:, None, g], self.geometry.w)
 
     def reflex_force(self, lam: FloatArray, ldot: FloatArray) -> FloatArray:
         """Φ (S, N, 6), N, for λ (S, N, 6) and λ̇ (N, 6) shared by every set: the value of

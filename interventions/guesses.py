@@ -42,7 +42,7 @@ from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.batch import (
     peak_magnitude,
     probe_forces,
-    rms_force,
+    rms_forces,
     standard_stretch_torques,
 )
 from fieldbank.evaluate.compare import Conditions
@@ -308,9 +308,9 @@ def headline_metrics_batch(batch: ArmBatch, cond: Conditions
         out[f"{s.name} reflex torque"] = ((s.fast_n_m - s.slow_n_m).max(axis=1), "N·m")
     for m in cond.probes:
         out[f"{m.name} peak force"] = (peak_magnitude(probe_forces(batch, m)), "N")
-    for k, speed in enumerate(cond.speeds_m_per_s):
-        out[f"RMS |F| at {speed:g} m/s"] = (rms_force(batch, cond.grid_m, cond.velocities[k]),
-                                             "N")
+    for speed, rms in zip(cond.speeds_m_per_s, rms_forces(batch, cond.grid_m, cond.velocities),
+                          strict=True):
+        out[f"RMS |F| at {speed:g} m/s"] = (rms, "N")
     return out, curves
 
 

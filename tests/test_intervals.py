@@ -12,7 +12,7 @@ import pytest
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.batch import probe_forces, rms_force, standard_stretch_torques
+from fieldbank.evaluate.batch import probe_forces, rms_forces, standard_stretch_torques
 from fieldbank.evaluate.compare import Conditions
 from fieldbank.evaluate.probing import profile, stretch_profiles
 from fieldbank.fitting.uncertainty import FitSamples
@@ -63,7 +63,7 @@ def test_batch_forces_equal_each_arm_compiled_alone(before: ArmParams) -> None:
     cond = Conditions.standard(Arm.from_params(before))
     x, v = cond.points(1)
     f = batch.endpoint_force(x, v)
-    rms = rms_force(batch, cond.grid_m, cond.velocities[1])
+    rms = rms_forces(batch, cond.grid_m, cond.velocities)[1]
     torques = standard_stretch_torques(batch)
     for k, p in enumerate(sets):
         arm = Arm.from_params(p)

@@ -168,7 +168,7 @@ class Jobs(DatabaseCore):
     def job_payloads(self, run_id: int) -> dict[str, bytes]:
         """Each finished job's payload by job key (jobs without one are left out)."""
         with self._read() as s:
-            return {str(k): bytes(p) for k, p in s.execute(
+            return {str(k): bytes(p or b"") for k, p in s.execute(
                 select(JobRow.key, JobRow.payload).where(JobRow.run_id == run_id,
                                                          JobRow.payload.is_not(None)))}
 
