@@ -19,7 +19,12 @@ what-if must say:
   samples (bootstrap replicates or Gaussian draws, :mod:`fieldbank.fitting.uncertainty`) gives
   the spread of the headline metrics before, after and of the change; reported as the 2.5-97.5
   percentiles (95%) beside the point prediction. Parameters held at the unimpaired value stay
-  held in the samples: what rests on them is in the warnings, not in the intervals.
+  held in the samples: what rests on them is in the warnings, not in the intervals. The
+  samples run in one vectorised pass (:func:`sample_metrics`, :class:`fieldbank.model.ArmBatch`:
+  the geometry compiled once, every muscle value - Km, α, β, slack offset, rest length, rest
+  posture - free per sample); :func:`sample_metrics_per_sample` is the one-arm-per-sample
+  reference it is tested against. :class:`IntervalSet` is what a report keeps with the fit
+  under :func:`interval_key`.
 
 Which parameters a step acts on follows from the catalogue's public contract (``targets()``
 and ``EFFECTS``): a change of α or β scales the group's reflex force, which rests on both α
