@@ -34,9 +34,8 @@ import time
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -46,8 +45,7 @@ TARGET_HOURS_16 = 1.0
 SESSIONS = 10_000
 
 
-@dataclass
-class Figures:
+class Figures(NamedTuple):
     workers: int
     sessions: int
     fit_wall_s: float
