@@ -21,6 +21,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import numpy as np
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.clock import RealClock, realtime
 from fieldbank.haptic.commands import Arm as ArmCommand
 from fieldbank.haptic.commands import Switch
@@ -29,7 +30,6 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from fieldbank.severity import synthesize
 
 
 def empty_loop(seconds: float, rate_hz: int) -> dict[str, float]:

@@ -17,9 +17,9 @@ import time
 import numpy as np
 
 from fieldbank.dynamics import forward_dynamics
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.maps import evaluate
 from fieldbank.model import Arm
-from fieldbank.severity import synthesize
 from fieldbank.sim import ArmSim
 
 

@@ -38,6 +38,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import numpy as np
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.commands import Arm as ArmCommand
 from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.link import RobotLink
@@ -47,7 +48,6 @@ from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.station.launch import StationProcess
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from fieldbank.severity import synthesize
 
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--no-first-run",

@@ -21,16 +21,17 @@ import timeit
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.pair import build_sim
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import NCOL, TraceBuffer
-from fieldbank.haptic.renderer import Renderer, RendererConfig, build_sim
+from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import Safety, SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.params import ArmParams
-from fieldbank.severity import synthesize
 
 
 def per_call_us(fn: object, n: int = 20000) -> float:

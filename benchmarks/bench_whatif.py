@@ -25,6 +25,7 @@ import numpy as np
 from benchmarks.timing import timeit
 from fieldbank.evaluate import ArmCache
 from fieldbank.evaluate.compare import Conditions, compare
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.catalogue import Botulinum, Lengthening
 from fieldbank.interventions.course import time_course
@@ -33,7 +34,6 @@ from fieldbank.interventions.inverse import optimise_botulinum
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
-from fieldbank.severity import synthesize
 
 
 def main() -> None:

@@ -1,5 +1,5 @@
 """``fieldbank field postural|stiffness``: a model's maps as CSV, JSON or a figure (SVG, PNG or
-PDF: :func:`fieldbank.fieldplot.map_figure`, the conventions of the report's field figures)."""
+PDF: :func:`fieldbank.figures.fields.map_figure`, the conventions of the report's field figures)."""
 
 from __future__ import annotations
 
@@ -9,19 +9,21 @@ from pathlib import Path
 import click
 import numpy as np
 
-from fieldbank import fieldplot, modelsource
+from fieldbank import modelsource
 from fieldbank.cli.options import json_option
 from fieldbank.errors import FileRefused, ParameterError
-from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
-from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
-from fieldbank.model import Arm
-from fieldbank.severity import (
+from fieldbank.evaluate.severity import (
     classify,
     parse_severity_options,
     severity_dict,
     summary,
     synthesize,
 )
+from fieldbank.figures import save
+from fieldbank.figures.fields import map_figure
+from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
+from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
+from fieldbank.model import Arm
 
 
 def _parse_pairs(text: str, what: str) -> np.ndarray:
@@ -132,7 +134,7 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     if fmt in ("svg", "png", "pdf"):
         if out is None:
             raise ParameterError("A plot needs --out FILE.svg, FILE.png or FILE.pdf.")
-        fieldplot.map_figure(arm, m).save(out, fmt)
+        save(map_figure(arm, m), out, fmt)
         click.echo(f"wrote {out}", err=True)
         return
     if fmt == "json":

@@ -14,12 +14,13 @@ the loop or read traces (:mod:`fieldbank.cli.haptic_session`: ``serve``, ``probe
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import click
 
 from fieldbank.cli.lazy import LazyCommand, LazyGroup
 from fieldbank.cli.options import open_db
+from fieldbank.haptic.modelinfo import ModelInfo
 
 if TYPE_CHECKING:  # typing only: parameters load with the commands that need them
     from fieldbank.modelsource import ModelSource
@@ -80,7 +81,7 @@ def resolve_sources(db_url: str | None, files: tuple[Path | None, Path | None],
                     severities: tuple[str | None, str | None],
                     ids: tuple[int | None, int | None]
                     ) -> tuple[ArmParams, ArmParams, tuple[int | None, int | None],
-                               dict[str, dict[str, Any]]]:
+                               dict[str, ModelInfo]]:
     """As :func:`resolve_models`, with what the station says about each model (its
     description, id, patient, and for a stored what-if result the plan's label)."""
     from fieldbank import modelsource
@@ -103,15 +104,13 @@ def resolve_sources(db_url: str | None, files: tuple[Path | None, Path | None],
     return a, b, (ids[0], ids[1] if out[1] is not None else ids[0]), info
 
 
-def _describe(db_url: str | None, src: ModelSource | None) -> dict[str, Any]:
+def _describe(db_url: str | None, src: ModelSource | None) -> ModelInfo:
     if src is None:
-        return {"label": "synthetic arm (unimpaired)", "model_id": None, "patient": None,
-                "plan": None}
+        return ModelInfo.describe("synthetic arm (unimpaired)")
     plan = None
     if src.model_id is not None:
         with open_db(db_url) as db:
             plans = [p for p in db.list_plans(src.patient_code)
                      if p.result_model_id == src.model_id]
-            plan = plans[-1].label[:200] if plans else None
-    return {"label": src.description[:200], "model_id": src.model_id,
-            "patient": src.patient_code, "plan": plan}
+            plan = plans[-1].label if plans else None
+    return ModelInfo.describe(src.description, src.model_id, src.patient_code, plan)

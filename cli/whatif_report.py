@@ -6,11 +6,11 @@ import math
 
 from fieldbank.evaluate.compare import Comparison
 from fieldbank.evaluate.probing import JointStretch
+from fieldbank.evaluate.severity import ComponentGrade
 from fieldbank.interventions.course import TimeCourse
 from fieldbank.interventions.defaults import DOSE_UNIT
 from fieldbank.interventions.inverse import DoseSplitResult
 from fieldbank.interventions.plan import Plan
-from fieldbank.severity import ComponentGrade
 
 
 def _pct(before: float, after: float) -> str:

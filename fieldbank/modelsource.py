@@ -4,7 +4,7 @@ A command names a model in one of four ways, and every command resolves it here:
 
 * a parameter file (``--params arm.json``, schema ``fieldbank.arm-params``);
 * a severity specification (``--severity elbow=severe``) on the scale of
-  :mod:`fieldbank.severity`, optionally on a synthetic body (mass, height, side);
+  :mod:`fieldbank.evaluate.severity`, optionally on a synthetic body (mass, height, side);
 * a stored model by id (``--model-id 5``);
 * a patient code: that patient's latest fitted model, else the latest synthetic one.
 
@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fieldbank.errors import ParameterError, StorageError
+from fieldbank.evaluate.severity import parse_severity_options, synthesize
 from fieldbank.params import ArmParams
-from fieldbank.severity import parse_severity_options, synthesize
 from fieldbank.storage import Database, FitRecord
 
 #: Opens the database only when a stored model is asked for.

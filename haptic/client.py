@@ -23,6 +23,7 @@ from fieldbank.haptic.errors import CommandError, ControlError
 from fieldbank.home import data_home
 
 if TYPE_CHECKING:  # typing only: push_models needs nothing of ArmParams but to_dict()
+    from fieldbank.haptic.modelinfo import ModelInfoPair
     from fieldbank.params import ArmParams
 
 #: Largest request or response line, bytes.
@@ -90,16 +91,16 @@ class ControlClient:
 
 def push_models(before: ArmParams, after: ArmParams, path: str | Path | None = None,
                 model_ids: tuple[int | None, int | None] | None = None,
-                model_info: dict[str, dict[str, Any]] | None = None) -> Any:
+                model_info: ModelInfoPair | None = None) -> Any:
     """Push a before/after pair to a running renderer (used by ``whatif … --render``).
 
     ``model_ids``: the pair's ids in the field database, if stored, so the session's trace
-    refers to them. ``model_info``: what the station says about each ({"A": {"label",
-    "model_id", "patient", "plan"}, "B": …}).
+    refers to them. ``model_info``: what the station says about each
+    (``{"A": ModelInfo, "B": ModelInfo}``, :mod:`haptic.modelinfo`).
     """
     args: dict[str, Any] = {"before": before.to_dict(), "after": after.to_dict()}
     if model_ids is not None:
         args["model_ids"] = {"A": model_ids[0], "B": model_ids[1]}
     if model_info is not None:
-        args["model_info"] = model_info
+        args["model_info"] = {k: v.to_dict() for k, v in model_info.items()}
     return ControlClient(path).request("push", **args)

@@ -46,6 +46,13 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
 from fieldbank.haptic.errors import CommandError, HapticError
+from fieldbank.haptic.modelinfo import (
+    ModelIds,
+    ModelInfo,
+    ModelInfoPair,
+    check_model_ids,
+    model_info_pair,
+)
 from fieldbank.haptic.training import (
     TrainingProtocol,
     TrainingSession,
@@ -63,14 +70,6 @@ if TYPE_CHECKING:  # typing only
 Result = dict[str, Any]
 #: Compiled arms A (before) and B (after), built outside the loop.
 SimPair = tuple["ArmSim", "ArmSim"]
-#: Database ids of the rendered models, ``{"A": id, "B": id}`` (None: not stored).
-ModelIds = Mapping[str, "int | None"]
-#: What a display says about each model: ``{"A": {"label", "model_id", "patient", "plan"}, …}``.
-ModelInfo = Mapping[str, Mapping[str, Any]]
-#: Largest model id accepted from the wire (ids are database integers).
-MAX_MODEL_ID = 2**63 - 1
-#: Longest text of a model description field.
-MAX_LABEL_CHARS = 200
 
 
 class CommandTarget(Protocol):
@@ -89,7 +88,8 @@ class CommandTarget(Protocol):
     def log_event(self, kind: str, **data: Any) -> dict[str, Any]: ...
     def compile_pair(self, before: ArmParams, after: ArmParams) -> SimPair: ...
     def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None, model_info: ModelInfo | None = None) -> None: ...
+                     model_ids: ModelIds | None,
+                     model_info: ModelInfoPair | None = None) -> None: ...
     def arm(self) -> None: ...
     def disarm(self) -> None: ...
     def request_stop(self) -> None: ...
@@ -122,45 +122,6 @@ def bool_field(req: Mapping[str, Any], key: str, default: bool, where: str) -> b
     if v not in (True, False):  # also 0 and 1
         raise CommandError(f'{where}: "{key}" must be true or false; got {v!r}')
     return bool(v)
-
-
-def check_model_ids(ids: object, where: str = "push") -> dict[str, int | None] | None:
-    """``{"A": id, "B": id}`` with positive integer ids or null; None stays None."""
-    if ids is None:
-        return None
-    if not (isinstance(ids, Mapping) and set(ids) <= {"A", "B"}):
-        raise CommandError(f'{where}: "model_ids" must be {{"A": id, "B": id}}')
-    out: dict[str, int | None] = {}
-    for k, v in ids.items():
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int)
-                              or not 1 <= v <= MAX_MODEL_ID):
-            raise CommandError(f'{where}: model id {k} must be a positive integer or null; '
-                               f'got {v!r}')
-        out[k] = v
-    return out
-
-
-def check_model_info(info: object, where: str = "push") -> dict[str, dict[str, Any]] | None:
-    """``{"A": {...}, "B": {...}}`` with short text labels and integer ids; None stays None."""
-    if info is None:
-        return None
-    if not (isinstance(info, Mapping) and set(info) <= {"A", "B"}):
-        raise CommandError(f'{where}: "model_info" must be {{"A": {{…}}, "B": {{…}}}}')
-    out: dict[str, dict[str, Any]] = {}
-    for k, d in info.items():
-        if not isinstance(d, Mapping) or not set(d) <= {"label", "model_id", "patient", "plan"}:
-            raise CommandError(f"{where}: model_info {k} has the keys label, model_id, "
-                               f"patient, plan")
-        entry: dict[str, Any] = {}
-        for f in ("label", "patient", "plan"):
-            v = d.get(f)
-            if v is not None and (not isinstance(v, str) or len(v) > MAX_LABEL_CHARS):
-                raise CommandError(f"{where}: model_info {k}.{f} must be text of at most "
-                                   f"{MAX_LABEL_CHARS} characters")
-            entry[f] = v
-        entry["model_id"] = (check_model_ids({k: d.get("model_id")}, where) or {}).get(k)
-        out[k] = entry
-    return out
 
 
 class RendererCommand:
@@ -241,12 +202,13 @@ class Push(RendererCommand):
     before: ArmParams
     after: ArmParams
     model_ids: ModelIds | None = None
-    model_info: ModelInfo | None = None
+    model_info: ModelInfoPair | None = None
     sims: SimPair | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         check_model_ids(self.model_ids)
-        check_model_info(self.model_info)
+        # records, or their wire dictionaries when built in process: records from here on
+        object.__setattr__(self, "model_info", model_info_pair(self.model_info))
 
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> Push:
@@ -255,7 +217,7 @@ class Push(RendererCommand):
                 raise CommandError(f'push: "{k}" must be an arm-parameter object')
         return cls(ArmParams.from_dict(req["before"], where="push: before"),
                    ArmParams.from_dict(req["after"], where="push: after"),
-                   check_model_ids(req.get("model_ids")), check_model_info(req.get("model_info")))
+                   check_model_ids(req.get("model_ids")), model_info_pair(req.get("model_info")))
 
     def prepare(self, target: CommandTarget) -> Push:
         if self.sims is not None:
@@ -496,8 +458,8 @@ class TrainNext(RendererCommand):
         trial = tr.begin(self.index, target.t_s, self.paths)
         label = (trial.legend if trial.phase == "familiarisation"
                  else f"assessment trial {trial.index + 1}")
-        info = {k: {"label": f"training: {label}", "model_id": None, "patient": None,
-                    "plan": None} for k in ("A", "B")}
+        same = ModelInfo.describe(f"training: {label}")
+        info = {"A": same, "B": same}
         target.queue_models(self.sims, (self.params, self.params), None, info)
         target.log_event("train_trial", trial=trial.index, phase=trial.phase,
                          condition=trial.condition)

@@ -3,8 +3,8 @@ and severity, the classifier names the group, and a confusion matrix says how of
 (the seed's assessment protocol - 3 groups × 4 severities × repetitions - with the classifier
 in the clinician's place).
 
-Each trial renders the true arm (:func:`fieldbank.severity.synthesize`) on the simulated robot
-in lockstep (faster than real time) while the operator performs every probe of a set:
+Each trial renders the true arm (:func:`fieldbank.evaluate.severity.synthesize`) on the simulated
+robot in lockstep (faster than real time) while the operator performs every probe of a set:
 
 1. the operator executes the probe with motion noise - direction, length and speed drawn from
    the noise model (:func:`fieldbank.evaluate.design.draw_execution`) and a smooth wander of
@@ -42,8 +42,8 @@ from fieldbank.evaluate.design import (
     seed_probes,
 )
 from fieldbank.evaluate.probing import ProbeMotion
+from fieldbank.evaluate.severity import group_name, level_name, synthesize
 from fieldbank.haptic.probe import observation_from_trace, probe_path
-from fieldbank.severity import group_name, level_name, synthesize
 
 #: Called after each trial with (trials done, trials in all).
 Progress = Callable[[int, int], None]

@@ -100,10 +100,13 @@ def loop_stats(times: LoopTimes, *, ticks: int, rate_hz: int, overrun_ms: float,
     last : int, optional
         Only the last this many iterations (the tick cost means are always whole-session).
     """
-    k = -last if last else 0
-    wake = np.array(times.wake_ns[k:], dtype=np.float64)
-    late = np.array(times.late_ns[k:], dtype=np.float64)
-    tick_ns = np.array(times.tick_ns[k:], dtype=np.float64)
+    # the loop may append while this copies (wake before late): the same iterations of both,
+    # up to the last one whose lateness is recorded
+    end = len(times.late_ns)
+    k = max(0, end - last) if last else 0
+    wake = np.array(times.wake_ns[k:end], dtype=np.float64)
+    late = np.array(times.late_ns[k:end], dtype=np.float64)
+    tick_ns = np.array(times.tick_ns[-last if last else 0:], dtype=np.float64)
     out: dict[str, Any] = {"ticks": ticks, "rate_hz": rate_hz,
                            "realtime_scheduling": realtime_scheduling}
     if late.size >= 2:

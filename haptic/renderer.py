@@ -11,7 +11,8 @@ Each tick (default 1 kHz, 500 Hz–4 kHz):
 3. tick both virtual arms (A = before, B = after) with the same handle state; each returns the
    force its coupling puts on the handle (:class:`fieldbank.sim.ArmSim`);
 4. blend them, F = (1 − w) F_A + w F_B, where w follows a raised-cosine ramp on each switch so
-   the force has no step; multiply by the arming/push gain (also raised-cosine);
+   the force has no step; multiply by the arming/push gain (also raised-cosine): the pair, its
+   blend and its fades are :class:`haptic.pair.ModelPair`;
 5. pass F through the passivity controller, rate limit and saturation; send it;
 6. record the row, and publish the tick's state for a display in another process
    (:mod:`haptic.snapshot`: a seqlock in shared memory, never waited on).
@@ -24,51 +25,46 @@ wall clock in tests so a minute of rendering takes a fraction of that.
 
 Commands (:mod:`haptic.commands`: switch, push, arm, disarm, A/B/X, stop, status) come from
 other threads through :meth:`Renderer.submit` and are applied at the start of a tick, so the
-loop's state has one owner.
+loop's state has one owner. What the renderer tells other processes (status, a display's info)
+is :mod:`haptic.readouts`; the session's trace is put together by :mod:`haptic.assemble`.
 """
 
 from __future__ import annotations
 
-import datetime as _dt
 import logging
 import math
 import queue
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from fieldbank.errors import ParameterError, UnreachableError
-from fieldbank.haptic import commands
+from fieldbank.errors import UnreachableError
+from fieldbank.haptic import commands, readouts
 from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.assemble import assemble_trace, close_blocks, utc_now
 from fieldbank.haptic.clock import Clock, RealClock, realtime
-from fieldbank.haptic.commands import (
-    ModelIds,
-    ModelInfo,
-    RendererCommand,
-    Request,
-    Result,
-    SimPair,
-)
+from fieldbank.haptic.commands import RendererCommand, Request, Result, SimPair
 from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.loopstats import LoopTimes, loop_stats, status_figures
+from fieldbank.haptic.loopstats import LoopTimes, loop_stats
+from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair
+from fieldbank.haptic.pair import ModelPair
 from fieldbank.haptic.protocol import FLAG_FAULT, FaultCode
-from fieldbank.haptic.recording import NCOL, Trace, TraceBuffer
+from fieldbank.haptic.recording import Trace, TraceBuffer
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.training import TrainingSession
-from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from fieldbank.sim import ArmSim, CouplingConfig
-from fieldbank.validation import Interval, check_number, check_tuple
+from fieldbank.sim import CouplingConfig
+from fieldbank.validation import Interval, check_fields, check_tuple
 
 log = logging.getLogger("fieldbank.haptic.renderer")
 
 #: Allowed range of each numeric setting of :class:`RendererConfig` (messages are generated).
 RENDERER_BOUNDS: dict[str, Interval] = {
-    "rate_hz": Interval(500, 4000, "Hz"),
+    "rate_hz": Interval.whole(500, 4000, "Hz"),
     "crossfade_s": Interval(0.0, None, "s"),
     "push_fade_s": Interval(0.0, None, "s"),
     "state_wait_s": Interval(0.0, None, "s"),
@@ -117,49 +113,9 @@ class RendererConfig:
     arm_on_start: bool = True
 
     def __post_init__(self) -> None:
-        for name, interval in RENDERER_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="renderer parameter")
-        if not isinstance(self.rate_hz, int):
-            raise ParameterError(f"The 'rate_hz' renderer parameter must be an integer number "
-                                 f"of Hz; got {self.rate_hz!r} instead.")
+        check_fields(self, RENDERER_BOUNDS, what="renderer parameter")
         check_tuple("shoulder_offset_m", self.shoulder_offset_m, 2, Interval(None, None, "m"),
                     what="renderer parameter")
-
-
-class _Ramp:
-    """Raised-cosine ramp from ``start`` to ``end`` over ``n`` ticks."""
-
-    __slots__ = ("end", "k", "n", "start", "value")
-
-    def __init__(self, value: float) -> None:
-        self.value = self.start = self.end = value
-        self.k = self.n = 0
-
-    def go(self, end: float, n: int) -> None:
-        self.start = self.value
-        self.end = end
-        self.k = 0
-        self.n = max(1, n)
-
-    def step(self) -> float:
-        if self.k < self.n:
-            self.k += 1
-            s = self.k / self.n
-            self.value = self.start + (self.end - self.start) * (0.5 - 0.5 * math.cos(math.pi * s))
-        return self.value
-
-    @property
-    def moving(self) -> bool:
-        return self.k < self.n
-
-    def set(self, value: float) -> None:
-        self.value = self.start = self.end = value
-        self.k = self.n = 0
-
-
-def build_sim(params: ArmParams, dt_s: float, coupling: CouplingConfig | None = None) -> ArmSim:
-    """Compile a model for the loop (slow part, done outside the loop)."""
-    return ArmSim(Arm.from_params(params), dt_s=dt_s, coupling=coupling)
 
 
 class Renderer:
@@ -188,10 +144,8 @@ class Renderer:
         self.safety = Safety(safety or SafetyConfig(), self.dt_s)
         self.clock: Clock = clock or RealClock(self.config.spin_us)
         self.coupling = coupling
-        self.params = (before, after)
-        self.sims = self.compile_pair(before, after)
-        self.blend = _Ramp(0.0)
-        self.gain = _Ramp(0.0)
+        self.pair = ModelPair(before, after, self.dt_s, self.config.crossfade_s,
+                              self.config.push_fade_s, coupling)
         self.commands: queue.SimpleQueue[Request] = queue.SimpleQueue()
         self.events: list[dict[str, Any]] = []
         self.abx: AbxSession | None = None
@@ -200,9 +154,6 @@ class Renderer:
         self.training_results: list[dict[str, Any]] = []
         #: Publishes each tick's state for a display in another process (haptic.station).
         self.snapshot: SnapshotWriter | None = None
-        self._pending: tuple[SimPair, tuple[ArmParams, ArmParams]] | None = None
-        self._pending_ids: ModelIds | None = None
-        self._pending_info: ModelInfo | None = None
         self._link_down = False
         self._stale = 0
         self._awaiting = False
@@ -234,7 +185,20 @@ class Renderer:
     @property
     def swapping(self) -> bool:
         """True while pushed models fade out, swap or fade in."""
-        return self._pending is not None or self.gain.moving
+        return self.pair.swapping
+
+    @property
+    def params(self) -> tuple[ArmParams, ArmParams]:
+        """The parameters of models A and B being rendered."""
+        return self.pair.params
+
+    @property
+    def rate_hz(self) -> int:
+        return self.config.rate_hz
+
+    @property
+    def shoulder_offset_m(self) -> tuple[float, float]:
+        return self.config.shoulder_offset_m
 
     @property
     def mode_name(self) -> str:
@@ -291,53 +255,39 @@ class Renderer:
 
     def crossfade(self, weight: float) -> None:
         """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""
-        self.blend.go(weight, round(self.config.crossfade_s / self.dt_s))
+        self.pair.crossfade(weight)
 
     def compile_pair(self, before: ArmParams, after: ArmParams) -> SimPair:
         """Both models compiled for this loop's period (slow: call outside the loop)."""
-        return (build_sim(before, self.dt_s, self.coupling),
-                build_sim(after, self.dt_s, self.coupling))
+        return self.pair.compile(before, after)
 
     def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None, model_info: ModelInfo | None = None) -> None:
+                     model_ids: ModelIds | None, model_info: ModelInfoPair | None = None
+                     ) -> None:
         """Swap in compiled models: at once when idle, else behind a fade out and in.
 
-        ``model_info``: what a display says about each ({'A': {'label', 'model_id', 'patient',
-        'plan'}, 'B': …}), kept in the trace's metadata from the swap on.
+        ``model_info``: what a display says about each (``{"A": ModelInfo, "B": ModelInfo}``),
+        kept in the trace's metadata from the swap on.
         """
-        self._pending = (sims, params)
-        self._pending_ids = model_ids
-        self._pending_info = model_info
+        self.pair.queue(sims, params, model_ids, model_info)
         if not self.running:
             self._swap()
         else:
-            self.gain.go(0.0, round(self.config.push_fade_s / self.dt_s))
+            self.pair.fade(0.0)
 
     def request_stop(self) -> None:
         """End the run after the current tick."""
         self._stop = True
 
     def _swap(self) -> None:
-        assert self._pending is not None
-        sims, params = self._pending
-        self._pending = None
-        self.sims = sims
-        self.params = params
-        if self._pending_ids:
-            self.metadata["model_ids"] = dict(self._pending_ids)
-        else:
-            self.metadata.pop("model_ids", None)
-        if self._pending_info:
-            self.metadata["model_info"] = {k: dict(v) for k, v in self._pending_info.items()}
-        else:
-            self.metadata.pop("model_info", None)
+        self.pair.swap(self.metadata)
         self._reset_arms()
 
     def _reset_arms(self) -> None:
         ox, oy = self.config.shoulder_offset_m
         hx, hy = self.link.x - ox, self.link.y - oy
         self.log_event("reset_arms", at_m=[hx, hy])
-        for sim in self.sims:
+        for sim in self.pair.sims:
             try:
                 if math.isfinite(hx) and math.isfinite(hy):
                     sim.reset_at_hand(hx, hy)
@@ -372,13 +322,13 @@ class Renderer:
         except LinkDown as exc:
             self._trip(FaultCode.DISCONNECT, str(exc))
             raise CommandError(f"cannot arm: {exc}") from None
-        self.gain.set(0.0)
-        self.gain.go(1.0, round(self.safety.config.rearm_ramp_s / self.dt_s))
+        self.pair.gain.set(0.0)
+        self.pair.gain.go(1.0, round(self.safety.config.rearm_ramp_s / self.dt_s))
         self.log_event("arm")
 
     def disarm(self) -> None:
         self.safety.disarm()
-        self.gain.set(0.0)
+        self.pair.gain.set(0.0)
         if not self._link_down:
             try:
                 self.link.disarm()
@@ -389,7 +339,7 @@ class Renderer:
     def _trip(self, code: int, message: str) -> None:
         first = not (self.safety.latched & (1 << (code - 1)))
         self.safety.trip(code, self.t_s, message)
-        self.gain.set(0.0)
+        self.pair.gain.set(0.0)
         if first:
             self.log_event("fault", code=int(code), name=FaultCode(code).name)
         if not self._link_down:
@@ -449,7 +399,8 @@ class Renderer:
             link.take_gap()
             safety.check_crc(link.crc_errors)
         c2 = pc()
-        sim_a, sim_b = self.sims
+        pair = self.pair
+        sim_a, sim_b = pair.sims
         fa_x = fa_y = fb_x = fb_y = 0.0
         if math.isfinite(x) and math.isfinite(y) and math.isfinite(vx) and math.isfinite(vy):
             try:
@@ -462,12 +413,12 @@ class Renderer:
                 self._trip(FaultCode.MODEL, "a virtual arm diverged (non-finite force)")
                 self._reset_arms()
                 fa_x = fa_y = fb_x = fb_y = 0.0
-        w = self.blend.step()
-        g = self.gain.step()
-        if self._pending is not None and g == 0.0 and not self.gain.moving:
+        w = pair.blend.step()
+        g = pair.gain.step()
+        if pair.pending is not None and g == 0.0 and not pair.gain.moving:
             self._swap()
             if safety.mode == Mode.ARMED:
-                self.gain.go(1.0, round(self.config.push_fade_s / self.dt_s))
+                pair.fade(1.0)
         mx = g * ((1.0 - w) * fa_x + w * fb_x)
         my = g * ((1.0 - w) * fa_y + w * fb_y)
         c3 = pc()
@@ -522,7 +473,7 @@ class Renderer:
         if not self.link.wait_state(first_state_timeout_s) and self.link.states == 0:
             raise HapticError(f"no STATE from the robot within {first_state_timeout_s} s")
         self._reset_arms()
-        self.metadata.setdefault("started_at", _utc_now())
+        self.metadata.setdefault("started_at", utc_now())
         self._buf = TraceBuffer(expected_ticks or 60 * cfg.rate_hz) if cfg.record else None
         self.times.restart()
         self.running = True
@@ -536,7 +487,7 @@ class Renderer:
     def finish(self) -> Trace:
         """Command zero force, disarm the device, answer pending commands; return the trace."""
         self.running = False
-        self.metadata["ended_at"] = _utc_now()
+        self.metadata["ended_at"] = utc_now()
         try:
             if not self._link_down:
                 self.link.send_force(0.0, 0.0)
@@ -544,7 +495,12 @@ class Renderer:
         except LinkDown:
             self._link_down = True
         self._drain()
-        self.trace = self._make_trace()
+        close_blocks(self.t_s, self.abx, self.abx_results, self.training, self.training_results)
+        self.trace = assemble_trace(
+            self._buf, rate_hz=self.config.rate_hz, params=self.pair.params, events=self.events,
+            safety=self.safety, stats=self.loop_stats(), metadata=self.metadata,
+            renderer_config=self.config, device=self.link.device, abx_results=self.abx_results,
+            training_results=self.training_results)
         return self.trace
 
     def run(self, duration_s: float | None = None, first_state_timeout_s: float = 1.0) -> Trace:
@@ -608,22 +564,8 @@ class Renderer:
                           link=self.link, last=last)
 
     def status(self) -> Result:
-        """What ``fieldbank haptic status`` shows (the blend is hidden during A/B/X)."""
-        s = self.safety
-        return {
-            "running": self.running, "mode": s.mode.name, "t_s": round(self.t_s, 4),
-            "ticks": self.ticks, "gain": self.gain.value,
-            # while an A/B/X block or an assessment runs, which model is rendered is hidden
-            "blend": "hidden" if self.blinded else self.blend.value,
-            "force_n": [self.fx, self.fy],
-            "handle_m": [self.link.x, self.link.y],
-            "latched_faults": [c.name for c in FaultCode if s.latched & (1 << (c - 1))],
-            "faults_logged": len(s.log_records),
-            "loop_last_10s": status_figures(self.loop_stats(last=10 * self.config.rate_hz)),
-            "abx_trial": None if self.abx is None else self.abx.trial,
-            "models": self._model_info(),
-            "training": None if self.training is None else self.training.state(self.t_s),
-        }
+        """What ``fieldbank haptic status`` shows (:func:`haptic.readouts.status`)."""
+        return readouts.status(self)
 
     @property
     def blinded(self) -> bool:
@@ -631,73 +573,6 @@ class Renderer:
         tr = self.training
         return self.abx is not None or (tr is not None and tr.blinded)
 
-    def _model_info(self) -> dict[str, Any] | str:
-        if self.blinded:
-            return "hidden"
-        known = self.metadata.get("model_info") or {}
-        ids = self.metadata.get("model_ids") or {}
-        out: dict[str, Any] = {}
-        for k in ("A", "B"):
-            d = {"label": None, "model_id": ids.get(k), "patient": None, "plan": None}
-            d.update({f: v for f, v in dict(known.get(k) or {}).items() if v is not None})
-            out[k] = d
-        return out
-
     def info(self) -> Result:
-        """What a display needs besides the snapshot (:class:`~haptic.commands.Info`): the
-        models and their parameters unless blinded, the arm geometry, the A/B/X block and the
-        training protocol. Read in the caller's thread; nothing is computed."""
-        blinded = self.blinded
-        geometry = {}
-        for k, p in zip(("A", "B"), self.params, strict=True):
-            geometry[k] = {"upper_arm_m": p.upper_arm_length_m, "forearm_m": p.forearm_length_m,
-                           "side": p.side, "shoulder_range_rad": list(p.shoulder_range_rad),
-                           "elbow_range_rad": list(p.elbow_range_rad)}
-        abx = self.abx
-        return {
-            "running": self.running, "mode": self.safety.mode.name, "t_s": self.t_s,
-            "events": len(self.events), "blinded": blinded,
-            "models": self._model_info(),
-            "params": None if blinded else {"A": self.params[0].to_dict(),
-                                            "B": self.params[1].to_dict()},
-            "geometry": geometry,
-            "shoulder_offset_m": list(self.config.shoulder_offset_m),
-            "force_limit_n": self.safety.config.force_limit_n,
-            "safety_workspace_m": list(self.safety.config.workspace_m),
-            "abx": None if abx is None else {"trial": abx.trial, "n_trials": abx.n_trials,
-                                             "done": abx.done},
-            "abx_last_result": self.abx_results[-1] if self.abx_results else None,
-            "training": None if self.training is None else self.training.state(self.t_s),
-        }
-
-    def _make_trace(self) -> Trace:
-        if self._buf is not None:
-            t, data = self._buf.arrays()
-        else:
-            t, data = np.zeros(0), np.zeros((0, NCOL), np.float32)
-        meta = dict(self.metadata)
-        meta.setdefault("renderer", {k: (list(v) if isinstance(v, tuple) else v)
-                                     for k, v in asdict(self.config).items()})
-        meta.setdefault("safety", {k: (list(v) if isinstance(v, tuple) else v)
-                                   for k, v in asdict(self.safety.config).items()})
-        if self.link.device is not None:
-            meta.setdefault("device", asdict(self.link.device))
-        if self.abx is not None:
-            self.abx_results.append(self.abx.result())
-        tr = self.training
-        if tr is not None and not tr.done:  # unfinished at the session's end: kept, marked
-            tr.finish(self.t_s, abandon=True)
-            self.training_results.append(tr.result())
-        meta["abx"] = self.abx_results
-        meta["training"] = self.training_results
-        return Trace(t_s=t, data=data.astype(np.float32, copy=False),
-                     rate_hz=float(self.config.rate_hz),
-                     models={"A": self.params[0].to_dict(), "B": self.params[1].to_dict()},
-                     events=list(self.events),
-                     faults=[r.to_dict() for r in self.safety.log_records],
-                     stats=self.loop_stats(), metadata=meta)
-
-
-def _utc_now() -> str:
-    """The wall-clock time now, UTC, ISO 8601 to the microsecond."""
-    return _dt.datetime.now(_dt.UTC).isoformat(timespec="microseconds")
+        """What a display needs besides the snapshot (:func:`haptic.readouts.info`)."""
+        return readouts.info(self)

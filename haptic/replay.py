@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from fieldbank.haptic.pair import build_sim
 from fieldbank.haptic.recording import Trace
-from fieldbank.haptic.renderer import build_sim
 from fieldbank.params import ArmParams
 
 

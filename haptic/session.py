@@ -32,11 +32,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fieldbank.haptic.commands import ModelInfo, Push, RendererCommand, Switch, check_model_info
+from fieldbank.haptic.commands import Push, RendererCommand, Switch
 from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.dbsink import DatabaseTraceSink, HapticStore
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.modelinfo import ModelInfoPair, model_info_pair, to_wire
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.protocol import DeviceInfo
 from fieldbank.haptic.recording import Hdf5TraceSink, Trace
@@ -169,7 +170,7 @@ def _push_vet(db: HapticStore | StoreOpener, patient_code: str | None,
 def serve(robot: str, before: ArmParams, after: ArmParams, *,
           model_ids: tuple[int | None, int | None] = (None, None),
           patient_code: str | None = None, patient_note: str | None = None,
-          model_info: ModelInfo | None = None, duration_s: float | None = None,
+          model_info: ModelInfoPair | None = None, duration_s: float | None = None,
           config: RendererConfig | None = None, safety: SafetyConfig | None = None,
           control: bool = True, socket_path: str | Path | None = None,
           station: StationOptions | None = None,
@@ -192,9 +193,9 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         The patient the session belongs to in the database (default: its models' patient).
     patient_note : str, optional
         Why the session's patient is not its models' patient (required then).
-    model_info : mapping, optional
-        What the station says about each model: ``{"A": {"label", "model_id", "patient",
-        "plan"}, "B": …}``.
+    model_info : mapping of ModelInfo, optional
+        What the station says about each model: ``{"A": ModelInfo, "B": ModelInfo}``
+        (:mod:`haptic.modelinfo`; their wire dictionaries are accepted too).
     duration_s : float, s, optional
         How long to render; None: until a ``stop`` command or Ctrl-C.
     config : RendererConfig, optional
@@ -228,7 +229,7 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
     """
     cfg = config or RendererConfig()
     name = trace_name or trace_name_now()
-    info = check_model_info(model_info, "serve")
+    info = to_wire(model_info_pair(model_info, "serve"))
     if station is not None and not control:
         raise HapticError("the station needs the control channel (control=True)")
     vet = None

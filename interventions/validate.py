@@ -10,24 +10,25 @@ model before was fitted to):
    (:meth:`~fieldbank.interventions.plan.Plan.at_week`), so an injection measured at 8 weeks
    is not judged by its 5-week prediction; other steps do not change with time;
 2. **per measured map**: the predicted after-model's values at the map's positions (and
-   velocity) against the measured ones - R², RMS error in N or N/m, χ²/n against the map's sd,
-   and the verdict of :mod:`fieldbank.fitting.quality` (the same rule a fit must pass);
-3. **the change**: measured (the later maps - the model before) against predicted (the model
-   after - the model before) at the same points: the RMS of each, and the realised fraction
-   f = Σ w·Δm·Δp / Σ w·Δp² (w = 1/sd²: a weighted regression of the measured on the predicted
-   change through the origin; 1 when the change came as predicted, 0 when nothing changed)
-   with its standard error 1/√(Σ w·Δp²), per map and pooled over the session;
-4. **the verdict** of the session: *prediction failed* when a map is poor against the
-   prediction, or the change is measurable (SE ≤ :data:`MAX_CHANGE_SE`) and f lies outside
-   1 ± :data:`CHANGE_TOLERANCE`; *prediction confirmed* when every map is good and the change
-   is measurable and within the tolerance; *inconclusive* when the maps fit but the predicted
-   change is too small against the noise to tell. A plan fails when any of its sessions fails.
+   velocity) against the measured ones - R², RMS error in N or N/m, χ²/n against the map's sd
+   widened by the fit's spread of the prediction, the verdict of
+   :mod:`fieldbank.fitting.quality`; how far the predicted change moves the map (sd); a map
+   stored twice (one measurement from two files) is counted once;
+3. **the change**: the realised fraction f of the predicted change (measured ÷ predicted, 1 as
+   predicted, 0 none), its SE from the later maps' noise and the fit's parameter samples
+   together, and whether the maps can see the change at all
+   (:mod:`fieldbank.interventions.realised`, which states the verdict's rules and numbers);
+4. **the verdict** of the session: *prediction confirmed*, *partial effect*, *prediction
+   failed* or *inconclusive* (:class:`~fieldbank.interventions.realised.Rules`). A plan
+   fails when any of its sessions fails, is partial when one shows a partial effect and none
+   fails, is confirmed when a session confirms it and none contradicts it.
 
 Plans without a date were only explored: they are listed as not checked, with the reason, as
-are plans whose patient has no later maps. :func:`validate_plans` reads the database;
-:func:`check_session` is the pure computation, which reports also run
-(:mod:`fieldbank.interventions.report`). Leaving one map out of a fit:
-:mod:`fieldbank.fitting.crossval`.
+are plans whose patient has no later maps. :func:`validate_plans` reads the database
+(:func:`read_plan_inputs` per plan, then :func:`check_plan`); :func:`check_session` is the pure
+computation, which reports also run (:mod:`fieldbank.interventions.report`). Every step is
+deterministic: the same inputs give the same bytes in any process. Leaving one map out of a
+fit: :mod:`fieldbank.fitting.crossval`.
 """
 
 from __future__ import annotations
@@ -35,33 +36,53 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import date
 from typing import Any
 
 import numpy as np
 
 from fieldbank.errors import FieldbankError
-from fieldbank.fitting.problem import map_sd
-from fieldbank.fitting.quality import DEFAULT_THRESHOLDS, MapFit, Thresholds, map_fit
+from fieldbank.fitting.quality import DEFAULT_THRESHOLDS, MapFit, Thresholds
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.maps import FieldMap, model_map_like
-from fieldbank.model import Arm
+from fieldbank.interventions.realised import (
+    CHANGE_TOLERANCE,
+    CONFIRMED,
+    CONTRADICTED,
+    DEFAULT_RULES,
+    FAILED,
+    INCONCLUSIVE,
+    MAX_CHANGE_SE,
+    MAX_REPORTED_SE,
+    NO_FIT,
+    NOT_CHECKED,
+    PARTIAL,
+    FitSpread,
+    Fraction,
+    MapChange,
+    Rules,
+    decide,
+    fraction_of,
+    guesses_explain,
+    map_changes,
+    physical_range,
+    positions_of,
+    suggestion,
+    treated,
+)
+from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database, PlanRecord
 
-#: A measured change within this fraction of the predicted one counts as predicted.
-CHANGE_TOLERANCE = 0.5
-#: The realised fraction is measurable when its standard error is at most this.
-MAX_CHANGE_SE = 0.25
-
-CONFIRMED = "prediction confirmed"
-FAILED = "prediction failed"
-INCONCLUSIVE = "inconclusive"
-NOT_CHECKED = "not checked"
+__all__ = [
+    "CHANGE_TOLERANCE", "CONFIRMED", "CONTRADICTED", "FAILED", "INCONCLUSIVE",
+    "MAX_CHANGE_SE", "NOT_CHECKED", "PARTIAL", "LaterSession", "MapCheck", "PlanInputs",
+    "PlanValidation", "SessionCheck", "ValidationReport", "check_plan", "check_session",
+    "given_on", "predicted_after", "read_plan_inputs", "validate_plans",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,9 +94,18 @@ class LaterSession:
     maps: tuple[tuple[int, FieldMap], ...]
 
 
+def _num(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else float(v)
+
+
 @dataclass(frozen=True)
 class MapCheck:
-    """One later map against the prediction (see the module docstring)."""
+    """One later map against the prediction (see the module docstring).
+
+    ``realised_fraction`` and ``realised_se`` are None where this map alone cannot see the
+    predicted change, the prediction rests on a guess, or the fraction lies outside the plan's
+    physical range; ``sensitivity_sd`` is how far the predicted change moves the map, in sd.
+    """
 
     map_id: int
     kind: str
@@ -87,6 +117,8 @@ class MapCheck:
     measured_change_rms: float
     realised_fraction: float | None
     realised_se: float | None
+    sensitivity_sd: float = 0.0
+    duplicate_of: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         p = self.prediction
@@ -98,12 +130,22 @@ class MapCheck:
                 "no_change_chi2_per_value": self.no_change.chi2_per_value,
                 "predicted_change_rms": self.predicted_change_rms,
                 "measured_change_rms": self.measured_change_rms,
-                "realised_fraction": self.realised_fraction, "realised_se": self.realised_se}
+                "sensitivity_sd": self.sensitivity_sd,
+                "realised_fraction": self.realised_fraction, "realised_se": self.realised_se,
+                "duplicate_of": self.duplicate_of}
 
 
 @dataclass(frozen=True)
 class SessionCheck:
-    """A plan's prediction against one later session."""
+    """A plan's prediction against one later session.
+
+    ``realised_fraction``/``realised_se``: pooled over the session's maps, None when not
+    reported (module docstring of :mod:`~fieldbank.interventions.realised`);
+    ``noise_se``/``fit_se``: the two parts of the SE; ``sensitivity_sd``: how far the predicted
+    change moves the maps (sd); ``interval``: f ± z SE; ``guessed``: parameters the change
+    rests on that the fit did not identify; ``suggestion``: the measurement that would decide
+    when these maps cannot; ``fit_uncertainty``: what the fit part rests on.
+    """
 
     session: str
     session_date: str
@@ -114,21 +156,52 @@ class SessionCheck:
     realised_se: float | None
     verdict: str
     reasons: tuple[str, ...]
+    noise_se: float | None = None
+    fit_se: float | None = None
+    sensitivity_sd: float = 0.0
+    interval: tuple[float, float] | None = None
+    physical_range: tuple[float, float] = (-1.0, 3.0)
+    treated: tuple[str, ...] = ()
+    guessed: tuple[str, ...] = ()
+    suggestion: str = ""
+    fit_uncertainty: str = ""
+    rules: Rules = field(default=DEFAULT_RULES)
+    #: The verdict was read from the realised fraction's interval (the rules of
+    #: :func:`~fieldbank.interventions.realised.decide`).
+    decided: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {"session": self.session, "date": self.session_date,
                 "weeks_after": self.weeks_after, "retimed": self.retimed,
                 "verdict": self.verdict, "reasons": list(self.reasons),
                 "realised_fraction": self.realised_fraction, "realised_se": self.realised_se,
+                "noise_se": self.noise_se, "fit_se": self.fit_se,
+                "interval": list(self.interval) if self.interval is not None else None,
+                "sensitivity_sd": self.sensitivity_sd,
+                "physical_range": list(self.physical_range), "treated": list(self.treated),
+                "guessed": list(self.guessed), "suggestion": self.suggestion or None,
+                "fit_uncertainty": self.fit_uncertainty, "decided": self.decided,
                 "maps": [m.to_dict() for m in self.maps]}
 
     @property
     def worst_chi2_per_value(self) -> float:
-        return max((m.prediction.chi2_per_value for m in self.maps), default=math.nan)
+        return max((m.prediction.chi2_per_value for m in self.maps if m.duplicate_of is None),
+                   default=math.nan)
 
     @property
     def lowest_r2(self) -> float:
-        return min((m.prediction.r2 for m in self.maps), default=math.nan)
+        return min((m.prediction.r2 for m in self.maps if m.duplicate_of is None),
+                   default=math.nan)
+
+
+def plan_verdict(verdicts: Sequence[str]) -> str:
+    """A plan's verdict from its sessions': failed before partial before confirmed (by one
+    session, contradicted by none) before inconclusive; not checked without sessions."""
+    found = set(verdicts)
+    for v in (FAILED, PARTIAL, CONFIRMED):
+        if v in found:
+            return v
+    return INCONCLUSIVE if found else NOT_CHECKED
 
 
 @dataclass(frozen=True)
@@ -148,10 +221,7 @@ class PlanValidation:
     def verdict(self) -> str:
         if self.not_checked is not None or not self.sessions:
             return NOT_CHECKED
-        verdicts = {s.verdict for s in self.sessions}
-        if FAILED in verdicts:
-            return FAILED
-        return CONFIRMED if verdicts == {CONFIRMED} else INCONCLUSIVE
+        return plan_verdict([s.verdict for s in self.sessions])
 
     def to_dict(self) -> dict[str, Any]:
         return {"plan_id": self.plan_id, "patient": self.patient, "label": self.label,
@@ -163,28 +233,50 @@ class PlanValidation:
 
 @dataclass(frozen=True)
 class ValidationReport:
-    """Every plan considered, and the overall verdict."""
+    """Every plan considered, and the one overall verdict."""
 
     plans: tuple[PlanValidation, ...]
     tolerance: float = CHANGE_TOLERANCE
     max_se: float = MAX_CHANGE_SE
 
     @property
+    def rules(self) -> Rules:
+        return dataclasses.replace(DEFAULT_RULES, tolerance=self.tolerance, max_se=self.max_se)
+
+    @property
     def failed(self) -> tuple[PlanValidation, ...]:
         return tuple(p for p in self.plans if p.verdict == FAILED)
 
     @property
+    def contradicted(self) -> tuple[PlanValidation, ...]:
+        """Plans whose prediction the later maps contradict (failed or partial): exit 1."""
+        return tuple(p for p in self.plans if p.verdict in CONTRADICTED)
+
+    @property
+    def counts(self) -> dict[str, int]:
+        out = dict.fromkeys((CONFIRMED, PARTIAL, FAILED, INCONCLUSIVE, NOT_CHECKED), 0)
+        for p in self.plans:
+            out[p.verdict] += 1
+        return out
+
+    @property
     def verdict(self) -> str:
-        checked = [p for p in self.plans if p.verdict != NOT_CHECKED]
-        if self.failed:
-            return FAILED
+        """Failed when a plan failed; else partial when one came out partial; else confirmed
+        when every checked plan was; not checked when none was; else inconclusive."""
+        verdicts = {p.verdict for p in self.plans}
+        for v in CONTRADICTED:
+            if v in verdicts:
+                return v
+        checked = verdicts - {NOT_CHECKED}
         if not checked:
             return NOT_CHECKED
-        return CONFIRMED if all(p.verdict == CONFIRMED for p in checked) else INCONCLUSIVE
+        return CONFIRMED if checked == {CONFIRMED} else INCONCLUSIVE
 
     def to_dict(self) -> dict[str, Any]:
-        return {"verdict": self.verdict, "change_tolerance": self.tolerance,
-                "max_change_se": self.max_se,
+        return {"verdict": self.verdict, "counts": self.counts,
+                "contradicted": [p.plan_id for p in self.contradicted],
+                "change_tolerance": self.tolerance, "max_change_se": self.max_se,
+                "rules": self.rules.to_dict(), "rules_text": self.rules.lines(),
                 "thresholds": DEFAULT_THRESHOLDS.to_dict(),
                 "plans": [p.to_dict() for p in self.plans]}
 
@@ -208,72 +300,163 @@ def predicted_after(before: ArmParams, plan: Plan | None, stored_after: ArmParam
     return plan.at_week(max(weeks, 0.0)).apply(before), True
 
 
-def _fraction(dm: np.ndarray, dp: np.ndarray, w: np.ndarray) -> tuple[float | None, float | None]:
-    den = float(np.sum(w * dp * dp))
-    if den <= 0:
-        return None, None
-    return float(np.sum(w * dm * dp)) / den, 1.0 / math.sqrt(den)
+def _rms(a: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(a**2))) if a.size else 0.0
+
+
+def _reportable(f: Fraction, rules: Rules, guessed: Sequence[str],
+                limits: tuple[float, float]) -> bool:
+    return (f.value is not None and f.sensitivity_sd >= rules.min_sensitivity and not guessed
+            and limits[0] <= f.value <= limits[1] and f.se is not None
+            and f.se <= max(MAX_REPORTED_SE, rules.max_se))
+
+
+def _map_check(c: MapChange, rules: Rules, thresholds: Thresholds, guessed: Sequence[str],
+               limits: tuple[float, float]) -> MapCheck:
+    label = f"map {c.map_id}"
+    pred = c.check(1.0, thresholds, label)
+    nochange = c.check(0.0, thresholds, label)
+    f = fraction_of([dataclasses.replace(c, duplicate_of=None)])
+    shown = _reportable(f, rules, guessed, limits)
+    m = c.measured
+    return MapCheck(c.map_id, m.kind, m.velocity_m_per_s, pred.unit, pred, nochange,
+                    _rms(c.after - c.before), _rms(c.y - c.before),
+                    f.value if shown else None, _num(f.se) if shown else None,
+                    f.sensitivity_sd, c.duplicate_of)
 
 
 def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams, given: date,
                   later: LaterSession, *, tolerance: float = CHANGE_TOLERANCE,
                   max_se: float = MAX_CHANGE_SE,
-                  thresholds: Thresholds = DEFAULT_THRESHOLDS) -> SessionCheck:
-    """A plan's prediction against the maps of one later session (module docstring)."""
+                  thresholds: Thresholds = DEFAULT_THRESHOLDS,
+                  spread: FitSpread = NO_FIT) -> SessionCheck:
+    """A plan's prediction against the maps of one later session (module docstring).
+
+    ``spread``: the fit's samples of the model before (:class:`FitSpread`); without them the
+    SE counts the later maps' noise only, and the session says so.
+    """
+    rules = dataclasses.replace(DEFAULT_RULES, tolerance=tolerance, max_se=max_se)
     weeks = (later.session_date - given).days / 7.0
     after, retimed = predicted_after(before, plan, stored_after, weeks)
-    arm_b, arm_a = Arm.from_params(before), Arm.from_params(after)
-    checks: list[MapCheck] = []
-    reasons: list[str] = []
-    sums = [0.0, 0.0]  # Σ w Δm Δp, Σ w Δp²
-    for map_id, raw in later.maps:
-        m = raw.as_arm_on_handle()
-        label = f"map {map_id}"
-        try:
-            yb = model_map_like(arm_b, m).values
-            ya = model_map_like(arm_a, m).values
-        except FieldbankError as exc:
-            reasons.append(f"{label}: not compared: {exc}")
-            continue
-        sd = map_sd(m)
-        n = m.n
-        pred = map_fit(0, m, ya, sd, thresholds, label=label)
-        nochange = map_fit(0, m, yb, sd, thresholds, label=label)
-        dp = (ya - yb).reshape(n, -1)
-        dm = (m.values - yb).reshape(n, -1)
-        w = 1.0 / sd**2
-        f, se = _fraction(dm, dp, w)
-        sums[0] += float(np.sum(w * dm * dp))
-        sums[1] += float(np.sum(w * dp * dp))
-        checks.append(MapCheck(
-            int(map_id), m.kind, m.velocity_m_per_s, pred.unit, pred, nochange,
-            float(np.sqrt(np.mean(dp**2))), float(np.sqrt(np.mean(dm**2))), f, se))
-        reasons += list(pred.reasons)
-    f_all = sums[0] / sums[1] if sums[1] > 0 else None
-    se_all = 1.0 / math.sqrt(sums[1]) if sums[1] > 0 else None
-    poor = [c for c in checks if c.prediction.verdict == "poor"]
-    measurable = se_all is not None and se_all <= max_se
-    change_off = measurable and f_all is not None and abs(f_all - 1.0) > tolerance
-    if change_off:
-        assert f_all is not None and se_all is not None
-        word = "weaker" if f_all < 1 else "stronger"
-        reasons.append(f"the measured change is {100 * f_all:.0f}% ± {100 * se_all:.0f}% of the "
-                       f"predicted change ({word} than predicted; tolerance ±"
-                       f"{100 * tolerance:.0f}%)")
-    if not checks:
+    note = spread.note
+    pairs: list[tuple[ArmParams, ArmParams]] = []
+    if spread.samples and plan is not None:
+        timed = plan.at_week(max(weeks, 0.0)) if retimed else plan
+        pairs = [(p, timed.apply(p)) for p in spread.samples]
+    elif spread.samples:
+        note = "the plan document could not be read: the SE counts the later maps' noise only"
+    changes, reasons = map_changes(before, after, later.maps, pairs)
+    what = treated(before, after)
+    treated_names = [n for t in what for n in t.names]
+    guessed = tuple(n for n in treated_names
+                    if n in spread.unidentified and n not in spread.varied)
+    # the prediction rests on guesses alone when every treated group's change is guessed
+    all_guessed = bool(what) and all(any(n in guessed for n in t.names) for t in what)
+    limits = physical_range(before, after)
+    f = fraction_of(changes)
+    blocked = guessed if all_guessed else ()
+    shown = _reportable(f, rules, blocked, limits)
+    checks = tuple(_map_check(c, rules, thresholds, blocked, limits) for c in changes)
+    words = " and ".join(t.words for t in what) or "model"
+    # the maps against the model before + f × the predicted change: what f cannot explain
+    seen = f.value is not None and f.sensitivity_sd >= rules.min_sensitivity
+    scale = (min(max(f.value, max(limits[0], 0.0)), limits[1])
+             if seen and f.value is not None else 1.0)
+    poor = [(c, c.check(scale, thresholds, f"map {c.map_id}")) for c in changes
+            if c.duplicate_of is None]
+    unexplained = [u for _, u in poor if u.verdict == "poor"]
+    untested = (guesses_explain(changes, before, spread.held, scale, thresholds)
+                if unexplained else ())
+    # a misfit where the model before was never fitted may be the model's, not a change
+    elsewhere = [c.map_id for c, u in poor if u.verdict == "poor" and not spread.covers(c.measured)]
+    interval = None
+    decided = False
+    se = _num(f.se)
+    advice = ""
+    if shown:
+        assert f.value is not None and se is not None
+        interval = (f.value - rules.z * se, f.value + rules.z * se)
+    if not changes:
         verdict = INCONCLUSIVE
         reasons.append("no map of the session could be compared")
-    elif poor or change_off:
-        verdict = FAILED
-    elif measurable:
-        verdict = CONFIRMED
-    else:
+    elif unexplained and untested:
         verdict = INCONCLUSIVE
-        reasons.append("the predicted change is too small against the maps' noise to check "
-                       + ("(the plan predicts no change of these maps)" if f_all is None else
-                          f"(realised fraction {f_all:.2f} ± {se_all:.2f})"))
-    return SessionCheck(later.label, later.session_date.isoformat(), weeks, retimed,
-                        tuple(checks), f_all, se_all, verdict, tuple(reasons))
+        reasons += [r for u in unexplained for r in u.reasons]
+        reasons.append(f"these maps differ from the model before + the predicted change by "
+                       f"more than their noise and the fit's uncertainty, but a change of the "
+                       f"{' and '.join(untested)}, which fit {spread.fit_id} held at the "
+                       "unimpaired value (a guess), explains the difference: it may be that "
+                       "guess, not the plan; refit with maps like these to decide")
+    elif unexplained and len(elsewhere) == len(unexplained):
+        verdict = INCONCLUSIVE
+        reasons += [r for u in unexplained for r in u.reasons]
+        reasons.append(f"these maps differ from the model before + the predicted change by "
+                       f"more than their noise and the fit's uncertainty, but fit "
+                       f"{spread.fit_id} used no map measured like map(s) "
+                       f"{', '.join(map(str, elsewhere))} (kind, hand velocity and positions): "
+                       "the model may not describe the arm there, so the difference cannot be "
+                       "laid on the plan; measure the later maps as the first session's to "
+                       "decide")
+    elif unexplained:
+        verdict = FAILED
+        at = (f"{scale:.2f} × the predicted change" if seen else "the predicted change")
+        reasons += [r for u in unexplained for r in u.reasons]
+        reasons.append(f"the maps changed in a way the plan does not predict: with the model "
+                       f"before + {at}, {len(unexplained)} map(s) still differ by more than "
+                       "their noise and the fit's uncertainty explain")
+    elif f.value is None or f.sensitivity_sd < rules.min_sensitivity:
+        verdict = INCONCLUSIVE
+        advice = suggestion(before, after, positions_of(changes), what)
+        reasons.append(f"these maps cannot see a change of the {words}: the predicted change "
+                       f"moves them by {f.sensitivity_sd:.1f} sd in all (at least "
+                       f"{rules.min_sensitivity:g} needed); {advice} to decide")
+    elif all_guessed:
+        verdict = INCONCLUSIVE
+        advice = suggestion(before, after, positions_of(changes), what)
+        how = ("held at the unimpaired value" if all(n in spread.held for n in guessed)
+               else "not identified")
+        reasons.append(f"the predicted change rests on a guess: fit {spread.fit_id} did not "
+                       f"identify {', '.join(guessed)} ({how}), so a realised fraction would "
+                       f"measure the guess, not the plan; {advice} and refit to decide")
+    elif se is None or se > rules.max_se:
+        verdict = INCONCLUSIVE
+        parts = f"noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)}" + _misfit(f)
+        value = (f"{f.value:.2f} ± {_f2(se)}" if shown else
+                 f"not known to better than ± {_f2(se)}")
+        bigger = ("the fit before the plan is too uncertain about the " + words
+                  if (f.fit_se or 0.0) > (f.noise_se or 0.0) else
+                  "the later maps are too noisy for this change")
+        reasons.append(f"the realised fraction is {value} ({parts}): SE above "
+                       f"{rules.max_se:g}, {bigger}")
+    else:
+        assert f.value is not None
+        decided = shown
+        if guessed:
+            reasons.append(f"part of the prediction rests on a guess: fit {spread.fit_id} did not "
+                           f"identify {', '.join(guessed)}; the realised fraction measures the "
+                           "change of the groups it did identify")
+        verdict, why = decide(f.value, se, rules)
+        if not shown:
+            lo, hi = limits
+            why = (f"the measured change along the predicted one is beyond what the plan can "
+                   f"produce (a fraction outside {lo:.2f} to {hi:.2f})")
+        reasons.append(f"realised fraction {_f2(f.value) if shown else 'not reported'}"
+                       + (f" ± {se:.2f} (noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)}"
+                          f"{_misfit(f)})" if shown else "") + f": {why}")
+    return SessionCheck(later.label, later.session_date.isoformat(), weeks, retimed, checks,
+                        f.value if shown else None, se if shown else None, verdict,
+                        tuple(reasons), _num(f.noise_se) if seen else None,
+                        _num(f.fit_se) if seen else None, f.sensitivity_sd,
+                        interval, limits, tuple(t.words for t in what), guessed, advice, note,
+                        rules, decided)
+
+
+def _misfit(f: Fraction) -> str:
+    return f"; × {f.misfit:.2f} for misfit" if f.misfit >= 1.005 else ""
+
+
+def _f2(v: float | None) -> str:
+    return "-" if v is None or not math.isfinite(v) else f"{v:.2f}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -288,6 +471,16 @@ class PlanInputs:
     fit_id: int | None
     later: tuple[LaterSession, ...]
     not_checked: str | None
+    #: The fit's samples of the model before, and what it did not identify.
+    spread: FitSpread = NO_FIT
+
+
+def _fit_maps(db: Database, map_ids: Sequence[int]) -> tuple[FieldMap, ...]:
+    """The maps a fit used; none when one of them is gone."""
+    try:
+        return tuple(db.get_maps(list(map_ids)))
+    except FieldbankError:
+        return ()
 
 
 def read_plan_inputs(db: Database, record: PlanRecord) -> PlanInputs:
@@ -301,6 +494,9 @@ def read_plan_inputs(db: Database, record: PlanRecord) -> PlanInputs:
     after = db.get_model(record.result_model_id).params
     found = fit_behind(db, record.base_model_id)
     fit = found[0] if found else None
+    spread = NO_FIT if found is None else FitSpread.from_report(
+        found[0].id, found[0].result, before, found[1] == record.base_model_id, found[1],
+        _fit_maps(db, found[0].map_ids))
     day = given_on(record.spec)
     if record.patient_code is None:
         return PlanInputs(record, plan, before, after, day, None, (),
@@ -325,7 +521,7 @@ def read_plan_inputs(db: Database, record: PlanRecord) -> PlanInputs:
     why = None if later else (f"patient {record.patient_code} has no maps dated after "
                               f"{day.isoformat()}, the day the plan was given")
     return PlanInputs(record, plan, before, after, day, fit.id if fit else None, tuple(later),
-                      why)
+                      why, spread)
 
 
 def check_plan(inputs: PlanInputs, *, tolerance: float = CHANGE_TOLERANCE,
@@ -338,7 +534,8 @@ def check_plan(inputs: PlanInputs, *, tolerance: float = CHANGE_TOLERANCE,
     if inputs.not_checked is not None or day is None:
         return dataclasses.replace(head, not_checked=inputs.not_checked or "no date")
     sessions = tuple(check_session(inputs.before, inputs.plan, inputs.after, day, s,
-                                   tolerance=tolerance, max_se=max_se) for s in inputs.later)
+                                   tolerance=tolerance, max_se=max_se, spread=inputs.spread)
+                     for s in inputs.later)
     return dataclasses.replace(head, sessions=sessions)
 
 

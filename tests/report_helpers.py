@@ -54,9 +54,9 @@ def store_cohort(db: Any, n: int, seed: int = 7) -> list[int]:
     """N synthetic patients (no fits: models synthesized from COHORT_SEVERITIES), each with
     one stored plan from COHORT_PLANS, in turn; body size drawn from a seeded generator.
     Returns the plan ids."""
+    from fieldbank.evaluate.severity import parse_severity_options, synthesize
     from fieldbank.interventions import Plan
     from fieldbank.params import ArmParams
-    from fieldbank.severity import parse_severity_options, synthesize
 
     rng = np.random.default_rng(seed)
     ids = []

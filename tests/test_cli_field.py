@@ -9,8 +9,8 @@ import numpy as np
 from click.testing import CliRunner
 
 from fieldbank.cli.main import cli
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.model import Arm
-from fieldbank.severity import synthesize
 
 
 def _run(*args: str):

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.renderer import RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.model import Arm
-from fieldbank.severity import synthesize
 from tests.haptic_util import pty_session, severe_shoulder, unimpaired
 
 #: Stated tolerance of the slow-pull force profile against the static field prediction:

@@ -19,6 +19,7 @@ from click.testing import CliRunner
 from fieldbank.cli.haptic import haptic
 from fieldbank.cli.main import cli
 from fieldbank.errors import ParameterError, StorageError
+from fieldbank.evaluate.severity import parse_severity_options, synthesize
 from fieldbank.haptic import motions
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.clock import VirtualClock
@@ -32,7 +33,6 @@ from fieldbank.haptic.replay import rerun
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.probepath import ProbePath, probes_document
-from fieldbank.severity import parse_severity_options, synthesize
 from tests.haptic_util import rest_hand, severe_shoulder, unimpaired
 
 
@@ -147,7 +147,7 @@ def test_abx_through_the_renderer_hides_and_records() -> None:
         for _ in range(600):
             rd.tick()
         expected_w = float(rd.abx.model_for("X")) if rd.abx else None
-        assert rd.blend.value == pytest.approx(expected_w)
+        assert rd.pair.blend.value == pytest.approx(expected_w)
         cmds.append(rd.submit("abx_answer", answer=ans))
         rd.tick()
     for c in cmds:
@@ -442,10 +442,10 @@ def test_loop_runs_with_gc_off_and_warns_without_realtime(monkeypatch, caplog) -
 
 
 def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    from fieldbank.cli.whatif import whatif
+    from fieldbank.cli.main import cli
 
     rd, sock = served
-    r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
+    r = CliRunner().invoke(cli, ["whatif", "--severity", "elbow=severe", "--botox", "ef=200",
                                     "--render", "--socket", str(sock), "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["rendered"] == {"pushed": True}
@@ -457,8 +457,11 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     assert a == before
     assert b != before and b.km_n_per_m == before.km_n_per_m  # botulinum acts on α, β only
     assert b.alpha_n[2] < before.alpha_n[2]
+    told = rd.metadata["model_info"]  # built through haptic.modelinfo.ModelInfo
+    assert told["A"]["plan"] is None and told["B"]["label"].startswith("after: ")
+    assert told["B"]["plan"] and "botulinum" in told["B"]["plan"].lower()
     # no renderer: a clean error, not a traceback
-    r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
+    r = CliRunner().invoke(cli, ["whatif", "--severity", "elbow=severe", "--botox", "ef=200",
                                     "--render", "--socket", str(tmp_path / "none.sock")])
     assert r.exit_code == 1 and "no renderer on" in r.output
 

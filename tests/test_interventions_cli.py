@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from fieldbank.cli.whatif import whatif
+from fieldbank.cli.main import cli
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.inverse import unimpaired_reference
@@ -18,7 +19,6 @@ from fieldbank.interventions.plan import Plan, params_sha256
 from fieldbank.interventions.spec import parse_length, parse_units
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
-from fieldbank.severity import synthesize
 from tests.report_helpers import svg_paths
 
 #: Built before any test counts compilations (synthesis compiles the arm it starts from).
@@ -26,7 +26,7 @@ SEVERE_ELBOW = synthesize({"elbow": "severe"})
 
 
 def run(*args: str) -> tuple[int, str, str]:
-    r = CliRunner().invoke(whatif, list(args))
+    r = CliRunner().invoke(cli, ["whatif", *args])
     return r.exit_code, r.stdout, r.stderr
 
 

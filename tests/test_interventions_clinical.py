@@ -10,6 +10,7 @@ from scipy.optimize import brentq
 
 from fieldbank.evaluate.compare import compare
 from fieldbank.evaluate.probing import joint_stretch
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.interventions.catalogue import Botulinum, Lengthening, SerialCasting, Tenotomy
 from fieldbank.interventions.course import time_course
 from fieldbank.interventions.defaults import DEFAULTS
@@ -19,7 +20,6 @@ from fieldbank.interventions.plan import Plan, params_sha256
 from fieldbank.interventions.timecourse import dose_effect, time_shape
 from fieldbank.model import Arm
 from fieldbank.params import GROUP_INDEX, PER_GROUP_FIELDS, ArmParams
-from fieldbank.severity import synthesize
 
 
 @pytest.fixture(scope="module")

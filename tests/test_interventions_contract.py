@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.interventions.catalogue import (
     KINDS,
     Baclofen,
@@ -25,7 +26,6 @@ from fieldbank.interventions.catalogue import (
 )
 from fieldbank.model import Arm
 from fieldbank.params import GROUP_INDEX, PER_GROUP_FIELDS, ArmParams
-from fieldbank.severity import synthesize
 
 INSTANCES: dict[str, Intervention] = {
     "botulinum": Botulinum({"ef": 200.0, "be": 80.0}, weeks_since=4.0),

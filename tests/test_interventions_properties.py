@@ -6,11 +6,11 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.interventions.catalogue import Botulinum, Lengthening
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm
 from fieldbank.params import GROUP_INDEX, GROUPS
-from fieldbank.severity import synthesize
 
 BASE = synthesize({"elbow": "severe", "shoulder": "mild"})
 doses = st.dictionaries(st.sampled_from(GROUPS), st.floats(0.0, 600.0), min_size=1, max_size=6)

@@ -149,3 +149,60 @@ def test_each_kind_of_misplaced_import_is_caught() -> None:
     assert v("from fieldbank.haptic import session\nfrom fieldbank.interventions import "
              "whatif\n", cli, "cli") == []
     assert v("def f():\n    from fieldbank.storage import Database\n", cli, "cli") == []
+
+
+# --- inside the core: no arrow runs back up -----------------------------------------------------
+
+def _core_unit(module: str) -> str:
+    """The unit of the core's own picture a module belongs to: a sub-package
+    (``fieldbank.evaluate``) or a top-level module (``fieldbank.maps``)."""
+    return ".".join(module.split(".")[:2])
+
+
+def core_cycles(root: Path) -> list[list[str]]:
+    """Cycles between the core's sub-packages and top-level modules (every import counts)."""
+    edges: dict[str, set[str]] = {}
+    for path in sorted((root / "fieldbank").rglob("*.py")):
+        module, _ = _module_name(path, root)
+        here = _core_unit(module)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            for name in _imported(node, module, path.name == "__init__.py"):
+                there = _core_unit(name)
+                if layer_of(name) == "core" and name != "fieldbank" and there != here:
+                    edges.setdefault(here, set()).add(there)
+    cycles: list[list[str]] = []
+    state: dict[str, int] = {}
+
+    def visit(unit: str, trail: list[str]) -> None:
+        state[unit] = 1
+        for nxt in sorted(edges.get(unit, ())):
+            if state.get(nxt) == 1:
+                cycles.append([*trail[trail.index(nxt):], unit, nxt] if nxt in trail
+                              else [unit, nxt])
+            elif nxt not in state:
+                visit(nxt, [*trail, unit])
+        state[unit] = 2
+
+    for unit in sorted(edges):
+        if unit not in state:
+            visit(unit, [])
+    return cycles
+
+
+def test_no_arrow_runs_back_up_inside_the_core() -> None:
+    found = core_cycles(ROOT)
+    assert not found, "\n".join(" -> ".join(c) for c in found)
+
+
+def test_an_arrow_back_up_inside_the_core_is_caught(tmp_path: Path) -> None:
+    shutil.copytree(ROOT / "fieldbank", tmp_path / "fieldbank",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    assert core_cycles(tmp_path) == []
+    # the arrow the severity scale once ran: a top-level module built on evaluate, imported
+    # back by evaluate
+    (tmp_path / "fieldbank" / "grading.py").write_text(
+        "from fieldbank.evaluate.probing import stretch_profile\n")
+    compare = tmp_path / "fieldbank" / "evaluate" / "compare.py"
+    compare.write_text(compare.read_text() + "\nfrom fieldbank.grading import stretch_profile\n")
+    found = core_cycles(tmp_path)
+    assert found and any("fieldbank.grading" in c and "fieldbank.evaluate" in c for c in found)

@@ -28,11 +28,11 @@ from fieldbank.evaluate.design import (
     seed_probes,
     severity_candidates,
 )
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.motions import LEAD_IN_S, format_path, parse_path, path, wander
 from fieldbank.haptic.probe import observation_from_trace, probe_path
 from fieldbank.haptic.recording import write_trace_h5
 from fieldbank.haptic.simrobot import SimRobotConfig
-from fieldbank.severity import synthesize
 
 LEVELS4 = ("very mild", "mild", "moderate", "severe")
 

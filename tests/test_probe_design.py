@@ -40,9 +40,9 @@ from fieldbank.evaluate.design import (
     severity_candidates,
 )
 from fieldbank.evaluate.probing import ProbeMotion, profile, pull
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.model import Arm
 from fieldbank.params import GROUP_INDEX, GROUP_SIGN, JOINT_GROUPS, ArmParams
-from fieldbank.severity import synthesize
 
 LEVELS4 = ("very mild", "mild", "moderate", "severe")
 

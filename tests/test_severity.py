@@ -11,9 +11,7 @@ import pytest
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import joint_stretch, stretch_profile
-from fieldbank.model import Arm
-from fieldbank.params import GROUP_INDEX, GROUPS, JOINT_GROUPS, ArmParams
-from fieldbank.severity import (
+from fieldbank.evaluate.severity import (
     COMPONENTS,
     LEVEL_RATIO,
     LEVELS,
@@ -25,6 +23,8 @@ from fieldbank.severity import (
     synthesize,
     target_name,
 )
+from fieldbank.model import Arm
+from fieldbank.params import GROUP_INDEX, GROUPS, JOINT_GROUPS, ArmParams
 
 IMPAIRED = LEVELS[1:]
 BASE = ArmParams.from_anthropometry()

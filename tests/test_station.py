@@ -112,7 +112,7 @@ def test_the_renderer_publishes_each_tick() -> None:
         assert rec["ticks"] == 299 and rec["t_s"] == pytest.approx(0.299)
         assert (rec["x_m"], rec["y_m"]) == (link.x, link.y)
         assert (rec["fx_n"], rec["fy_n"]) == (rd.fx, rd.fy)
-        assert rec["a_q1_rad"] == rd.sims[0].state.q1 and rec["mode"] == 1.0
+        assert rec["a_q1_rad"] == rd.pair.sims[0].state.q1 and rec["mode"] == 1.0
         assert rec["blinded"] == 0.0
         rd.submit("abx_start", n_trials=2)
         rd.tick()
@@ -218,7 +218,7 @@ def test_the_station_websocket_locks(station) -> None:  # type: ignore[no-untype
         assert out[k]["ok"] is False and "does not send" in out[k]["error"]  # type: ignore[index]
     assert "must be one of start, present, answer" in out["reply3"]["error"]  # type: ignore[index]
     assert out["reply4"]["ok"] is True  # type: ignore[index]
-    assert rd.blend.end == 1.0  # the switch reached the renderer
+    assert rd.pair.blend.end == 1.0  # the switch reached the renderer
     assert out["big"] in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED,
                           aiohttp.WSMsgType.CLOSING, aiohttp.WSMsgType.ERROR)
 

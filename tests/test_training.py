@@ -13,6 +13,7 @@ import pytest
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate import probing
+from fieldbank.evaluate.severity import classify
 from fieldbank.haptic import commands as C
 from fieldbank.haptic.dbsink import DatabaseTraceSink
 from fieldbank.haptic.errors import CommandError
@@ -30,7 +31,6 @@ from fieldbank.haptic.training import (
 from fieldbank.model import Arm
 from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.probepath import ProbePath
-from fieldbank.severity import classify
 
 
 def test_the_seed_protocol_has_the_papers_counts_and_order() -> None:

@@ -11,15 +11,17 @@ Modules
 probing   the seed's probing motions, the force felt along them, the clinic's slow and fast
           single-joint stretches (resisting torque, its velocity-dependent part, Tardieu catch);
           a probe as plain data (ProbePath)
-design    probing motions that tell candidate arms apart: what a hand feels, information,
-          the seed's min-max and orientation paradigms, the search
+severity  the severity scale per muscle group and direction, passive and dynamic: levels,
+          synthesis, classification (builds on probing's stretches)
+design    probing motions that tell candidate arms apart (a package, one module per step):
+          candidates, paths, what a hand feels, information, the seed's paradigms, the search
 classify  a recorded probe scored against candidate arms; the next probe
-plot      figures of probes and classifications (matplotlib loads with the first figure)
 compare   standard conditions, one arm's evaluation on them, before/after comparison
 arms      ArmCache: each distinct parameter set compiled once per use case
 
-``compare`` grades severity (:mod:`fieldbank.severity`, which itself builds on ``probing``), so
-it is imported as ``fieldbank.evaluate.compare``, not re-exported here.
+Each module builds only on the ones above it in this list (``arms`` on none of them), so every
+module here is imported by its full name the same way; this package re-exports the probing
+names the rest of the product uses most.
 """
 
 from fieldbank.evaluate.arms import ArmCache

@@ -19,7 +19,7 @@ Reported (:class:`Comparison`):
   ratio before and after; :func:`fieldbank.maps.ellipse`);
 * the passive potential U: mean, RMS and largest change over the grid;
 * severity per muscle group and direction before and after, passive (position-dependent) and
-  dynamic (velocity-dependent) (:func:`fieldbank.severity.classify`), each grade naming the
+  dynamic (velocity-dependent) (:func:`fieldbank.evaluate.severity.classify`), each grade naming the
   parameters it rests on that the model's fit did not identify;
 * probing-motion profiles: peak force, its direction, mean direction, before and after;
 * the clinic's joint stretches per joint and direction: resisting torque at the slow and the
@@ -46,10 +46,10 @@ from fieldbank.evaluate.probing import (
     stretch_profiles,
     unimpaired_reference,
 )
+from fieldbank.evaluate.severity import GroupSeverity, classify, severity_dict
 from fieldbank.maps import ellipse, workspace_grid
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.severity import GroupSeverity, classify, severity_dict
 
 GRID_N = 15
 #: Grid postures with the elbow within this angle of straight are left out: there the endpoint

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from fieldbank.errors import FitError
+from fieldbank.evaluate.severity import classify, severity_dict
 from fieldbank.fitting.identify import Unidentified, identify
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.quality import (
@@ -53,7 +54,6 @@ from fieldbank.fitting.uncertainty import (
 from fieldbank.maps import FRAMES, FieldMap
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.severity import classify, severity_dict
 
 #: Metadata keys that may state a map's value unit, and the unit each kind must have.
 UNIT_KEYS = ("unit", "units", "value_unit", "values_unit", "force_unit", "stiffness_unit")
@@ -383,8 +383,9 @@ class ArmFitter:
 
 
 def _severity(params: ArmParams, unidentified: Sequence[str]) -> dict[str, Any]:
-    """Severity per muscle group, passive and dynamic (:func:`fieldbank.severity.classify`), as
-    plain values; each grade lists the parameters behind it that the maps did not identify."""
+    """Severity per muscle group, passive and dynamic
+    (:func:`fieldbank.evaluate.severity.classify`), as plain values; each grade lists the
+    parameters behind it that the maps did not identify."""
     return severity_dict(classify(Arm.from_params(params), unidentified))
 
 

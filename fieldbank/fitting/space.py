@@ -37,6 +37,13 @@ PARAM_FIELD: dict[str, str] = {
     "beta": "beta",
     "q_rest": "q_rest_rad",
 }
+def named_values(params: ArmParams) -> dict[str, float]:
+    """Every muscle parameter a fit may fit, by its name in fit reports (``km_ef``,
+    ``alpha_ef``, ``beta_ef``, ...), SI units."""
+    return {f"{kind}_{g}": float(v) for kind in ("km", "alpha", "beta")
+            for g, v in zip(GROUPS, getattr(params, PARAM_FIELD[kind]), strict=True)}
+
+
 #: Physiological bounds of the fitted parameters (q_rest: the range of motion, see below).
 FIT_BOUNDS: dict[str, Interval] = {
     "km": Interval(50.0, 50_000.0, "N/m"),

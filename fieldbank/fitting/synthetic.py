@@ -2,7 +2,7 @@
 
 Used to show that the fitter recovers what it should. A patient has one joint group
 (``fieldbank.params.JOINT_GROUPS``) made hypertonic at a severity level of the one scale,
-:func:`fieldbank.severity.synthesize`.
+:func:`fieldbank.evaluate.severity.synthesize`.
 
 Maps: a postural map at ``n_postural`` positions and stiffness maps at ``n_stiffness``
 positions, each measured static and moving (at ``±speed`` along :data:`MOVE_DIRECTION`, so that
@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fieldbank import severity
 from fieldbank.errors import ParameterError
+from fieldbank.evaluate import severity
 from fieldbank.fitting.problem import relative_scale
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm, FloatArray

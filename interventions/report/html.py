@@ -29,10 +29,11 @@ from html import escape
 from typing import Any
 
 from fieldbank.evaluate.probing import STRETCHES
+from fieldbank.evaluate.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES
+from fieldbank.interventions.realised import CONTRADICTED
 from fieldbank.interventions.report.compute import COLUMNS, STRETCH_READOUTS, CaseResult
-from fieldbank.interventions.report.figures import pct
+from fieldbank.interventions.report.figures.common import pct
 from fieldbank.params import GROUPS
-from fieldbank.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES
 
 CSS = """
 body { font-family: system-ui, "DejaVu Sans", sans-serif; margin: 1.5em auto; padding: 0 1em;
@@ -310,7 +311,7 @@ def _trust(detail: Mapping[str, Any]) -> list[str]:
             out.append(f'<p class="legend">Prediction not checked: '
                        f'{escape(str(v["not_checked"]).rstrip("."))}.</p>')
         else:
-            cls = "warn" if v.get("verdict") == "prediction failed" else "rests"
+            cls = "warn" if v.get("verdict") in CONTRADICTED else "rests"
             out.append(f'<p class="{cls}">Checked against maps measured after the plan: '
                        f'{escape(str(v.get("verdict")))}.</p><ul class="steps">')
             for sess in v.get("sessions") or []:

@@ -23,7 +23,7 @@ import cattrs
 from fieldbank.engine import Done, Progress, Task, run_batch
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.report.compute import CaseResult, Figure, compute_case
-from fieldbank.interventions.report.figures import CheckPoint
+from fieldbank.interventions.report.figures.cohort import CheckPoint
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
 from fieldbank.interventions.report.trust import keep_intervals, with_known_intervals
 from fieldbank.storage import Database

@@ -1,0 +1,134 @@
+"""The two arms behind the handle and the fades between them (:class:`ModelPair`).
+
+Model A (before) and model B (after) are compiled once, outside the loop, into two
+:class:`fieldbank.sim.ArmSim`; the loop ticks both with the same handle state and blends their
+forces, F = g · ((1 − w) F_A + w F_B):
+
+* the blend w follows a raised-cosine ramp (:class:`Ramp`) over ``crossfade_s`` on each switch,
+  so the force has no step;
+* the gain g fades out over ``push_fade_s`` before a pushed pair is swapped in, and back in
+  after it (also raised-cosine); arming, faults and disarming set it too (:mod:`haptic.renderer`).
+
+What the pair was told about its models (ids, :class:`~haptic.modelinfo.ModelInfo`) goes into the
+trace's metadata when the pair is swapped in.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from fieldbank.haptic.commands import SimPair
+from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair, to_wire
+from fieldbank.model import Arm
+from fieldbank.params import ArmParams
+from fieldbank.sim import ArmSim, CouplingConfig
+
+
+class Ramp:
+    """Raised-cosine ramp from its value to ``end`` over ``n`` ticks (:meth:`go`)."""
+
+    __slots__ = ("end", "k", "n", "start", "value")
+
+    def __init__(self, value: float) -> None:
+        self.value = self.start = self.end = value
+        self.k = self.n = 0
+
+    def go(self, end: float, n: int) -> None:
+        self.start = self.value
+        self.end = end
+        self.k = 0
+        self.n = max(1, n)
+
+    def step(self) -> float:
+        if self.k < self.n:
+            self.k += 1
+            s = self.k / self.n
+            self.value = self.start + (self.end - self.start) * (0.5 - 0.5 * math.cos(math.pi * s))
+        return self.value
+
+    @property
+    def moving(self) -> bool:
+        return self.k < self.n
+
+    def set(self, value: float) -> None:
+        self.value = self.start = self.end = value
+        self.k = self.n = 0
+
+
+def build_sim(params: ArmParams, dt_s: float, coupling: CouplingConfig | None = None) -> ArmSim:
+    """Compile a model for the loop (slow part, done outside the loop)."""
+    return ArmSim(Arm.from_params(params), dt_s=dt_s, coupling=coupling)
+
+
+class ModelPair:
+    """Arms A and B, the blend between them and the gain around a swap.
+
+    Parameters
+    ----------
+    before, after : ArmParams
+    dt_s : float, s
+        The loop's period.
+    crossfade_s, push_fade_s : float, s
+        Ramp of an A↔B switch; fade out before and in after a swap.
+    coupling : CouplingConfig, optional
+    """
+
+    def __init__(self, before: ArmParams, after: ArmParams, dt_s: float, crossfade_s: float,
+                 push_fade_s: float, coupling: CouplingConfig | None = None) -> None:
+        self.dt_s = dt_s
+        self.coupling = coupling
+        self.crossfade_ticks = round(crossfade_s / dt_s)
+        self.push_fade_ticks = round(push_fade_s / dt_s)
+        self.params = (before, after)
+        self.sims = self.compile(before, after)
+        self.blend = Ramp(0.0)
+        self.gain = Ramp(0.0)
+        #: compiled models waiting for the gain to reach zero, with their ids and descriptions
+        self.pending: tuple[SimPair, tuple[ArmParams, ArmParams], ModelIds | None,
+                            ModelInfoPair | None] | None = None
+
+    def compile(self, before: ArmParams, after: ArmParams) -> SimPair:
+        """Both models compiled for this loop's period (slow: call outside the loop)."""
+        return (build_sim(before, self.dt_s, self.coupling),
+                build_sim(after, self.dt_s, self.coupling))
+
+    def crossfade(self, weight: float) -> None:
+        """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""
+        self.blend.go(weight, self.crossfade_ticks)
+
+    def fade(self, gain: float) -> None:
+        """Ramp the gain to ``gain`` over ``push_fade_s``."""
+        self.gain.go(gain, self.push_fade_ticks)
+
+    def queue(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
+              model_ids: ModelIds | None, model_info: ModelInfoPair | None) -> None:
+        """Hold compiled models for :meth:`swap`."""
+        self.pending = (sims, params, model_ids, model_info)
+
+    @property
+    def swapping(self) -> bool:
+        """True while pushed models fade out, wait to be swapped or fade in."""
+        return self.pending is not None or self.gain.moving
+
+    @property
+    def swap_due(self) -> bool:
+        """Pushed models wait and the gain has reached zero."""
+        return self.pending is not None and self.gain.value == 0.0 and not self.gain.moving
+
+    def swap(self, metadata: dict[str, Any]) -> None:
+        """Put the pending models in place; their ids and descriptions replace those in the
+        trace's ``metadata``."""
+        assert self.pending is not None
+        sims, params, ids, info = self.pending
+        self.pending = None
+        self.sims = sims
+        self.params = params
+        if ids:
+            metadata["model_ids"] = dict(ids)
+        else:
+            metadata.pop("model_ids", None)
+        if info:
+            metadata["model_info"] = to_wire(info)
+        else:
+            metadata.pop("model_info", None)
