@@ -12,10 +12,15 @@ from __future__ import annotations
 FIT_ALGORITHMS: tuple[str, ...] = ("mlsl+lbfgs", "crs2+bobyqa", "direct+lbfgs", "dual_annealing")
 FIT_DEFAULT_ALGORITHM = "mlsl+lbfgs"
 FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest")
+# fieldbank.model.MODEL_VERSION: the model version fits are made under (fit --older-than)
+MODEL_VERSION = 1
 FIT_DEFAULT_PRIOR_WEIGHT = 1.0
 UNCERTAINTY_METHODS: tuple[str, ...] = ("auto", "gauss-newton", "bootstrap")
 UNCERTAINTY_DEFAULT_METHOD = "auto"
 UNCERTAINTY_DEFAULT_REPLICATES = 40
+
+# fieldbank.storage.orm: the kinds of batch run (fieldbank jobs --kind)
+JOB_KINDS: tuple[str, ...] = ("fit", "report", "validate")
 
 # fieldbank.evaluate.design and .classify
 PROBE_CRITERIA: tuple[str, ...] = ("feel", "information", "orientation", "minmax")

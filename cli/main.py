@@ -48,6 +48,8 @@ COMMANDS: dict[str, LazyCommand] = {
                "Stored intervention plans: list, show, record the day one was given."),
     "report": C("fieldbank.cli.report", "report",
                 "Report the field changes of stored intervention plans (HTML + CSV + JSON)."),
+    "jobs": C("fieldbank.cli.jobs", "jobs",
+              "Batch runs: what ran, what failed, what is left (RUN: each of its tasks)."),
     "validate": C("fieldbank.cli.validate", "validate",
                   "Check predictions against maps measured after the plan; --loo: leave maps "
                   "out of a fit."),

@@ -13,7 +13,15 @@ from datetime import date, datetime
 
 import click
 
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import (
+    DATE,
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+    say,
+    scheduler_option,
+)
 from fieldbank.config import setting
 
 
@@ -44,6 +52,7 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes for batches (default: report.jobs in fieldbank.toml, "
                    "else the cores available).")
+@scheduler_option
 @click.option("--no-date/--date", "no_date", default=None,
               help="Leave the time of writing out, so that reruns give identical files "
                    "(default: report.no_date in fieldbank.toml, else dated).")
@@ -53,13 +62,14 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
 def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ...],
            plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: date | None,
            until: date | None, kinds: tuple[str, ...], out_dir: str, force: bool,
-           jobs: int | None, no_date: bool | None, accept_poor_fit: bool,
+           jobs: int | None, scheduler: str | None, no_date: bool | None, accept_poor_fit: bool,
            as_json: bool) -> None:
     """Report the field changes of stored intervention plans (HTML + CSV + JSON).
 
     Terms (R1, R2, catch, χ²/n, under-determined, ...): docs/glossary.md.
     """
     # the report's numerics load when it runs, so 'report --help' starts at once
+    from fieldbank.engine import resolve_scheduler
     from fieldbank.interventions.catalogue import KINDS
     from fieldbank.interventions.report import Selection, build_report, default_jobs
 
@@ -74,9 +84,11 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     jobs = setting("report.jobs", jobs).value
     when = (None if setting("report.no_date", no_date).value
             else datetime.now().astimezone().isoformat(timespec="seconds"))
+    address = resolve_scheduler(scheduler)  # a bad address is refused before any work
     with open_db(db_url) as db:
         out = build_report(db, sel, out_dir, jobs=jobs or default_jobs(), progress=True,
-                           stamp=when, accept_poor_fit=accept_poor_fit, force=force)
+                           stamp=when, accept_poor_fit=accept_poor_fit, force=force,
+                           scheduler=address, say=say)
     if as_json:
         emit_json({"cases": out.n_cases, "jobs": out.jobs_used, "html": str(out.html),
                    "csv": str(out.csv), "json": str(out.json)})

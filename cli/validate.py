@@ -19,7 +19,15 @@ import textwrap
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import (
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+    say,
+    scheduler_option,
+)
+from fieldbank.engine import progress_bar, resolve_scheduler
 from fieldbank.fitting.crossval import (
     EXPLANATION,
     NOT_GENERALISED,
@@ -37,6 +45,7 @@ from fieldbank.interventions.validate import (
     ValidationReport,
     validate_plans,
 )
+from fieldbank.interventions.validate_batch import validate_on_cluster
 
 #: Text output is wrapped to this width.
 WIDTH = 100
@@ -160,16 +169,18 @@ def loo_text(cv: CrossValidation) -> str:
 @click.option("--max-change-se", type=click.FloatRange(0.0, 10.0, min_open=True),
               default=MAX_CHANGE_SE, show_default=True,
               help="The realised fraction decides a verdict only when its SE is at most this.")
+@scheduler_option
 @db_option
 @json_option
 @click.pass_context
 def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int, ...],
              loo: bool, model_id: int | None, change_tolerance: float, max_change_se: float,
-             db_url: str | None, as_json: bool) -> None:
+             scheduler: str | None, db_url: str | None, as_json: bool) -> None:
     """Check given plans against maps measured after them; --loo: does the fit generalise.
 
     Exit status 1 when a plan's prediction is contradicted (failed or partial effect), or with
-    --loo when the fit does not generalise to a map the others should predict.
+    --loo when the fit does not generalise to a map the others should predict; with
+    --scheduler, also when a task failed (its plans were not checked).
     """
     if loo:
         if plan_ids:
@@ -189,12 +200,21 @@ def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int,
         return
     if model_id is not None:
         raise click.UsageError("--model goes with --loo.")
+    address = resolve_scheduler(scheduler)
+    lost: tuple[str, ...] = ()
     with open_db(db_url) as db:
-        rep = validate_plans(db, patients, plan_ids, tolerance=change_tolerance,
-                             max_se=max_change_se)
+        if address:
+            rep, lost = validate_on_cluster(db, address, patients, plan_ids,
+                                            tolerance=change_tolerance, max_se=max_change_se,
+                                            progress=progress_bar("validate"), say=say)
+        else:
+            rep = validate_plans(db, patients, plan_ids, tolerance=change_tolerance,
+                                 max_se=max_change_se)
     if as_json:
         emit_json(rep.to_dict())
     else:
         click.echo(plans_text(rep))
-    if rep.contradicted:
+    for line in lost:
+        click.echo(f"not checked (task failed): {line}", err=True)
+    if rep.contradicted or lost:
         ctx.exit(1)

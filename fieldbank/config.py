@@ -53,8 +53,10 @@ FILE_NAME = "fieldbank.toml"
 #: The embedded database's file in the data directory (when no ``db`` is set).
 DEFAULT_DB_FILE = "fieldbank.sqlite3"
 ENV_CONFIG = "FIELDBANK_CONFIG"
-#: ``tcp://HOST:PORT`` of a Dask scheduler (HOST a name, an IPv4 address or [IPv6]).
-SCHEDULER_RE = re.compile(r"tcp://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):([0-9]{1,5})")
+#: Address schemes of a Dask scheduler (``dask.distributed`` comms).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+#: ``SCHEME://HOST:PORT`` of a Dask scheduler (HOST a name, an IPv4 address or [IPv6]).
+SCHEDULER_RE = re.compile(r"([a-z]+)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):([0-9]{1,5})")
 
 
 def _text(v: object) -> str:
@@ -68,10 +70,12 @@ def _path(v: object) -> Path:
 
 
 def _scheduler(v: object) -> str:
-    text = _text(v)
+    text = _text(v).strip()
     m = SCHEDULER_RE.fullmatch(text)
-    if m is None or not 0 < int(m.group(2)) < 65536:
-        raise ValueError("a Dask scheduler address tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786)")
+    if m is None or m.group(1) not in SCHEDULER_SCHEMES or not 0 < int(m.group(3)) < 65536:
+        raise ValueError("a Dask scheduler address tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786, "
+                         "the address 'dask scheduler' prints; schemes "
+                         f"{', '.join(SCHEDULER_SCHEMES)})")
     return text
 
 
@@ -145,9 +149,9 @@ KEYS: dict[str, Key] = {k.name: k for k in (
         "FIELDBANK_ARRAYS", unset="(beside the SQLite file)"),
     Key("robot", "the robot 'haptic serve' drives: a port or URL (no default: serve asks)",
         _text, "FIELDBANK_ROBOT", "--robot", None, mask_url, "(none: give --robot)"),
-    Key("scheduler", "Dask scheduler of the batch commands, tcp://HOST:PORT (default: a "
-        "local cluster)", _scheduler, "FIELDBANK_SCHEDULER", "--scheduler",
-        unset="(a local cluster)"),
+    Key("scheduler", "Dask scheduler of the batch commands, tcp://HOST:PORT (default: local "
+        "worker processes)", _scheduler, "FIELDBANK_SCHEDULER", "--scheduler",
+        unset="(none: local worker processes)"),
     Key("haptic_socket", "control socket of a running renderer (default: haptic.sock in the "
         "data directory)", _path, "FIELDBANK_HAPTIC_SOCKET", "--socket",
         unset="(haptic.sock in home)"),
@@ -258,7 +262,7 @@ def setting(name: str, flag: object = None) -> Setting:
             raise ConfigError(f"{key.flag or name} must be {exc}; got {flag!r}.") from None
     if key.env:
         env = os.environ.get(key.env)
-        if env:
+        if env and env.strip():
             try:
                 return Setting(name, key.convert(env), f"variable {key.env}")
             except ValueError as exc:

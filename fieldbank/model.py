@@ -43,9 +43,17 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fieldbank.errors import ParameterError, UnreachableError
+from fieldbank.muscle import passive_tension, reflex_tension
 from fieldbank.params import GROUP_SIGN, ArmParams
 
 FloatArray = NDArray[np.float64]
+#: Four same-shaped arrays: the entries of a 2 × 2 matrix per point, row by row.
+Quad = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+
+#: Version of the arm model and of how a fit estimates it: raised with every change of the
+#: equations, of the fitter or of its defaults that changes what a fit of the same maps gives.
+#: Every fit records it; ``fieldbank fit --all --older-than N`` refits what older versions made.
+MODEL_VERSION = 1
 
 #: Elbow angles closer than this to 0 or π make the endpoint Jacobian singular.
 SINGULAR_ELBOW_RAD = 0.02
@@ -319,40 +327,14 @@ class Arm:
 
     def passive_forces(self, lam: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Ψ and ∂Ψ/∂λ, each (N, 6): N and N/m."""
-        d = lam - self.lam_slack
-        z = d / self.w
-        soft = np.logaddexp(0.0, z)  # ln(1 + e^z), without overflow
-        sp = self.w * soft
-        sig = np.exp(z - soft)  # the logistic function 1/(1 + e^-z), stable at both ends
-        ell = self.excursion
-        g = np.exp(-((d / ell) ** 2))
-        psi = self.km * sp * g
-        dpsi = self.km * g * (sig - sp * 2.0 * d / (ell * ell))
-        return psi, dpsi
+        return passive_tension(lam, self.lam_slack, self.km, self.excursion, self.w)
 
     def reflex_forces(
         self, lam: FloatArray, ldot: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Φ, ∂Φ/∂λ and ∂Φ/∂λ̇, each (N, 6): N, N/m, N·s/m."""
-        r = ldot / self.ldot_max
-        c = np.clip(r, 0.0, 1.0)
-        dc = np.where((r > 0) & (r < 1), 1.0, 0.0)
-        dc = np.where((r == 0) | (r == 1), 0.5, dc) / self.ldot_max
-        u = self.beta * c
-        ell = self.excursion
-        k = self.lam_rest / self.lam_max
-        gam = (lam - self.lam_min) / ell - k * (1.0 - u)
-        e = np.exp(-gam * gam)
-        h = self.alpha * u * gam * e
-        dh_dlam = self.alpha * u * e * (1.0 - 2.0 * gam * gam) / ell
-        dh_du = self.alpha * (gam * e + u * e * (1.0 - 2.0 * gam * gam) * k)
-        # max(0, h): active where h > 0; where u == 0 (h == 0) the lengthening side is active
-        # exactly when h would grow with u, and dc already halves that slope.
-        on = (h > 0) | ((h == 0) & (dh_du > 0))
-        phi = np.where(h > 0, h, 0.0)
-        dphi_dlam = np.where(on, dh_dlam, 0.0)
-        dphi_dldot = np.where(on, dh_du * self.beta * dc, 0.0)
-        return phi, dphi_dlam, dphi_dldot
+        return reflex_tension(lam, ldot, self.ldot_max, self.alpha, self.beta, self.excursion,
+                              self.lam_rest, self.lam_min, self.lam_max)
 
     def joint_torque(self, q: ArrayLike, qdot: ArrayLike | None = None) -> FloatArray:
         """Muscle torque on the arm τ = -J_λᵀ(Ψ+Φ), shape (N, 2), N·m."""
@@ -368,20 +350,14 @@ class Arm:
         """Force the arm exerts on the handle, (N, 2), N, at hand positions x and velocity v."""
         return self.field(x, v, derivatives=False)[0]
 
-    def field(
-        self, x: ArrayLike, v: ArrayLike | None = None, derivatives: bool = True
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Force F (N,2), stiffness K = -∂F/∂x (N,2,2) and damping B = -∂F/∂v (N,2,2).
-
-        Parameters
-        ----------
-        x : array, shape (N, 2), m
-            Hand positions in the shoulder frame.
-        v : array, shape (2,) or (N, 2), m/s, optional
-            Endpoint velocity (0 = static). K is taken at this fixed velocity.
-        derivatives : bool
-            Skip K and B (returned as empty arrays) when False.
-        """
+    def hand_state(
+        self, x: ArrayLike, v: ArrayLike | None = None
+    ) -> tuple[FloatArray, Quad, Quad, tuple[FloatArray, FloatArray]]:
+        """The joint-space state of hand positions x (N, 2), m, and velocity v ((2,) or
+        (N, 2), m/s; None: static), shoulder frame, model side: joint angles q (N, 2), rad;
+        the endpoint Jacobian's entries (a, b, c, d) = J (m/rad) and (ia, ib, ic, id) = J⁻¹,
+        each (N,); and the joint velocities (q̇1, q̇2), each (N,), rad/s. Depends on the
+        geometry only (:class:`ArmBatch` shares it across parameter sets)."""
         xm = self._in(x)
         n = xm.shape[0]
         if v is None:
@@ -406,17 +382,29 @@ class Arm:
         vx, vy = vm[:, 0], vm[:, 1]
         qd1 = ia * vx + ib * vy
         qd2 = ic * vx + id_ * vy
+        return q, (a, b, c, d), (ia, ib, ic, id_), (qd1, qd2)
+
+    def field(
+        self, x: ArrayLike, v: ArrayLike | None = None, derivatives: bool = True
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Force F (N,2), stiffness K = -∂F/∂x (N,2,2) and damping B = -∂F/∂v (N,2,2).
+
+        Parameters
+        ----------
+        x : array, shape (N, 2), m
+            Hand positions in the shoulder frame.
+        v : array, shape (2,) or (N, 2), m/s, optional
+            Endpoint velocity (0 = static). K is taken at this fixed velocity.
+        derivatives : bool
+            Skip K and B (returned as empty arrays) when False.
+        """
+        q, (a, b, c, d), (ia, ib, ic, id_), (qd1, qd2) = self.hand_state(x, v)
         jl = self.jl
         lam = self.lam_rest + (q - self.q_rest) @ jl.T
         ldot = np.outer(qd1, jl[:, 0]) + np.outer(qd2, jl[:, 1])
         psi, dpsi = self.passive_forces(lam)
         phi, dphi_l, dphi_ld = self.reflex_forces(lam, ldot)
-        f = psi + phi
-        tau = -f @ jl
-        t1, t2 = tau[:, 0], tau[:, 1]
-        # F = J⁻ᵀ τ
-        fx = ia * t1 + ic * t2
-        fy = ib * t1 + id_ * t2
+        fx, fy = hand_force(psi + phi, jl, ia, ib, ic, id_)
         force = np.stack([fx, fy], axis=1)
         if not derivatives:
             empty = np.empty((0, 2, 2))
@@ -462,6 +450,15 @@ class Arm:
     def rest_position(self) -> FloatArray:
         """Hand position at the rest posture, shape (2,), m, shoulder frame."""
         return self.fk(self.q_rest)[0]
+
+
+def hand_force(f: FloatArray, jl: FloatArray, ia: FloatArray, ib: FloatArray, ic: FloatArray,
+                id_: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The hand force (F_x, F_y), N, of muscle tensions f (…, N, 6), N: τ = -J_λᵀ f, then
+    F = J⁻ᵀ τ with J⁻¹ = [[ia, ib], [ic, id]] (each (N,)); leading axes of f carry through."""
+    tau = -f @ jl
+    t1, t2 = tau[..., 0], tau[..., 1]
+    return ia * t1 + ic * t2, ib * t1 + id_ * t2
 
 
 def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatArray]:

@@ -19,7 +19,12 @@ what-if must say:
   samples (bootstrap replicates or Gaussian draws, :mod:`fieldbank.fitting.uncertainty`) gives
   the spread of the headline metrics before, after and of the change; reported as the 2.5-97.5
   percentiles (95%) beside the point prediction. Parameters held at the unimpaired value stay
-  held in the samples: what rests on them is in the warnings, not in the intervals.
+  held in the samples: what rests on them is in the warnings, not in the intervals. The
+  samples run in one vectorised pass (:func:`sample_metrics`, :class:`fieldbank.model.ArmBatch`:
+  the geometry compiled once, every muscle value - Km, α, β, slack offset, rest length, rest
+  posture - free per sample); :func:`sample_metrics_per_sample` is the one-arm-per-sample
+  reference it is tested against. :class:`IntervalSet` is what a report keeps with the fit
+  under :func:`interval_key`.
 
 Which parameters a step acts on follows from the catalogue's public contract (``targets()``
 and ``EFFECTS``): a change of α or β scales the group's reflex force, which rests on both α
@@ -29,14 +34,23 @@ on Km.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
+from fieldbank.armbatch import ArmBatch
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.batch import (
+    peak_magnitude,
+    probe_forces,
+    rms_forces,
+    standard_stretch_torques,
+)
 from fieldbank.evaluate.compare import Conditions
 from fieldbank.evaluate.probing import (
     Profiles,
@@ -48,7 +62,7 @@ from fieldbank.evaluate.probing import (
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.model import Arm, FloatArray
+from fieldbank.model import MODEL_VERSION, Arm, FloatArray
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import ArmParams
 
@@ -287,6 +301,93 @@ def headline_metrics(arm: Arm, cond: Conditions,
     return out
 
 
+def headline_metrics_batch(batch: ArmBatch, cond: Conditions
+                           ) -> tuple[dict[str, tuple[FloatArray, str]], dict[str, FloatArray]]:
+    """:func:`headline_metrics` of every parameter set of ``batch`` in one pass: metric ->
+    (values (S,), unit), in the same order, and each stretch's torque resisting the fast
+    stretch along the joint angle (stretch name -> (S, T) N·m)."""
+    out: dict[str, tuple[FloatArray, str]] = {}
+    curves: dict[str, FloatArray] = {}
+    for s in standard_stretch_torques(batch):
+        curves[s.name] = s.fast_n_m
+        out[f"{s.name} peak torque"] = (s.fast_n_m.max(axis=1), "N·m")
+        out[f"{s.name} reflex torque"] = ((s.fast_n_m - s.slow_n_m).max(axis=1), "N·m")
+    for m in cond.probes:
+        out[f"{m.name} peak force"] = (peak_magnitude(probe_forces(batch, m)), "N")
+    for speed, rms in zip(cond.speeds_m_per_s, rms_forces(batch, cond.grid_m, cond.velocities),
+                          strict=True):
+        out[f"RMS |F| at {speed:g} m/s"] = (rms, "N")
+    return out, curves
+
+
+@dataclass(frozen=True, eq=False)
+class SampleMetrics:
+    """The headline metrics of S parameter samples before and after a plan.
+
+    ``keys`` and ``units`` in :func:`headline_metrics` order; ``before`` and ``after`` (S, K);
+    ``curves``: {"before" | "after": {stretch name: (S, T) N·m}}, the fast-stretch torque.
+    """
+
+    keys: tuple[str, ...]
+    units: tuple[str, ...]
+    before: FloatArray
+    after: FloatArray
+    curves: dict[str, dict[str, FloatArray]]
+
+
+def sample_metrics(samples: Sequence[ArmParams], plan: Plan, cond: Conditions,
+                   geometry: Arm) -> SampleMetrics:
+    """The plan applied to each sample, every sample's metrics before and after in one
+    vectorised pass (:class:`fieldbank.model.ArmBatch`: ``geometry`` compiled once, every
+    muscle value free per sample). A plan that changed the geometry itself falls back to
+    :func:`sample_metrics_per_sample`."""
+    afters = [plan.apply(p) for p in samples]
+    try:
+        b = ArmBatch.from_params(samples, geometry)
+        a = ArmBatch.from_params(afters, geometry)
+    except ParameterError:
+        return sample_metrics_per_sample(samples, plan, cond)
+    mb, cb = headline_metrics_batch(b, cond)
+    ma, ca = headline_metrics_batch(a, cond)
+    keys = tuple(mb)
+    return SampleMetrics(keys, tuple(mb[k][1] for k in keys),
+                         np.stack([mb[k][0] for k in keys], axis=1),
+                         np.stack([ma[k][0] for k in keys], axis=1),
+                         {"before": cb, "after": ca})
+
+
+def sample_metrics_per_sample(samples: Sequence[ArmParams], plan: Plan,
+                              cond: Conditions) -> SampleMetrics:
+    """:func:`sample_metrics` one sample at a time, each compiled as its own arm: the
+    reference the vectorised pass is tested against, and the path for a plan that changes
+    the geometry."""
+    references: dict[ArmParams, tuple[Arm, Profiles]] = {}
+    rows_b, rows_a = [], []
+    curves: dict[str, list[dict[str, FloatArray]]] = {"before": [], "after": []}
+    keys: list[str] = []
+    units: list[str] = []
+    for p in samples:
+        cb: dict[str, FloatArray] = {}
+        ca: dict[str, FloatArray] = {}
+        arm_p = Arm.from_params(p)
+        after_p = plan.apply(p)
+        try:  # a plan changes muscle values only: the geometry is compiled once
+            arm_pa = arm_p.with_muscles(after_p)
+        except ParameterError:
+            arm_pa = Arm.from_params(after_p)
+        mb = headline_metrics(arm_p, cond, cb, references)
+        ma = headline_metrics(arm_pa, cond, ca, references)
+        keys, units = list(mb), [mb[k][1] for k in mb]
+        rows_b.append([mb[k][0] for k in keys])
+        rows_a.append([ma[k][0] for k in keys])
+        curves["before"].append(cb)
+        curves["after"].append(ca)
+    return SampleMetrics(
+        tuple(keys), tuple(units), np.array(rows_b, dtype=float), np.array(rows_a, dtype=float),
+        {when: ({name: np.stack([c[name] for c in per]) for name in per[0]} if per else {})
+         for when, per in curves.items()})
+
+
 def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
                          cond: Conditions, arms: ArmCache,
                          n_samples: int = DEFAULT_INTERVAL_SAMPLES,
@@ -304,46 +405,104 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
     if not basis.same_model:
         return (), (f"the model before is derived from fitted model {basis.fitted_model_id} by "
                     "earlier plans: intervals need the fitted model itself"), 0
-    point_b = headline_metrics(arms(before), cond)
-    point_a = headline_metrics(arms(plan.apply(before)), cond)
     samples = basis.samples.params(before, n_samples)
-    keys = list(point_b)
-    vb = np.empty((len(samples), len(keys)))
-    va = np.empty_like(vb)
-    curves: dict[str, list[dict[str, FloatArray]]] = {"before": [], "after": []}
-    references: dict[ArmParams, tuple[Arm, Profiles]] = {}
-    for j, p in enumerate(samples):
-        cb: dict[str, FloatArray] = {}
-        ca: dict[str, FloatArray] = {}
-        arm_p = Arm.from_params(p)
-        after_p = plan.apply(p)
-        try:  # a plan changes muscle values only: the geometry is compiled once
-            arm_pa = arm_p.with_muscles(after_p)
-        except ParameterError:
-            arm_pa = Arm.from_params(after_p)
-        mb = headline_metrics(arm_p, cond, cb, references)
-        ma = headline_metrics(arm_pa, cond, ca, references)
-        vb[j] = [mb[k][0] for k in keys]
-        va[j] = [ma[k][0] for k in keys]
-        curves["before"].append(cb)
-        curves["after"].append(ca)
-    lo, hi = INTERVAL_PERCENTILES
-    if bands is not None and samples:
-        for when, per_sample in curves.items():
-            bands[when] = {}
-            for name in per_sample[0]:
-                stack = np.stack([c[name] for c in per_sample])
-                low, high = np.percentile(stack, [lo, hi], axis=0)
-                bands[when][name] = (low, high)
-    bl, bh = np.percentile(vb, [lo, hi], axis=0)
-    al, ah = np.percentile(va, [lo, hi], axis=0)
-    cl, ch = np.percentile(va - vb, [lo, hi], axis=0)
-    out = tuple(Interval(k, point_b[k][1], point_b[k][0], point_a[k][0], float(bl[i]),
-                         float(bh[i]), float(al[i]), float(ah[i]), float(cl[i]), float(ch[i]))
-                for i, k in enumerate(keys))
+    # the model itself rides along as set 0: its metrics are the point predictions
+    sm = sample_metrics([before, *samples], plan, cond, arms(before))
+    out = intervals_of(sm, bands)
     note = (f"95% intervals over {len(samples)} parameter samples of fit {basis.fit_id}; "
             "parameters held at the unimpaired value stay held (see warnings)")
     return out, note, len(samples)
+
+
+def intervals_of(sm: SampleMetrics,
+                 bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] | None = None
+                 ) -> tuple[Interval, ...]:
+    """The point predictions (set 0 of ``sm``: the model itself) with the 95% intervals of
+    the samples (sets 1…S); ``bands`` receives the curves' percentile bands (see
+    :func:`prediction_intervals`)."""
+    lo, hi = INTERVAL_PERCENTILES
+    if bands is not None and len(sm.before) > 1:
+        for when, per_name in sm.curves.items():
+            bands[when] = {}
+            for name, stack in per_name.items():
+                low, high = np.percentile(stack[1:], [lo, hi], axis=0)
+                bands[when][name] = (low, high)
+    pb, pa = sm.before[0], sm.after[0]
+    vb, va = sm.before[1:], sm.after[1:]
+    bl, bh = np.percentile(vb, [lo, hi], axis=0)
+    al, ah = np.percentile(va, [lo, hi], axis=0)
+    cl, ch = np.percentile(va - vb, [lo, hi], axis=0)
+    return tuple(Interval(k, sm.units[i], float(pb[i]), float(pa[i]), float(bl[i]),
+                          float(bh[i]), float(al[i]), float(ah[i]), float(cl[i]), float(ch[i]))
+                 for i, k in enumerate(sm.keys))
+
+
+@dataclass(frozen=True, eq=False)
+class IntervalSet:
+    """What :func:`prediction_intervals` gives for one plan on one fitted model: the
+    intervals, their note, the samples used and the curve bands. Kept with the fit in the
+    database (:meth:`to_document`), so a report that meets the same fit, model and plan again
+    reads them instead of computing them."""
+
+    intervals: tuple[Interval, ...]
+    note: str
+    n_samples: int
+    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]]
+
+    def to_document(self) -> tuple[dict[str, Any], bytes | None]:
+        """A JSON document and the bands as float64 little-endian bytes (exact: read back,
+        every figure and number is the same to the last bit)."""
+        names = [[when, name] for when, per in self.bands.items() for name in per]
+        parts = [np.asarray(side, dtype="<f8") for when, name in names
+                 for side in self.bands[when][name]]
+        doc = {"intervals": [{f.name: getattr(i, f.name) for f in fields(Interval)}
+                             for i in self.intervals],
+               "note": self.note, "n_samples": self.n_samples,
+               "bands": names, "band_length": [len(p) for p in parts]}
+        return doc, (b"".join(p.tobytes() for p in parts) if parts else None)
+
+    @classmethod
+    def from_document(cls, doc: Mapping[str, Any], arrays: bytes | None) -> IntervalSet:
+        flat = np.frombuffer(arrays or b"", dtype="<f8").astype(float)
+        bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = {}
+        at = 0
+        lengths = iter(doc["band_length"])
+        for when, name in doc["bands"]:
+            sides = []
+            for _ in range(2):
+                n = next(lengths)
+                sides.append(flat[at:at + n])
+                at += n
+            bands.setdefault(when, {})[name] = (sides[0], sides[1])
+        return cls(tuple(Interval(**i) for i in doc["intervals"]), str(doc["note"]),
+                   int(doc["n_samples"]), bands)
+
+
+#: Raised with every change of how intervals are computed; with
+#: :data:`fieldbank.model.MODEL_VERSION` part of :func:`interval_key`.
+INTERVALS_VERSION = 1
+
+
+def interval_key(basis: FitBasis, before: ArmParams, plan: Plan, n_samples: int) -> str:
+    """SHA-256 of everything :func:`prediction_intervals` depends on: the fit (its samples),
+    the model before, the plan, the number of samples and the model and interval versions.
+    A refit, another model or plan, or a new version gives another key."""
+    doc = {"fit": basis.fit_id, "fitted_model": basis.fitted_model_id,
+           "same_model": basis.same_model, "before": before.to_dict(), "plan": plan.to_dict(),
+           "n_samples": n_samples, "model_version": MODEL_VERSION,
+           "intervals_version": INTERVALS_VERSION}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode("utf-8")).hexdigest()
+
+
+def interval_set(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
+                 arms: ArmCache, n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> IntervalSet:
+    """:func:`prediction_intervals` with its bands, as one :class:`IntervalSet`."""
+    if n_samples <= 0:
+        return IntervalSet((), "intervals not asked for", 0, {})
+    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = {}
+    intervals, note, used = prediction_intervals(basis, before, plan, cond, arms, n_samples,
+                                                 bands)
+    return IntervalSet(intervals, note, used, bands)
 
 
 def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *,
@@ -356,18 +515,19 @@ def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *
 
 def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
                   arms: ArmCache, *, accept_poor_fit: bool = False,
-                  n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
-    """:func:`examine` for a model ``before`` whose fit basis is known (reports)."""
+                  n_samples: int = DEFAULT_INTERVAL_SAMPLES,
+                  known: IntervalSet | None = None) -> Guesses:
+    """:func:`examine` for a model ``before`` whose fit basis is known (reports); ``known``:
+    its intervals read from the fit's stored documents (:func:`interval_key`), used instead
+    of computing them."""
     note = check_fit(basis, accept_poor_fit)
-    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = {}
-    intervals, inote, used = (prediction_intervals(basis, before, plan, cond, arms, n_samples,
-                                                   bands)
-                              if n_samples > 0 else ((), "intervals not asked for", 0))
+    iv = known if known is not None else interval_set(basis, before, plan, cond, arms,
+                                                      n_samples)
     warn = list(plan_warnings(plan, basis, before))
     if note:
         warn.insert(0, note)
-    return Guesses(basis, guesses(basis, before), tuple(warn), intervals, inote, used,
-                   note is not None, bands=bands)
+    return Guesses(basis, guesses(basis, before), tuple(warn), iv.intervals, iv.note,
+                   iv.n_samples, note is not None, bands=iv.bands)
 
 
 def _values(params: ArmParams) -> dict[str, float]:

@@ -139,6 +139,8 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     from fieldbank.interventions.defaults import DOSE_UNIT, value
     from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
     from fieldbank.measure.protocol import PARTS, ProtocolConfig
+    from fieldbank.model import MODEL_VERSION
+    from fieldbank.storage.orm import JOB_KINDS
 
     assert ch.FIT_ALGORITHMS == tuple(ALGORITHMS)
     assert ch.FIT_DEFAULT_ALGORITHM == DEFAULT_ALGORITHM
@@ -166,6 +168,8 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
         lim.max_speed_m_per_s, lim.force_limit_n)
     pc = ProtocolConfig()
     assert ch.MEASURE_PARTS == PARTS
+    assert ch.JOB_KINDS == JOB_KINDS
+    assert ch.MODEL_VERSION == MODEL_VERSION
     assert (ch.MEASURE_SPACING_MM, ch.MEASURE_DISPLACEMENT_MM) == pytest.approx(
         (pc.spacing_m * 1000, pc.displacement_m * 1000))
     assert tuple(float(v) for v in ch.MEASURE_CENTRE.split(",")) == pc.centre_m

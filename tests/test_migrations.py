@@ -182,10 +182,11 @@ def test_a_downgrade_that_rebuilds_a_table_keeps_the_rows_that_point_at_it(
         hs = db.start_haptic_session(m.id, "sim://")
         db.add_trace(hs.id, "t", np.zeros((10, 3)), "mixed", {})
         engine = db.engine
-        assert migrate.downgrade(engine, "0002", tmp_path / "arrays") == ("0003", "0002")
+        head = migrate.head_revision()
+        assert migrate.downgrade(engine, "0002", tmp_path / "arrays") == (head, "0002")
         with engine.connect() as conn:
             assert conn.exec_driver_sql("PRAGMA foreign_key_check").all() == []
             assert conn.exec_driver_sql("SELECT count(*) FROM traces").scalar() == 1
             assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1  # on again
-        assert migrate.upgrade(engine, store_root=tmp_path / "arrays") == ("0002", "0003")
+        assert migrate.upgrade(engine, store_root=tmp_path / "arrays") == ("0002", head)
         assert db.check().ok

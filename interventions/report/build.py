@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fieldbank.engine import progress_bar
 from fieldbank.errors import FileRefused
 from fieldbank.figures import svg
 from fieldbank.files import write_atomic
@@ -36,8 +37,13 @@ from fieldbank.interventions.report.figures.cohort import (
     validation_figure,
 )
 from fieldbank.interventions.report.html import case_stretches, render
+from fieldbank.interventions.report.remote import compute_on_cluster
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
-from fieldbank.interventions.report.trust import TRUST_COLUMNS
+from fieldbank.interventions.report.trust import (
+    TRUST_COLUMNS,
+    keep_intervals,
+    with_known_intervals,
+)
 from fieldbank.sanitize import csv_cell
 from fieldbank.storage import Database
 
@@ -58,12 +64,8 @@ class ReportOutput:
     csv: Path
     json: Path
     n_cases: int
+    #: Local worker processes used (0: computed on a Dask cluster).
     jobs_used: int
-
-
-def default_jobs() -> int:
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-               else (os.cpu_count() or 1))
 
 
 def compute_all(cases: list[CaseSpec], jobs: int,
@@ -165,11 +167,15 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
                  title: str | None = None, accept_poor_fit: bool = False,
-                 force: bool = False) -> ReportOutput:
+                 force: bool = False, scheduler: str | None = None,
+                 say: Callable[[str], None] | None = None) -> ReportOutput:
     """Select, compute and write the report; raises SelectionError for an empty selection,
     and for cases whose model comes from a poor fit unless ``accept_poor_fit`` (then each such
     case records it); FileRefused when ``out_dir`` already holds report files, unless
-    ``force`` (checked first: nothing is computed for a report that would be refused)."""
+    ``force`` (checked first: nothing is computed for a report that would be refused). With
+    ``scheduler`` the cases are computed on that Dask cluster
+    (:mod:`~fieldbank.interventions.report.remote`), else in ``jobs`` local processes; the
+    files are the same bytes either way."""
     there = [f for f in FILES if os.path.lexists(Path(out_dir) / f)]
     if there and not force:
         raise FileRefused(f"{out_dir} already holds a report ({', '.join(there)}); give --force "
@@ -191,7 +197,15 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
         def wrap(it: Iterable[CaseResult], n: int) -> Iterable[CaseResult]:
             return tqdm(it, total=n, unit="case", desc="report", leave=False, disable=None)
 
-    results, used = compute_all(cases, jobs, wrap)
+    if scheduler:
+        results = compute_on_cluster(db, cases, scheduler, accept_poor_fit=accept_poor_fit,
+                                     progress=progress_bar("report") if progress else None,
+                                     say=say)
+        used = 0
+    else:
+        cases = with_known_intervals(db, cases)
+        results, used = compute_all(cases, jobs, wrap)
+        keep_intervals(db, cases, [r.intervals for r in results])
     if title is None:
         title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
                  f"fieldbank report: {len(cases)} cases")

@@ -19,6 +19,7 @@ from fieldbank.figures import svg
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
+from fieldbank.interventions.guesses import IntervalSet
 from fieldbank.interventions.plan import dose_warnings
 from fieldbank.interventions.report.figures.case import case_figures, treated_groups
 from fieldbank.interventions.report.figures.cohort import CheckPoint, check_points
@@ -104,6 +105,9 @@ class CaseResult:
     figures: tuple[Figure, ...]
     #: The plan checked against maps measured after it, per map (cohort figure).
     checks: tuple[CheckPoint, ...] = ()
+    #: The prediction intervals computed for this case (None: read from the fit's kept
+    #: documents, or none to compute), to keep with the fit.
+    intervals: IntervalSet | None = None
 
 
 def _clinical(c: Comparison) -> dict[str, Any]:
@@ -205,4 +209,7 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         Figure(f.key, f.caption,
                "" if f.scene is None else svg.write(f.scene, f"p{spec.plan_id}f{k}"))
         for k, f in enumerate(case_figures(arm_b, arm_a, c, plan, course, bands, checks)))
-    return CaseResult(spec, json_finite(row), json_finite(detail), figs, checks)
+    g = trust.guesses
+    fresh = (IntervalSet(g.intervals, g.interval_note, g.n_samples, g.bands)
+             if g is not None and spec.intervals is None and g.n_samples > 0 else None)
+    return CaseResult(spec, json_finite(row), json_finite(detail), figs, checks, fresh)

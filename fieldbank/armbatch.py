@@ -1,0 +1,181 @@
+"""Many parameter sets of one arm geometry evaluated together: :class:`ArmBatch`.
+
+A fit's uncertainty is carried as parameter samples that differ only in their muscle values
+(:data:`SAMPLED_FIELDS`); the geometry (J_λ, λ̇_max, segment lengths, range of motion) is the
+same for all of them. :class:`ArmBatch` compiles that geometry once and evaluates every set's
+forces with the equations of :mod:`fieldbank.model` (:func:`~fieldbank.model.passive_force`,
+:func:`~fieldbank.model.reflex_force`), so that S samples cost one vectorised pass instead of S
+compiled arms (the prediction intervals of a what-if and of a report).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fieldbank.errors import ParameterError
+from fieldbank.model import Arm, FloatArray, hand_force
+from fieldbank.muscle import passive_force, reflex_force
+from fieldbank.params import ArmParams
+
+#: ArmParams fields that may differ between the parameter sets of one :class:`ArmBatch`: every
+#: muscle value a fit or its uncertainty can move (Km, α, β per group, slack offsets, rest
+#: lengths and the rest posture). Everything else - segment lengths and masses, moment arms,
+#: range of motion, the λ̇_max circle, the smoothing width, the side - is the shared geometry.
+SAMPLED_FIELDS: tuple[str, ...] = ("km_n_per_m", "alpha_n", "beta", "slack_offset_m",
+                                   "rest_length_m", "q_rest_rad")
+
+
+@dataclass(frozen=True, eq=False)
+class ArmBatch:
+    """S parameter sets of one arm geometry, evaluated together.
+
+    The geometry (``geometry``: J_λ, λ̇_max, segment lengths, the range of motion) is compiled
+    once; the muscle values of :data:`SAMPLED_FIELDS` are arrays with a leading sample axis.
+    What each set gives is what :meth:`Arm.from_params` of that set would give, evaluated
+    with the same equations (:func:`passive_force`, :func:`reflex_force`); forces only, no
+    stiffness. Build with :meth:`from_params`; every array is read-only.
+
+    Attributes
+    ----------
+    geometry : Arm
+        The compiled arm of the first parameter set.
+    params : tuple of ArmParams
+        The S parameter sets.
+    q_rest : ndarray, shape (S, 2), rad
+    lam_rest, lam_slack, lam_min, lam_max, excursion : ndarray, shape (S, 6), m
+    km, alpha, beta : ndarray, shape (S, 6); N/m, N, dimensionless
+    """
+
+    geometry: Arm
+    params: tuple[ArmParams, ...]
+    q_rest: FloatArray
+    lam_rest: FloatArray
+    lam_slack: FloatArray
+    lam_min: FloatArray
+    lam_max: FloatArray
+    excursion: FloatArray
+    km: FloatArray
+    alpha: FloatArray
+    beta: FloatArray
+
+    @classmethod
+    def from_params(cls, params: Sequence[ArmParams], geometry: Arm | None = None) -> ArmBatch:
+        """Compile ``params`` (S ≥ 1 sets) over one geometry (default: the first set's).
+
+        Raises
+        ------
+        ParameterError
+            A set differs from the geometry in a field outside :data:`SAMPLED_FIELDS` (it
+            needs its own :meth:`Arm.from_params`), or a muscle would reach a non-positive
+            length within the range of motion.
+        """
+        sets = tuple(params)
+        if not sets:
+            raise ParameterError("ArmBatch needs at least one parameter set.")
+        geo = geometry if geometry is not None else Arm.from_params(sets[0])
+        key = _geometry_key(geo.params)
+        for k, p in enumerate(sets):
+            if _geometry_key(p) != key:
+                other = [f for f in _GEOMETRY_FIELDS if getattr(p, f) != getattr(geo.params, f)]
+                raise ParameterError(
+                    f"ArmBatch: parameter set {k} differs from the geometry in "
+                    f"{', '.join(other)}, not only in muscle values; compile it with "
+                    "Arm.from_params.")
+        q_rest = np.array([p.q_rest_rad for p in sets], dtype=float)
+        lam_rest = np.array([p.rest_length_m for p in sets], dtype=float)
+        p0 = geo.params
+        corners = np.array([[a, b] for a in p0.shoulder_range_rad for b in p0.elbow_range_rad])
+        # as Arm.from_params, per set: λ is linear in q, its extremes lie at the box corners
+        lam_corners = lam_rest[:, None, :] + (corners[None, :, :] - q_rest[:, None, :]) @ geo.jl.T
+        lam_min = lam_corners.min(axis=1)
+        lam_max = lam_corners.max(axis=1)
+        if np.any(lam_min <= 0):
+            where = np.unravel_index(int(np.argmin(lam_min)), lam_min.shape)
+            raise ParameterError(
+                f"ArmBatch: in parameter set {int(where[0])}, muscle {int(where[1])} would "
+                f"reach a non-positive length ({lam_min[where]:.4g} m) within the range of "
+                "motion.")
+        arrays = {
+            "q_rest": q_rest, "lam_rest": lam_rest,
+            "lam_slack": lam_rest + np.array([p.slack_offset_m for p in sets], dtype=float),
+            "lam_min": lam_min, "lam_max": lam_max, "excursion": lam_max - lam_min,
+            "km": np.array([p.km_n_per_m for p in sets], dtype=float),
+            "alpha": np.array([p.alpha_n for p in sets], dtype=float),
+            "beta": np.array([p.beta for p in sets], dtype=float),
+        }
+        for a in arrays.values():
+            a.setflags(write=False)
+        return cls(geometry=geo, params=sets, **arrays)
+
+    def __len__(self) -> int:
+        return len(self.params)
+
+    def muscle_lengths(self, q: ArrayLike) -> FloatArray:
+        """λ (S, N, 6), m, at joint angles q: (N, 2) shared by every set, or (S, N, 2)."""
+        qa = np.asarray(q, dtype=float)
+        return self.lam_rest[:, None, :] + (qa - self.q_rest[:, None, :]) @ self.geometry.jl.T
+
+    def passive_force(self, lam: FloatArray, groups: ArrayLike | None = None) -> FloatArray:
+        """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only.
+        ``groups`` (indices): λ holds only these muscle groups' columns, and so does Ψ."""
+        g = slice(None) if groups is None else np.asarray(groups)
+        return passive_force(lam, self.lam_slack[:, None, g], self.km[:, None, g],
+                             self.excursion[:, None, g], self.geometry.w)
+
+    def reflex_force(self, lam: FloatArray, ldot: FloatArray) -> FloatArray:
+        """Φ (S, N, 6), N, for λ (S, N, 6) and λ̇ (N, 6) shared by every set: the value of
+        :meth:`Arm.reflex_forces` of each set. Computed only where λ̇ > 0: elsewhere the
+        reflex is exactly zero (u = 0), and about half the muscles shorten at any motion."""
+        phi = np.zeros(np.broadcast_shapes(lam.shape, (len(self.params), *ldot.shape)))
+        rows, cols = np.nonzero(ldot > 0)
+        if rows.size:
+            phi[:, rows, cols] = reflex_force(
+                lam[:, rows, cols], ldot[rows, cols], self.geometry.ldot_max[cols],
+                self.alpha[:, cols], self.beta[:, cols], self.excursion[:, cols],
+                self.lam_rest[:, cols], self.lam_min[:, cols], self.lam_max[:, cols])
+        return phi
+
+    def endpoint_force(self, x: ArrayLike, v: ArrayLike | None = None) -> FloatArray:
+        """Force each set's arm exerts on the handle, (S, N, 2), N, at hand positions x
+        (N, 2), m, and velocity v ((2,) or (N, 2), m/s): :meth:`Arm.endpoint_force` per set."""
+        geo = self.geometry
+        q, _, (ia, ib, ic, id_), (qd1, qd2) = geo.hand_state(x, v)
+        lam = self.muscle_lengths(q)
+        return geo._out_vec(self._force(self.passive_force(lam), lam, ia, ib, ic, id_, qd1, qd2))
+
+    def grid_force(self, x: ArrayLike, velocities: ArrayLike) -> FloatArray:
+        """:meth:`endpoint_force` at every hand position x (N, 2), m, with every velocity of
+        ``velocities`` (D, 2), m/s: (S, N, D, 2), N. The passive force depends on the
+        position only, so it is computed once per position, not once per velocity."""
+        geo = self.geometry
+        vel = np.atleast_2d(np.asarray(velocities, dtype=float))
+        q, _, (ia, ib, ic, id_), _ = geo.hand_state(x)
+        lam = self.muscle_lengths(q)
+        psi = self.passive_force(lam)
+        out = []
+        for v in vel:
+            _, _, _, (qd1, qd2) = geo.hand_state(x, v)
+            out.append(self._force(psi, lam, ia, ib, ic, id_, qd1, qd2))
+        return geo._out_vec(np.stack(out, axis=2))
+
+    def _force(self, psi: FloatArray, lam: FloatArray, ia: FloatArray, ib: FloatArray,
+               ic: FloatArray, id_: FloatArray, qd1: FloatArray, qd2: FloatArray) -> FloatArray:
+        """Model-frame hand force (S, N, 2) of passive force ψ and the reflex at q̇."""
+        jl = self.geometry.jl
+        ldot = np.outer(qd1, jl[:, 0]) + np.outer(qd2, jl[:, 1])
+        fx, fy = hand_force(psi + self.reflex_force(lam, ldot), jl, ia, ib, ic, id_)
+        return np.stack([fx, fy], axis=-1)
+
+
+#: Every ArmParams field but the sampled ones and the document header.
+_GEOMETRY_FIELDS: tuple[str, ...] = tuple(
+    f.name for f in dataclass_fields(ArmParams) if f.name not in SAMPLED_FIELDS)
+
+
+def _geometry_key(p: ArmParams) -> tuple[object, ...]:
+    return tuple(getattr(p, f) for f in _GEOMETRY_FIELDS)
