@@ -37,7 +37,9 @@ one-sided slopes, the value a central difference measures.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from dataclasses import fields as dataclass_fields
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,6 +49,8 @@ from fieldbank.errors import ParameterError, UnreachableError
 from fieldbank.params import GROUP_SIGN, ArmParams
 
 FloatArray = NDArray[np.float64]
+#: Four same-shaped arrays: the entries of a 2 × 2 matrix per point, row by row.
+Quad = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
 #: Elbow angles closer than this to 0 or π make the endpoint Jacobian singular.
 SINGULAR_ELBOW_RAD = 0.02
@@ -320,39 +324,14 @@ class Arm:
 
     def passive_forces(self, lam: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Ψ and ∂Ψ/∂λ, each (N, 6): N and N/m."""
-        d = lam - self.lam_slack
-        z = d / self.w
-        sp = self.w * np.logaddexp(0.0, z)
-        sig = expit(z)
-        ell = self.excursion
-        g = np.exp(-((d / ell) ** 2))
-        psi = self.km * sp * g
-        dpsi = self.km * g * (sig - sp * 2.0 * d / (ell * ell))
-        return psi, dpsi
+        return passive_tension(lam, self.lam_slack, self.km, self.excursion, self.w)
 
     def reflex_forces(
         self, lam: FloatArray, ldot: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Φ, ∂Φ/∂λ and ∂Φ/∂λ̇, each (N, 6): N, N/m, N·s/m."""
-        r = ldot / self.ldot_max
-        c = np.clip(r, 0.0, 1.0)
-        dc = np.where((r > 0) & (r < 1), 1.0, 0.0)
-        dc = np.where((r == 0) | (r == 1), 0.5, dc) / self.ldot_max
-        u = self.beta * c
-        ell = self.excursion
-        k = self.lam_rest / self.lam_max
-        gam = (lam - self.lam_min) / ell - k * (1.0 - u)
-        e = np.exp(-gam * gam)
-        h = self.alpha * u * gam * e
-        dh_dlam = self.alpha * u * e * (1.0 - 2.0 * gam * gam) / ell
-        dh_du = self.alpha * (gam * e + u * e * (1.0 - 2.0 * gam * gam) * k)
-        # max(0, h): active where h > 0; where u == 0 (h == 0) the lengthening side is active
-        # exactly when h would grow with u, and dc already halves that slope.
-        on = (h > 0) | ((h == 0) & (dh_du > 0))
-        phi = np.where(h > 0, h, 0.0)
-        dphi_dlam = np.where(on, dh_dlam, 0.0)
-        dphi_dldot = np.where(on, dh_du * self.beta * dc, 0.0)
-        return phi, dphi_dlam, dphi_dldot
+        return reflex_tension(lam, ldot, self.ldot_max, self.alpha, self.beta, self.excursion,
+                              self.lam_rest, self.lam_min, self.lam_max)
 
     def joint_torque(self, q: ArrayLike, qdot: ArrayLike | None = None) -> FloatArray:
         """Muscle torque on the arm τ = -J_λᵀ(Ψ+Φ), shape (N, 2), N·m."""
@@ -368,20 +347,14 @@ class Arm:
         """Force the arm exerts on the handle, (N, 2), N, at hand positions x and velocity v."""
         return self.field(x, v, derivatives=False)[0]
 
-    def field(
-        self, x: ArrayLike, v: ArrayLike | None = None, derivatives: bool = True
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Force F (N,2), stiffness K = -∂F/∂x (N,2,2) and damping B = -∂F/∂v (N,2,2).
-
-        Parameters
-        ----------
-        x : array, shape (N, 2), m
-            Hand positions in the shoulder frame.
-        v : array, shape (2,) or (N, 2), m/s, optional
-            Endpoint velocity (0 = static). K is taken at this fixed velocity.
-        derivatives : bool
-            Skip K and B (returned as empty arrays) when False.
-        """
+    def hand_state(
+        self, x: ArrayLike, v: ArrayLike | None = None
+    ) -> tuple[FloatArray, Quad, Quad, tuple[FloatArray, FloatArray]]:
+        """The joint-space state of hand positions x (N, 2), m, and velocity v ((2,) or
+        (N, 2), m/s; None: static), shoulder frame, model side: joint angles q (N, 2), rad;
+        the endpoint Jacobian's entries (a, b, c, d) = J (m/rad) and (ia, ib, ic, id) = J⁻¹,
+        each (N,); and the joint velocities (q̇1, q̇2), each (N,), rad/s. Depends on the
+        geometry only (:class:`ArmBatch` shares it across parameter sets)."""
         xm = self._in(x)
         n = xm.shape[0]
         if v is None:
@@ -406,17 +379,29 @@ class Arm:
         vx, vy = vm[:, 0], vm[:, 1]
         qd1 = ia * vx + ib * vy
         qd2 = ic * vx + id_ * vy
+        return q, (a, b, c, d), (ia, ib, ic, id_), (qd1, qd2)
+
+    def field(
+        self, x: ArrayLike, v: ArrayLike | None = None, derivatives: bool = True
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Force F (N,2), stiffness K = -∂F/∂x (N,2,2) and damping B = -∂F/∂v (N,2,2).
+
+        Parameters
+        ----------
+        x : array, shape (N, 2), m
+            Hand positions in the shoulder frame.
+        v : array, shape (2,) or (N, 2), m/s, optional
+            Endpoint velocity (0 = static). K is taken at this fixed velocity.
+        derivatives : bool
+            Skip K and B (returned as empty arrays) when False.
+        """
+        q, (a, b, c, d), (ia, ib, ic, id_), (qd1, qd2) = self.hand_state(x, v)
         jl = self.jl
         lam = self.lam_rest + (q - self.q_rest) @ jl.T
         ldot = np.outer(qd1, jl[:, 0]) + np.outer(qd2, jl[:, 1])
         psi, dpsi = self.passive_forces(lam)
         phi, dphi_l, dphi_ld = self.reflex_forces(lam, ldot)
-        f = psi + phi
-        tau = -f @ jl
-        t1, t2 = tau[:, 0], tau[:, 1]
-        # F = J⁻ᵀ τ
-        fx = ia * t1 + ic * t2
-        fy = ib * t1 + id_ * t2
+        fx, fy = _hand_force(psi + phi, jl, ia, ib, ic, id_)
         force = np.stack([fx, fy], axis=1)
         if not derivatives:
             empty = np.empty((0, 2, 2))
@@ -462,6 +447,244 @@ class Arm:
     def rest_position(self) -> FloatArray:
         """Hand position at the rest posture, shape (2,), m, shoulder frame."""
         return self.fk(self.q_rest)[0]
+
+
+#: ArmParams fields that may differ between the parameter sets of one :class:`ArmBatch`: every
+#: muscle value a fit or its uncertainty can move (Km, α, β per group, slack offsets, rest
+#: lengths and the rest posture). Everything else - segment lengths and masses, moment arms,
+#: range of motion, the λ̇_max circle, the smoothing width, the side - is the shared geometry.
+SAMPLED_FIELDS: tuple[str, ...] = ("km_n_per_m", "alpha_n", "beta", "slack_offset_m",
+                                   "rest_length_m", "q_rest_rad")
+
+
+@dataclass(frozen=True, eq=False)
+class ArmBatch:
+    """S parameter sets of one arm geometry, evaluated together.
+
+    The geometry (``geometry``: J_λ, λ̇_max, segment lengths, the range of motion) is compiled
+    once; the muscle values of :data:`SAMPLED_FIELDS` are arrays with a leading sample axis.
+    What each set gives is what :meth:`Arm.from_params` of that set would give, evaluated
+    with the same equations (:func:`passive_force`, :func:`reflex_force`); forces only, no
+    stiffness. Build with :meth:`from_params`; every array is read-only.
+
+    Attributes
+    ----------
+    geometry : Arm
+        The compiled arm of the first parameter set.
+    params : tuple of ArmParams
+        The S parameter sets.
+    q_rest : ndarray, shape (S, 2), rad
+    lam_rest, lam_slack, lam_min, lam_max, excursion : ndarray, shape (S, 6), m
+    km, alpha, beta : ndarray, shape (S, 6); N/m, N, dimensionless
+    """
+
+    geometry: Arm
+    params: tuple[ArmParams, ...]
+    q_rest: FloatArray
+    lam_rest: FloatArray
+    lam_slack: FloatArray
+    lam_min: FloatArray
+    lam_max: FloatArray
+    excursion: FloatArray
+    km: FloatArray
+    alpha: FloatArray
+    beta: FloatArray
+
+    @classmethod
+    def from_params(cls, params: Sequence[ArmParams], geometry: Arm | None = None) -> ArmBatch:
+        """Compile ``params`` (S ≥ 1 sets) over one geometry (default: the first set's).
+
+        Raises
+        ------
+        ParameterError
+            A set differs from the geometry in a field outside :data:`SAMPLED_FIELDS` (it
+            needs its own :meth:`Arm.from_params`), or a muscle would reach a non-positive
+            length within the range of motion.
+        """
+        sets = tuple(params)
+        if not sets:
+            raise ParameterError("ArmBatch needs at least one parameter set.")
+        geo = geometry if geometry is not None else Arm.from_params(sets[0])
+        key = _geometry_key(geo.params)
+        for k, p in enumerate(sets):
+            if _geometry_key(p) != key:
+                other = [f for f in _GEOMETRY_FIELDS if getattr(p, f) != getattr(geo.params, f)]
+                raise ParameterError(
+                    f"ArmBatch: parameter set {k} differs from the geometry in "
+                    f"{', '.join(other)}, not only in muscle values; compile it with "
+                    "Arm.from_params.")
+        q_rest = np.array([p.q_rest_rad for p in sets], dtype=float)
+        lam_rest = np.array([p.rest_length_m for p in sets], dtype=float)
+        p0 = geo.params
+        corners = np.array([[a, b] for a in p0.shoulder_range_rad for b in p0.elbow_range_rad])
+        # as Arm.from_params, per set: λ is linear in q, its extremes lie at the box corners
+        lam_corners = lam_rest[:, None, :] + (corners[None, :, :] - q_rest[:, None, :]) @ geo.jl.T
+        lam_min = lam_corners.min(axis=1)
+        lam_max = lam_corners.max(axis=1)
+        if np.any(lam_min <= 0):
+            k, i = np.unravel_index(int(np.argmin(lam_min)), lam_min.shape)
+            raise ParameterError(
+                f"ArmBatch: in parameter set {k}, muscle {i} would reach a non-positive "
+                f"length ({lam_min[k, i]:.4g} m) within the range of motion.")
+        arrays = {
+            "q_rest": q_rest, "lam_rest": lam_rest,
+            "lam_slack": lam_rest + np.array([p.slack_offset_m for p in sets], dtype=float),
+            "lam_min": lam_min, "lam_max": lam_max, "excursion": lam_max - lam_min,
+            "km": np.array([p.km_n_per_m for p in sets], dtype=float),
+            "alpha": np.array([p.alpha_n for p in sets], dtype=float),
+            "beta": np.array([p.beta for p in sets], dtype=float),
+        }
+        for a in arrays.values():
+            a.setflags(write=False)
+        return cls(geometry=geo, params=sets, **arrays)
+
+    def __len__(self) -> int:
+        return len(self.params)
+
+    def muscle_lengths(self, q: ArrayLike) -> FloatArray:
+        """λ (S, N, 6), m, at joint angles q: (N, 2) shared by every set, or (S, N, 2)."""
+        qa = np.asarray(q, dtype=float)
+        return self.lam_rest[:, None, :] + (qa - self.q_rest[:, None, :]) @ self.geometry.jl.T
+
+    def passive_force(self, lam: FloatArray) -> FloatArray:
+        """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only."""
+        return passive_force(lam, self.lam_slack[:, None, :], self.km[:, None, :],
+                             self.excursion[:, None, :], self.geometry.w)
+
+    def reflex_force(self, lam: FloatArray, ldot: FloatArray) -> FloatArray:
+        """Φ (S, N, 6), N, for λ (S, N, 6) and λ̇ (N, 6) shared by every set: the value of
+        :meth:`Arm.reflex_forces` of each set. Computed only where λ̇ > 0: elsewhere the
+        reflex is exactly zero (u = 0), and about half the muscles shorten at any motion."""
+        phi = np.zeros(np.broadcast_shapes(lam.shape, (len(self.params), *ldot.shape)))
+        rows, cols = np.nonzero(ldot > 0)
+        if rows.size:
+            phi[:, rows, cols] = reflex_force(
+                lam[:, rows, cols], ldot[rows, cols], self.geometry.ldot_max[cols],
+                self.alpha[:, cols], self.beta[:, cols], self.excursion[:, cols],
+                self.lam_rest[:, cols], self.lam_min[:, cols], self.lam_max[:, cols])
+        return phi
+
+    def endpoint_force(self, x: ArrayLike, v: ArrayLike | None = None) -> FloatArray:
+        """Force each set's arm exerts on the handle, (S, N, 2), N, at hand positions x
+        (N, 2), m, and velocity v ((2,) or (N, 2), m/s): :meth:`Arm.endpoint_force` per set."""
+        geo = self.geometry
+        q, _, (ia, ib, ic, id_), (qd1, qd2) = geo.hand_state(x, v)
+        lam = self.muscle_lengths(q)
+        return geo._out_vec(self._force(self.passive_force(lam), lam, ia, ib, ic, id_, qd1, qd2))
+
+    def grid_force(self, x: ArrayLike, velocities: ArrayLike) -> FloatArray:
+        """:meth:`endpoint_force` at every hand position x (N, 2), m, with every velocity of
+        ``velocities`` (D, 2), m/s: (S, N, D, 2), N. The passive force depends on the
+        position only, so it is computed once per position, not once per velocity."""
+        geo = self.geometry
+        vel = np.atleast_2d(np.asarray(velocities, dtype=float))
+        q, _, (ia, ib, ic, id_), _ = geo.hand_state(x)
+        lam = self.muscle_lengths(q)
+        psi = self.passive_force(lam)
+        out = []
+        for v in vel:
+            _, _, _, (qd1, qd2) = geo.hand_state(x, v)
+            out.append(self._force(psi, lam, ia, ib, ic, id_, qd1, qd2))
+        return geo._out_vec(np.stack(out, axis=2))
+
+    def _force(self, psi: FloatArray, lam: FloatArray, ia: FloatArray, ib: FloatArray,
+               ic: FloatArray, id_: FloatArray, qd1: FloatArray, qd2: FloatArray) -> FloatArray:
+        """Model-frame hand force (S, N, 2) of passive force ψ and the reflex at q̇."""
+        jl = self.geometry.jl
+        ldot = np.outer(qd1, jl[:, 0]) + np.outer(qd2, jl[:, 1])
+        fx, fy = _hand_force(psi + self.reflex_force(lam, ldot), jl, ia, ib, ic, id_)
+        return np.stack([fx, fy], axis=-1)
+
+
+#: Every ArmParams field but the sampled ones and the document header.
+_GEOMETRY_FIELDS: tuple[str, ...] = tuple(
+    f.name for f in dataclass_fields(ArmParams) if f.name not in SAMPLED_FIELDS)
+
+
+def _geometry_key(p: ArmParams) -> tuple[object, ...]:
+    return tuple(getattr(p, f) for f in _GEOMETRY_FIELDS)
+
+
+def _hand_force(f: FloatArray, jl: FloatArray, ia: FloatArray, ib: FloatArray, ic: FloatArray,
+                id_: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The hand force (F_x, F_y), N, of muscle tensions f (…, N, 6), N: τ = -J_λᵀ f, then
+    F = J⁻ᵀ τ with J⁻¹ = [[ia, ib], [ic, id]] (each (N,)); leading axes of f carry through."""
+    tau = -f @ jl
+    t1, t2 = tau[..., 0], tau[..., 1]
+    return ia * t1 + ic * t2, ib * t1 + id_ * t2
+
+
+def passive_force(lam: FloatArray, lam_slack: FloatArray, km: FloatArray,
+                  excursion: FloatArray, w: float) -> FloatArray:
+    """The passive force Ψ of eq. 5 (module docstring), N: the value of
+    :func:`passive_tension` without its slope, for evaluations that need forces only."""
+    return _passive(lam, lam_slack, km, excursion, w)[0]
+
+
+def passive_tension(lam: FloatArray, lam_slack: FloatArray, km: FloatArray,
+                    excursion: FloatArray, w: float) -> tuple[FloatArray, FloatArray]:
+    """The passive force of eq. 5 (module docstring) and its slope ∂Ψ/∂λ: N and N/m.
+
+    Element-wise: every muscle array (``lam_slack``, ``km``, ``excursion``) broadcasts against
+    ``lam``, so ``lam`` (N, 6) with arrays (6,) is one arm, and ``lam`` (S, N, 6) with arrays
+    (S, 1, 6) is S parameter sets of one geometry (:class:`ArmBatch`).
+    """
+    psi, d, z, sp, g = _passive(lam, lam_slack, km, excursion, w)
+    dpsi = km * g * (expit(z) - sp * 2.0 * d / (excursion * excursion))
+    return psi, dpsi
+
+
+def _passive(lam: FloatArray, lam_slack: FloatArray, km: FloatArray, excursion: FloatArray,
+             w: float) -> tuple[FloatArray, ...]:
+    """Ψ and the intermediate terms its slope reuses: (Ψ, d, d/w, s_w(d), e^{-(d/ℓ)²})."""
+    d = lam - lam_slack
+    z = d / w
+    sp = w * np.logaddexp(0.0, z)
+    g = np.exp(-((d / excursion) ** 2))
+    return km * sp * g, d, z, sp, g
+
+
+def reflex_force(lam: FloatArray, ldot: FloatArray, ldot_max: FloatArray, alpha: FloatArray,
+                 beta: FloatArray, excursion: FloatArray, lam_rest: FloatArray,
+                 lam_min: FloatArray, lam_max: FloatArray) -> FloatArray:
+    """The reflex force Φ of eqs. 3-4, N: the value of :func:`reflex_tension` without its
+    slopes. Zero wherever λ̇ ≤ 0 (the reflex acts on lengthening muscles only)."""
+    return _reflex(lam, ldot, ldot_max, alpha, beta, excursion, lam_rest, lam_min, lam_max)[0]
+
+
+def reflex_tension(lam: FloatArray, ldot: FloatArray, ldot_max: FloatArray, alpha: FloatArray,
+                   beta: FloatArray, excursion: FloatArray, lam_rest: FloatArray,
+                   lam_min: FloatArray, lam_max: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The reflex force of eqs. 3-4 and its slopes ∂Φ/∂λ, ∂Φ/∂λ̇: N, N/m, N·s/m; element-wise
+    like :func:`passive_tension`."""
+    phi, r, u, k, gam, e, h = _reflex(lam, ldot, ldot_max, alpha, beta, excursion, lam_rest,
+                                      lam_min, lam_max)
+    dc = np.where((r > 0) & (r < 1), 1.0, 0.0)
+    dc = np.where((r == 0) | (r == 1), 0.5, dc) / ldot_max
+    ell = excursion
+    dh_dlam = alpha * u * e * (1.0 - 2.0 * gam * gam) / ell
+    dh_du = alpha * (gam * e + u * e * (1.0 - 2.0 * gam * gam) * k)
+    # max(0, h): active where h > 0; where u == 0 (h == 0) the lengthening side is active
+    # exactly when h would grow with u, and dc already halves that slope.
+    on = (h > 0) | ((h == 0) & (dh_du > 0))
+    dphi_dlam = np.where(on, dh_dlam, 0.0)
+    dphi_dldot = np.where(on, dh_du * beta * dc, 0.0)
+    return phi, dphi_dlam, dphi_dldot
+
+
+def _reflex(lam: FloatArray, ldot: FloatArray, ldot_max: FloatArray, alpha: FloatArray,
+            beta: FloatArray, excursion: FloatArray, lam_rest: FloatArray, lam_min: FloatArray,
+            lam_max: FloatArray) -> tuple[FloatArray, ...]:
+    """Φ and the intermediate terms its slopes reuse: (Φ, λ̇/λ̇_max, u, λ_rest/λ_max, Γ,
+    e^{-Γ²}, h)."""
+    r = ldot / ldot_max
+    u = beta * np.clip(r, 0.0, 1.0)
+    k = lam_rest / lam_max
+    gam = (lam - lam_min) / excursion - k * (1.0 - u)
+    e = np.exp(-gam * gam)
+    h = alpha * u * gam * e
+    return np.where(h > 0, h, 0.0), r, u, k, gam, e, h
 
 
 def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatArray]:

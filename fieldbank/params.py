@@ -133,11 +133,19 @@ def _label(name: str, index: int | None) -> str:
 
 
 def _check_value(name: str, value: Any, index: int | None = None) -> float:
+    if type(value) is float and BOUNDS[name].contains(value):
+        return value  # the common case, checked without building a message
     return check_number(_label(name, index), value, BOUNDS[name])
 
 
 def _check_tuple(name: str, value: Any, length: int) -> tuple[float, ...]:
-    return check_tuple(name, value, length, BOUNDS[name],
+    interval = BOUNDS[name]
+    # the common case (a copy of validated parameters with a few values changed, e.g. each
+    # of a fit's parameter samples) is checked without building labels or messages
+    if type(value) is tuple and len(value) == length and all(
+            type(v) is float and interval.contains(v) for v in value):
+        return value
+    return check_tuple(name, value, length, interval,
                        labels=[_label(name, i) for i in range(length)])
 
 

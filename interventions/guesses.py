@@ -37,6 +37,12 @@ import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.batch import (
+    peak_magnitude,
+    probe_forces,
+    rms_force,
+    standard_stretch_torques,
+)
 from fieldbank.evaluate.compare import Conditions
 from fieldbank.evaluate.probing import (
     Profiles,
@@ -48,7 +54,7 @@ from fieldbank.evaluate.probing import (
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.model import Arm, FloatArray
+from fieldbank.model import Arm, ArmBatch, FloatArray
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import ArmParams
 
@@ -287,6 +293,93 @@ def headline_metrics(arm: Arm, cond: Conditions,
     return out
 
 
+def headline_metrics_batch(batch: ArmBatch, cond: Conditions
+                           ) -> tuple[dict[str, tuple[FloatArray, str]], dict[str, FloatArray]]:
+    """:func:`headline_metrics` of every parameter set of ``batch`` in one pass: metric ->
+    (values (S,), unit), in the same order, and each stretch's torque resisting the fast
+    stretch along the joint angle (stretch name -> (S, T) N·m)."""
+    out: dict[str, tuple[FloatArray, str]] = {}
+    curves: dict[str, FloatArray] = {}
+    for s in standard_stretch_torques(batch):
+        curves[s.name] = s.fast_n_m
+        out[f"{s.name} peak torque"] = (s.fast_n_m.max(axis=1), "N·m")
+        out[f"{s.name} reflex torque"] = ((s.fast_n_m - s.slow_n_m).max(axis=1), "N·m")
+    for m in cond.probes:
+        out[f"{m.name} peak force"] = (peak_magnitude(probe_forces(batch, m)), "N")
+    for k, speed in enumerate(cond.speeds_m_per_s):
+        out[f"RMS |F| at {speed:g} m/s"] = (rms_force(batch, cond.grid_m, cond.velocities[k]),
+                                             "N")
+    return out, curves
+
+
+@dataclass(frozen=True, eq=False)
+class SampleMetrics:
+    """The headline metrics of S parameter samples before and after a plan.
+
+    ``keys`` and ``units`` in :func:`headline_metrics` order; ``before`` and ``after`` (S, K);
+    ``curves``: {"before" | "after": {stretch name: (S, T) N·m}}, the fast-stretch torque.
+    """
+
+    keys: tuple[str, ...]
+    units: tuple[str, ...]
+    before: FloatArray
+    after: FloatArray
+    curves: dict[str, dict[str, FloatArray]]
+
+
+def sample_metrics(samples: Sequence[ArmParams], plan: Plan, cond: Conditions,
+                   geometry: Arm) -> SampleMetrics:
+    """The plan applied to each sample, every sample's metrics before and after in one
+    vectorised pass (:class:`fieldbank.model.ArmBatch`: ``geometry`` compiled once, every
+    muscle value free per sample). A plan that changed the geometry itself falls back to
+    :func:`sample_metrics_per_sample`."""
+    afters = [plan.apply(p) for p in samples]
+    try:
+        b = ArmBatch.from_params(samples, geometry)
+        a = ArmBatch.from_params(afters, geometry)
+    except ParameterError:
+        return sample_metrics_per_sample(samples, plan, cond)
+    mb, cb = headline_metrics_batch(b, cond)
+    ma, ca = headline_metrics_batch(a, cond)
+    keys = tuple(mb)
+    return SampleMetrics(keys, tuple(mb[k][1] for k in keys),
+                         np.stack([mb[k][0] for k in keys], axis=1),
+                         np.stack([ma[k][0] for k in keys], axis=1),
+                         {"before": cb, "after": ca})
+
+
+def sample_metrics_per_sample(samples: Sequence[ArmParams], plan: Plan,
+                              cond: Conditions) -> SampleMetrics:
+    """:func:`sample_metrics` one sample at a time, each compiled as its own arm: the
+    reference the vectorised pass is tested against, and the path for a plan that changes
+    the geometry."""
+    references: dict[ArmParams, tuple[Arm, Profiles]] = {}
+    rows_b, rows_a = [], []
+    curves: dict[str, list[dict[str, FloatArray]]] = {"before": [], "after": []}
+    keys: list[str] = []
+    units: list[str] = []
+    for p in samples:
+        cb: dict[str, FloatArray] = {}
+        ca: dict[str, FloatArray] = {}
+        arm_p = Arm.from_params(p)
+        after_p = plan.apply(p)
+        try:  # a plan changes muscle values only: the geometry is compiled once
+            arm_pa = arm_p.with_muscles(after_p)
+        except ParameterError:
+            arm_pa = Arm.from_params(after_p)
+        mb = headline_metrics(arm_p, cond, cb, references)
+        ma = headline_metrics(arm_pa, cond, ca, references)
+        keys, units = list(mb), [mb[k][1] for k in mb]
+        rows_b.append([mb[k][0] for k in keys])
+        rows_a.append([ma[k][0] for k in keys])
+        curves["before"].append(cb)
+        curves["after"].append(ca)
+    return SampleMetrics(
+        tuple(keys), tuple(units), np.array(rows_b, dtype=float), np.array(rows_a, dtype=float),
+        {when: ({name: np.stack([c[name] for c in per]) for name in per[0]} if per else {})
+         for when, per in curves.items()})
+
+
 def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
                          cond: Conditions, arms: ArmCache,
                          n_samples: int = DEFAULT_INTERVAL_SAMPLES,
@@ -304,46 +397,36 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
     if not basis.same_model:
         return (), (f"the model before is derived from fitted model {basis.fitted_model_id} by "
                     "earlier plans: intervals need the fitted model itself"), 0
-    point_b = headline_metrics(arms(before), cond)
-    point_a = headline_metrics(arms(plan.apply(before)), cond)
     samples = basis.samples.params(before, n_samples)
-    keys = list(point_b)
-    vb = np.empty((len(samples), len(keys)))
-    va = np.empty_like(vb)
-    curves: dict[str, list[dict[str, FloatArray]]] = {"before": [], "after": []}
-    references: dict[ArmParams, tuple[Arm, Profiles]] = {}
-    for j, p in enumerate(samples):
-        cb: dict[str, FloatArray] = {}
-        ca: dict[str, FloatArray] = {}
-        arm_p = Arm.from_params(p)
-        after_p = plan.apply(p)
-        try:  # a plan changes muscle values only: the geometry is compiled once
-            arm_pa = arm_p.with_muscles(after_p)
-        except ParameterError:
-            arm_pa = Arm.from_params(after_p)
-        mb = headline_metrics(arm_p, cond, cb, references)
-        ma = headline_metrics(arm_pa, cond, ca, references)
-        vb[j] = [mb[k][0] for k in keys]
-        va[j] = [ma[k][0] for k in keys]
-        curves["before"].append(cb)
-        curves["after"].append(ca)
-    lo, hi = INTERVAL_PERCENTILES
-    if bands is not None and samples:
-        for when, per_sample in curves.items():
-            bands[when] = {}
-            for name in per_sample[0]:
-                stack = np.stack([c[name] for c in per_sample])
-                low, high = np.percentile(stack, [lo, hi], axis=0)
-                bands[when][name] = (low, high)
-    bl, bh = np.percentile(vb, [lo, hi], axis=0)
-    al, ah = np.percentile(va, [lo, hi], axis=0)
-    cl, ch = np.percentile(va - vb, [lo, hi], axis=0)
-    out = tuple(Interval(k, point_b[k][1], point_b[k][0], point_a[k][0], float(bl[i]),
-                         float(bh[i]), float(al[i]), float(ah[i]), float(cl[i]), float(ch[i]))
-                for i, k in enumerate(keys))
+    # the model itself rides along as set 0: its metrics are the point predictions
+    sm = sample_metrics([before, *samples], plan, cond, arms(before))
+    out = intervals_of(sm, bands)
     note = (f"95% intervals over {len(samples)} parameter samples of fit {basis.fit_id}; "
             "parameters held at the unimpaired value stay held (see warnings)")
     return out, note, len(samples)
+
+
+def intervals_of(sm: SampleMetrics,
+                 bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] | None = None
+                 ) -> tuple[Interval, ...]:
+    """The point predictions (set 0 of ``sm``: the model itself) with the 95% intervals of
+    the samples (sets 1…S); ``bands`` receives the curves' percentile bands (see
+    :func:`prediction_intervals`)."""
+    lo, hi = INTERVAL_PERCENTILES
+    if bands is not None and len(sm.before) > 1:
+        for when, per_name in sm.curves.items():
+            bands[when] = {}
+            for name, stack in per_name.items():
+                low, high = np.percentile(stack[1:], [lo, hi], axis=0)
+                bands[when][name] = (low, high)
+    pb, pa = sm.before[0], sm.after[0]
+    vb, va = sm.before[1:], sm.after[1:]
+    bl, bh = np.percentile(vb, [lo, hi], axis=0)
+    al, ah = np.percentile(va, [lo, hi], axis=0)
+    cl, ch = np.percentile(va - vb, [lo, hi], axis=0)
+    return tuple(Interval(k, sm.units[i], float(pb[i]), float(pa[i]), float(bl[i]),
+                          float(bh[i]), float(al[i]), float(ah[i]), float(cl[i]), float(ch[i]))
+                 for i, k in enumerate(sm.keys))
 
 
 def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *,

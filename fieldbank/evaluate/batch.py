@@ -1,0 +1,108 @@
+"""Read-outs of many parameter sets of one arm in one pass (:class:`fieldbank.model.ArmBatch`).
+
+A fit's uncertainty is a set of parameter samples that differ from the fitted model only in
+muscle values (Km, α, β, slack offsets, rest lengths, the rest posture). Evaluating each as its
+own :class:`~fieldbank.model.Arm` compiles and validates the same geometry once per sample and
+loops in Python; here the geometry is compiled once and every read-out runs over a leading
+sample axis:
+
+* :func:`stretch_torques` - the slow and fast joint stretches of
+  :func:`fieldbank.evaluate.probing.stretch_profile`, the torque resisting each, per sample;
+* :func:`probe_forces` - the force felt along a probing motion
+  (:func:`fieldbank.evaluate.probing.profile`), per sample;
+* :func:`rms_force` - the RMS endpoint force over a set of points and velocities.
+
+Each equals the one-arm function applied to each sample in turn (``tests/test_intervals.py``
+checks it to 1e-12 relative against those functions).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fieldbank.evaluate.probing import (
+    DIRECTION_SIGN,
+    JOINTS,
+    SLOW_STRETCH_SPEED_RAD_S,
+    STRETCH_SAMPLES,
+    STRETCH_SPEED_RAD_S,
+    STRETCHES,
+    ProbeMotion,
+)
+from fieldbank.model import ArmBatch, FloatArray
+
+
+@dataclass(frozen=True, eq=False)
+class StretchTorques:
+    """One joint stretch of every set of a batch.
+
+    angles_rad : (T,) rad, in the order of travel (shared: the range of motion is geometry)
+    slow_n_m, fast_n_m : (S, T) N·m, the joint torque resisting the slow and the fast stretch
+    """
+
+    joint: str
+    direction: str
+    angles_rad: FloatArray
+    slow_n_m: FloatArray
+    fast_n_m: FloatArray
+
+    @property
+    def name(self) -> str:
+        return f"{self.joint} {self.direction}"
+
+
+def stretch_torques(batch: ArmBatch, joint: str, direction: str,
+                    fast_speed_rad_s: float = STRETCH_SPEED_RAD_S,
+                    slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S,
+                    samples: int = STRETCH_SAMPLES) -> StretchTorques:
+    """:func:`fieldbank.evaluate.probing.stretch_profile` of every set: ``joint`` swept
+    through its range in ``direction``, the other joint held at each set's rest posture."""
+    if joint not in JOINTS:
+        raise ValueError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
+    if direction not in DIRECTION_SIGN:
+        raise ValueError(f"direction must be 'flexion' or 'extension'; got {direction!r}.")
+    geo = batch.geometry
+    j = JOINTS.index(joint)
+    sign = DIRECTION_SIGN[direction]
+    lo, hi = (geo.params.shoulder_range_rad, geo.params.elbow_range_rad)[j]
+    angles = np.linspace(lo, hi, samples) if sign > 0 else np.linspace(hi, lo, samples)
+    q = np.repeat(batch.q_rest[:, None, :], samples, axis=1)
+    q[:, :, j] = angles
+    lam = batch.muscle_lengths(q)
+    lever = sign * geo.jl[:, j]
+
+    def reflex(speed: float) -> FloatArray:
+        qdot = np.zeros((samples, 2))
+        qdot[:, j] = sign * speed
+        return np.asarray(batch.reflex_force(lam, geo.muscle_velocities(qdot)) * lever)
+
+    passive = batch.passive_force(lam) * lever
+    slow = (passive + reflex(slow_speed_rad_s)).sum(axis=-1)
+    fast = (passive + reflex(fast_speed_rad_s)).sum(axis=-1)
+    return StretchTorques(joint, direction, angles, slow, fast)
+
+
+def standard_stretch_torques(batch: ArmBatch) -> tuple[StretchTorques, ...]:
+    """The four standard stretches (:data:`fieldbank.evaluate.probing.STRETCHES`), in order."""
+    return tuple(stretch_torques(batch, j, d) for j, d in STRETCHES)
+
+
+def probe_forces(batch: ArmBatch, motion: ProbeMotion) -> FloatArray:
+    """The force every set's arm exerts on the handle along ``motion``, (S, T, 2), N."""
+    return batch.endpoint_force(motion.positions_m, motion.velocities_m_per_s)
+
+
+def peak_magnitude(force_n: FloatArray) -> FloatArray:
+    """Largest force magnitude along the last-but-one axis: (S, T, 2) -> (S,), N."""
+    return np.asarray(np.hypot(force_n[..., 0], force_n[..., 1]).max(axis=-1))
+
+
+def rms_force(batch: ArmBatch, grid_m: FloatArray, velocities_m_per_s: FloatArray) -> FloatArray:
+    """RMS endpoint force magnitude, per set, (S,), N, over every point of ``grid_m`` (N, 2)
+    with every velocity of ``velocities_m_per_s`` (D, 2): the N·D points of
+    :meth:`fieldbank.evaluate.compare.Conditions.points`, in that order."""
+    f = batch.grid_force(grid_m, velocities_m_per_s)
+    f = f.reshape(f.shape[0], -1, 2)
+    return np.asarray(np.sqrt(np.mean(np.sum(f * f, axis=-1), axis=-1)))
