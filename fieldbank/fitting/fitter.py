@@ -22,10 +22,28 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
-from fieldbank.errors import FitError
-from fieldbank.evaluate.severity import classify, severity_dict
+from fieldbank.errors import FitError, ParameterError
+from fieldbank.evaluate.probing import stretch_profiles, unimpaired_reference
+from fieldbank.evaluate.severity import (
+    COMPONENTS,
+    GRADED_STRETCH,
+    SCALE,
+    GroupSeverity,
+    classify,
+    ratio_of_score,
+    severity_dict,
+)
 from fieldbank.fitting.identify import Unidentified, identify
+from fieldbank.fitting.prior import (
+    GuessRange,
+    Prior,
+    draw,
+    fit_ranges,
+    prior_dict,
+    units,
+)
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.quality import (
     DEFAULT_THRESHOLDS,
@@ -48,8 +66,11 @@ from fieldbank.fitting.uncertainty import (
     DEFAULT_METHOD,
     DEFAULT_REPLICATES,
     METHODS,
+    FitSamples,
     Uncertainty,
     estimate,
+    reduced_problem,
+    refit_local,
 )
 from fieldbank.maps import FRAMES, FieldMap
 from fieldbank.model import Arm, FloatArray
@@ -64,12 +85,26 @@ PATIENT_KEYS = ("patient", "patient_code")
 
 #: Significance level of the test that may keep unidentified parameters at unimpaired values.
 HOLD_TEST_LEVEL = 0.95
+#: Family-wise level of the per-unit release tests (a group's Km, its reflex, a rest angle):
+#: each unit is released when the maps reject its hold at 1 - (1 - level) / units tested
+#: (Bonferroni), so holding a dozen units releases none by chance in 95% of fits.
+RELEASE_TEST_LEVEL = 0.95
+#: Groups whose stretch reflexes show in the same stretches (a flexor or an extensor group of
+#: one joint and the bi-articular group of the same direction): the maps may not tell them
+#: apart, and a fit must not attribute the reflex to one of them without saying so.
+REFLEX_PARTNERS: tuple[tuple[str, str], ...] = (("ef", "bf"), ("sf", "bf"), ("ee", "be"),
+                                                ("se", "be"))
+#: Level of the attribution test: the reflex is moved to the partner group and refitted; the
+#: maps tell the two apart when that costs more than this χ² quantile (2 degrees of freedom).
+ATTRIBUTION_TEST_LEVEL = 0.95
+#: Percentiles of the grade ranges over the fit's samples.
+GRADE_PERCENTILES = (2.5, 97.5)
 
 _RESULTS = ("held_", "hold_test_", "params_", "theta_", "cost_", "chi2_", "residuals_", "r2_",
             "uncertainty_", "relative_sd_", "residual_variance_", "unidentified_", "status_",
             "at_bounds_", "n_evals_", "stop_reason_", "time_s_", "algorithm_", "seed_", "maps_",
             "severity_", "problem_", "space_", "base_", "goodness_", "intervals_",
-            "uncertainty_detail_")
+            "uncertainty_detail_", "prior_ranges_", "attribution_")
 
 
 def _unit(value: str) -> str:
@@ -255,18 +290,35 @@ class ArmFitter:
             held = _hold_unidentified(problem, theta, ident.unidentified, self.algorithm, seed)
             n_evals += held.n_evals
             self.hold_test_ = held.test
-            flagged = tuple(dataclasses.replace(u, reason=u.reason + held.note(u.name))
-                            for u in ident.unidentified)
             if held.accepted:
                 theta = held.theta
                 self.held_ = list(held.names)
                 stop_reason += f"; unidentified held at unimpaired: {held.stop_reason}"
-                ident = identify(problem, theta)  # uncertainty at the final point
-            # what the full fit could not identify stays reported, held or not
-            ident = dataclasses.replace(ident, unidentified=flagged)
+            final = identify(problem, theta)  # uncertainty at the final point
+            # what the full fit could not identify stays reported, held or not - unless the
+            # maps rejected its hold and identify it at the point they led to
+            still = {u.name for u in final.unidentified}
+            flagged = tuple(dataclasses.replace(u, reason=u.reason + held.note(u.name))
+                            for u in ident.unidentified
+                            if u.name in self.held_ or not held.was_released(u.name)
+                            or u.name in still)
+            ident = dataclasses.replace(final, unidentified=flagged)
+        self.attribution_ = _attribution(problem, theta, self.held_, seed)
+        if self.attribution_:
+            ident = dataclasses.replace(ident, unidentified=_with_attribution(
+                ident.unidentified, self.attribution_))
+            n_evals += sum(int(a["n_evals"]) for a in self.attribution_)
+        fitted_params = space.to_params(theta, base)
+        prior = Prior.for_arm(arm.with_muscles(fitted_params)
+                              if fitted_params.q_rest_rad == base.q_rest_rad
+                              else Arm.from_params(fitted_params))
+        self.prior_ranges_: tuple[GuessRange, ...] = (
+            fit_ranges(reduced_problem(problem, theta, self.held_), theta, self.held_, prior)
+            if self.held_ else ())
         unc = estimate(problem, theta, self.held_,
                        unidentified=[u.name for u in ident.unidentified],
-                       method=self.uncertainty, n_replicates=self.replicates, seed=seed)
+                       method=self.uncertainty, n_replicates=self.replicates, seed=seed,
+                       held_intervals=_held_intervals(self.prior_ranges_, prior, seed))
         n_evals += unc.n_evals
         yhat = problem.predict(theta)
         self.time_s_ = time.perf_counter() - t0
@@ -304,7 +356,10 @@ class ArmFitter:
         self.stop_reason_ = stop_reason
         self.algorithm_ = self.algorithm
         self.seed_ = seed
-        self.severity_ = _severity(self.params_, [u.name for u in self.unidentified_])
+        samples = draw(FitSamples(unc.names, unc.samples), self.prior_ranges_, prior, seed=seed)
+        self.severity_ = _severity(self.params_, [u.name for u in self.unidentified_],
+                                   samples.params(self.params_))
+        self.prior_ = prior
         return self
 
     # --- using a fit --------------------------------------------------------------------------
@@ -355,6 +410,8 @@ class ArmFitter:
             "at_bounds": self.at_bounds_,
             "held_at_unimpaired": self.held_,
             "hold_test": self.hold_test_,
+            "prior": prior_dict(self.prior_ranges_, self.prior_),
+            "attribution": self.attribution_,
             "unidentified": [u.to_dict() for u in self.unidentified_],
             "maps": [
                 {"index": k, "kind": m.kind, "n": m.n, "velocity_m_per_s": list(
@@ -370,11 +427,42 @@ class ArmFitter:
         }
 
 
-def _severity(params: ArmParams, unidentified: Sequence[str]) -> dict[str, Any]:
+def _severity(params: ArmParams, unidentified: Sequence[str],
+              samples: Sequence[ArmParams] = ()) -> dict[str, Any]:
     """Severity per muscle group, passive and dynamic
     (:func:`fieldbank.evaluate.severity.classify`), as plain values; each grade lists the
-    parameters behind it that the maps did not identify."""
-    return severity_dict(classify(Arm.from_params(params), unidentified))
+    parameters behind it that the maps did not identify and, over the fit's parameter samples
+    (held parameters drawn from their prior range), the 95% range of its score and levels."""
+    arm = Arm.from_params(params)
+    ref = unimpaired_reference(arm)
+    ref_prof = stretch_profiles(ref)
+    out = severity_dict(classify(arm, unidentified, ref, reference_profiles=ref_prof))
+    if not samples:
+        return out
+    scores: dict[tuple[str, str], list[float]] = {}
+    for p in samples:
+        try:
+            trial = arm.with_muscles(p)
+        except ParameterError:  # a sample with its own rest posture
+            trial = Arm.from_params(p)
+        graded: dict[str, GroupSeverity] = classify(trial, reference=ref,
+                                                    reference_profiles=ref_prof)
+        for g, sev in graded.items():
+            for c in COMPONENTS:
+                scores.setdefault((g, c), []).append(sev.component(c).score)
+    lo_p, hi_p = GRADE_PERCENTILES
+    for (g, c), vals in scores.items():
+        lo, hi = (float(v) for v in np.percentile(vals, [lo_p, hi_p]))
+        grade = out[g][c]
+        assert isinstance(grade, dict)
+        grade["score_range"] = [round(lo, 4), round(hi, 4)]
+        grade["level_range"] = [_level_of_score(lo, c), _level_of_score(hi, c)]
+    return out
+
+
+def _level_of_score(score: float, component: str) -> str:
+    """The level a continuous score (0 unimpaired … 4 severe) is graded."""
+    return SCALE.level(ratio_of_score(score, component), component)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -386,10 +474,18 @@ class _Hold:
     stop_reason: str
     test: dict[str, Any]
 
+    def was_released(self, name: str) -> bool:
+        return any(name in r["names"] for r in self.test["released"])
+
     def note(self, name: str) -> str:
-        if name not in self.names:
-            return ""
         t = self.test
+        for r in t["released"]:
+            if name in r["names"]:
+                return (f"; the maps reject holding {', '.join(r['names'])} at the unimpaired "
+                        f"value (Δχ² {r['delta_chi2']:.3g} > {r['threshold']:.3g}), so it is "
+                        "fitted, not held")
+        if name not in t["held"]:
+            return ""
         if self.accepted:
             return (f"; held at the unimpaired value (the maps do not reject it: Δχ² "
                     f"{t['delta_chi2']:.3g} <= {t['threshold']:.3g})")
@@ -398,27 +494,161 @@ class _Hold:
                 "kept")
 
 
+def _chi2(problem: FitProblem, theta: FloatArray) -> float:
+    r = problem.residuals(theta)
+    return float(r @ r)
+
+
+def _hold_units(names: Sequence[str]) -> list[tuple[str, ...]]:
+    """The units a hold is tested by: a group's Km, its reflex (α and β), each rest angle."""
+    out = list(units(names).values())
+    out += [(n,) for n in names if n.startswith("q_rest_")]
+    return out
+
+
 def _hold_unidentified(problem: FitProblem, theta: FloatArray,
                        unidentified: Sequence[Unidentified], algorithm: str, seed: int) -> _Hold:
-    """Refit with the unidentified parameters at their prior means; test against the fit."""
-    from scipy.stats import chi2
+    """Hold what the maps do not identify at the unimpaired (prior) values, unless the maps
+    reject it.
 
+    1. Refit with every unidentified parameter at its prior mean.
+    2. Release test per unit (:func:`_hold_units`): the unit alone freed again and refitted
+       from the held point (a local search with a coarse scan of every reflex gain, which a
+       reflex that never fires at the held point needs), the rest held; the unit is released
+       when the maps improve by more than the χ² quantile of :data:`RELEASE_TEST_LEVEL`,
+       Bonferroni-corrected over the units tested. A reflex the full search missed (stuck
+       where it never fires, so "not identified") is found here, not held at unimpaired.
+    3. Refit with the released units free; the joint likelihood-ratio test of what stays held
+       against the full fit (:data:`HOLD_TEST_LEVEL`, one degree of freedom per held
+       parameter) decides whether the hold stands.
+    """
     space = problem.space
     names = tuple(u.name for u in unidentified)
     idx = [space.names.index(n) for n in names]
-    fitted = space.fitted.copy()
-    fitted[idx] = False
     base = theta.copy()
     base[idx] = space.prior_mean[idx]
-    reduced_space = dataclasses.replace(space, fitted=fitted, base=base)
-    reduced = dataclasses.replace(problem, space=reduced_space, n_evals=0, _xkm_cache=None)
+    reduced = reduced_problem(problem, base, names)
     name = algorithm if algorithm in ALGORITHMS and algorithm != "dual_annealing" \
         else DEFAULT_ALGORITHM
     res = run_nlopt(reduced, name, seed, HOLD_EVALS)
-    r_full = problem.residuals(theta)
-    r_held = problem.residuals(res.theta)
-    delta = float(r_held @ r_held - r_full @ r_full)
-    threshold = float(chi2.ppf(HOLD_TEST_LEVEL, len(idx)))
-    test = {"held": list(names), "delta_chi2": delta, "threshold": threshold,
-            "level": HOLD_TEST_LEVEL, "accepted": delta <= threshold}
-    return _Hold(delta <= threshold, res.theta, names, reduced.n_evals, res.stop_reason, test)
+    n_evals = reduced.n_evals
+    theta_h = res.theta
+    chi_h = _chi2(problem, theta_h)
+    groups = _hold_units(names)
+    unit_level = 1.0 - (1.0 - RELEASE_TEST_LEVEL) / max(1, len(groups))
+    tested: list[dict[str, Any]] = []
+    released: list[dict[str, Any]] = []
+    start = theta_h.copy()
+    for unit in groups:
+        rest = [n for n in names if n not in unit]
+        red = reduced_problem(problem, theta_h, rest)
+        th, ne = refit_local(red, red.y, theta_h, seed)
+        n_evals += ne
+        delta = chi_h - _chi2(problem, th)
+        limit = float(chi2.ppf(unit_level, len(unit)))
+        row = {"names": list(unit), "delta_chi2": delta, "threshold": limit,
+               "level": unit_level}
+        tested.append(row)
+        if delta > limit:
+            released.append(row)
+            for n in unit:
+                k = space.names.index(n)
+                start[k] = th[k]
+    final = tuple(n for n in names if not any(n in r["names"] for r in released))
+    theta_f = theta_h
+    if released:
+        red = reduced_problem(problem, start, final)
+        theta_f, ne = refit_local(red, red.y, start, seed)
+        n_evals += ne
+    chi_full = _chi2(problem, theta)
+    delta = _chi2(problem, theta_f) - chi_full
+    threshold = float(chi2.ppf(HOLD_TEST_LEVEL, max(1, len(final))))
+    accepted = delta <= threshold
+    test = {"held": list(final), "delta_chi2": delta, "threshold": threshold,
+            "level": HOLD_TEST_LEVEL, "accepted": accepted, "released": released,
+            "tested": tested}
+    return _Hold(accepted, theta_f if accepted else theta, final if accepted else (),
+                 n_evals, res.stop_reason, test)
+
+
+def _attribution(problem: FitProblem, theta: FloatArray, held: Sequence[str],
+                 seed: int) -> list[dict[str, Any]]:
+    """Whether the maps tell a fitted stretch reflex from that of its partner group
+    (:data:`REFLEX_PARTNERS`: the bi-articular reflex and an elbow or shoulder group's show in
+    the same stretches).
+
+    For each partner pair where one group's reflex is fitted above unimpaired (its dynamic
+    grade not unimpaired) and the other's is not, the reflex is moved: the impaired group's α
+    and β held at the unimpaired values, the partner's freed and refitted (a local search with
+    a coarse scan of every reflex gain). When that costs the maps no more than the χ²
+    quantile of :data:`ATTRIBUTION_TEST_LEVEL`, the maps do not tell the two apart: both
+    groups' reflex parameters are reported as not identified, with the test. When the moved
+    reflex fits better by more than that, the fit is reported as having attributed it to the
+    wrong group (the same flag, with the better fit's Δχ²).
+    """
+    space = problem.space
+    params = space.to_params(theta, problem.arm.params)
+    grades = classify(problem.arm.with_muscles(params)
+                      if params.q_rest_rad == problem.arm.params.q_rest_rad
+                      else Arm.from_params(params))
+    fitted = set(n for k, n in enumerate(space.names) if space.fitted[k])
+    out: list[dict[str, Any]] = []
+    limit = float(chi2.ppf(ATTRIBUTION_TEST_LEVEL, 2))
+    chi0 = _chi2(problem, theta)
+    for a, b in REFLEX_PARTNERS:
+        for g, h in ((a, b), (b, a)):
+            if grades[g].dynamic.level == "unimpaired" or \
+                    grades[h].dynamic.level != "unimpaired":
+                continue
+            mine = (f"alpha_{g}", f"beta_{g}")
+            theirs = (f"alpha_{h}", f"beta_{h}")
+            if not all(n in fitted for n in mine + theirs):
+                continue
+            t = theta.copy()
+            for n in mine:
+                k = space.names.index(n)
+                t[k] = space.prior_mean[k]
+            keep = [n for n in held if n not in theirs] + list(mine)
+            red = reduced_problem(problem, t, keep)
+            th, ne = refit_local(red, red.y, t, seed)
+            delta = _chi2(problem, th) - chi0
+            if delta <= limit:
+                out.append({"group": g, "partner": h, "delta_chi2": delta, "threshold": limit,
+                            "stretch": " ".join(GRADED_STRETCH[g]), "n_evals": ne,
+                            "names": list(mine + theirs)})
+    return out
+
+
+def _with_attribution(flagged: Sequence[Unidentified],
+                      attribution: Sequence[Mapping[str, Any]]) -> tuple[Unidentified, ...]:
+    """``flagged`` with the reflex parameters of every pair the maps do not tell apart."""
+    out = {u.name: u for u in flagged}
+    for a in attribution:
+        g, h = a["group"], a["partner"]
+        better = a["delta_chi2"] < 0
+        why = (f"the maps do not tell the stretch reflex of {g} from that of {h}: putting it on "
+               f"{h} instead " + (f"fits better (Δχ² {a['delta_chi2']:.3g})" if better else
+                                  f"costs only Δχ² {a['delta_chi2']:.3g} <= "
+                                  f"{a['threshold']:.3g}")
+               + f"; the fit's {g} reflex may be {h}'s")
+        for n in a["names"]:
+            old = out.get(n)
+            out[n] = Unidentified(n, why if old is None else old.reason + "; " + why,
+                                  old.posterior_to_prior_sd if old is not None else 1.0)
+    return tuple(out.values())
+
+
+def _held_intervals(ranges: Sequence[GuessRange], prior: Prior, seed: int
+                    ) -> dict[str, tuple[float, float, float]]:
+    """(sd, low, high) of every held parameter over its prior range (draws of the range)."""
+    if not ranges:
+        return {}
+    one = FitSamples((), np.zeros((400, 0)))
+    drawn = draw(one, ranges, prior, seed=seed)
+    out = {}
+    for r in ranges:
+        iv = prior.interval(r)
+        for n in r.names:
+            col = drawn.values[:, drawn.names.index(n)]
+            out[n] = (float(col.std(ddof=1)), *iv[n])
+    return out
