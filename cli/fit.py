@@ -1,9 +1,11 @@
-"""``fieldbank fit PATIENT`` and ``fieldbank models list|show``.
+"""``fieldbank fit PATIENT``, ``fieldbank fit --all`` and ``fieldbank models list|show``.
 
 Thin: the commands open a :class:`fieldbank.fitting.records.FitStore`, call
-:func:`fieldbank.fitting.records.fit_patient` or the store, and print. The store comes from
-``ctx.obj['fit_store']`` when the caller provides one (a factory ``db_url -> FitStore``),
-else from :func:`fieldbank.fitting.dbstore.open_fit_store` on the field database.
+:func:`fieldbank.fitting.records.fit_patient` or the store, and print; ``fit --all`` calls
+:func:`fieldbank.fitting.batch.fit_all` (a batch on local processes or a Dask cluster).
+The store comes from ``ctx.obj['fit_store']`` when the caller provides one (a factory
+``db_url -> FitStore``), else from :func:`fieldbank.fitting.dbstore.open_fit_store` on the
+field database.
 """
 
 from __future__ import annotations
@@ -14,12 +16,22 @@ from typing import Any
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option
+from fieldbank.cli.options import (
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+    say,
+    scheduler_option,
+)
+from fieldbank.engine import BatchResult, default_jobs, progress_bar, resolve_scheduler
 from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
+from fieldbank.fitting.batch import fit_all
 from fieldbank.fitting.plot import plot_fit
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
 from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
+from fieldbank.model import MODEL_VERSION
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
@@ -120,8 +132,23 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 
 
 @click.command("fit")
-@click.argument("patient")
+@click.argument("patient", required=False)
 @click.option("--session", default=None, help="Fit the maps of this session only.")
+@click.option("--all", "batch", is_flag=True,
+              help="Fit every session with maps as a batch (of --patient, else of every "
+                   "patient), on --scheduler's cluster or local worker processes; a fit "
+                   "stored already with the same maps, options and model version is found, "
+                   "not repeated.")
+@click.option("--patient", "patients", multiple=True, metavar="CODE",
+              help="With --all: only this patient's sessions (repeatable).")
+@click.option("--older-than", "older_than", type=click.IntRange(min=1), default=None,
+              metavar="VERSION",
+              help="With --all: refit only the fits made under a model version below VERSION "
+                   f"(this fieldbank's: {MODEL_VERSION}).")
+@scheduler_option
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="With --all and no scheduler: worker processes (default: the cores "
+                   "available).")
 @click.option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
               show_default=True, help="nlopt global+local, or the dual annealing baseline.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
@@ -140,11 +167,32 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @json_option
 @db_option
 @click.pass_context
-def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, seed: int,
-        fit_kinds: str, prior_weight: float, max_evals: int | None, uncertainty: str,
-        replicates: int, plot_path: str | None, as_json: bool, db_url: str | None) -> None:
+def fit(ctx: click.Context, patient: str | None, session: str | None, batch: bool,
+        patients: tuple[str, ...], older_than: int | None, scheduler: str | None,
+        jobs: int | None, algorithm: str, seed: int, fit_kinds: str, prior_weight: float,
+        max_evals: int | None, uncertainty: str, replicates: int, plot_path: str | None,
+        as_json: bool, db_url: str | None) -> None:
     """Fit PATIENT's arm model to the patient's measured maps and store it."""
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
+    if batch:
+        if patient is not None or session is not None or plot_path is not None:
+            raise click.UsageError("--all fits every session: name patients with --patient; "
+                                   "it takes no PATIENT, --session or --plot.")
+        options = {"algorithm": algorithm, "seed": seed, "fit": list(kinds),
+                   "prior_weight": prior_weight, "max_evals": max_evals,
+                   "uncertainty": uncertainty, "replicates": replicates}
+        with open_db(db_url) as db:
+            res = fit_all(db, options, patients=patients, older_than=older_than,
+                          scheduler=resolve_scheduler(scheduler), jobs=jobs or default_jobs(),
+                          progress=progress_bar("fit"), say=say)
+        _batch_output(res, as_json)
+        if res.failed:
+            ctx.exit(1)
+        return
+    if patient is None:
+        raise click.UsageError("give a PATIENT to fit, or --all for every session.")
+    if patients or older_than is not None or scheduler is not None or jobs is not None:
+        raise click.UsageError("--patient, --older-than, --scheduler and --jobs go with --all.")
 
     def progress(n: int, best: float) -> None:
         click.echo(f"  {n} evaluations, best cost {best:.6g}", err=True)
@@ -155,6 +203,10 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
     store = _store(ctx, db_url)
     out = fit_patient(store, patient, session, fitter,
                       progress=lambda msg: click.echo(msg, err=True))
+    if not out.saved.created:
+        click.echo(f"fit {out.saved.fit_id} (model {out.saved.model_id}) holds the same maps "
+                   "with the same options under this model version: it is the fit shown, and "
+                   "nothing new was stored.", err=True)
     if plot_path:
         f = out.fitter
         path = plot_fit(f.maps_, f.predict(f.maps_), plot_path, f.r2_,
@@ -175,6 +227,23 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
         click.echo("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons) + "). It is "
                    "stored, but what-ifs and reports refuse it unless given --accept-poor-fit.",
                    err=True)
+
+
+def _batch_output(res: BatchResult, as_json: bool) -> None:
+    """What a batch fit did: one line per task that failed, the totals; or the JSON."""
+    if as_json:
+        emit_json(res.to_dict())
+    else:
+        for o in res.outcomes:
+            if o.state != "failed":
+                click.echo(f"{o.state:<8} {printable(o.key)}: {printable(o.detail)}")
+    run = res.run
+    click.echo(f"run {run.id} ({res.engine}): {res.count('done')} fitted, "
+               f"{res.count('skipped')} found fitted already, {res.count('failed')} failed"
+               + (f", {run.left} left" if run.left else "") + "; 'fieldbank jobs "
+               f"{run.id}' shows each", err=True)
+    for o in res.failed:
+        click.echo(f"failed: {printable(o.detail)}", err=True)
 
 
 @click.group("models")

@@ -46,6 +46,8 @@ COMMANDS: dict[str, LazyCommand] = {
                "Design probing motions that tell candidate arms apart; classify recorded traces."),
     "report": C("fieldbank.cli.report", "report",
                 "Report the field changes of stored intervention plans (HTML + CSV + JSON)."),
+    "jobs": C("fieldbank.cli.jobs", "jobs",
+              "Batch runs: what ran, what failed, what is left (RUN: each of its tasks)."),
     "validate": C("fieldbank.cli.validate", "validate",
                   "Check predictions against maps measured after the plan; --loo: leave maps "
                   "out of a fit."),

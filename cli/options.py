@@ -29,6 +29,17 @@ def db_option(f: F) -> F:
     return click.option("--db", "db_url", default=None, metavar="URL", help=DB_HELP)(f)
 
 
+SCHEDULER_HELP = ("Run on the Dask cluster of this scheduler (tcp://HOST:PORT); default: "
+                  "$FIELDBANK_SCHEDULER, else worker processes on this machine (--jobs).")
+
+
+def scheduler_option(f: F) -> F:
+    """``--scheduler ADDRESS`` → parameter ``scheduler`` (resolved by
+    :func:`fieldbank.engine.resolve_scheduler` when the command runs)."""
+    return click.option("--scheduler", "scheduler", default=None, metavar="ADDRESS",
+                        help=SCHEDULER_HELP)(f)
+
+
 def json_option(f: F) -> F:
     """``--json`` → parameter ``as_json``: one JSON document on stdout, messages on stderr."""
     return click.option("--json", "as_json", is_flag=True,

@@ -13,7 +13,15 @@ from datetime import datetime
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import (
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+    say,
+    scheduler_option,
+)
+from fieldbank.engine import resolve_scheduler
 from fieldbank.interventions.catalogue import KINDS
 from fieldbank.interventions.report import Selection, build_report, default_jobs
 
@@ -42,6 +50,7 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
               help="Directory for report.html, metrics.csv and metrics.json.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes for batches (default: the cores available).")
+@scheduler_option
 @click.option("--no-date", "no_date", is_flag=True,
               help="Leave the time of writing out, so that reruns give identical files.")
 @click.option("--accept-poor-fit", is_flag=True,
@@ -50,7 +59,8 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
 def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ...],
            plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: datetime | None,
            until: datetime | None, kinds: tuple[str, ...], out_dir: str, jobs: int | None,
-           no_date: bool, accept_poor_fit: bool, as_json: bool) -> None:
+           scheduler: str | None, no_date: bool, accept_poor_fit: bool,
+           as_json: bool) -> None:
     """Report the field changes of stored intervention plans (HTML + CSV + JSON)."""
     bad = [k for k in kinds if k not in KINDS]
     if bad:
@@ -64,7 +74,8 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     when = None if no_date else datetime.now().astimezone().isoformat(timespec="seconds")
     with open_db(db_url) as db:
         out = build_report(db, sel, out_dir, jobs=jobs or default_jobs(), progress=True,
-                           stamp=when, accept_poor_fit=accept_poor_fit)
+                           stamp=when, accept_poor_fit=accept_poor_fit,
+                           scheduler=resolve_scheduler(scheduler), say=say)
     if as_json:
         emit_json({"cases": out.n_cases, "jobs": out.jobs_used, "html": str(out.html),
                    "csv": str(out.csv), "json": str(out.json)})

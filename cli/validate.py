@@ -13,7 +13,15 @@ import math
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import (
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+    say,
+    scheduler_option,
+)
+from fieldbank.engine import progress_bar, resolve_scheduler
 from fieldbank.fitting.crossval import CrossValidation, cross_validate, latest_fitted_model
 from fieldbank.fitting.dbstore import DatabaseFitStore
 from fieldbank.interventions.validate import (
@@ -24,6 +32,7 @@ from fieldbank.interventions.validate import (
     ValidationReport,
     validate_plans,
 )
+from fieldbank.interventions.validate_batch import validate_on_cluster
 
 
 def _f(v: float | None, fmt: str) -> str:
@@ -104,12 +113,13 @@ def loo_text(cv: CrossValidation) -> str:
 @click.option("--max-change-se", type=click.FloatRange(0.0, 10.0, min_open=True),
               default=MAX_CHANGE_SE, show_default=True,
               help="The change is checked only when its realised fraction is known to this SE.")
+@scheduler_option
 @db_option
 @json_option
 @click.pass_context
 def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int, ...],
              loo: bool, model_id: int | None, change_tolerance: float, max_change_se: float,
-             db_url: str | None, as_json: bool) -> None:
+             scheduler: str | None, db_url: str | None, as_json: bool) -> None:
     """Check predictions against maps measured after the plan; --loo: leave maps out of a fit."""
     if loo:
         if plan_ids:
@@ -131,14 +141,24 @@ def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int,
         return
     if model_id is not None:
         raise click.UsageError("--model goes with --loo.")
+    address = resolve_scheduler(scheduler)
+    lost: tuple[str, ...] = ()
     with open_db(db_url) as db:
-        rep = validate_plans(db, patients, plan_ids, tolerance=change_tolerance,
-                             max_se=max_change_se)
+        if address:
+            rep, lost = validate_on_cluster(db, address, patients, plan_ids,
+                                            tolerance=change_tolerance, max_se=max_change_se,
+                                            progress=progress_bar("validate"), say=say)
+        else:
+            rep = validate_plans(db, patients, plan_ids, tolerance=change_tolerance,
+                                 max_se=max_change_se)
     if as_json:
         emit_json(rep.to_dict())
     else:
         click.echo(plans_text(rep))
+    for line in lost:
+        click.echo(f"not checked (task failed): {line}", err=True)
     if rep.failed:
         click.echo("prediction failed: " + ", ".join(
             f"plan {p.plan_id} ({p.patient})" for p in rep.failed), err=True)
+    if rep.failed or lost:
         ctx.exit(1)

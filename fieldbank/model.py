@@ -52,6 +52,11 @@ FloatArray = NDArray[np.float64]
 #: Four same-shaped arrays: the entries of a 2 × 2 matrix per point, row by row.
 Quad = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
+#: Version of the arm model and of how a fit estimates it: raised with every change of the
+#: equations, of the fitter or of its defaults that changes what a fit of the same maps gives.
+#: Every fit records it; ``fieldbank fit --all --older-than N`` refits what older versions made.
+MODEL_VERSION = 1
+
 #: Elbow angles closer than this to 0 or π make the endpoint Jacobian singular.
 SINGULAR_ELBOW_RAD = 0.02
 #: Gauss-Legendre segments (in units of the smoothing width w) for the potential's
@@ -522,10 +527,11 @@ class ArmBatch:
         lam_min = lam_corners.min(axis=1)
         lam_max = lam_corners.max(axis=1)
         if np.any(lam_min <= 0):
-            k, i = np.unravel_index(int(np.argmin(lam_min)), lam_min.shape)
+            where = np.unravel_index(int(np.argmin(lam_min)), lam_min.shape)
             raise ParameterError(
-                f"ArmBatch: in parameter set {k}, muscle {i} would reach a non-positive "
-                f"length ({lam_min[k, i]:.4g} m) within the range of motion.")
+                f"ArmBatch: in parameter set {int(where[0])}, muscle {int(where[1])} would "
+                f"reach a non-positive length ({lam_min[where]:.4g} m) within the range of "
+                "motion.")
         arrays = {
             "q_rest": q_rest, "lam_rest": lam_rest,
             "lam_slack": lam_rest + np.array([p.slack_offset_m for p in sets], dtype=float),
@@ -546,10 +552,12 @@ class ArmBatch:
         qa = np.asarray(q, dtype=float)
         return self.lam_rest[:, None, :] + (qa - self.q_rest[:, None, :]) @ self.geometry.jl.T
 
-    def passive_force(self, lam: FloatArray) -> FloatArray:
-        """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only."""
-        return passive_force(lam, self.lam_slack[:, None, :], self.km[:, None, :],
-                             self.excursion[:, None, :], self.geometry.w)
+    def passive_force(self, lam: FloatArray, groups: ArrayLike | None = None) -> FloatArray:
+        """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only.
+        ``groups`` (indices): λ holds only these muscle groups' columns, and so does Ψ."""
+        g = slice(None) if groups is None else np.asarray(groups)
+        return passive_force(lam, self.lam_slack[:, None, g], self.km[:, None, g],
+                             self.excursion[:, None, g], self.geometry.w)
 
     def reflex_force(self, lam: FloatArray, ldot: FloatArray) -> FloatArray:
         """Φ (S, N, 6), N, for λ (S, N, 6) and λ̇ (N, 6) shared by every set: the value of

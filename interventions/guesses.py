@@ -19,7 +19,12 @@ what-if must say:
   samples (bootstrap replicates or Gaussian draws, :mod:`fieldbank.fitting.uncertainty`) gives
   the spread of the headline metrics before, after and of the change; reported as the 2.5-97.5
   percentiles (95%) beside the point prediction. Parameters held at the unimpaired value stay
-  held in the samples: what rests on them is in the warnings, not in the intervals.
+  held in the samples: what rests on them is in the warnings, not in the intervals. The
+  samples run in one vectorised pass (:func:`sample_metrics`, :class:`fieldbank.model.ArmBatch`:
+  the geometry compiled once, every muscle value - Km, α, β, slack offset, rest length, rest
+  posture - free per sample); :func:`sample_metrics_per_sample` is the one-arm-per-sample
+  reference it is tested against. :class:`IntervalSet` is what a report keeps with the fit
+  under :func:`interval_key`.
 
 Which parameters a step acts on follows from the catalogue's public contract (``targets()``
 and ``EFFECTS``): a change of α or β scales the group's reflex force, which rests on both α
@@ -29,8 +34,10 @@ on Km.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -40,7 +47,7 @@ from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.batch import (
     peak_magnitude,
     probe_forces,
-    rms_force,
+    rms_forces,
     standard_stretch_torques,
 )
 from fieldbank.evaluate.compare import Conditions
@@ -54,7 +61,7 @@ from fieldbank.evaluate.probing import (
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.model import Arm, ArmBatch, FloatArray
+from fieldbank.model import MODEL_VERSION, Arm, ArmBatch, FloatArray
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import ArmParams
 
@@ -306,9 +313,9 @@ def headline_metrics_batch(batch: ArmBatch, cond: Conditions
         out[f"{s.name} reflex torque"] = ((s.fast_n_m - s.slow_n_m).max(axis=1), "N·m")
     for m in cond.probes:
         out[f"{m.name} peak force"] = (peak_magnitude(probe_forces(batch, m)), "N")
-    for k, speed in enumerate(cond.speeds_m_per_s):
-        out[f"RMS |F| at {speed:g} m/s"] = (rms_force(batch, cond.grid_m, cond.velocities[k]),
-                                             "N")
+    for speed, rms in zip(cond.speeds_m_per_s, rms_forces(batch, cond.grid_m, cond.velocities),
+                          strict=True):
+        out[f"RMS |F| at {speed:g} m/s"] = (rms, "N")
     return out, curves
 
 
@@ -429,6 +436,74 @@ def intervals_of(sm: SampleMetrics,
                  for i, k in enumerate(sm.keys))
 
 
+@dataclass(frozen=True, eq=False)
+class IntervalSet:
+    """What :func:`prediction_intervals` gives for one plan on one fitted model: the
+    intervals, their note, the samples used and the curve bands. Kept with the fit in the
+    database (:meth:`to_document`), so a report that meets the same fit, model and plan again
+    reads them instead of computing them."""
+
+    intervals: tuple[Interval, ...]
+    note: str
+    n_samples: int
+    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]]
+
+    def to_document(self) -> tuple[dict[str, Any], bytes | None]:
+        """A JSON document and the bands as float64 little-endian bytes (exact: read back,
+        every figure and number is the same to the last bit)."""
+        names = [[when, name] for when, per in self.bands.items() for name in per]
+        parts = [np.asarray(side, dtype="<f8") for when, name in names
+                 for side in self.bands[when][name]]
+        doc = {"intervals": [{f.name: getattr(i, f.name) for f in fields(Interval)}
+                             for i in self.intervals],
+               "note": self.note, "n_samples": self.n_samples,
+               "bands": names, "band_length": [len(p) for p in parts]}
+        return doc, (b"".join(p.tobytes() for p in parts) if parts else None)
+
+    @classmethod
+    def from_document(cls, doc: Mapping[str, Any], arrays: bytes | None) -> IntervalSet:
+        flat = np.frombuffer(arrays or b"", dtype="<f8").astype(float)
+        bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = {}
+        at = 0
+        lengths = iter(doc["band_length"])
+        for when, name in doc["bands"]:
+            sides = []
+            for _ in range(2):
+                n = next(lengths)
+                sides.append(flat[at:at + n])
+                at += n
+            bands.setdefault(when, {})[name] = (sides[0], sides[1])
+        return cls(tuple(Interval(**i) for i in doc["intervals"]), str(doc["note"]),
+                   int(doc["n_samples"]), bands)
+
+
+#: Raised with every change of how intervals are computed; with
+#: :data:`fieldbank.model.MODEL_VERSION` part of :func:`interval_key`.
+INTERVALS_VERSION = 1
+
+
+def interval_key(basis: FitBasis, before: ArmParams, plan: Plan, n_samples: int) -> str:
+    """SHA-256 of everything :func:`prediction_intervals` depends on: the fit (its samples),
+    the model before, the plan, the number of samples and the model and interval versions.
+    A refit, another model or plan, or a new version gives another key."""
+    doc = {"fit": basis.fit_id, "fitted_model": basis.fitted_model_id,
+           "same_model": basis.same_model, "before": before.to_dict(), "plan": plan.to_dict(),
+           "n_samples": n_samples, "model_version": MODEL_VERSION,
+           "intervals_version": INTERVALS_VERSION}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode("utf-8")).hexdigest()
+
+
+def interval_set(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
+                 arms: ArmCache, n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> IntervalSet:
+    """:func:`prediction_intervals` with its bands, as one :class:`IntervalSet`."""
+    if n_samples <= 0:
+        return IntervalSet((), "intervals not asked for", 0, {})
+    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = {}
+    intervals, note, used = prediction_intervals(basis, before, plan, cond, arms, n_samples,
+                                                 bands)
+    return IntervalSet(intervals, note, used, bands)
+
+
 def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *,
             accept_poor_fit: bool = False,
             n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
@@ -439,18 +514,19 @@ def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *
 
 def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
                   arms: ArmCache, *, accept_poor_fit: bool = False,
-                  n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
-    """:func:`examine` for a model ``before`` whose fit basis is known (reports)."""
+                  n_samples: int = DEFAULT_INTERVAL_SAMPLES,
+                  known: IntervalSet | None = None) -> Guesses:
+    """:func:`examine` for a model ``before`` whose fit basis is known (reports); ``known``:
+    its intervals read from the fit's stored documents (:func:`interval_key`), used instead
+    of computing them."""
     note = check_fit(basis, accept_poor_fit)
-    bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] = {}
-    intervals, inote, used = (prediction_intervals(basis, before, plan, cond, arms, n_samples,
-                                                   bands)
-                              if n_samples > 0 else ((), "intervals not asked for", 0))
+    iv = known if known is not None else interval_set(basis, before, plan, cond, arms,
+                                                      n_samples)
     warn = list(plan_warnings(plan, basis, before))
     if note:
         warn.insert(0, note)
-    return Guesses(basis, guesses(basis, before), tuple(warn), intervals, inote, used,
-                   note is not None, bands=bands)
+    return Guesses(basis, guesses(basis, before), tuple(warn), iv.intervals, iv.note,
+                   iv.n_samples, note is not None, bands=iv.bands)
 
 
 def _values(params: ArmParams) -> dict[str, float]:

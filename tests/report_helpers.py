@@ -132,3 +132,57 @@ def decode_path(d: str) -> list[np.ndarray]:
         else:
             raise ValueError(f"unexpected token {t!r} in {d[:80]!r}")
     return [np.array(p) for p in lines]
+
+
+def store_fitted_cohort(db: Any, n: int, templates: int = 6, seed: int = 7) -> list[int]:
+    """N patients with fitted models, one stored plan each (COHORT_PLANS in turn), as a clinic
+    holds them: maps of a 'pre' and a 'post' session, a fit of the 'pre' maps with its
+    parameter samples, the plan recorded as given between the two sessions (so a report
+    checks it against the 'post' maps). ``templates`` patients (COHORT_SEVERITIES in turn) are
+    fitted for real; the others are their namesakes - the same body, maps, fit report and
+    samples, stored as their own patient, maps, fitted model and fit - so that a cohort of a
+    hundred costs a few fits to build. Returns the plan ids."""
+    from datetime import date
+
+    from fieldbank import modelsource
+    from fieldbank.fitting.dbstore import DatabaseFitStore
+    from fieldbank.fitting.fitter import ArmFitter
+    from fieldbank.fitting.records import fit_patient
+    from fieldbank.interventions import Plan
+    from fieldbank.interventions.whatif import save_plan
+    from tests.cohort_helpers import ingest_maps, store_sessions
+
+    pairs = store_sessions(db, templates, seed=seed, prefix="FIT")
+    codes = list(dict.fromkeys(code for code, _ in pairs))
+    fits = {}
+    for code in codes:
+        out = fit_patient(DatabaseFitStore(db), code, "pre", ArmFitter(seed=0))
+        fits[code] = (out.fitter.params_, dict(out.record.report))
+    ids = []
+    for i in range(n):
+        template = codes[i % templates]
+        if i < templates:
+            code = template
+            model_id = int(db.list_models(code, origin="fitted")[-1].id)
+        else:
+            code = f"FIT-C{i:04d}"
+            t = db.get_patient(template)
+            db.add_patient(code, t.body_mass_kg, t.height_m, t.side, notes="synthetic")
+            for label in ("pre", "post"):
+                stored = db.list_maps(template, label)
+                when = stored[0].session_date
+                ingest_maps(db, code, label, db.get_maps([m.id for m in stored]), when)
+            map_ids = [m.id for m in db.list_maps(code, "pre")]
+            params, report = fits[template]
+            report = {**report, "patient": code, "map_ids": map_ids}
+            model, _ = db.add_fitted_model(params, f"fit of {len(map_ids)} maps", code,
+                                           report["algorithm"], report["seed"],
+                                           report["n_evals"], report["time_s"],
+                                           report["cost"], report, map_ids,
+                                           session_label="pre")
+            model_id = int(model.id)
+        label, step = COHORT_PLANS[i % len(COHORT_PLANS)]
+        saved = save_plan(db, modelsource.stored(db, model_id), Plan.of(step(), label=label),
+                          given_on=date(2024, 1, 20), accept_poor_fit=True)
+        ids.append(saved.plan_id)
+    return ids

@@ -33,7 +33,7 @@ def _entries(path: Path) -> list[tuple[str, str, str, list[str]]]:
     """``(name, version, marker, hashes)`` of every requirement in a lock file."""
     out = []
     block: list[str] = []
-    for line in path.read_text(encoding="utf-8").splitlines() + [""]:
+    for line in [*path.read_text(encoding="utf-8").splitlines(), ""]:
         if line and not line.startswith((" ", "#")):
             block = [line]
         elif block and line.startswith("    --hash"):

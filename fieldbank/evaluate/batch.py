@@ -10,7 +10,7 @@ sample axis:
   :func:`fieldbank.evaluate.probing.stretch_profile`, the torque resisting each, per sample;
 * :func:`probe_forces` - the force felt along a probing motion
   (:func:`fieldbank.evaluate.probing.profile`), per sample;
-* :func:`rms_force` - the RMS endpoint force over a set of points and velocities.
+* :func:`rms_forces` - the RMS endpoint force over a grid, for sets of velocities.
 
 Each equals the one-arm function applied to each sample in turn (``tests/test_intervals.py``
 checks it to 1e-12 relative against those functions).
@@ -18,6 +18,8 @@ checks it to 1e-12 relative against those functions).
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,7 +80,10 @@ def stretch_torques(batch: ArmBatch, joint: str, direction: str,
         qdot[:, j] = sign * speed
         return np.asarray(batch.reflex_force(lam, geo.muscle_velocities(qdot)) * lever)
 
-    passive = batch.passive_force(lam) * lever
+    # the groups this joint moves: the others add exactly 0 N·m (a zero lever)
+    moved = np.flatnonzero(lever)
+    passive = np.zeros_like(lam)
+    passive[..., moved] = batch.passive_force(lam[..., moved], moved) * lever[moved]
     slow = (passive + reflex(slow_speed_rad_s)).sum(axis=-1)
     fast = (passive + reflex(fast_speed_rad_s)).sum(axis=-1)
     return StretchTorques(joint, direction, angles, slow, fast)
@@ -99,10 +104,16 @@ def peak_magnitude(force_n: FloatArray) -> FloatArray:
     return np.asarray(np.hypot(force_n[..., 0], force_n[..., 1]).max(axis=-1))
 
 
-def rms_force(batch: ArmBatch, grid_m: FloatArray, velocities_m_per_s: FloatArray) -> FloatArray:
-    """RMS endpoint force magnitude, per set, (S,), N, over every point of ``grid_m`` (N, 2)
-    with every velocity of ``velocities_m_per_s`` (D, 2): the N·D points of
-    :meth:`fieldbank.evaluate.compare.Conditions.points`, in that order."""
-    f = batch.grid_force(grid_m, velocities_m_per_s)
-    f = f.reshape(f.shape[0], -1, 2)
-    return np.asarray(np.sqrt(np.mean(np.sum(f * f, axis=-1), axis=-1)))
+def rms_forces(batch: ArmBatch, grid_m: FloatArray,
+               velocities: Sequence[FloatArray]) -> list[FloatArray]:
+    """RMS endpoint force magnitude per set, (S,) N, for each velocity set of ``velocities``
+    (each (D, 2), m/s) over every point of ``grid_m`` (N, 2): the N·D points of
+    :meth:`fieldbank.evaluate.compare.Conditions.points`, in that order. The passive force
+    on the grid is computed once for every velocity set."""
+    sizes = [len(v) for v in velocities]
+    f = batch.grid_force(grid_m, np.concatenate(velocities, axis=0))
+    out = []
+    for lo, hi in itertools.pairwise(np.cumsum([0, *sizes])):
+        part = np.ascontiguousarray(f[:, :, lo:hi]).reshape(f.shape[0], -1, 2)
+        out.append(np.asarray(np.sqrt(np.mean(np.sum(part * part, axis=-1), axis=-1))))
+    return out

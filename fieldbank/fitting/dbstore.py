@@ -38,11 +38,17 @@ class DatabaseFitStore:
                  + (f", session {record.session}" if record.session else "")
                  + f" ({record.algorithm}, seed {record.seed})")
         report = dict(record.report)
-        model, fit = self.db.add_fitted_model(
-            record.params, label, record.patient, record.algorithm, record.seed,
-            int(report["n_evals"]), float(report["time_s"]), float(report["cost"]), report,
-            [int(m) for m in record.map_ids])
-        return SavedFit(fit.id, model.id)
+        args = (record.params, label, record.patient, record.algorithm, record.seed,
+                int(report["n_evals"]), float(report["time_s"]), float(report["cost"]), report,
+                [int(m) for m in record.map_ids])
+        if record.fit_key is None:
+            model, fit = self.db.add_fitted_model(*args, model_version=record.model_version,
+                                                  session_label=record.session)
+            return SavedFit(fit.id, model.id)
+        model, fit, created = self.db.add_fitted_model_once(
+            *args, fit_key=record.fit_key, model_version=record.model_version,
+            session_label=record.session)
+        return SavedFit(fit.id, model.id, created)
 
     def list_models(self, patient: str | None = None) -> Sequence[StoredModel]:
         return self.db.list_models(patient_code=patient)

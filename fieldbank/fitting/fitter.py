@@ -228,6 +228,18 @@ class ArmFitter:
         self.replicates = replicates
         self.thresholds = thresholds
 
+    def options(self) -> dict[str, Any]:
+        """The options that decide what a fit gives, as plain JSON values (a stored fit's key
+        hashes them; the progress callback is not one)."""
+        return {"algorithm": self.algorithm, "seed": int(self.seed),
+                "fit": list(self.fit_kinds),
+                "bounds": None if self.bounds is None else
+                {k: [float(v) for v in b] for k, b in sorted(self.bounds.items())},
+                "prior_weight": float(self.prior_weight), "max_evals": self.max_evals,
+                "hold_unidentified": bool(self.hold_unidentified),
+                "uncertainty": self.uncertainty, "replicates": int(self.replicates),
+                "thresholds": None if self.thresholds is None else self.thresholds.to_dict()}
+
     def __getattr__(self, name: str) -> Any:
         if name in _RESULTS:
             raise FitError(f"ArmFitter has no result {name!r} yet: call fit(maps, base) first.")

@@ -8,7 +8,9 @@ the storage layer (or a test double) can provide them:
 * ``maps_for(patient, session)`` - the patient's measured maps as :class:`PatientMap`
   (all sessions when ``session`` is None; an unknown session -> a FieldbankError);
 * ``add_fit(record)`` - store the fit and the fitted model **in one transaction** and return
-  their ids (:class:`SavedFit`); the record carries the lineage (patient, session, map ids);
+  their ids (:class:`SavedFit`); the record carries the lineage (patient, session, map ids)
+  and its :func:`fit_key`: a store that keeps keys returns an identical fit stored before
+  instead of storing a second one (``SavedFit.created`` False);
 * ``list_models(patient)`` - the stored models as
   :class:`~fieldbank.storage.records.StoredModel` records, for ``fieldbank models list``;
 * ``get_model(model_id)`` - a :class:`ModelDetail`: the model, its ancestors (newest first)
@@ -20,6 +22,8 @@ the storage layer (or a test double) can provide them:
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -27,6 +31,7 @@ from typing import Any, Protocol
 from fieldbank.errors import FitError
 from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.maps import FieldMap
+from fieldbank.model import MODEL_VERSION
 from fieldbank.params import ArmParams
 from fieldbank.storage.records import StoredModel
 
@@ -60,12 +65,30 @@ class FitSubmission:
     seed: int
     status: str
     severity: Mapping[str, Any] | None = field(default=None)
+    #: :func:`fit_key` of what the fit was made from; a store keeps one fit per key.
+    fit_key: str | None = None
+    model_version: int = MODEL_VERSION
 
 
 @dataclass(frozen=True)
 class SavedFit:
+    """The stored fit and model; ``created`` False: an identical fit (same key) was stored
+    already, and these are its ids (nothing new was stored)."""
+
     fit_id: int | str
     model_id: int | str
+    created: bool = True
+
+
+def fit_key(patient: str, session: str | None, map_ids: Sequence[int | str],
+            base: ArmParams, options: Mapping[str, Any]) -> str:
+    """SHA-256 of what a fit is made from: the patient and the session asked for, the maps
+    (stored maps never change, so their ids stand for their contents), the patient's base
+    parameters, the fitter's options (:meth:`ArmFitter.options`) and
+    :data:`fieldbank.model.MODEL_VERSION`. The same key means the same fit would result."""
+    doc = {"patient": patient, "session": session, "maps": sorted(str(m) for m in map_ids),
+           "base": base.to_dict(), "options": dict(options), "model_version": MODEL_VERSION}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode("utf-8")).hexdigest()
 
 
 def model_summary(m: StoredModel) -> dict[str, Any]:
@@ -154,6 +177,7 @@ def fit_patient(
         meta = dict(s.map.metadata)
         meta.setdefault("map_id", str(s.map_id))
         maps.append(replace(s.map, metadata=meta))
+    key = fit_key(patient, session, [s.map_id for s in stored], base, fitter.options())
     fitter.fit(maps, base, patient=None)
     report = fitter.report()
     report["patient"] = patient
@@ -170,6 +194,7 @@ def fit_patient(
         seed=fitter.seed_,
         status=fitter.status_,
         severity=fitter.severity_,
+        fit_key=key,
     )
     saved = store.add_fit(record)
     return FitOutcome(saved, fitter, record)

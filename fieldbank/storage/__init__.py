@@ -25,7 +25,8 @@ leave this package)::
     db.add_fit(patient_code, model_id, algorithm, seed, n_evals, time_s, cost, result, map_ids)
     db.add_fitted_model(params, label, patient_code, algorithm, seed, n_evals, time_s, cost,
                         result, map_ids) -> (StoredModel, FitRecord)   # one transaction
-    db.list_fits(patient_code=None) / db.get_fit(id)
+    db.list_fits(patient_code=None) / db.get_fit(id) / db.fit_by_key(key)
+    db.add_fitted_model_once(..., fit_key=key) -> (StoredModel, FitRecord, stored: bool)
     db.add_plan(base_model_id, result_model_id, spec, label="", patient_code=None)
     db.add_plan_result(after, spec, label, patient_code=None, base_model_id=None, before=None,
                        before_label="") -> (base model id, after StoredModel, PlanRecord)
@@ -36,6 +37,14 @@ leave this package)::
     db.list_haptic_sessions(patient_code=None)
     db.add_trace(haptic_session_id, name, array, unit, provenance) -> TraceRecord
     db.list_traces(haptic_session_id) / db.get_trace_array(trace_id) / db.trace_attrs(id)
+    # batch runs and their jobs; documents derived from a fit                   jobs.py
+    db.start_run(kind, engine, args, [(key, patient, session)]) -> JobRunRecord
+    db.start_job(run_id, key, worker) / db.finish_job(run_id, key, state, result, error,
+                 payload) -> JobRecord
+    db.get_run(id) / db.run_by_token(token) / db.list_runs(kind=None, limit=None)
+    db.list_jobs(run_id, states=None) / db.job_payloads(run_id) / db.clear_payloads(run_id)
+    db.finish_run(run_id)
+    db.fit_document(fit_id, key) / db.put_fit_document(fit_id, key, model_version, doc, arrays)
     # audit, integrity and clean-up                      database.py, check.py, arrays.py
     db.audit_entries(limit=None) -> [AuditEntry]
     db.check() -> CheckReport      # check.check(db): reads db.engine and db.arrays only
@@ -69,6 +78,7 @@ Modules::
     mapstore.py    MapStore mixin: ingest, maps, source files (IngestProgress)
     lineage.py     Lineage mixin: models, fits, plans
     traces.py      Traces mixin: haptic sessions and traces
+    jobs.py        Jobs mixin: batch runs, their jobs, documents derived from a fit
     arrays.py      where large arrays live (store directory or array_chunks), write, read, gc
     check.py       check(db) -> CheckReport: every reference and checksum, orphans
     records.py     the frozen records returned by Database
@@ -93,6 +103,8 @@ from fieldbank.storage.records import (
     HapticTrialRecord,
     IncomingFile,
     IngestOutcome,
+    JobRecord,
+    JobRunRecord,
     PatientInfo,
     PlanRecord,
     SessionInfo,
@@ -112,6 +124,8 @@ __all__ = [
     "IncomingFile",
     "IngestOutcome",
     "IngestProgress",
+    "JobRecord",
+    "JobRunRecord",
     "PatientInfo",
     "PlanRecord",
     "SessionInfo",

@@ -5,10 +5,11 @@
 :class:`~fieldbank.storage.core.DatabaseCore` (engine, array store, actor, transactions, audit,
 patient and session rows)::
 
-    Database(MapStore, Lineage, Traces)      this module: open/close, patients, sessions, audit,
+    Database(MapStore, Lineage, Traces, Jobs)  this module: open/close, patients, sessions, audit,
     ├── MapStore(DatabaseCore)                 mapstore.py: ingest, maps, source files
     ├── Lineage(DatabaseCore)                  lineage.py: models, fits, plans
-    └── Traces(DatabaseCore)                   traces.py: haptic sessions, traces
+    ├── Traces(DatabaseCore)                   traces.py: haptic sessions, traces
+    └── Jobs(DatabaseCore)                     jobs.py: batch runs and jobs, fit documents
 
 Why mixins rather than objects the facade holds: the aggregates share one engine, one store and
 one actor, and several writes span two of them in ONE transaction (an ingest creates the
@@ -47,6 +48,7 @@ from fieldbank.storage.config import (
     resolve_url,
 )
 from fieldbank.storage.core import now, to_utc
+from fieldbank.storage.jobs import Jobs
 from fieldbank.storage.lineage import Lineage
 from fieldbank.storage.mapstore import MapStore
 from fieldbank.storage.orm import AuditRow, MapRow, PatientRow, SessionRow
@@ -72,7 +74,7 @@ def _patient_info(r: PatientRow) -> PatientInfo:
                        to_utc(r.created_at))
 
 
-class Database(MapStore, Lineage, Traces):
+class Database(MapStore, Lineage, Traces, Jobs):
     """The field database and its array store. Create with :meth:`open`."""
 
     # --- opening ----------------------------------------------------------------------------

@@ -23,7 +23,15 @@ from sqlalchemy.orm import Session
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.storage.core import DatabaseCore, now, to_utc
-from fieldbank.storage.orm import FitRow, MapRow, ModelRow, PatientRow, PlanRow, fit_maps
+from fieldbank.storage.orm import (
+    FitRow,
+    MapRow,
+    ModelRow,
+    PatientRow,
+    PlanRow,
+    SessionRow,
+    fit_maps,
+)
 from fieldbank.storage.records import FitRecord, PlanRecord, StoredModel
 
 ORIGINS = ("synthetic", "fitted", "intervention")
@@ -105,18 +113,62 @@ class Lineage(DatabaseCore):
     def add_fitted_model(self, params: ArmParams, label: str, patient_code: str,
                          algorithm: str, seed: int | None, n_evals: int, time_s: float,
                          cost: float, result: Mapping[str, Any],
-                         map_ids: Sequence[int]) -> tuple[StoredModel, FitRecord]:
-        """Store a fitted model and its fit record in one transaction: both or neither."""
+                         map_ids: Sequence[int], *, fit_key: str | None = None,
+                         model_version: int | None = None,
+                         session_label: str | None = None) -> tuple[StoredModel, FitRecord]:
+        """Store a fitted model and its fit record in one transaction: both or neither.
+
+        ``fit_key`` (unique), ``model_version`` and ``session_label`` record what the fit was
+        made from (:meth:`add_fitted_model_once` stores a keyed fit at most once).
+        """
         with self._write() as s:
             model = self._add_model(s, params, "fitted", label, patient_code, None)
             fit = self._add_fit(s, patient_code, model.id, algorithm, seed, n_evals, time_s,
-                                cost, result, map_ids)
+                                cost, result, map_ids, fit_key, model_version, session_label)
             return model, fit
+
+    def add_fitted_model_once(self, params: ArmParams, label: str, patient_code: str,
+                              algorithm: str, seed: int | None, n_evals: int, time_s: float,
+                              cost: float, result: Mapping[str, Any], map_ids: Sequence[int],
+                              *, fit_key: str, model_version: int | None = None,
+                              session_label: str | None = None
+                              ) -> tuple[StoredModel, FitRecord, bool]:
+        """:meth:`add_fitted_model` unless a fit with ``fit_key`` is stored already: then
+        nothing is stored and that fit and its model come back. The last item says whether
+        this call stored them.
+
+        Two writers racing with one key (a batch task run twice, after its first worker died
+        having committed) cannot both store: the key is unique, the loser's transaction rolls
+        back whole (model included) and it returns the winner's fit.
+        """
+        found = self.fit_by_key(fit_key)
+        if found is None:
+            try:
+                model, fit = self.add_fitted_model(
+                    params, label, patient_code, algorithm, seed, n_evals, time_s, cost,
+                    result, map_ids, fit_key=fit_key, model_version=model_version,
+                    session_label=session_label)
+                return model, fit, True
+            except StorageError:
+                found = self.fit_by_key(fit_key)
+                if found is None:
+                    raise
+        return self.get_model(found.model_id), found, False
+
+    def fit_by_key(self, fit_key: str) -> FitRecord | None:
+        """The fit stored with ``fit_key``, or None."""
+        with self._read() as s:
+            r = s.scalar(select(FitRow).where(FitRow.fit_key == fit_key))
+            return None if r is None else self._fit(s, r)
 
     def _add_fit(self, s: Session, patient_code: str, model_id: int, algorithm: str,
                  seed: int | None, n_evals: int, time_s: float, cost: float,
-                 result: Mapping[str, Any], map_ids: Sequence[int]) -> FitRecord:
+                 result: Mapping[str, Any], map_ids: Sequence[int],
+                 fit_key: str | None = None, model_version: int | None = None,
+                 session_label: str | None = None) -> FitRecord:
         p = self._patient_row(s, patient_code)
+        session_id = (None if session_label is None else
+                      self._session_row(s, p, session_label, None, create=False).id)
         if s.get(ModelRow, model_id) is None:
             raise StorageError(f"No model with id {model_id}.")
         found = set(s.scalars(select(MapRow.id).where(MapRow.id.in_(list(map_ids)),
@@ -127,23 +179,27 @@ class Lineage(DatabaseCore):
         row = FitRow(patient_id=p.id, model_id=model_id, algorithm=algorithm, seed=seed,
                      n_evals=int(n_evals), time_s=float(time_s), cost=float(cost),
                      result_json=json.dumps(dict(result), sort_keys=True),
-                     created_at=now())
+                     created_at=now(), fit_key=fit_key, model_version=model_version,
+                     session_id=session_id)
         s.add(row)
         s.flush()
         ids = tuple(dict.fromkeys(int(m) for m in map_ids))
         if ids:
             s.execute(fit_maps.insert(), [{"fit_id": row.id, "map_id": m} for m in ids])
-        self._audit(s, "add", "fit", row.id, {"model": model_id, "maps": list(ids)})
+        self._audit(s, "add", "fit", row.id, {"model": model_id, "maps": list(ids),
+                                              "key": fit_key, "model_version": model_version})
         return FitRecord(row.id, p.code, model_id, algorithm, seed, row.n_evals,
                          row.time_s, row.cost, json.loads(row.result_json), ids,
-                         to_utc(row.created_at))
+                         to_utc(row.created_at), fit_key, model_version, session_label)
 
     def _fit(self, s: Session, r: FitRow) -> FitRecord:
         ids = tuple(s.scalars(select(fit_maps.c.map_id).where(fit_maps.c.fit_id == r.id)
                               .order_by(fit_maps.c.map_id)))
+        label = (None if r.session_id is None else
+                 s.scalar(select(SessionRow.label).where(SessionRow.id == r.session_id)))
         return FitRecord(r.id, str(self._code_of(s, r.patient_id)), r.model_id, r.algorithm,
                          r.seed, r.n_evals, r.time_s, r.cost, json.loads(r.result_json), ids,
-                         to_utc(r.created_at))
+                         to_utc(r.created_at), r.fit_key, r.model_version, label)
 
     def get_fit(self, fit_id: int) -> FitRecord:
         with self._read() as s:

@@ -8,10 +8,12 @@ Tables::
 
     patients ─┬─ sessions ── maps ── source_files ── arrays ── array_chunks
               ├─ models (parent → models)
-              ├─ fits ── fit_maps ── maps
+              ├─ fits ─┬─ fit_maps ── maps
+              │        └─ fit_intervals  (derived: intervals of a plan over the fit's samples)
               ├─ plans (base/result → models)
               └─ haptic_sessions ─┬─ traces ── arrays
                                   └─ haptic_trials  (A/B/X and training answers)
+    job_runs ── jobs  (batch work over workers: what ran, what failed, what is left)
     audit_log  (append-only: UPDATE and DELETE are refused by triggers)
 
 An array's bytes (a self-describing HDF5 file image, :mod:`fieldbank.arraystore`) live where
@@ -205,6 +207,81 @@ class FitRow(Base):
     cost: Mapped[float] = mapped_column(Float)
     result_json: Mapped[str] = mapped_column(Text)
     created_at: Mapped[datetime] = mapped_column(DateTime)
+    # SHA-256 of what the fit was made from (maps, patient, options, model version): one fit
+    # per key, so a batch refit that dies and runs again stores nothing twice (None: a fit
+    # stored before keys were kept)
+    fit_key: Mapped[str | None] = mapped_column(SHA, nullable=True, unique=True)
+    # fieldbank.model.MODEL_VERSION the fit was made under (None: not recorded)
+    model_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    # the session whose maps were fitted (None: every session of the patient)
+    session_id: Mapped[int | None] = mapped_column(ForeignKey("sessions.id"), nullable=True,
+                                                   index=True)
+
+
+class FitIntervalRow(Base):
+    """A derived document kept with a fit: the prediction intervals of one plan applied to
+    the fitted model's parameter samples, keyed by everything they depend on. Rebuilt, never
+    edited: a different fit, model or plan is a different key."""
+
+    __tablename__ = "fit_intervals"
+    __table_args__ = (UniqueConstraint("fit_id", "key"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    fit_id: Mapped[int] = mapped_column(ForeignKey("fits.id"), index=True)
+    key: Mapped[str] = mapped_column(SHA)
+    model_version: Mapped[int] = mapped_column(Integer)
+    document_json: Mapped[str] = mapped_column(Text)
+    # float64 little-endian arrays the document names (curve bands), or None
+    arrays: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+#: Kinds of batch work, and the states of one task of a run.
+JOB_KINDS = ("fit", "report", "validate")
+JOB_STATES = ("pending", "running", "done", "skipped", "failed")
+
+
+class JobRunRow(Base):
+    """One batch command (``fit --all``, ``report``, ``validate``) spread over workers."""
+
+    __tablename__ = "job_runs"
+    __table_args__ = (CheckConstraint("kind IN ('fit', 'report', 'validate')", name="kind"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    # a random token the workers check, so that every worker writes into this database
+    token: Mapped[str] = mapped_column(String(64), unique=True)
+    engine: Mapped[str] = mapped_column(String(255))
+    args_json: Mapped[str] = mapped_column(Text)
+    actor: Mapped[str] = mapped_column(String(128))
+    started_at: Mapped[datetime] = mapped_column(DateTime)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
+
+
+class JobRow(Base):
+    """One task of a run: a session to fit, a group of report cases, a patient's plans to
+    check. Written by the worker that runs it; ``attempts`` counts the times one started."""
+
+    __tablename__ = "jobs"
+    __table_args__ = (
+        UniqueConstraint("run_id", "key"),
+        CheckConstraint("state IN ('pending', 'running', 'done', 'skipped', 'failed')",
+                        name="state"),
+        CheckConstraint("attempts >= 0", name="attempts_non_negative"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("job_runs.id"), index=True)
+    key: Mapped[str] = mapped_column(String(255))
+    patient_code: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    session_label: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    state: Mapped[str] = mapped_column(String(16))
+    attempts: Mapped[int] = mapped_column(Integer)
+    worker: Mapped[str | None] = mapped_column(String(255), nullable=True)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    result_json: Mapped[str | None] = mapped_column(Text, nullable=True)
+    # what the task computed for the run's own process to put together (report cases, plan
+    # checks): JSON bytes, cleared once the run's output is written
+    payload: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True)
 
 
 class PlanRow(Base):

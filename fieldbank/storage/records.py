@@ -106,6 +106,50 @@ class FitRecord:
     result: dict[str, Any]
     map_ids: tuple[int, ...]
     created_at: datetime
+    #: What the fit was made from, hashed (None: stored before fits kept keys).
+    fit_key: str | None = None
+    #: The model version it was made under (None: not recorded).
+    model_version: int | None = None
+    #: The session whose maps it fitted (None: every session of the patient).
+    session_label: str | None = None
+
+
+@dataclass(frozen=True)
+class JobRunRecord:
+    """A batch command run over workers, with how many of its jobs are in each state."""
+
+    id: int
+    kind: str
+    token: str
+    engine: str
+    args: dict[str, Any]
+    actor: str
+    started_at: datetime
+    finished_at: datetime | None
+    counts: dict[str, int]
+
+    @property
+    def left(self) -> int:
+        """Jobs not finished: pending, or started and not (yet) done."""
+        return self.counts.get("pending", 0) + self.counts.get("running", 0)
+
+
+@dataclass(frozen=True)
+class JobRecord:
+    """One job of a run: its state, how often it was started, where and when it ran."""
+
+    id: int
+    run_id: int
+    key: str
+    patient_code: str | None
+    session_label: str | None
+    state: str
+    attempts: int
+    worker: str | None
+    started_at: datetime | None
+    finished_at: datetime | None
+    error: str | None
+    result: dict[str, Any] | None
 
 
 @dataclass(frozen=True)

@@ -18,13 +18,13 @@ import csv
 import dataclasses
 import io
 import json
-import os
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fieldbank.engine import progress_bar
 from fieldbank.files import write_atomic
 from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
@@ -34,8 +34,13 @@ from fieldbank.interventions.report.figures import (
     validation_figure,
 )
 from fieldbank.interventions.report.html import case_stretches, render
+from fieldbank.interventions.report.remote import compute_on_cluster
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
-from fieldbank.interventions.report.trust import TRUST_COLUMNS
+from fieldbank.interventions.report.trust import (
+    TRUST_COLUMNS,
+    keep_intervals,
+    with_known_intervals,
+)
 from fieldbank.sanitize import csv_cell
 from fieldbank.storage import Database
 
@@ -56,12 +61,8 @@ class ReportOutput:
     csv: Path
     json: Path
     n_cases: int
+    #: Local worker processes used (0: computed on a Dask cluster).
     jobs_used: int
-
-
-def default_jobs() -> int:
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-               else (os.cpu_count() or 1))
 
 
 def compute_all(cases: list[CaseSpec], jobs: int,
@@ -162,10 +163,14 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
 
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
-                 title: str | None = None, accept_poor_fit: bool = False) -> ReportOutput:
+                 title: str | None = None, accept_poor_fit: bool = False,
+                 scheduler: str | None = None,
+                 say: Callable[[str], None] | None = None) -> ReportOutput:
     """Select, compute and write the report; raises SelectionError for an empty selection,
     and for cases whose model comes from a poor fit unless ``accept_poor_fit`` (then each such
-    case records it)."""
+    case records it). With ``scheduler`` the cases are computed on that Dask cluster
+    (:mod:`~fieldbank.interventions.report.remote`), else in ``jobs`` local processes; the
+    files are the same bytes either way."""
     cases = select_cases(db, selection)
     poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
     if poor and not accept_poor_fit:
@@ -183,7 +188,15 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
         def wrap(it: Iterable[CaseResult], n: int) -> Iterable[CaseResult]:
             return tqdm(it, total=n, unit="case", desc="report", leave=False, disable=None)
 
-    results, used = compute_all(cases, jobs, wrap)
+    if scheduler:
+        results = compute_on_cluster(db, cases, scheduler, accept_poor_fit=accept_poor_fit,
+                                     progress=progress_bar("report") if progress else None,
+                                     say=say)
+        used = 0
+    else:
+        cases = with_known_intervals(db, cases)
+        results, used = compute_all(cases, jobs, wrap)
+        keep_intervals(db, cases, [r.intervals for r in results])
     if title is None:
         title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
                  f"fieldbank report: {len(cases)} cases")

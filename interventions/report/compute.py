@@ -18,6 +18,7 @@ from fieldbank.evaluate.severity import COMPONENTS, GRADED_STRETCH, GroupSeverit
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
+from fieldbank.interventions.guesses import IntervalSet
 from fieldbank.interventions.plan import dose_warnings
 from fieldbank.interventions.report.figures import (
     CheckPoint,
@@ -107,6 +108,9 @@ class CaseResult:
     figures: tuple[Figure, ...]
     #: The plan checked against maps measured after it, per map (cohort figure).
     checks: tuple[CheckPoint, ...] = ()
+    #: The prediction intervals computed for this case (None: read from the fit's kept
+    #: documents, or none to compute), to keep with the fit.
+    intervals: IntervalSet | None = None
 
 
 def _clinical(c: Comparison) -> dict[str, Any]:
@@ -208,4 +212,7 @@ def compute_case(spec: CaseSpec) -> CaseResult:
         Figure(f.key, f.caption,
                "" if f.scene is None else f.scene.to_svg(f"p{spec.plan_id}f{k}"))
         for k, f in enumerate(case_figures(arm_b, arm_a, c, plan, course, bands, checks)))
-    return CaseResult(spec, json_finite(row), json_finite(detail), figs, checks)
+    g = trust.guesses
+    fresh = (IntervalSet(g.intervals, g.interval_note, g.n_samples, g.bands)
+             if g is not None and spec.intervals is None and g.n_samples > 0 else None)
+    return CaseResult(spec, json_finite(row), json_finite(detail), figs, checks, fresh)

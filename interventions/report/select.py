@@ -26,6 +26,7 @@ from datetime import date
 from typing import Any
 
 from fieldbank.interventions.errors import InterventionError, SelectionError
+from fieldbank.interventions.guesses import IntervalSet
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.validate import PlanInputs, read_plan_inputs
 from fieldbank.params import ArmParams
@@ -99,6 +100,8 @@ class CaseSpec:
     checks: PlanInputs | None = None
     #: A poor fit behind the model before was accepted by the user.
     accept_poor_fit: bool = False
+    #: The case's prediction intervals as kept with its fit (None: to be computed).
+    intervals: IntervalSet | None = None
 
     @property
     def title(self) -> str:

@@ -6,11 +6,15 @@ acting on a guessed parameter; an accepted poor fit), 95% intervals of the headl
 (the fit's samples through the plan; for every joint stretch, the probing motions), and - when
 the plan was given and the patient has maps
 measured after it - the check of :mod:`fieldbank.interventions.validate` per later session.
+The intervals are kept with the fit (:func:`with_known_intervals` reads them,
+:func:`keep_intervals` stores new ones): a report that meets the same fit, model and plan
+again reads them back, exactly, instead of computing them.
 The metrics table gets :data:`TRUST_COLUMNS`; the case's JSON gets everything.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -18,9 +22,18 @@ from typing import Any
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions
 from fieldbank.evaluate.probing import STRETCHES
-from fieldbank.interventions.guesses import FitBasis, Guesses, examine_basis
+from fieldbank.interventions.guesses import (
+    DEFAULT_INTERVAL_SAMPLES,
+    FitBasis,
+    Guesses,
+    IntervalSet,
+    examine_basis,
+    interval_key,
+)
 from fieldbank.interventions.report.select import CaseSpec
 from fieldbank.interventions.validate import PlanValidation, check_plan
+from fieldbank.model import MODEL_VERSION
+from fieldbank.storage import Database
 
 #: Headline metrics with interval columns: metric of
 #: :func:`fieldbank.interventions.guesses.headline_metrics` -> (column stem, heading, unit).
@@ -69,6 +82,41 @@ def basis_of(spec: CaseSpec) -> FitBasis | None:
                                 spec.fitted_model_id == spec.base_model_id, spec.fit_report)
 
 
+def interval_key_of(spec: CaseSpec) -> tuple[int, str] | None:
+    """(fit id, :func:`~fieldbank.interventions.guesses.interval_key`) of a case whose
+    intervals can be kept with its fit; None when it has none to keep (no fit, no samples, a
+    model derived from the fitted one, no readable plan)."""
+    basis = basis_of(spec)
+    if basis is None or spec.plan is None or basis.samples is None or not basis.same_model:
+        return None
+    return basis.fit_id, interval_key(basis, spec.before, spec.plan, DEFAULT_INTERVAL_SAMPLES)
+
+
+def with_known_intervals(db: Database, cases: list[CaseSpec]) -> list[CaseSpec]:
+    """The cases, each with its intervals when its fit keeps them already."""
+    out = []
+    for c in cases:
+        at = interval_key_of(c)
+        found = db.fit_document(*at) if at is not None else None
+        out.append(c if found is None else
+                   dataclasses.replace(c, intervals=IntervalSet.from_document(*found)))
+    return out
+
+
+def keep_intervals(db: Database, specs: list[CaseSpec],
+                   computed: list[IntervalSet | None]) -> int:
+    """Keep the intervals computed for cases that had none with their fits; returns how
+    many were stored (two processes storing the same one store it once)."""
+    n = 0
+    for spec, iv in zip(specs, computed, strict=True):
+        at = interval_key_of(spec)
+        if at is None or iv is None or spec.intervals is not None or iv.n_samples == 0:
+            continue
+        doc, arrays = iv.to_document()
+        n += db.put_fit_document(at[0], at[1], MODEL_VERSION, doc, arrays)
+    return n
+
+
 def case_trust(spec: CaseSpec, cond: Conditions, arms: ArmCache) -> CaseTrust:
     """The case's :data:`TRUST_COLUMNS` values and its JSON parts (``fit``,
     ``unidentified``, ``warnings``, ``intervals``, ``validation``)."""
@@ -78,7 +126,7 @@ def case_trust(spec: CaseSpec, cond: Conditions, arms: ArmCache) -> CaseTrust:
     g = v = None
     if spec.plan is not None:
         g = examine_basis(basis, spec.before, spec.plan, cond, arms,
-                          accept_poor_fit=spec.accept_poor_fit)
+                          accept_poor_fit=spec.accept_poor_fit, known=spec.intervals)
         detail.update(g.to_dict())
         row["fit_status"] = (basis.status + (" (accepted)" if g.accepted_poor_fit else "")
                              if basis is not None else "not fitted")
