@@ -20,7 +20,7 @@ def store_sessions(db: Any, n_patients: int, sessions: tuple[str, ...] = ("pre",
     (static and moving), ingested as CSV files. Returns the (patient, session) pairs."""
     from fieldbank.fitting.synthetic import synthetic_patient
     from fieldbank.params import ArmParams
-    from fieldbank.severity import parse_severity_options, synthesize
+    from fieldbank.evaluate.severity import parse_severity_options, synthesize
 
     rng = np.random.default_rng(seed)
     out = []

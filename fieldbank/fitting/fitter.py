@@ -524,15 +524,18 @@ def _hold_unidentified(problem: FitProblem, theta: FloatArray,
     reject it.
 
     1. Refit with every unidentified parameter at its prior mean.
-    2. Release test per unit (:func:`_hold_units`): the unit alone freed again and refitted
-       from the held point (a local search with a coarse scan of every reflex gain, which a
-       reflex that never fires at the held point needs), the rest held; the unit is released
-       when the maps improve by more than the χ² quantile of :data:`RELEASE_TEST_LEVEL`,
-       Bonferroni-corrected over the units tested. A reflex the full search missed (stuck
-       where it never fires, so "not identified") is found here, not held at unimpaired.
-    3. Refit with the released units free; the joint likelihood-ratio test of what stays held
-       against the full fit (:data:`HOLD_TEST_LEVEL`, one degree of freedom per held
-       parameter) decides whether the hold stands.
+    2. Release tests per unit (:func:`_hold_units`), by forward selection: each unit still
+       held is freed alone and refitted from the current point (a local search with a coarse
+       scan of every reflex gain, which a reflex that never fires at the held point needs),
+       the rest held; the unit the maps improve most on is released when that improvement
+       exceeds the χ² quantile of :data:`RELEASE_TEST_LEVEL`, Bonferroni-corrected over the
+       units tested in the round; then the others are tested again against that fit (a
+       group's missing reflex can make a neighbour's look needed, until it is released). A
+       reflex the full search missed (stuck where it never fires, so "not identified") is
+       found here, not held at unimpaired.
+    3. The joint likelihood-ratio test of what stays held against the full fit
+       (:data:`HOLD_TEST_LEVEL`, one degree of freedom per held parameter) decides whether
+       the hold stands.
     """
     space = problem.space
     names = tuple(u.name for u in unidentified)
@@ -545,33 +548,34 @@ def _hold_unidentified(problem: FitProblem, theta: FloatArray,
     res = run_nlopt(reduced, name, seed, HOLD_EVALS)
     n_evals = reduced.n_evals
     theta_h = res.theta
-    chi_h = _chi2(problem, theta_h)
-    groups = _hold_units(names)
-    unit_level = 1.0 - (1.0 - RELEASE_TEST_LEVEL) / max(1, len(groups))
+    remaining = _hold_units(names)
     tested: list[dict[str, Any]] = []
     released: list[dict[str, Any]] = []
-    start = theta_h.copy()
-    for unit in groups:
-        rest = [n for n in names if n not in unit]
-        red = reduced_problem(problem, theta_h, rest)
-        th, ne = refit_local(red, red.y, theta_h, seed)
-        n_evals += ne
-        delta = chi_h - _chi2(problem, th)
-        limit = float(chi2.ppf(unit_level, len(unit)))
-        row = {"names": list(unit), "delta_chi2": delta, "threshold": limit,
-               "level": unit_level}
-        tested.append(row)
-        if delta > limit:
-            released.append(row)
-            for n in unit:
-                k = space.names.index(n)
-                start[k] = th[k]
-    final = tuple(n for n in names if not any(n in r["names"] for r in released))
     theta_f = theta_h
-    if released:
-        red = reduced_problem(problem, start, final)
-        theta_f, ne = refit_local(red, red.y, start, seed)
-        n_evals += ne
+    held_now = list(names)
+    # forward selection: release the unit the maps reject most, then test the others again
+    # against that fit (a group's missing reflex can make another group's look needed)
+    while remaining:
+        unit_level = 1.0 - (1.0 - RELEASE_TEST_LEVEL) / len(remaining)
+        best: tuple[float, int, FloatArray] | None = None
+        chi_now = _chi2(problem, theta_f)
+        for k, unit in enumerate(remaining):
+            red = reduced_problem(problem, theta_f, [n for n in held_now if n not in unit])
+            th, ne = refit_local(red, red.y, theta_f, seed)
+            n_evals += ne
+            delta = chi_now - _chi2(problem, th)
+            limit = float(chi2.ppf(unit_level, len(unit)))
+            tested.append({"names": list(unit), "delta_chi2": delta, "threshold": limit,
+                           "level": unit_level, "round": len(released) + 1})
+            if delta > limit and (best is None or delta > best[0]):
+                best = (delta, k, th)
+        if best is None:
+            break
+        unit = remaining.pop(best[1])
+        released.append(next(t for t in reversed(tested) if t["names"] == list(unit)))
+        held_now = [n for n in held_now if n not in unit]
+        theta_f = best[2]
+    final = tuple(held_now)
     chi_full = _chi2(problem, theta)
     delta = _chi2(problem, theta_f) - chi_full
     threshold = float(chi2.ppf(HOLD_TEST_LEVEL, max(1, len(final))))
@@ -655,8 +659,7 @@ def _held_intervals(ranges: Sequence[GuessRange], prior: Prior, seed: int
     """(sd, low, high) of every held parameter over its prior range (draws of the range)."""
     if not ranges:
         return {}
-    one = FitSamples((), np.zeros((400, 0)))
-    drawn = draw(one, ranges, prior, seed=seed)
+    drawn = draw(FitSamples((), np.zeros((1, 0))), ranges, prior, 400, seed=seed)
     out = {}
     for r in ranges:
         iv = prior.interval(r)

@@ -18,7 +18,13 @@ the held parameters from a stated prior range instead of keeping them at the hel
   held the other keeps its fitted samples;
 * **draws**: the severity score uniform on [0, top] - each level equally likely - stratified
   (one draw in each of n equal slices, in a seeded random order), so 40 samples reach both
-  ends of the range;
+  ends of the range. The held units of one sample share their place in their ranges (the
+  same fraction of each unit's top): the guesses move together from all unimpaired to all
+  past severe. Every headline metric grows with each group's Km and reflex, so an interval
+  between those ends holds any mixture of them (a severe elbow-flexor reflex beside an
+  unimpaired bi-articular one included), where independent draws would leave out both ends
+  of a sum of guesses (the 2.5th percentile of two independent reflexes is already well
+  above unimpaired);
 * **what the maps allow**: a held parameter can be poorly constrained rather than free. At fit
   time the top of each unit's range is checked against the maps (:func:`fit_ranges`): the
   unit at the top, everything else at the fit, the fitted linear parameters (Km, α) re-solved;
@@ -243,16 +249,22 @@ def stratified_scores(n: int, high: float, rng: np.random.Generator) -> FloatArr
 
 def draw(samples: FitSamples, ranges: Sequence[GuessRange], prior: Prior, n: int | None = None,
          seed: int = 0) -> FitSamples:
-    """The fit's samples (the first ``n``) with every held parameter of ``ranges`` drawn from
-    its range (module docstring); identified parameters keep their samples. A held name the
-    samples lack becomes a new column."""
-    rows = samples.values if n is None else samples.values[:n]
+    """``n`` samples (default: as many as the fit's) with every held parameter of ``ranges``
+    drawn from its range (module docstring); identified parameters keep the fit's samples,
+    taken in order and cycled when ``n`` exceeds them (the draws of the guesses then still
+    differ). A held name the samples lack becomes a new column."""
+    count = samples.values.shape[0]
+    size = count if n is None else int(n)
+    if count == 0 or size < 1:
+        raise FitError(f"draws need at least one fit sample and n >= 1; got {count} and "
+                       f"{size}.")
+    rows = samples.values[np.arange(size) % count]
     names = list(samples.names)
     cols = {name: rows[:, k].copy() for k, name in enumerate(names)}
-    gen = np.random.default_rng(seed)
+    # one position in the range per sample, shared by every held unit
+    where = stratified_scores(size, 1.0, np.random.default_rng(seed))
     for r in ranges:
-        drawn = prior.values(r.group, r.component,
-                             stratified_scores(rows.shape[0], r.score_high, gen))
+        drawn = prior.values(r.group, r.component, where * r.score_high)
         for name in r.names:
             if name not in cols:
                 names.append(name)
