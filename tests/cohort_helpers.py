@@ -18,9 +18,9 @@ def store_sessions(db: Any, n_patients: int, sessions: tuple[str, ...] = ("pre",
     """``n_patients`` synthetic patients (severities of COHORT_SEVERITIES in turn, body size
     drawn from a seeded generator), each with ``sessions`` of noisy postural and stiffness maps
     (static and moving), ingested as CSV files. Returns the (patient, session) pairs."""
+    from fieldbank.evaluate.severity import parse_severity_options, synthesize
     from fieldbank.fitting.synthetic import synthetic_patient
     from fieldbank.params import ArmParams
-    from fieldbank.evaluate.severity import parse_severity_options, synthesize
 
     rng = np.random.default_rng(seed)
     out = []

@@ -15,6 +15,7 @@ from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.batch import probe_forces, rms_forces, standard_stretch_torques
 from fieldbank.evaluate.compare import Conditions
 from fieldbank.evaluate.probing import profile, stretch_profiles
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.catalogue import Botulinum, Lengthening, Rhizotomy, Tenotomy
 from fieldbank.interventions.guesses import (
@@ -29,7 +30,6 @@ from fieldbank.interventions.guesses import (
 from fieldbank.interventions.plan import Plan
 from fieldbank.model import Arm, ArmBatch
 from fieldbank.params import GROUPS, ArmParams
-from fieldbank.evaluate.severity import synthesize
 
 RTOL = 1e-12
 
