@@ -26,10 +26,37 @@ counts Δt_k/τ times::
     log L_c = −Σ_k (Δt_k/τ) |F_rec,k − F_c,k|² / (2σ²)
 
 summed over the observations. The posterior over candidates is prior × likelihood, normalised;
-the group's probability sums its severities. The classification says whether the best
-candidate explains the trace at all (mean squared residual against σ²) and designs the next
-probe - the stroke carrying the most information about the candidates still in play, with the
-posterior as the prior (:func:`fieldbank.evaluate.design.design`).
+the group's probability sums its severities.
+
+**Does any candidate explain the trace?** Under the noise model the best candidate's whitened
+residual Q = Σ_k (Δt_k/τ) |F_rec,k − F_c,k|²/σ² has mean 2 Σ_k Δt_k/τ and a variance that
+follows from the noise's correlation (an Ornstein-Uhlenbeck process of time constant τ/2,
+:func:`with_force_noise`: ρ(Δt) = e^(−2|Δt|/τ)): Var Q = 4 Σ_k Σ_l (Δt_k/τ)(Δt_l/τ) ρ²(t_k − t_l).
+Q is compared with the χ² distribution of that mean and variance (Satterthwaite); below the
+p-value :data:`FIT_LEVEL` no candidate explains the trace within the noise - an arm outside
+the candidates (a flexor group alone among joint groups), a noise larger than assumed, or a
+recording that is not what it claims to be - and the read-out says so (``explains``).
+
+**Calibration: model error is not noise.** The likelihood counts one independent sample per τ,
+which is right for sensor noise but not for the part of the residual the candidates cannot
+produce: a patient between two candidates' severities, or outside them, leaves a systematic
+residual, smooth over the whole probe, and the likelihood ratio between two wrong candidates
+then grows with the recording's length without meaning anything. The classifier estimates
+that model error from the best candidate's excess residual, σ_m² = σ² · max(0, Q/E[Q] − 1)
+per axis, and counts it as a noise correlated over the whole probe (one independent sample per
+observation): the noise's variance-time product σ²τ gains σ_m² D (D the probe's duration),
+which divides the log-likelihoods by T = 1 + max(0, Q/E[Q] − 1) · n_eff / n_obs (n_eff =
+Σ Δt/τ, n_obs the observations) - a temperature set by the trace itself. A trace one candidate
+explains (Q ≈ E[Q]) keeps T ≈ 1 and its full confidence. A global temperature
+(:data:`TEMPERATURE`) multiplies it; ``benchmarks/bench_probe_design.py --trials`` measures
+the reliability (stated probability against observed accuracy) with and without both on
+simulated patients on and between the candidates' severities at several noise levels
+(``docs/probing.md``). ``log_likelihood`` stays the stated likelihood;
+``raw_posterior`` is its posterior before the correction.
+
+The classification designs the next probe - the stroke carrying the most information about
+the candidates still in play, with the posterior as the prior
+(:func:`fieldbank.evaluate.design.design`).
 """
 
 from __future__ import annotations
@@ -43,6 +70,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import savgol_filter
+from scipy.stats import chi2
 
 from fieldbank.dynamics import hand_inertial_force
 from fieldbank.errors import ParameterError, Problem, UnreachableError, ValidationError
@@ -67,8 +95,11 @@ ACCELERATION_WINDOW_S = 0.025
 STOP_PROBABILITY = 0.99
 #: Candidates below this posterior are out of play for the next probe.
 REMAINING_PROBABILITY = 1e-3
-#: Mean squared residual per axis above this many σ² means no candidate explains the trace.
-MISFIT_RATIO = 4.0
+#: p-value of the best candidate's residual below which no candidate explains the trace.
+FIT_LEVEL = 1e-3
+#: Global temperature on the (model-error corrected) log-likelihoods: 1, the value the
+#: reliability benchmark supports (docs/probing.md, "Are the probabilities right?").
+TEMPERATURE = 1.0
 #: Replay accepts sample periods within this fraction of the median period.
 RATE_TOLERANCE = 0.25
 
@@ -374,6 +405,14 @@ class Classification:
         The stroke that best separates the candidates still in play.
     next_reason : str
         Why there is no next probe, or what it is for.
+    raw_posterior : ndarray, shape (n,)
+        The posterior of the stated likelihood, before the model-error correction.
+    temperature : float
+        What the log-likelihoods were divided by (model-error correction × global).
+    fit_statistic, fit_expected, fit_variance : float
+        The best candidate's whitened residual Q, its mean and variance under the noise model.
+    fit_p_value : float
+        P(Q at least as large | the best candidate and the noise model) (module docstring).
     """
 
     candidates: tuple[Candidate, ...]
@@ -387,6 +426,12 @@ class Classification:
     predictor: str
     next_probe: ProbeDesign | None
     next_reason: str
+    raw_posterior: FloatArray | None = None
+    temperature: float = 1.0
+    fit_statistic: float = 0.0
+    fit_expected: float = 0.0
+    fit_variance: float = 0.0
+    fit_p_value: float = 1.0
 
     @property
     def best(self) -> Candidate:
@@ -425,9 +470,18 @@ class Classification:
 
     @property
     def explains(self) -> bool:
-        """Whether the best candidate's residual is within the noise model (≤ 2σ RMS)."""
-        k = int(np.argmax(self.posterior))
-        return bool(self.rms_residual_n[k] ** 2 / 2.0 <= MISFIT_RATIO * self.noise.force_sd_n ** 2)
+        """Whether the best-fitting candidate explains the trace within the noise model: its
+        residual's p-value is at least :data:`FIT_LEVEL` (module docstring)."""
+        return bool(self.fit_p_value >= FIT_LEVEL)
+
+    @property
+    def model_error_n(self) -> float:
+        """The residual the best-fitting candidate leaves beyond the noise, N RMS per axis
+        (σ_m of the module docstring)."""
+        if self.fit_expected <= 0:
+            return 0.0
+        excess = max(0.0, self.fit_statistic / self.fit_expected - 1.0)
+        return float(self.noise.force_sd_n * math.sqrt(excess))
 
     @property
     def knows_groups(self) -> bool:
@@ -442,10 +496,14 @@ class Classification:
             g = self.group_posterior
             text += f"; impaired group {self.group} (p = {g[self.group]:.3g})"
         if not self.explains:
-            k = int(np.argmax(self.posterior))
-            text += (f"; but no candidate explains the recording: the best leaves "
+            k = int(np.argmin(self.rms_residual_n))
+            text += (f"; but no candidate explains the recording (p = {self.fit_p_value:.2g}): "
+                     f"the closest, {self.candidates[k].name}, leaves "
                      f"{self.rms_residual_n[k]:.2f} N RMS against a noise of "
-                     f"{self.noise.force_sd_n:g} N per axis")
+                     f"{self.noise.force_sd_n:g} N per axis - the arm may be none of these")
+        elif self.temperature > 1.05:
+            text += (f" (tempered ×1/{self.temperature:.2g} for ≈ {self.model_error_n:.2g} N "
+                     "of model error beyond the noise)")
         return text
 
     def to_dict(self, shoulder_offset_m: tuple[float, float] = (0.0, 0.0)
@@ -459,11 +517,20 @@ class Classification:
             "level_posterior": {k: round(v, 6) for k, v in self.level_posterior.items()},
             "log10_likelihood_ratio": round(self.log10_likelihood_ratio, 3),
             "explains_recording": self.explains,
+            "fit_test": {"statistic": round(self.fit_statistic, 3),
+                         "expected": round(self.fit_expected, 3),
+                         "variance": round(self.fit_variance, 3),
+                         "p_value": float(f"{self.fit_p_value:.4g}"), "level": FIT_LEVEL},
+            "calibration": {"temperature": round(self.temperature, 4),
+                            "model_error_n": round(self.model_error_n, 4),
+                            "global_temperature": TEMPERATURE},
             "candidates": [{
                 "candidate": self.candidates[k].name, "group": self.candidates[k].label,
                 "level": self.candidates[k].level,
                 "prior": round(float(self.prior[k]), 6),
                 "posterior": float(f"{self.posterior[k]:.6g}"),
+                "raw_posterior": float(f"{self.raw_posterior[k]:.6g}")
+                if self.raw_posterior is not None else None,
                 "log_likelihood": round(float(self.log_likelihood[k]), 3),
                 "rms_residual_n": round(float(self.rms_residual_n[k]), 4),
                 "notes": list(self.candidates[k].notes),
@@ -531,6 +598,7 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
     ll = np.zeros(len(cands))
     sq = np.zeros(len(cands))
     count = 0
+    expected = variance = n_eff = 0.0
     for o, pr in zip(obs, preds, strict=True):
         w = o.weights(noise)
         r2 = ((o.force_n[None] - pr) ** 2).sum(axis=-1)
@@ -538,10 +606,14 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
         used = np.ones(len(o.times_s), dtype=bool) if o.counted is None else o.counted
         sq += r2[:, used].sum(axis=1)
         count += int(used.sum())
-    with np.errstate(divide="ignore"):
-        logpost = np.log(p0) + ll
-    post = np.exp(logpost - logpost.max())
-    post /= post.sum()
+        n_eff += float(w.sum())
+        expected += 2.0 * float(w.sum())
+        variance += 4.0 * _correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
+    q = float((-2.0 * ll).min())  # Σ w |r|² / σ² of the best-fitting candidate
+    p_fit = _fit_p_value(q, expected, variance)
+    temperature = TEMPERATURE * (1.0 + max(0.0, q / expected - 1.0) * n_eff / len(obs))
+    raw = _posterior(p0, ll)
+    post = _posterior(p0, ll / temperature)
     rms = np.sqrt(sq / count)
     nxt: ProbeDesign | None = None
     if not next_probe:
@@ -560,8 +632,37 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
                   + ", ".join(f"{c.name} (p = {post[k]:.2g})"
                               for c, k in zip(rest, keep, strict=True)))
     return Classification(cands, obs, p0, ll, post, rms, tuple(preds), noise, predictor, nxt,
-                          reason)
+                          reason, raw, temperature, q, expected, variance, p_fit)
 
 
-__all__ = ["PREDICTORS", "Classification", "Observation", "classify", "predict_all",
-           "predict_observation", "recorded_accelerations", "with_force_noise"]
+def _posterior(prior: FloatArray, log_likelihood: FloatArray) -> FloatArray:
+    with np.errstate(divide="ignore"):
+        logpost = np.log(prior) + log_likelihood
+    post = np.exp(logpost - logpost.max())
+    return np.asarray(post / post.sum(), dtype=float)
+
+
+def _correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> float:
+    """Σ_k Σ_l w_k w_l e^(−rate |t_k − t_l|), by one pass of an exponential filter."""
+    decay = np.exp(-rate * np.diff(times_s))
+    total = 0.0
+    carried = 0.0  # Σ_{l<k} w_l e^(−rate (t_k − t_l))
+    for k in range(len(w)):
+        if k:
+            carried = decay[k - 1] * (carried + w[k - 1])
+        total += w[k] * (w[k] + 2.0 * carried)
+    return total
+
+
+def _fit_p_value(q: float, expected: float, variance: float) -> float:
+    """P(Q ≥ q) for Q of mean ``expected`` and ``variance``, as a scaled χ² (Satterthwaite)."""
+    if expected <= 0 or variance <= 0:
+        return 1.0
+    scale = variance / (2.0 * expected)
+    dof = 2.0 * expected ** 2 / variance
+    return float(chi2.sf(q / scale, dof))
+
+
+__all__ = ["FIT_LEVEL", "PREDICTORS", "TEMPERATURE", "Classification", "Observation",
+           "classify", "predict_all", "predict_observation", "recorded_accelerations",
+           "with_force_noise"]

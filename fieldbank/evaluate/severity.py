@@ -599,12 +599,31 @@ def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
     same group and component. Groups and components not named keep the base values (default:
     unimpaired, 75 kg, 1.75 m).
     """
-    p = base if base is not None else ArmParams.from_anthropometry()
-    wanted: dict[tuple[str, str], str] = {}
+    wanted: dict[tuple[str, str], float] = {}
     for target, lvl in severities.items():
         level = level_name(lvl)
+        for g, comp in expand_target(target):
+            wanted[(g, comp)] = scale.level_ratio(level, comp)
+    return _synthesize(wanted, base, scale)
+
+
+def synthesize_ratios(ratios: Mapping[str, float], base: ArmParams | None = None,
+                      scale: SeverityScale = SCALE) -> ArmParams:
+    """An arm with the named targets at a ratio to unimpaired (≥ 1; any value, between the
+    levels too: a patient need not sit on the scale's steps), as :func:`synthesize`."""
+    wanted: dict[tuple[str, str], float] = {}
+    for target, ratio in ratios.items():
+        if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and ratio >= 1.0):
+            raise ParameterError(f"severity ratio of {target!r} must be a number >= 1; got "
+                                 f"{ratio!r}.")
         for pair in expand_target(target):
-            wanted[pair] = level
+            wanted[pair] = float(ratio)
+    return _synthesize(wanted, base, scale)
+
+
+def _synthesize(wanted: Mapping[tuple[str, str], float], base: ArmParams | None,
+                scale: SeverityScale) -> ArmParams:
+    p = base if base is not None else ArmParams.from_anthropometry()
     if not wanted:
         return p
     km = np.array(p.km_n_per_m)
@@ -614,9 +633,8 @@ def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
     ref_prof = stretch_profiles(unimpaired_reference(base_arm))
     if any(c == "passive" for _, c in wanted):
         unit = stretch_profiles(base_arm.with_muscles(p.replace(km_n_per_m=(1.0,) * 6)))
-    for (g, comp), level in wanted.items():
+    for (g, comp), ratio in wanted.items():
         i = GROUP_INDEX[g]
-        ratio = scale.level_ratio(level, comp)
         rp = ref_prof[GRADED_STRETCH[g]]
         if comp == "passive":
             per_newton_per_m = float(unit[GRADED_STRETCH[g]].passive_n_m[:, i].max())
@@ -651,5 +669,6 @@ __all__ = [
     "severity_dict",
     "summary",
     "synthesize",
+    "synthesize_ratios",
     "target_name",
 ]
