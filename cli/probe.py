@@ -21,7 +21,13 @@ from fieldbank.cli.options import (
 )
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.classify import PREDICTORS, Classification, Observation, classify
+from fieldbank.evaluate.classify import (
+    FIT_LEVEL,
+    PREDICTORS,
+    Classification,
+    Observation,
+    classify,
+)
 from fieldbank.evaluate.design import (
     CRITERIA,
     FAMILIES,
@@ -307,6 +313,10 @@ def _classification_text(cl: Classification) -> str:
         lines.append(f"    {cl.candidates[k].name:<22} p = {cl.posterior[k]:.3g}   residual "
                      f"{cl.rms_residual_n[k]:.2f} N RMS")
     lines.append(f"  likelihood ratio best : runner-up = 10^{cl.log10_likelihood_ratio:.1f}")
+    lines.append(f"  fit of the closest candidate: p = {cl.fit_p_value:.3g} under the noise model"
+                 f" (below {FIT_LEVEL:g}: none of the candidates explains the trace); "
+                 f"probabilities tempered ×1/{cl.temperature:.3g} for "
+                 f"{cl.model_error_n:.2g} N of model error")
     if cl.next_probe is not None:
         p = cl.next_probe.score.probes[0]
         lines.append(f"next probe: {p.motion.description}; {cl.next_reason}")

@@ -80,11 +80,12 @@ def grid_patients(groups: Sequence[str], levels: Sequence[str]) -> tuple[Patient
                  for g in groups for lvl in levels)
 
 
-def between_patients(groups: Sequence[str], n: int, seed: int = 0, low: float = 1.0,
-                     high: float = 4.0, spread: float = 0.5) -> tuple[Patient, ...]:
+def between_patients(groups: Sequence[str], n: int, seed: int = 0, low: float = 0.5,
+                     high: float = 4.5, spread: float = 0.5) -> tuple[Patient, ...]:
     """``n`` arms, the groups in turn: a severity score uniform in [low, high] (1 very mild …
-    4 severe), each muscle group and component of the joint group off by a uniform
-    ±``spread`` (in Weber steps) from it - between and around the scale's steps."""
+    4 severe; the default reaches half a step beyond either end), each muscle group and
+    component of the joint group off by a uniform ±``spread`` (in Weber steps) from it -
+    between and around the scale's steps."""
     rng = np.random.default_rng(seed)
     gs = [group_name(g) for g in groups]
     out = []

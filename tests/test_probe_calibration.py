@@ -100,11 +100,14 @@ def test_model_error_tempers_the_posterior_by_the_stated_factor(all12) -> None: 
     q = off.fit_statistic
     assert q == pytest.approx(float((-2 * off.log_likelihood).min()))
     assert off.fit_expected == pytest.approx(2 * n_eff)
-    assert off.temperature == pytest.approx(1 + (q / (2 * n_eff) - 1) * n_eff)
+    # the excess beyond 2 SD of the statistic, per unit of its mean, counted once per probe
+    excess = (q - 2 * n_eff - 2 * math.sqrt(off.fit_variance)) / (2 * n_eff)
+    assert excess > 0.5
+    assert off.temperature == pytest.approx(1 + excess * n_eff)
     lp = np.log(off.prior) + off.log_likelihood / off.temperature
     want = np.exp(lp - lp.max())
     assert off.posterior == pytest.approx(want / want.sum(), rel=1e-9)
-    assert off.model_error_n == pytest.approx(2.0 * math.sqrt(q / (2 * n_eff) - 1))
+    assert off.model_error_n == pytest.approx(2.0 * math.sqrt(excess))
     # 3 N per axis beside a 2 N noise: no candidate explains the recording, and it says so
     assert not off.explains and off.fit_p_value < FIT_LEVEL
     assert "no candidate explains the recording" in off.verdict()

@@ -42,12 +42,14 @@ which is right for sensor noise but not for the part of the residual the candida
 produce: a patient between two candidates' severities, or outside them, leaves a systematic
 residual, smooth over the whole probe, and the likelihood ratio between two wrong candidates
 then grows with the recording's length without meaning anything. The classifier estimates
-that model error from the best candidate's excess residual, σ_m² = σ² · max(0, Q/E[Q] − 1)
-per axis, and counts it as a noise correlated over the whole probe (one independent sample per
+that model error from the best candidate's residual beyond what the noise explains - the
+excess over :data:`MODEL_ERROR_SDS` standard deviations of Q, so that the noise's own scatter
+is not taken for model error: σ_m² = σ² · max(0, Q − E[Q] − 2 √Var Q) / E[Q] per axis - and
+counts it as a noise correlated over the whole probe (one independent sample per
 observation): the noise's variance-time product σ²τ gains σ_m² D (D the probe's duration),
-which divides the log-likelihoods by T = 1 + max(0, Q/E[Q] − 1) · n_eff / n_obs (n_eff =
-Σ Δt/τ, n_obs the observations) - a temperature set by the trace itself. A trace one candidate
-explains (Q ≈ E[Q]) keeps T ≈ 1 and its full confidence. A global temperature
+which divides the log-likelihoods by T = 1 + (σ_m²/σ²) · n_eff / n_obs (n_eff = Σ Δt/τ, n_obs
+the observations) - a temperature set by the trace itself. A trace one candidate explains
+within the noise keeps T = 1 and its full confidence. A global temperature
 (:data:`TEMPERATURE`) multiplies it; ``benchmarks/bench_probe_design.py --trials`` measures
 the reliability (stated probability against observed accuracy) with and without both on
 simulated patients on and between the candidates' severities at several noise levels
@@ -97,6 +99,9 @@ STOP_PROBABILITY = 0.99
 REMAINING_PROBABILITY = 1e-3
 #: p-value of the best candidate's residual below which no candidate explains the trace.
 FIT_LEVEL = 1e-3
+#: Standard deviations of the fit statistic the noise is allowed before the rest of the
+#: residual counts as model error (module docstring).
+MODEL_ERROR_SDS = 2.0
 #: Global temperature on the (model-error corrected) log-likelihoods: 1, the value the
 #: reliability benchmark supports (docs/probing.md, "Are the probabilities right?").
 TEMPERATURE = 1.0
@@ -478,10 +483,8 @@ class Classification:
     def model_error_n(self) -> float:
         """The residual the best-fitting candidate leaves beyond the noise, N RMS per axis
         (σ_m of the module docstring)."""
-        if self.fit_expected <= 0:
-            return 0.0
-        excess = max(0.0, self.fit_statistic / self.fit_expected - 1.0)
-        return float(self.noise.force_sd_n * math.sqrt(excess))
+        return float(self.noise.force_sd_n * math.sqrt(_model_error_ratio(
+            self.fit_statistic, self.fit_expected, self.fit_variance)))
 
     @property
     def knows_groups(self) -> bool:
@@ -611,7 +614,8 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
         variance += 4.0 * _correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
     q = float((-2.0 * ll).min())  # Σ w |r|² / σ² of the best-fitting candidate
     p_fit = _fit_p_value(q, expected, variance)
-    temperature = TEMPERATURE * (1.0 + max(0.0, q / expected - 1.0) * n_eff / len(obs))
+    temperature = TEMPERATURE * (1.0 + _model_error_ratio(q, expected, variance) * n_eff
+                                 / len(obs))
     raw = _posterior(p0, ll)
     post = _posterior(p0, ll / temperature)
     rms = np.sqrt(sq / count)
@@ -633,6 +637,14 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
                               for c, k in zip(rest, keep, strict=True)))
     return Classification(cands, obs, p0, ll, post, rms, tuple(preds), noise, predictor, nxt,
                           reason, raw, temperature, q, expected, variance, p_fit)
+
+
+def _model_error_ratio(q: float, expected: float, variance: float) -> float:
+    """σ_m²/σ² of the module docstring: the fit statistic's excess beyond
+    :data:`MODEL_ERROR_SDS` of its SD, per unit of its mean."""
+    if expected <= 0:
+        return 0.0
+    return max(0.0, q - expected - MODEL_ERROR_SDS * math.sqrt(max(variance, 0.0))) / expected
 
 
 def _posterior(prior: FloatArray, log_likelihood: FloatArray) -> FloatArray:
