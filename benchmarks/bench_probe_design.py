@@ -122,7 +122,7 @@ def _bins_table(trials: Sequence[Trial], label: str) -> list[str]:
 
 
 def reliability_run(groups: tuple[str, ...], noise_levels: tuple[float, ...] = (2, 4, 6, 8),
-                    between: int = 24, draws: int = 5) -> None:
+                    between: int = 24, draws: int = 8) -> None:
     """The classifier's reliability at several noise levels, and arms outside its candidates
     (module docstring)."""
     cands = severity_candidates(groups, LEVELS)
@@ -146,6 +146,10 @@ def reliability_run(groups: tuple[str, ...], noise_levels: tuple[float, ...] = (
         print("\n".join(_bins_table(trials, f"{sd:g} N")))
     print(f"all noise levels ({time.perf_counter() - t0:.0f} s)")
     print("\n".join(_bins_table(pooled, "pooled")))
+    stood = [t for t in pooled if t.explains]
+    print(f"  of which a candidate explains the trace ({len(stood)} of {len(pooled)}; the "
+          "others are said to be none of the candidates)")
+    print("\n".join(_bins_table(stood, "pooled, explained")))
     noise = NoiseModel(force_sd_n=4.0, correlation_s=0.05)
     rep = design_report(cands, criterion="information", target="group", max_probes=2,
                         stop_when_separated=False, noise=noise)

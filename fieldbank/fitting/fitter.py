@@ -464,9 +464,13 @@ def _severity(params: ArmParams, unidentified: Sequence[str],
                 scores.setdefault((g, c), []).append(sev.component(c).score)
     lo_p, hi_p = GRADE_PERCENTILES
     for (g, c), vals in scores.items():
-        lo, hi = (float(v) for v in np.percentile(vals, [lo_p, hi_p]))
         grade = out[g][c]
         assert isinstance(grade, dict)
+        # the fitted model's own grade belongs to the range (held parameters: its unimpaired
+        # end, which the percentiles of the draws may cut off)
+        point = float(grade["score"])
+        lo, hi = (float(v) for v in np.percentile(vals, [lo_p, hi_p]))
+        lo, hi = min(lo, point), max(hi, point)
         grade["score_range"] = [round(lo, 4), round(hi, 4)]
         grade["level_range"] = [_level_of_score(lo, c), _level_of_score(hi, c)]
     return out
