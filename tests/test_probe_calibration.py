@@ -85,7 +85,7 @@ def test_the_fit_statistic_has_the_stated_mean_and_variance_under_the_noise(all1
 
 def test_model_error_tempers_the_posterior_by_the_stated_factor(all12) -> None:  # type: ignore[no-untyped-def]
     """A recording one candidate explains keeps the stated posterior; a smooth residual the
-    candidates cannot produce divides the log-likelihoods by 1 + excess × n_eff per probe."""
+    candidates cannot produce divides the log-likelihoods by 1 + excess × n_eff."""
     cands = all12[:4]
     obs, f = _static_observation(cands, 2)
     noise = NoiseModel(force_sd_n=2.0, correlation_s=0.05)
@@ -100,7 +100,8 @@ def test_model_error_tempers_the_posterior_by_the_stated_factor(all12) -> None: 
     q = off.fit_statistic
     assert q == pytest.approx(float((-2 * off.log_likelihood).min()))
     assert off.fit_expected == pytest.approx(2 * n_eff)
-    # the excess beyond 2 SD of the statistic, per unit of its mean, counted once per probe
+    # the excess beyond 2 SD of the statistic, per unit of its mean, counted once for the
+    # whole recording
     excess = (q - 2 * n_eff - 2 * math.sqrt(off.fit_variance)) / (2 * n_eff)
     assert excess > 0.5
     assert off.temperature == pytest.approx(1 + excess * n_eff)

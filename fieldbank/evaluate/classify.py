@@ -45,11 +45,12 @@ then grows with the recording's length without meaning anything. The classifier 
 that model error from the best candidate's residual beyond what the noise explains - the
 excess over :data:`MODEL_ERROR_SDS` standard deviations of Q, so that the noise's own scatter
 is not taken for model error: σ_m² = σ² · max(0, Q − E[Q] − 2 √Var Q) / E[Q] per axis - and
-counts it as a noise correlated over the whole probe (one independent sample per
-observation): the noise's variance-time product σ²τ gains σ_m² D (D the probe's duration),
-which divides the log-likelihoods by T = 1 + (σ_m²/σ²) · n_eff / n_obs (n_eff = Σ Δt/τ, n_obs
-the observations) - a temperature set by the trace itself. A trace one candidate explains
-within the noise keeps T = 1 and its full confidence. A global temperature
+counts it as a noise correlated over the whole recording (the same arm's mismatch in every
+probe: one independent sample in all): the noise's variance-time product σ²τ gains σ_m² D (D
+the recording's duration), which divides the log-likelihoods by T = 1 + (σ_m²/σ²) · n_eff
+(n_eff = Σ Δt/τ) - a temperature set by the trace itself. A trace one candidate explains within
+the noise keeps T = 1 and its full confidence. (Counting one independent sample per probe
+instead was measured too: it left more confident wrong answers.) A global temperature
 (:data:`TEMPERATURE`) multiplies it; ``benchmarks/bench_probe_design.py --trials`` measures
 the reliability (stated probability against observed accuracy) with and without both on
 simulated patients on and between the candidates' severities at several noise levels
@@ -614,8 +615,7 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
         variance += 4.0 * _correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
     q = float((-2.0 * ll).min())  # Σ w |r|² / σ² of the best-fitting candidate
     p_fit = _fit_p_value(q, expected, variance)
-    temperature = TEMPERATURE * (1.0 + _model_error_ratio(q, expected, variance) * n_eff
-                                 / len(obs))
+    temperature = TEMPERATURE * (1.0 + _model_error_ratio(q, expected, variance) * n_eff)
     raw = _posterior(p0, ll)
     post = _posterior(p0, ll / temperature)
     rms = np.sqrt(sq / count)
