@@ -134,16 +134,21 @@ def _summary(out: FitOutcome) -> str:
 
 
 def _grade_text(grade: Mapping[str, object]) -> str:
-    return (f"{grade['level']}{'+' if grade.get('beyond_scale') else ''}"
+    text = (f"{grade['level']}{'+' if grade.get('beyond_scale') else ''}"
             f"{'*' if grade.get('unidentified') else ''}")
+    span = grade.get("level_range")
+    if isinstance(span, list) and len(span) == 2 and span[0] != span[1]:
+        text += f" ({span[0]} … {span[1]})"
+    return text
 
 
 def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) -> list[str]:
     """The fit report's severity as a table: one muscle group per line."""
-    out = [f"  {'severity':<24} {'passive (contracture)':<23} dynamic (spasticity)",
-           "  (+ beyond severe; * rests on a parameter these maps did not identify)"]
+    out = [f"  {'severity':<24} {'passive (contracture)':<36} dynamic (spasticity)",
+           "  (+ beyond severe; * rests on a parameter these maps did not identify; (… …) the "
+           "95% range over the fit's samples)"]
     for g, v in severity.items():
-        out.append(f"  {v.get('name', g)!s:<24} {_grade_text(v['passive']):<23} "
+        out.append(f"  {v.get('name', g)!s:<24} {_grade_text(v['passive']):<36} "
                    f"{_grade_text(v['dynamic'])}")
     return out
 

@@ -33,7 +33,7 @@ from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.probepath import probes_document
 
 if TYPE_CHECKING:  # typing only: the library loads when a command runs
-    from fieldbank.evaluate.classify import Classification, Observation
+    from fieldbank.evaluate.classify import Classification
     from fieldbank.evaluate.design import (
         Candidate,
         DesignReport,
@@ -42,6 +42,7 @@ if TYPE_CHECKING:  # typing only: the library loads when a command runs
         ProbeLimits,
         ProbeSetScore,
     )
+    from fieldbank.evaluate.observation import Observation
     from fieldbank.figures import Scene
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -287,7 +288,7 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
 
 def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | None,
                        offset: tuple[float, float] | None) -> list[Observation]:
-    from fieldbank.evaluate.classify import Observation
+    from fieldbank.evaluate.observation import Observation
     from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
     from fieldbank.haptic.probe import observation_from_trace
     from fieldbank.haptic.recording import read_trace_h5
@@ -312,6 +313,8 @@ def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | N
 
 
 def _classification_text(cl: Classification) -> str:
+    from fieldbank.evaluate.classify import FIT_LEVEL
+
     lines = [cl.verdict()]
     if cl.knows_groups:
         lines.append("  groups: " + ", ".join(f"{g} {p:.3g}"
@@ -323,6 +326,10 @@ def _classification_text(cl: Classification) -> str:
         lines.append(f"    {cl.candidates[k].name:<22} p = {cl.posterior[k]:.3g}   residual "
                      f"{cl.rms_residual_n[k]:.2f} N RMS")
     lines.append(f"  likelihood ratio best : runner-up = 10^{cl.log10_likelihood_ratio:.1f}")
+    lines.append(f"  fit of the closest candidate: p = {cl.fit_p_value:.3g} under the noise model"
+                 f" (below {FIT_LEVEL:g}: none of the candidates explains the trace); "
+                 f"probabilities tempered ×1/{cl.temperature:.3g} for "
+                 f"{cl.model_error_n:.2g} N of model error")
     if cl.next_probe is not None:
         p = cl.next_probe.score.probes[0]
         lines.append(f"next probe: {p.motion.description}; {cl.next_reason}")

@@ -20,6 +20,14 @@ candidates' predictions for the executed motion are made once), so a trial is on
 and one noise draw. Every set meets the same arms with the same seeds, so the sets differ only
 in their probes. :func:`designed_vs_seed` designs a set for the candidates and runs it against
 the seed's pull and semi-ellipse.
+
+The arms need not be the candidates: :class:`Patient` is any simulated arm with its true group.
+:func:`between_patients` draws arms whose severity lies between and around the candidates'
+levels, each muscle group and component off by up to half a Weber step from the others (a
+patient is not on the scale's steps, nor equally severe in flexors and extensors);
+:func:`flexor_patients` makes only the flexor group of a joint hypertonic, an arm outside a set
+of joint-group candidates. :func:`reliability` sets the probability each answer was given with
+against how often such answers were right (:mod:`fieldbank.evaluate.classify`: calibration).
 """
 
 from __future__ import annotations
@@ -31,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.errors import ParameterError
-from fieldbank.evaluate.classify import classify, predict_all, with_force_noise
+from fieldbank.evaluate.classify import classify, predict_all
 from fieldbank.evaluate.design import (
     Candidate,
     DesignReport,
@@ -41,17 +49,76 @@ from fieldbank.evaluate.design import (
     draw_execution,
     seed_probes,
 )
+from fieldbank.evaluate.observation import with_force_noise
 from fieldbank.evaluate.probing import ProbeMotion
-from fieldbank.evaluate.severity import group_name, level_name, synthesize
+from fieldbank.evaluate.severity import (
+    group_name,
+    level_name,
+    ratio_of_score,
+    synthesize,
+    synthesize_ratios,
+)
 from fieldbank.haptic.probe import observation_from_trace, probe_path
+from fieldbank.params import JOINT_GROUPS, ArmParams
 
 #: Called after each trial with (trials done, trials in all).
 Progress = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
+class Patient:
+    """A simulated arm: its impaired joint group, a label (its level, or how it was made) and
+    its parameters."""
+
+    group: str
+    level: str
+    params: ArmParams
+
+
+def grid_patients(groups: Sequence[str], levels: Sequence[str]) -> tuple[Patient, ...]:
+    """Each group at each level of the scale (the severity candidates themselves)."""
+    return tuple(Patient(group_name(g), level_name(lvl), synthesize({group_name(g): lvl}))
+                 for g in groups for lvl in levels)
+
+
+def between_patients(groups: Sequence[str], n: int, seed: int = 0, low: float = 0.5,
+                     high: float = 4.5, spread: float = 0.5) -> tuple[Patient, ...]:
+    """``n`` arms, the groups in turn: a severity score uniform in [low, high] (1 very mild …
+    4 severe; the default reaches half a step beyond either end), each muscle group and
+    component of the joint group off by a uniform ±``spread`` (in Weber steps) from it -
+    between and around the scale's steps."""
+    rng = np.random.default_rng(seed)
+    gs = [group_name(g) for g in groups]
+    out = []
+    for k in range(n):
+        g = gs[k % len(gs)]
+        score = float(rng.uniform(low, high))
+        ratios = {f"{m}:{c}": ratio_of_score(max(0.0, score + float(rng.uniform(-spread,
+                                                                                  spread))), c)
+                  for m in JOINT_GROUPS[g] for c in ("passive", "dynamic")}
+        out.append(Patient(g, f"score {score:.2f}", synthesize_ratios(ratios)))
+    return tuple(out)
+
+
+def flexor_patients(groups: Sequence[str], levels: Sequence[str]) -> tuple[Patient, ...]:
+    """The flexor group of each joint group alone at each level, the extensors unimpaired:
+    arms outside a set of joint-group candidates."""
+    out = []
+    for g in (group_name(x) for x in groups):
+        for lvl in (level_name(x) for x in levels):
+            out.append(Patient(g, f"{lvl}, flexors only",
+                               synthesize({JOINT_GROUPS[g][0]: lvl})))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
 class Trial:
-    """One trial of one probe set: the true arm and what the classifier answered."""
+    """One trial of one probe set: the true arm and what the classifier answered.
+
+    ``probability`` and ``group_probability`` are the calibrated ones (the classifier's
+    posterior); ``raw_*`` the posterior of the stated likelihood alone; ``explains``: the
+    classifier found a candidate that explains the trace within the noise.
+    """
 
     probe_set: str
     group: str
@@ -62,6 +129,10 @@ class Trial:
     answer_group: str
     probability: float
     group_probability: float
+    raw_answer_group: str = ""
+    raw_group_probability: float = math.nan
+    explains: bool = True
+    fit_p_value: float = 1.0
 
     @property
     def correct_group(self) -> bool:
@@ -72,7 +143,9 @@ class Trial:
                 "repetition": self.repetition, "draw": self.draw, "answer": self.answer,
                 "answer_group": self.answer_group, "probability": round(self.probability, 6),
                 "group_probability": round(self.group_probability, 6),
-                "correct_group": self.correct_group}
+                "correct_group": self.correct_group, "raw_answer_group": self.raw_answer_group,
+                "raw_group_probability": round(self.raw_group_probability, 6),
+                "explains": self.explains, "fit_p_value": float(f"{self.fit_p_value:.4g}")}
 
 
 @dataclass(frozen=True)
@@ -140,7 +213,8 @@ def run_trials(probe_sets: Mapping[str, Sequence[ProbeMotion]],
                candidates: Sequence[Candidate], *, groups: Sequence[str],
                levels: Sequence[str], repetitions: int = 3, noise_draws: int = 1,
                noise: NoiseModel | None = None, seed: int = 0, predictor: str = "replay",
-               progress: Progress | None = None) -> TrialResults:
+               progress: Progress | None = None,
+               patients: Sequence[Patient] | None = None) -> TrialResults:
     """Run every probe set on every (group, level) arm ``repetitions`` times.
 
     Parameters
@@ -151,6 +225,7 @@ def run_trials(probe_sets: Mapping[str, Sequence[ProbeMotion]],
     repetitions : executions of each set on each arm
     noise_draws : sensor-noise draws met by each execution
     noise : motion and force noise of the operator and the recording (also the likelihood's)
+    patients : the true arms instead of groups × levels (:class:`Patient`)
     """
     if repetitions < 1 or noise_draws < 1:
         raise ParameterError(f"repetitions and noise_draws must be at least 1; got "
@@ -158,38 +233,104 @@ def run_trials(probe_sets: Mapping[str, Sequence[ProbeMotion]],
     if not probe_sets or any(len(v) == 0 for v in probe_sets.values()):
         raise ParameterError("Give at least one probe set, each with at least one probe.")
     noise = noise or NoiseModel()
-    gs = tuple(group_name(g) for g in groups)
-    ls = tuple(level_name(lvl) for lvl in levels)
+    arms = tuple(patients) if patients is not None else grid_patients(groups, levels)
+    gs = tuple(dict.fromkeys([group_name(g) for g in groups] + [p.group for p in arms]))
+    ls = tuple(dict.fromkeys(p.level for p in arms))
     answers = tuple(dict.fromkeys([c.label for c in candidates] + list(gs)))
-    total = len(gs) * len(ls) * repetitions * len(probe_sets) * noise_draws
+    total = len(arms) * repetitions * len(probe_sets) * noise_draws
     done = 0
     out: list[Trial] = []
-    for gi, g in enumerate(gs):
-        for li, lvl in enumerate(ls):
-            params = synthesize({g: lvl})
-            for rep in range(repetitions):
-                trial_seed = seed * 1_000_003 + (gi * 97 + li) * 1009 + rep
-                for name, motions in probe_sets.items():
-                    rng = np.random.default_rng(trial_seed)
-                    obs = []
-                    for k, m in enumerate(motions):
-                        executed = draw_execution(m, noise, rng)
-                        res = probe_path(params, executed, seed=trial_seed * 7 + k,
-                                         wander_m=noise.wander_m)
-                        obs.append(observation_from_trace(res.trace, m.name))
-                    preds = predict_all(obs, candidates, predictor)
-                    for draw in range(noise_draws):
-                        noisy = [with_force_noise(o, noise, rng) for o in obs]
-                        c = classify(noisy, candidates, noise=noise, next_probe=False,
-                                     predictions=preds)
-                        gp = c.group_posterior
-                        out.append(Trial(name, g, lvl, rep, draw, c.best.name, c.group,
-                                         c.probability, gp[c.group]))
-                        done += 1
-                        if progress is not None:
-                            progress(done, total)
+    for pi, patient in enumerate(arms):
+        g, lvl, params = patient.group, patient.level, patient.params
+        gi, li = gs.index(g), ls.index(lvl)
+        if patients is not None:
+            gi, li = pi, 0
+        for rep in range(repetitions):
+            trial_seed = seed * 1_000_003 + (gi * 97 + li) * 1009 + rep
+            for name, motions in probe_sets.items():
+                rng = np.random.default_rng(trial_seed)
+                obs = []
+                for k, m in enumerate(motions):
+                    executed = draw_execution(m, noise, rng)
+                    res = probe_path(params, executed, seed=trial_seed * 7 + k,
+                                     wander_m=noise.wander_m)
+                    obs.append(observation_from_trace(res.trace, m.name))
+                preds = predict_all(obs, candidates, predictor)
+                for draw in range(noise_draws):
+                    noisy = [with_force_noise(o, noise, rng) for o in obs]
+                    c = classify(noisy, candidates, noise=noise, next_probe=False,
+                                 predictions=preds)
+                    gp = c.group_posterior
+                    raw = _group_marginal(candidates, c.raw_posterior
+                                          if c.raw_posterior is not None else c.posterior)
+                    raw_group = max(raw, key=raw.__getitem__)
+                    out.append(Trial(name, g, lvl, rep, draw, c.best.name, c.group,
+                                     c.probability, gp[c.group], raw_group,
+                                     raw[raw_group], c.explains, c.fit_p_value))
+                    done += 1
+                    if progress is not None:
+                        progress(done, total)
     return TrialResults(tuple(out), tuple(probe_sets), gs, ls, answers, noise, repetitions,
                         noise_draws, seed)
+
+
+def _group_marginal(candidates: Sequence[Candidate], posterior: np.ndarray) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for c, p in zip(candidates, posterior, strict=True):
+        out[c.label] = out.get(c.label, 0.0) + float(p)
+    return out
+
+
+#: Bins of the stated probability in :func:`reliability` (the answer's group probability).
+RELIABILITY_BINS: tuple[tuple[float, float], ...] = (
+    (0.0, 0.6), (0.6, 0.8), (0.8, 0.9), (0.9, 0.99), (0.99, 1.0))
+
+
+@dataclass(frozen=True)
+class ReliabilityBin:
+    """Answers stated with a probability in [low, high): how many, the mean stated
+    probability, the fraction right and its binomial SE."""
+
+    low: float
+    high: float
+    n: int
+    stated: float
+    observed: float
+
+    @property
+    def gap(self) -> float:
+        """Observed accuracy minus stated probability (negative: over-confident)."""
+        return self.observed - self.stated
+
+    @property
+    def se(self) -> float:
+        return math.sqrt(max(self.stated * (1 - self.stated), 1e-4) / self.n) if self.n \
+            else math.nan
+
+
+def reliability(trials: Sequence[Trial], raw: bool = False,
+                bins: Sequence[tuple[float, float]] = RELIABILITY_BINS
+                ) -> tuple[ReliabilityBin, ...]:
+    """Stated group probability against observed accuracy, per bin of the stated probability
+    (``raw``: the posterior of the stated likelihood, before the classifier's correction)."""
+    stated = np.array([t.raw_group_probability if raw else t.group_probability
+                       for t in trials])
+    right = np.array([(t.raw_answer_group if raw else t.answer_group) == t.group
+                      for t in trials])
+    out = []
+    for k, (lo, hi) in enumerate(bins):
+        top = k == len(bins) - 1
+        m = (stated >= lo) & ((stated <= hi) if top else (stated < hi))
+        n = int(m.sum())
+        out.append(ReliabilityBin(lo, hi, n, float(stated[m].mean()) if n else math.nan,
+                                  float(right[m].mean()) if n else math.nan))
+    return tuple(out)
+
+
+def calibration_error(bins: Sequence[ReliabilityBin]) -> float:
+    """Expected calibration error: the trial-weighted mean |observed − stated| over bins."""
+    n = sum(b.n for b in bins)
+    return sum(b.n * abs(b.gap) for b in bins if b.n) / n if n else math.nan
 
 
 def designed_vs_seed(candidates: Sequence[Candidate], *, groups: Sequence[str],

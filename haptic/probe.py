@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fieldbank.evaluate.classify import Observation
+from fieldbank.evaluate.observation import Observation
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.errors import HapticError

@@ -18,8 +18,14 @@ what-if must say:
 * **intervals** (:func:`prediction_intervals`): the plan applied to each of the fit's parameter
   samples (bootstrap replicates or Gaussian draws, :mod:`fieldbank.fitting.uncertainty`) gives
   the spread of the headline metrics before, after and of the change; reported as the 2.5-97.5
-  percentiles (95%) beside the point prediction. Parameters held at the unimpaired value stay
-  held in the samples: what rests on them is in the warnings, not in the intervals. The
+  percentiles (95%) beside the point prediction. Parameters held at the unimpaired value are
+  drawn from their stated prior range (:mod:`fieldbank.fitting.prior`: unimpaired to the top
+  of the severity scale's severe band, as far as the maps allow), so an interval that rests
+  on a guess is as wide as the guess; the same samples with the held values kept give the
+  interval of what the maps identified (``without_guesses``), which the reported interval
+  also holds (the held values are the range's unimpaired end), and a metric whose interval
+  the guesses widen by more than :data:`GUESS_WIDENING` says it rests on a guess
+  (``rests_on_guess``, ``*`` in the text). The
   samples run in one vectorised pass (:func:`sample_metrics`, :class:`fieldbank.model.ArmBatch`:
   the geometry compiled once, every muscle value - Km, α, β, slack offset, rest length, rest
   posture - free per sample); :func:`sample_metrics_per_sample` is the one-arm-per-sample
@@ -37,32 +43,19 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
-from fieldbank.armbatch import ArmBatch
-from fieldbank.errors import ParameterError
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.batch import (
-    peak_magnitude,
-    probe_forces,
-    rms_forces,
-    standard_stretch_torques,
-)
 from fieldbank.evaluate.compare import Conditions
-from fieldbank.evaluate.probing import (
-    Profiles,
-    profile,
-    standard_stretches,
-    stretch_profiles,
-    unimpaired_reference,
-)
+from fieldbank.fitting.prior import PRIOR_VERSION, GuessRange, Prior, draw, ranges_from_report
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.model import MODEL_VERSION, Arm, FloatArray
+from fieldbank.interventions.samplemetrics import SampleMetrics, sample_metrics
+from fieldbank.model import MODEL_VERSION, FloatArray
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import ArmParams
 
@@ -70,6 +63,10 @@ from fieldbank.params import ArmParams
 DEFAULT_INTERVAL_SAMPLES = 40
 #: Percentiles of the reported intervals.
 INTERVAL_PERCENTILES = (2.5, 97.5)
+#: An interval rests on a guess when drawing the held parameters from their prior range
+#: widens it (before, after or of the change) by more than this factor over the interval of
+#: what the maps identified.
+GUESS_WIDENING = 1.25
 
 #: Changed parameter (catalogue ``EFFECTS`` key) -> what the change scales and the fitted
 #: parameters that size it.
@@ -113,6 +110,10 @@ class FitBasis:
     unidentified: tuple[tuple[str, str], ...]
     held: tuple[str, ...]
     samples: FitSamples | None
+    #: The held parameters' prior ranges (:func:`fieldbank.fitting.prior.ranges_from_report`)
+    #: and the seed their draws use (the fit's).
+    ranges: tuple[GuessRange, ...] = ()
+    seed: int = 0
 
     @classmethod
     def of(cls, source: ModelSource) -> FitBasis | None:
@@ -133,7 +134,8 @@ class FitBasis:
                    str(report.get("status", "unknown")), str(gof.get("verdict", "unknown")),
                    tuple(str(r) for r in gof.get("reasons", [])), unid,
                    tuple(str(h) for h in report.get("held_at_unimpaired", []) or []),
-                   FitSamples.from_report(report))
+                   FitSamples.from_report(report), ranges_from_report(report),
+                   int(report.get("seed", 0) or 0))
 
 
 @dataclass(frozen=True)
@@ -150,16 +152,28 @@ class Interval:
     after_high: float
     change_low: float
     change_high: float
+    #: Whether the held parameters' prior range widens the interval (module docstring), and
+    #: the intervals of what the maps identified (held parameters kept at the held value):
+    #: (before low, before high, after low, after high, change low, change high).
+    rests_on_guess: bool = False
+    identified: tuple[float, ...] | None = None
 
     @property
     def change(self) -> float:
         return self.after - self.before
 
     def to_dict(self) -> dict[str, Any]:
-        return {"unit": self.unit, "before": self.before, "after": self.after,
-                "change": self.change, "before_interval": [self.before_low, self.before_high],
-                "after_interval": [self.after_low, self.after_high],
-                "change_interval": [self.change_low, self.change_high]}
+        out = {"unit": self.unit, "before": self.before, "after": self.after,
+               "change": self.change, "before_interval": [self.before_low, self.before_high],
+               "after_interval": [self.after_low, self.after_high],
+               "change_interval": [self.change_low, self.change_high],
+               "rests_on_guess": self.rests_on_guess}
+        if self.identified is not None:
+            i = self.identified
+            out["without_guesses"] = {"before_interval": [i[0], i[1]],
+                                      "after_interval": [i[2], i[3]],
+                                      "change_interval": [i[4], i[5]]}
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,129 +279,6 @@ def plan_warnings(plan: Plan, basis: FitBasis | None, params: ArmParams) -> tupl
     return tuple(out)
 
 
-def headline_metrics(arm: Arm, cond: Conditions,
-                     curves: dict[str, FloatArray] | None = None,
-                     references: dict[ArmParams, tuple[Arm, Profiles]] | None = None
-                     ) -> dict[str, tuple[float, str]]:
-    """The metrics given intervals: metric -> (value, unit).
-
-    Peak resisting torque and its reflex part of each fast joint stretch, the peak force of
-    each probing motion, and the RMS endpoint force of each standard speed. ``curves``, when
-    given, receives each stretch's torque resisting the fast stretch along the joint angle
-    (stretch name -> (T,) N·m), the curve the figures draw. ``references`` keeps the
-    unimpaired reference arm and its stretch profiles (the catch threshold) per geometry, for
-    callers that evaluate many arms of one geometry.
-    """
-    out: dict[str, tuple[float, str]] = {}
-    profiles = stretch_profiles(arm)
-    if curves is not None:
-        curves.update({f"{j} {d}": p.fast_n_m for (j, d), p in profiles.items()})
-    ref_params = arm.params.with_unimpaired_muscles()
-    known = references.get(ref_params) if references is not None else None
-    if known is None:
-        ref = unimpaired_reference(arm)
-        known = (ref, profiles if ref is arm else stretch_profiles(ref))
-        if references is not None:
-            references[ref_params] = known
-    for s in standard_stretches(arm, known[0], profiles, known[1]):
-        out[f"{s.name} peak torque"] = (s.peak_torque_n_m, "N·m")
-        out[f"{s.name} reflex torque"] = (s.reflex_torque_n_m, "N·m")
-    for m in cond.probes:
-        out[f"{m.name} peak force"] = (profile(arm, m).peak_force_n, "N")
-    for k, speed in enumerate(cond.speeds_m_per_s):
-        f = arm.endpoint_force(*cond.points(k))  # the force alone: no stiffness needed
-        rms = float(np.sqrt(np.mean(np.sum(f * f, axis=1))))
-        out[f"RMS |F| at {speed:g} m/s"] = (rms, "N")
-    return out
-
-
-def headline_metrics_batch(batch: ArmBatch, cond: Conditions
-                           ) -> tuple[dict[str, tuple[FloatArray, str]], dict[str, FloatArray]]:
-    """:func:`headline_metrics` of every parameter set of ``batch`` in one pass: metric ->
-    (values (S,), unit), in the same order, and each stretch's torque resisting the fast
-    stretch along the joint angle (stretch name -> (S, T) N·m)."""
-    out: dict[str, tuple[FloatArray, str]] = {}
-    curves: dict[str, FloatArray] = {}
-    for s in standard_stretch_torques(batch):
-        curves[s.name] = s.fast_n_m
-        out[f"{s.name} peak torque"] = (s.fast_n_m.max(axis=1), "N·m")
-        out[f"{s.name} reflex torque"] = ((s.fast_n_m - s.slow_n_m).max(axis=1), "N·m")
-    for m in cond.probes:
-        out[f"{m.name} peak force"] = (peak_magnitude(probe_forces(batch, m)), "N")
-    for speed, rms in zip(cond.speeds_m_per_s, rms_forces(batch, cond.grid_m, cond.velocities),
-                          strict=True):
-        out[f"RMS |F| at {speed:g} m/s"] = (rms, "N")
-    return out, curves
-
-
-@dataclass(frozen=True, eq=False)
-class SampleMetrics:
-    """The headline metrics of S parameter samples before and after a plan.
-
-    ``keys`` and ``units`` in :func:`headline_metrics` order; ``before`` and ``after`` (S, K);
-    ``curves``: {"before" | "after": {stretch name: (S, T) N·m}}, the fast-stretch torque.
-    """
-
-    keys: tuple[str, ...]
-    units: tuple[str, ...]
-    before: FloatArray
-    after: FloatArray
-    curves: dict[str, dict[str, FloatArray]]
-
-
-def sample_metrics(samples: Sequence[ArmParams], plan: Plan, cond: Conditions,
-                   geometry: Arm) -> SampleMetrics:
-    """The plan applied to each sample, every sample's metrics before and after in one
-    vectorised pass (:class:`fieldbank.model.ArmBatch`: ``geometry`` compiled once, every
-    muscle value free per sample). A plan that changed the geometry itself falls back to
-    :func:`sample_metrics_per_sample`."""
-    afters = [plan.apply(p) for p in samples]
-    try:
-        b = ArmBatch.from_params(samples, geometry)
-        a = ArmBatch.from_params(afters, geometry)
-    except ParameterError:
-        return sample_metrics_per_sample(samples, plan, cond)
-    mb, cb = headline_metrics_batch(b, cond)
-    ma, ca = headline_metrics_batch(a, cond)
-    keys = tuple(mb)
-    return SampleMetrics(keys, tuple(mb[k][1] for k in keys),
-                         np.stack([mb[k][0] for k in keys], axis=1),
-                         np.stack([ma[k][0] for k in keys], axis=1),
-                         {"before": cb, "after": ca})
-
-
-def sample_metrics_per_sample(samples: Sequence[ArmParams], plan: Plan,
-                              cond: Conditions) -> SampleMetrics:
-    """:func:`sample_metrics` one sample at a time, each compiled as its own arm: the
-    reference the vectorised pass is tested against, and the path for a plan that changes
-    the geometry."""
-    references: dict[ArmParams, tuple[Arm, Profiles]] = {}
-    rows_b, rows_a = [], []
-    curves: dict[str, list[dict[str, FloatArray]]] = {"before": [], "after": []}
-    keys: list[str] = []
-    units: list[str] = []
-    for p in samples:
-        cb: dict[str, FloatArray] = {}
-        ca: dict[str, FloatArray] = {}
-        arm_p = Arm.from_params(p)
-        after_p = plan.apply(p)
-        try:  # a plan changes muscle values only: the geometry is compiled once
-            arm_pa = arm_p.with_muscles(after_p)
-        except ParameterError:
-            arm_pa = Arm.from_params(after_p)
-        mb = headline_metrics(arm_p, cond, cb, references)
-        ma = headline_metrics(arm_pa, cond, ca, references)
-        keys, units = list(mb), [mb[k][1] for k in mb]
-        rows_b.append([mb[k][0] for k in keys])
-        rows_a.append([ma[k][0] for k in keys])
-        curves["before"].append(cb)
-        curves["after"].append(ca)
-    return SampleMetrics(
-        tuple(keys), tuple(units), np.array(rows_b, dtype=float), np.array(rows_a, dtype=float),
-        {when: ({name: np.stack([c[name] for c in per]) for name in per[0]} if per else {})
-         for when, per in curves.items()})
-
-
 def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
                          cond: Conditions, arms: ArmCache,
                          n_samples: int = DEFAULT_INTERVAL_SAMPLES,
@@ -405,13 +296,61 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
     if not basis.same_model:
         return (), (f"the model before is derived from fitted model {basis.fitted_model_id} by "
                     "earlier plans: intervals need the fitted model itself"), 0
-    samples = basis.samples.params(before, n_samples)
-    # the model itself rides along as set 0: its metrics are the point predictions
-    sm = sample_metrics([before, *samples], plan, cond, arms(before))
-    out = intervals_of(sm, bands)
-    note = (f"95% intervals over {len(samples)} parameter samples of fit {basis.fit_id}; "
-            "parameters held at the unimpaired value stay held (see warnings)")
-    return out, note, len(samples)
+    plain = basis.samples.params(before, n_samples)
+    if not basis.ranges:
+        # the model itself rides along as set 0: its metrics are the point predictions
+        sm = sample_metrics([before, *plain], plan, cond, arms(before))
+        note = (f"95% intervals over {len(plain)} parameter samples of fit {basis.fit_id}; "
+                "the fit held no parameter at a guessed value")
+        return intervals_of(sm, bands), note, len(plain)
+    prior = Prior.for_arm(arms(before))
+    # as many draws as asked for: the fit's replicates are cycled when fewer, the guesses
+    # drawn afresh for each
+    guessed = draw(basis.samples, basis.ranges, prior, n_samples, seed=basis.seed
+                   ).params(before)
+    plain = draw(basis.samples, (), prior, n_samples).params(before)
+    n = len(guessed)
+    # one pass: the model (set 0), the samples with the guesses drawn (1…n), the samples with
+    # the held values kept (n+1…2n)
+    sm = sample_metrics([before, *guessed, *plain], plan, cond, arms(before))
+    drawn = intervals_of(_rows(sm, range(0, n + 1)), bands)
+    kept = intervals_of(_rows(sm, [0, *range(n + 1, 2 * n + 1)]))
+    out = tuple(_with_identified(a, b) for a, b in zip(drawn, kept, strict=True))
+    held = ", ".join(n for r in basis.ranges for n in r.names)
+    note = (f"95% intervals over {n} parameter samples of fit {basis.fit_id}; the held "
+            f"parameters ({held}) drawn from their prior range (unimpaired to the top of the "
+            "severe band, as far as the maps allow); * rests on them")
+    return out, note, n
+
+
+def _rows(sm: SampleMetrics, rows: Sequence[int]) -> SampleMetrics:
+    """The parameter sets ``rows`` of ``sm`` (row 0 first: the point predictions)."""
+    idx = np.asarray(list(rows), dtype=int)
+    return SampleMetrics(sm.keys, sm.units, sm.before[idx], sm.after[idx],
+                         {when: {name: stack[idx] for name, stack in per.items()}
+                          for when, per in sm.curves.items()})
+
+
+def _with_identified(drawn: Interval, kept: Interval) -> Interval:
+    """``drawn`` widened to hold the intervals of what the maps identified (``kept``: the
+    guesses at their held, unimpaired, end of the range - a member of the range the draws'
+    percentiles may cut off), with those intervals and whether the guesses widen it by more
+    than :data:`GUESS_WIDENING`."""
+    drawn = replace(drawn, before_low=min(drawn.before_low, kept.before_low),
+                    before_high=max(drawn.before_high, kept.before_high),
+                    after_low=min(drawn.after_low, kept.after_low),
+                    after_high=max(drawn.after_high, kept.after_high),
+                    change_low=min(drawn.change_low, kept.change_low),
+                    change_high=max(drawn.change_high, kept.change_high))
+    pairs = (((drawn.before_low, drawn.before_high), (kept.before_low, kept.before_high)),
+             ((drawn.after_low, drawn.after_high), (kept.after_low, kept.after_high)),
+             ((drawn.change_low, drawn.change_high), (kept.change_low, kept.change_high)))
+    scale = max(abs(drawn.before), abs(drawn.after), 1e-12)
+    wider = any(hi - lo > GUESS_WIDENING * (khi - klo) + 1e-9 * scale
+                for (lo, hi), (klo, khi) in pairs)
+    ident = (kept.before_low, kept.before_high, kept.after_low, kept.after_high,
+             kept.change_low, kept.change_high)
+    return replace(drawn, rests_on_guess=wider, identified=ident)
 
 
 def intervals_of(sm: SampleMetrics,
@@ -474,7 +413,9 @@ class IntervalSet:
                 sides.append(flat[at:at + n])
                 at += n
             bands.setdefault(when, {})[name] = (sides[0], sides[1])
-        return cls(tuple(Interval(**i) for i in doc["intervals"]), str(doc["note"]),
+        return cls(tuple(Interval(**{**i, "identified": None if i.get("identified") is None
+                                     else tuple(i["identified"])}) for i in doc["intervals"]),
+                   str(doc["note"]),
                    int(doc["n_samples"]), bands)
 
 
@@ -485,12 +426,15 @@ INTERVALS_VERSION = 1
 
 def interval_key(basis: FitBasis, before: ArmParams, plan: Plan, n_samples: int) -> str:
     """SHA-256 of everything :func:`prediction_intervals` depends on: the fit (its samples),
-    the model before, the plan, the number of samples and the model and interval versions.
+    the model before, the plan, the number of samples, the model and interval versions and
+    the prior the held parameters are drawn from (:data:`fieldbank.fitting.prior.PRIOR_VERSION`,
+    the fit's ranges and seed).
     A refit, another model or plan, or a new version gives another key."""
     doc = {"fit": basis.fit_id, "fitted_model": basis.fitted_model_id,
            "same_model": basis.same_model, "before": before.to_dict(), "plan": plan.to_dict(),
            "n_samples": n_samples, "model_version": MODEL_VERSION,
-           "intervals_version": INTERVALS_VERSION}
+           "intervals_version": INTERVALS_VERSION, "prior_version": PRIOR_VERSION,
+           "prior_ranges": [r.to_dict() for r in basis.ranges], "draw_seed": basis.seed}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode("utf-8")).hexdigest()
 
 
@@ -563,7 +507,7 @@ def summary_lines(g: Guesses) -> Sequence[str]:
         lines.append(f"  {'metric':<40}{'before':>22}{'after':>22}{'change':>24}")
         for i in g.intervals:
             lines.append(
-                f"  {i.metric + ', ' + i.unit:<40}"
+                f"  {i.metric + ', ' + i.unit + ('*' if i.rests_on_guess else ''):<40}"
                 f"{_iv(i.before, i.before_low, i.before_high):>22}"
                 f"{_iv(i.after, i.after_low, i.after_high):>22}"
                 f"{_iv(i.change, i.change_low, i.change_high, True):>24}")

@@ -180,11 +180,15 @@ def test_held_parameters_get_the_prior_interval_and_samples_travel_with_the_repo
     pat = synthetic_patient(truth, seed=2, moving=False)
     fit = ArmFitter(seed=0, replicates=8).fit(pat.maps, BASE)
     assert fit.held_
+    # a held parameter's interval is its stated prior range on the severity scale
+    # (fieldbank.fitting.prior), with the spread of draws over that range
+    ranges = {n: r for r in fit.prior_ranges_ for n in r.names}
     for name in fit.held_:
         iv = fit.intervals_[name]
         assert iv["basis"] == "prior"
-        k = fit.space_.names.index(name)
-        assert iv["sd"] == pytest.approx(fit.space_.prior_sd[k])
+        lo, hi = fit.prior_.interval(ranges[name])[name]
+        assert (iv["low"], iv["high"]) == pytest.approx((min(lo, hi), max(lo, hi)))
+        assert 0 < iv["sd"] < abs(hi - lo) / 2
     report = json.loads(json.dumps(fit.report()))
     samples = FitSamples.from_report(report)
     assert samples is not None and samples.values.shape == (8, 18)

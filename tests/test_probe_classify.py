@@ -11,11 +11,9 @@ import pytest
 
 from fieldbank.errors import ParameterError, ValidationError
 from fieldbank.evaluate.classify import (
-    Observation,
     classify,
     predict_all,
     predict_observation,
-    with_force_noise,
 )
 from fieldbank.evaluate.design import (
     Candidate,
@@ -28,6 +26,7 @@ from fieldbank.evaluate.design import (
     seed_probes,
     severity_candidates,
 )
+from fieldbank.evaluate.observation import Observation, with_force_noise
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.motions import LEAD_IN_S, format_path, parse_path, path, wander
 from fieldbank.haptic.probe import observation_from_trace, probe_path

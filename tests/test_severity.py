@@ -229,9 +229,10 @@ def test_stretch_torques_match_a_hand_derivation(spec):
             assert model[GROUP_INDEX["sf"]] == model[GROUP_INDEX["se"]] == 0.0
 
 
-def test_grades_match_a_hand_derivation():
-    # ef dynamic: (max P_ref + V) / (max P_ref + V_ref) from hand-computed torques
-    p = synthesize({"ef:dynamic": "moderate"})
+def _hand_curves(p: ArmParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Along an elbow extension from 150° to 0° (121 samples): the elbow flexors' passive
+    torque and velocity-dependent torque (180°/s against 5°/s), of ``p`` and of the unimpaired
+    arm, from the hand derivation."""
     ref = ArmParams.from_anthropometry()
     angles = np.radians(np.linspace(150.0, 0.0, 121))
     fast, slow = math.radians(180.0), math.radians(5.0)
@@ -242,13 +243,101 @@ def test_grades_match_a_hand_derivation():
     def passive(par: ArmParams, q2: float) -> float:
         return ef(par.replace(alpha_n=(0.0,) * 6), q2, 0.0)
 
-    p_ref = np.array([passive(ref, a) for a in angles])
-    v = np.array([ef(p, a, fast) - ef(p, a, slow) for a in angles])
-    v_ref = np.array([ef(ref, a, fast) - ef(ref, a, slow) for a in angles])
-    expected = (p_ref + v).max() / (p_ref + v_ref).max()
+    return (np.array([passive(p, a) for a in angles]),
+            np.array([passive(ref, a) for a in angles]),
+            np.array([ef(p, a, fast) - ef(p, a, slow) for a in angles]),
+            np.array([ef(ref, a, fast) - ef(ref, a, slow) for a in angles]))
+
+
+def test_grades_match_a_hand_derivation():
+    # ef dynamic: 1 + max (V - V_ref) / max (P_ref + V_ref) from hand-computed torques; on the
+    # synthesis path the reflex adds most where the passive torque peaks, so this is also
+    # max (P_ref + V) / max (P_ref + V_ref)
+    p = synthesize({"ef:dynamic": "moderate"})
+    _, p_ref, v, v_ref = _hand_curves(p)
+    expected = 1.0 + (v - v_ref).max() / (p_ref + v_ref).max()
     got = _grades(p)["ef"].dynamic.ratio
     assert got == pytest.approx(expected, rel=2e-3)
+    assert expected == pytest.approx((p_ref + v).max() / (p_ref + v_ref).max(), rel=1e-9)
     assert got == pytest.approx(LEVEL_RATIO["moderate"], rel=1e-6)
+
+
+def test_alpha_alone_raised_tenfold_is_felt_at_the_end_of_a_fast_stretch():
+    # α × 10 at the unimpaired gain: the reflex fires only near the end of the range (Γ > 0
+    # needs λ close to λ_max while u ≤ β = 0.1) and adds ≈ 0.094 N·m there to a fast-stretch
+    # resistance of 0.379 N·m: D ≈ 1.25, below the first Weber step (1.56) but 2.5 force JNDs
+    # above unimpaired - MAS 1's "minimal resistance at the end of the range".
+    i = GROUP_INDEX["ef"]
+    alpha = list(BASE.alpha_n)
+    alpha[i] *= 10.0
+    p = BASE.replace(alpha_n=tuple(alpha))
+    _, p_ref, v, v_ref = _hand_curves(p)
+    expected = 1.0 + (v - v_ref).max() / (p_ref + v_ref).max()
+    assert 1.2 < expected < 1.3
+    sev = _grades(p)
+    ef = sev["ef"].dynamic
+    assert ef.ratio == pytest.approx(expected, rel=2e-3)
+    assert ef.level == "very mild" and 0.0 < ef.score < 1.0
+    added = sev["ef"].tone.dynamic_added
+    assert added.torque_n_m == pytest.approx((v - v_ref).max(), rel=2e-3)
+    assert added.at_deg == pytest.approx(0.0, abs=1e-9)  # at the end of the range
+    assert added.felt_from_deg is not None and 0.0 < added.felt_from_deg < 20.0
+    assert sev["ef"].passive.level == "unimpaired"
+    assert summary(sev) == "ef dynamic very mild"
+    # raised only 2×, the reflex adds 2.5% of the resistance: not felt
+    alpha[i] = 2.0 * BASE.alpha_n[i]
+    assert _grades(BASE.replace(alpha_n=tuple(alpha)))["ef"].dynamic.level == "unimpaired"
+
+
+def test_a_shorter_slack_length_is_graded_by_the_resistance_it_adds_earlier():
+    # 20 mm shorter (slack_offset_m = -0.02) at normal Km: the passive force starts 0.02 /
+    # 0.025 rad = 46° earlier in the elbow extension; its peak at the end of the range grows
+    # only 14% (ψ = Km d exp(-(d/ℓ)²) saturates), but at 66° it adds ≈ 0.26 N·m where the
+    # unimpaired flexors give 0.04: P* ≈ 1.7.
+    i = GROUP_INDEX["ef"]
+    slack = list(BASE.slack_offset_m)
+    slack[i] = -0.02
+    p = BASE.replace(slack_offset_m=tuple(slack))
+    pp, p_ref, _, _ = _hand_curves(p)
+    assert pp.max() / p_ref.max() < 1.2  # the seed's peak ratio would call it unimpaired
+    expected = 1.0 + (pp - p_ref).max() / p_ref.max()
+    assert 1.6 < expected < 1.8
+    sev = _grades(p)
+    ef = sev["ef"].passive
+    assert ef.ratio == pytest.approx(expected, rel=2e-3)
+    assert ef.level == "very mild"
+    added = sev["ef"].tone.passive_added
+    assert 55.0 < added.at_deg < 75.0
+    # felt from where the contracted group's passive torque reaches 10% of the unimpaired peak
+    felt = np.radians(np.linspace(150.0, 0.0, 121))[np.argmax(pp - p_ref >= 0.1 * p_ref.max())]
+    assert added.felt_from_deg == pytest.approx(math.degrees(felt))
+    assert added.felt_from_deg > 100.0  # the unimpaired group is slack down to 70° (q_rest)
+    assert sev["ef"].dynamic.level == "unimpaired"
+    doc = sev["ef"].to_dict()["passive"]
+    assert doc["added_torque_n_m"] == pytest.approx(added.torque_n_m)  # type: ignore[index]
+    # the contracture grows with the shortening; a lengthening adds nothing
+    slack[i] = -0.04
+    assert _grades(BASE.replace(slack_offset_m=tuple(slack)))["ef"].passive.ratio > ef.ratio
+    slack[i] = 0.01
+    longer = _grades(BASE.replace(slack_offset_m=tuple(slack)))["ef"].passive
+    assert longer.level == "unimpaired" and longer.ratio < 1.0
+
+
+def test_unimpaired_only_while_the_addition_is_not_felt():
+    scale = SeverityScale()
+    assert scale.level(1.0) == scale.level(1.099) == "unimpaired"
+    assert scale.level(1.101) == scale.level(1.5) == scale.level(2.44) == "very mild"
+    assert scale.level(3.2) == "mild"
+    assert SeverityScale(felt_fraction=0.3).level(1.25) == "unimpaired"
+    with pytest.raises(ParameterError, match="felt_fraction"):
+        SeverityScale(felt_fraction=0.7)
+    # Km 5% above unimpaired is within the JND; 20% above is felt
+    i = GROUP_INDEX["ee"]
+    for factor, level in ((1.05, "unimpaired"), (1.2, "very mild")):
+        km = list(BASE.km_n_per_m)
+        km[i] *= factor
+        got = _grades(BASE.replace(km_n_per_m=tuple(km)))["ee"].passive
+        assert got.ratio == pytest.approx(factor, rel=1e-9) and got.level == level
 
 
 # --- against published magnitudes --------------------------------------------------------------

@@ -26,26 +26,54 @@ counts Δt_k/τ times::
     log L_c = −Σ_k (Δt_k/τ) |F_rec,k − F_c,k|² / (2σ²)
 
 summed over the observations. The posterior over candidates is prior × likelihood, normalised;
-the group's probability sums its severities. The classification says whether the best
-candidate explains the trace at all (mean squared residual against σ²) and designs the next
-probe - the stroke carrying the most information about the candidates still in play, with the
-posterior as the prior (:func:`fieldbank.evaluate.design.design`).
+the group's probability sums its severities.
+
+**Does any candidate explain the trace?** Under the noise model the best candidate's whitened
+residual Q = Σ_k (Δt_k/τ) |F_rec,k − F_c,k|²/σ² has mean 2 Σ_k Δt_k/τ and a variance that
+follows from the noise's correlation (an Ornstein-Uhlenbeck process of time constant τ/2,
+:func:`with_force_noise`: ρ(Δt) = e^(−2|Δt|/τ)): Var Q = 4 Σ_k Σ_l (Δt_k/τ)(Δt_l/τ) ρ²(t_k − t_l).
+Q is compared with the χ² distribution of that mean and variance (Satterthwaite); below the
+p-value :data:`FIT_LEVEL` no candidate explains the trace within the noise - an arm outside
+the candidates (a flexor group alone among joint groups), a noise larger than assumed, or a
+recording that is not what it claims to be - and the read-out says so (``explains``).
+
+**Calibration: model error is not noise.** The likelihood counts one independent sample per τ,
+which is right for sensor noise but not for the part of the residual the candidates cannot
+produce: a patient between two candidates' severities, or outside them, leaves a systematic
+residual, smooth over the whole probe, and the likelihood ratio between two wrong candidates
+then grows with the recording's length without meaning anything. The classifier estimates
+that model error from the best candidate's residual beyond what the noise explains - the
+excess over :data:`MODEL_ERROR_SDS` standard deviations of Q, so that the noise's own scatter
+is not taken for model error: σ_m² = σ² · max(0, Q − E[Q] − 2 √Var Q) / E[Q] per axis - and
+counts it as a noise correlated over the whole recording (the same arm's mismatch in every
+probe: one independent sample in all): the noise's variance-time product σ²τ gains σ_m² D (D
+the recording's duration), which divides the log-likelihoods by T = 1 + (σ_m²/σ²) · n_eff
+(n_eff = Σ Δt/τ) - a temperature set by the trace itself. A trace one candidate explains within
+the noise keeps T = 1 and its full confidence. (Counting one independent sample per probe
+instead was measured too: it left more confident wrong answers.) A global temperature
+(:data:`TEMPERATURE`) multiplies it; ``benchmarks/bench_probe_design.py --trials`` measures
+the reliability (stated probability against observed accuracy) with and without both on
+simulated patients on and between the candidates' severities at several noise levels
+(``docs/probing.md``). ``log_likelihood`` stays the stated likelihood;
+``raw_posterior`` is its posterior before the correction.
+
+The classification designs the next probe - the stroke carrying the most information about
+the candidates still in play, with the posterior as the prior
+(:func:`fieldbank.evaluate.design.design`).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.signal import savgol_filter
+from scipy.stats import chi2
 
 from fieldbank.dynamics import hand_inertial_force
-from fieldbank.errors import ParameterError, Problem, UnreachableError, ValidationError
+from fieldbank.errors import ParameterError, UnreachableError
 from fieldbank.evaluate.design import (
     Candidate,
     NoiseModel,
@@ -57,6 +85,7 @@ from fieldbank.evaluate.design import (
     design,
     saturate,
 )
+from fieldbank.evaluate.observation import Observation
 from fieldbank.model import Arm, FloatArray
 from fieldbank.sim import ArmSim
 
@@ -67,243 +96,16 @@ ACCELERATION_WINDOW_S = 0.025
 STOP_PROBABILITY = 0.99
 #: Candidates below this posterior are out of play for the next probe.
 REMAINING_PROBABILITY = 1e-3
-#: Mean squared residual per axis above this many σ² means no candidate explains the trace.
-MISFIT_RATIO = 4.0
+#: p-value of the best candidate's residual below which no candidate explains the trace.
+FIT_LEVEL = 1e-3
+#: Standard deviations of the fit statistic the noise is allowed before the rest of the
+#: residual counts as model error (module docstring).
+MODEL_ERROR_SDS = 2.0
+#: Global temperature on the (model-error corrected) log-likelihoods: 1, the value the
+#: reliability benchmark supports (docs/probing.md, "Are the probabilities right?").
+TEMPERATURE = 1.0
 #: Replay accepts sample periods within this fraction of the median period.
 RATE_TOLERANCE = 0.25
-
-_COLUMNS = ("t_s", "x_m", "y_m", "fx_n", "fy_n")
-_VELOCITY = ("vx_m_per_s", "vy_m_per_s")
-_SIGNS = {"force on the handle": 1.0, "arm-on-handle": 1.0, "handle-on-arm": -1.0}
-
-
-@dataclass(frozen=True, eq=False)
-class Observation:
-    """One recorded probing motion (shoulder frame, SI; force the arm exerts on the handle).
-
-    Attributes
-    ----------
-    name : str
-    times_s : ndarray, shape (T,), s (increasing)
-    positions_m : ndarray, shape (T, 2), m
-    velocities_m_per_s : ndarray, shape (T, 2), m/s
-    force_n : ndarray, shape (T, 2), N
-    force_limit_n : float or None, N
-        Saturation of the force when it was rendered.
-    reset_m : (x, y) or None, m
-        Where the renderer put the virtual arm at rest (default: the first position).
-    source : str
-        Where the observation came from (file, database session).
-    output_gain : ndarray, shape (T,), or None
-        The renderer's output gain per sample (its arming ramp), applied to every prediction.
-    counted : ndarray of bool, shape (T,), or None
-        Samples the likelihood counts (default all); the others only carry the replay forward
-        (e.g. while a renderer blended two models).
-    """
-
-    name: str
-    times_s: FloatArray
-    positions_m: FloatArray
-    velocities_m_per_s: FloatArray
-    force_n: FloatArray
-    force_limit_n: float | None = None
-    reset_m: tuple[float, float] | None = None
-    source: str = ""
-    output_gain: FloatArray | None = None
-    counted: NDArray[np.bool_] | None = None
-
-    @classmethod
-    def from_arrays(cls, name: str, times_s: object, positions_m: object, force_n: object,
-                    velocities_m_per_s: object | None = None, *,
-                    force_limit_n: float | None = None,
-                    reset_m: tuple[float, float] | None = None,
-                    source: str = "", output_gain: object | None = None,
-                    counted: object | None = None) -> Observation:
-        """Check shapes and values; velocities by differentiating positions when not given."""
-        where = source or name
-        t = np.asarray(times_s, dtype=float)
-        x = np.asarray(positions_m, dtype=float)
-        f = np.asarray(force_n, dtype=float)
-        problems = []
-        if t.ndim != 1 or t.shape[0] < 3:
-            problems.append(Problem(where, f"times_s must be a 1-D array of at least 3 samples; "
-                                           f"got shape {t.shape}"))
-        for label, a in (("positions_m", x), ("force_n", f)):
-            if a.shape != (t.shape[0], 2):
-                problems.append(Problem(where, f"{label} must have shape ({t.shape[0]}, 2); got "
-                                               f"{a.shape}"))
-        if problems:
-            raise ValidationError(problems, f"Observation {name!r} is malformed:")
-        v = None if velocities_m_per_s is None else np.asarray(velocities_m_per_s, dtype=float)
-        if v is not None and v.shape != x.shape:
-            raise ValidationError([Problem(where, f"velocities_m_per_s must have shape "
-                                                  f"{x.shape}; got {v.shape}")])
-        for label, arr in (("times_s", t), ("positions_m", x), ("velocities_m_per_s", v),
-                           ("force_n", f)):
-            if arr is None:
-                continue
-            bad = ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
-            if bad.any():
-                problems.append(Problem(f"{where}: sample {int(np.argmax(bad))}",
-                                        f"{label} is not finite ({int(bad.sum())} samples)"))
-        if np.any(np.diff(t) <= 0):
-            k = int(np.argmax(np.diff(t) <= 0)) + 1
-            problems.append(Problem(f"{where}: sample {k}", "times_s must increase; "
-                                                           f"{t[k]:g} s follows {t[k - 1]:g} s"))
-        gain = None if output_gain is None else np.asarray(output_gain, dtype=float)
-        mask = None if counted is None else np.asarray(counted, dtype=bool)
-        for label, extra in (("output_gain", gain), ("counted", mask)):
-            if extra is not None and extra.shape != t.shape:
-                problems.append(Problem(where, f"{label} must have shape {t.shape}; got "
-                                               f"{extra.shape}"))
-        if mask is not None and mask.shape == t.shape and mask.sum() < 3:
-            problems.append(Problem(where, f"at least 3 samples must count; {int(mask.sum())} "
-                                           "do"))
-        if problems:
-            raise ValidationError(problems, f"Observation {name!r} is malformed:")
-        if v is None:
-            v = np.gradient(x, t, axis=0)
-        return cls(name, t, x, v, f, force_limit_n, reset_m, source, gain, mask)
-
-    @classmethod
-    def from_csv(cls, path: str | Path, shoulder_offset_m: tuple[float, float] | None = None,
-                 name: str | None = None) -> Observation:
-        """Read a recorded probe from CSV: ``# key: value`` metadata lines, a header, one row a
-        sample. Columns ``t_s,x_m,y_m,fx_n,fy_n`` (any order; ``vx_m_per_s,vy_m_per_s``
-        optional, other columns ignored). ``# frame: shoulder`` or ``robot`` (then the shoulder
-        offset comes from the argument, a ``# shoulder_offset_m: [x, y]`` line or the
-        ``renderer`` metadata of an exported haptic trace); ``# sign: force on the handle`` (or
-        ``arm-on-handle``) or ``handle-on-arm``. Every problem is reported with its row."""
-        p = Path(path)
-        try:
-            lines = p.read_text(encoding="utf-8").splitlines()
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ValidationError([Problem(str(p), f"cannot read: {exc}")]) from None
-        meta: dict[str, str] = {}
-        body: list[tuple[int, str]] = []
-        for n, ln in enumerate(lines, start=1):
-            if ln.startswith("#"):
-                key, _, value = ln[1:].partition(":")
-                meta[key.strip().lower()] = value.strip()
-            elif ln.strip():
-                body.append((n, ln))
-        problems: list[Problem] = []
-        if not body:
-            raise ValidationError([Problem(str(p), "no header row and no samples")])
-        header = [h.strip() for h in body[0][1].split(",")]
-        missing = [c for c in _COLUMNS if c not in header]
-        if missing:
-            raise ValidationError([Problem(f"{p}:row {body[0][0]}",
-                                           f"missing column(s) {', '.join(missing)}; got "
-                                           f"{', '.join(header)}")])
-        want = list(_COLUMNS) + [c for c in _VELOCITY if c in header]
-        col = {c: header.index(c) for c in want}
-        rows = []
-        for n, ln in body[1:]:
-            parts = ln.split(",")
-            try:
-                rows.append([float(parts[col[c]]) for c in want])
-            except (ValueError, IndexError):
-                problems.append(Problem(f"{p}:row {n}", f"expected numbers in "
-                                                        f"{', '.join(want)}; got {ln!r}"))
-        frame = meta.get("frame", "").split()[0].lower() if meta.get("frame") else ""
-        if frame not in ("shoulder", "robot"):
-            problems.append(Problem(str(p), f"'# frame:' must be shoulder or robot; got "
-                                            f"{meta.get('frame')!r}"))
-        sign_text = meta.get("sign", "").split("(")[0].strip().lower()
-        if sign_text not in _SIGNS:
-            problems.append(Problem(str(p), f"'# sign:' must be one of {', '.join(_SIGNS)}; got "
-                                            f"{meta.get('sign')!r}"))
-        offset = (0.0, 0.0)
-        if frame == "robot":
-            found = shoulder_offset_m or _offset_from_meta(meta)
-            if found is None:
-                problems.append(Problem(str(p), "positions are in the robot frame but the "
-                                                "shoulder's position is unknown: give it "
-                                                "(--shoulder-offset X,Y) or a "
-                                                "'# shoulder_offset_m: [x, y]' line"))
-            else:
-                offset = found
-        if len(rows) < 3 and not problems:
-            problems.append(Problem(str(p), f"at least 3 samples needed; got {len(rows)}"))
-        if problems:
-            raise ValidationError(problems, f"{p}: not a usable probe recording:")
-        a = np.array(rows)
-        pos = a[:, 1:3] - np.asarray(offset)
-        vel = a[:, 5:7] if len(want) == 7 else None
-        limit = _force_limit_from_meta(meta)
-        return cls.from_arrays(name or p.stem, a[:, 0], pos, _SIGNS[sign_text] * a[:, 3:5],
-                               vel, force_limit_n=limit, source=str(p))
-
-    @property
-    def duration_s(self) -> float:
-        return float(self.times_s[-1] - self.times_s[0])
-
-    def weights(self, noise: NoiseModel) -> FloatArray:
-        """Δt_k/τ per counted sample (trapezoid): how many independent samples each is worth."""
-        dt = np.diff(self.times_s)
-        w = np.zeros(self.times_s.shape)
-        w[1:] += 0.5 * dt
-        w[:-1] += 0.5 * dt
-        if self.counted is not None:
-            w = np.where(self.counted, w, 0.0)
-        return w / noise.correlation_s
-
-    def replace_force(self, force_n: FloatArray) -> Observation:
-        """The same motion with another recorded force."""
-        return Observation(self.name, self.times_s, self.positions_m, self.velocities_m_per_s,
-                           force_n, self.force_limit_n, self.reset_m, self.source,
-                           self.output_gain, self.counted)
-
-
-def _json_value(text: str) -> object:
-    try:
-        return json.loads(text)
-    except ValueError:
-        return None
-
-
-def _offset_from_meta(meta: dict[str, str]) -> tuple[float, float] | None:
-    for raw in (meta.get("shoulder_offset_m"),
-                _nested(meta.get("renderer"), "shoulder_offset_m")):
-        if raw is None:
-            continue
-        val = _json_value(raw) if isinstance(raw, str) else raw
-        if isinstance(val, list) and len(val) == 2 and all(
-                isinstance(v, (int, float)) for v in val):
-            return (float(val[0]), float(val[1]))
-    return None
-
-
-def _force_limit_from_meta(meta: dict[str, str]) -> float | None:
-    raw = meta.get("force_limit_n")
-    val = _json_value(raw) if raw is not None else _nested(meta.get("safety"), "force_limit_n")
-    return float(val) if isinstance(val, (int, float)) and val > 0 else None
-
-
-def _nested(raw: str | None, key: str) -> object:
-    if raw is None:
-        return None
-    d = _json_value(raw)
-    return d.get(key) if isinstance(d, dict) else None
-
-
-def with_force_noise(obs: Observation, noise: NoiseModel, rng: np.random.Generator
-                     ) -> Observation:
-    """``obs`` with simulated sensor noise added: per axis Gaussian with SD σ, correlated as an
-    Ornstein-Uhlenbeck process of time constant τ/2, whose integral time scale gives one
-    independent sample per τ - the noise the likelihood assumes."""
-    t = obs.times_s
-    dt = np.diff(t, prepend=t[0])
-    a = np.exp(-dt / (0.5 * noise.correlation_s))
-    e = rng.standard_normal((len(t), 2)) * noise.force_sd_n
-    out = np.empty_like(e)
-    out[0] = e[0]
-    scale = np.sqrt(1.0 - a * a)
-    for k in range(1, len(t)):
-        out[k] = a[k] * out[k - 1] + scale[k] * e[k]
-    return obs.replace_force(obs.force_n + out)
-
 
 def recorded_accelerations(obs: Observation) -> FloatArray:
     """Hand accelerations (T, 2), m/s²: a Savitzky-Golay derivative (quadratic, window
@@ -374,6 +176,14 @@ class Classification:
         The stroke that best separates the candidates still in play.
     next_reason : str
         Why there is no next probe, or what it is for.
+    raw_posterior : ndarray, shape (n,)
+        The posterior of the stated likelihood, before the model-error correction.
+    temperature : float
+        What the log-likelihoods were divided by (model-error correction × global).
+    fit_statistic, fit_expected, fit_variance : float
+        The best candidate's whitened residual Q, its mean and variance under the noise model.
+    fit_p_value : float
+        P(Q at least as large | the best candidate and the noise model) (module docstring).
     """
 
     candidates: tuple[Candidate, ...]
@@ -387,6 +197,12 @@ class Classification:
     predictor: str
     next_probe: ProbeDesign | None
     next_reason: str
+    raw_posterior: FloatArray | None = None
+    temperature: float = 1.0
+    fit_statistic: float = 0.0
+    fit_expected: float = 0.0
+    fit_variance: float = 0.0
+    fit_p_value: float = 1.0
 
     @property
     def best(self) -> Candidate:
@@ -425,9 +241,16 @@ class Classification:
 
     @property
     def explains(self) -> bool:
-        """Whether the best candidate's residual is within the noise model (≤ 2σ RMS)."""
-        k = int(np.argmax(self.posterior))
-        return bool(self.rms_residual_n[k] ** 2 / 2.0 <= MISFIT_RATIO * self.noise.force_sd_n ** 2)
+        """Whether the best-fitting candidate explains the trace within the noise model: its
+        residual's p-value is at least :data:`FIT_LEVEL` (module docstring)."""
+        return bool(self.fit_p_value >= FIT_LEVEL)
+
+    @property
+    def model_error_n(self) -> float:
+        """The residual the best-fitting candidate leaves beyond the noise, N RMS per axis
+        (σ_m of the module docstring)."""
+        return float(self.noise.force_sd_n * math.sqrt(_model_error_ratio(
+            self.fit_statistic, self.fit_expected, self.fit_variance)))
 
     @property
     def knows_groups(self) -> bool:
@@ -442,10 +265,14 @@ class Classification:
             g = self.group_posterior
             text += f"; impaired group {self.group} (p = {g[self.group]:.3g})"
         if not self.explains:
-            k = int(np.argmax(self.posterior))
-            text += (f"; but no candidate explains the recording: the best leaves "
+            k = int(np.argmin(self.rms_residual_n))
+            text += (f"; but no candidate explains the recording (p = {self.fit_p_value:.2g}): "
+                     f"the closest, {self.candidates[k].name}, leaves "
                      f"{self.rms_residual_n[k]:.2f} N RMS against a noise of "
-                     f"{self.noise.force_sd_n:g} N per axis")
+                     f"{self.noise.force_sd_n:g} N per axis - the arm may be none of these")
+        elif self.temperature > 1.05:
+            text += (f" (tempered ×1/{self.temperature:.2g} for ≈ {self.model_error_n:.2g} N "
+                     "of model error beyond the noise)")
         return text
 
     def to_dict(self, shoulder_offset_m: tuple[float, float] = (0.0, 0.0)
@@ -459,11 +286,20 @@ class Classification:
             "level_posterior": {k: round(v, 6) for k, v in self.level_posterior.items()},
             "log10_likelihood_ratio": round(self.log10_likelihood_ratio, 3),
             "explains_recording": self.explains,
+            "fit_test": {"statistic": round(self.fit_statistic, 3),
+                         "expected": round(self.fit_expected, 3),
+                         "variance": round(self.fit_variance, 3),
+                         "p_value": float(f"{self.fit_p_value:.4g}"), "level": FIT_LEVEL},
+            "calibration": {"temperature": round(self.temperature, 4),
+                            "model_error_n": round(self.model_error_n, 4),
+                            "global_temperature": TEMPERATURE},
             "candidates": [{
                 "candidate": self.candidates[k].name, "group": self.candidates[k].label,
                 "level": self.candidates[k].level,
                 "prior": round(float(self.prior[k]), 6),
                 "posterior": float(f"{self.posterior[k]:.6g}"),
+                "raw_posterior": float(f"{self.raw_posterior[k]:.6g}")
+                if self.raw_posterior is not None else None,
                 "log_likelihood": round(float(self.log_likelihood[k]), 3),
                 "rms_residual_n": round(float(self.rms_residual_n[k]), 4),
                 "notes": list(self.candidates[k].notes),
@@ -531,6 +367,7 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
     ll = np.zeros(len(cands))
     sq = np.zeros(len(cands))
     count = 0
+    expected = variance = n_eff = 0.0
     for o, pr in zip(obs, preds, strict=True):
         w = o.weights(noise)
         r2 = ((o.force_n[None] - pr) ** 2).sum(axis=-1)
@@ -538,10 +375,14 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
         used = np.ones(len(o.times_s), dtype=bool) if o.counted is None else o.counted
         sq += r2[:, used].sum(axis=1)
         count += int(used.sum())
-    with np.errstate(divide="ignore"):
-        logpost = np.log(p0) + ll
-    post = np.exp(logpost - logpost.max())
-    post /= post.sum()
+        n_eff += float(w.sum())
+        expected += 2.0 * float(w.sum())
+        variance += 4.0 * _correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
+    q = float((-2.0 * ll).min())  # Σ w |r|² / σ² of the best-fitting candidate
+    p_fit = _fit_p_value(q, expected, variance)
+    temperature = TEMPERATURE * (1.0 + _model_error_ratio(q, expected, variance) * n_eff)
+    raw = _posterior(p0, ll)
+    post = _posterior(p0, ll / temperature)
     rms = np.sqrt(sq / count)
     nxt: ProbeDesign | None = None
     if not next_probe:
@@ -560,8 +401,44 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
                   + ", ".join(f"{c.name} (p = {post[k]:.2g})"
                               for c, k in zip(rest, keep, strict=True)))
     return Classification(cands, obs, p0, ll, post, rms, tuple(preds), noise, predictor, nxt,
-                          reason)
+                          reason, raw, temperature, q, expected, variance, p_fit)
 
 
-__all__ = ["PREDICTORS", "Classification", "Observation", "classify", "predict_all",
-           "predict_observation", "recorded_accelerations", "with_force_noise"]
+def _model_error_ratio(q: float, expected: float, variance: float) -> float:
+    """σ_m²/σ² of the module docstring: the fit statistic's excess beyond
+    :data:`MODEL_ERROR_SDS` of its SD, per unit of its mean."""
+    if expected <= 0:
+        return 0.0
+    return max(0.0, q - expected - MODEL_ERROR_SDS * math.sqrt(max(variance, 0.0))) / expected
+
+
+def _posterior(prior: FloatArray, log_likelihood: FloatArray) -> FloatArray:
+    with np.errstate(divide="ignore"):
+        logpost = np.log(prior) + log_likelihood
+    post = np.exp(logpost - logpost.max())
+    return np.asarray(post / post.sum(), dtype=float)
+
+
+def _correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> float:
+    """Σ_k Σ_l w_k w_l e^(−rate |t_k − t_l|), by one pass of an exponential filter."""
+    decay = np.exp(-rate * np.diff(times_s))
+    total = 0.0
+    carried = 0.0  # Σ_{l<k} w_l e^(−rate (t_k − t_l))
+    for k in range(len(w)):
+        if k:
+            carried = decay[k - 1] * (carried + w[k - 1])
+        total += w[k] * (w[k] + 2.0 * carried)
+    return total
+
+
+def _fit_p_value(q: float, expected: float, variance: float) -> float:
+    """P(Q ≥ q) for Q of mean ``expected`` and ``variance``, as a scaled χ² (Satterthwaite)."""
+    if expected <= 0 or variance <= 0:
+        return 1.0
+    scale = variance / (2.0 * expected)
+    dof = 2.0 * expected ** 2 / variance
+    return float(chi2.sf(q / scale, dof))
+
+
+__all__ = ["FIT_LEVEL", "PREDICTORS", "TEMPERATURE", "Classification", "classify",
+           "predict_all", "predict_observation", "recorded_accelerations"]

@@ -9,28 +9,54 @@ by definition velocity-dependent resistance (Lance 1980), and clinicians grade p
 and direction (MAS, Tardieu). So here every one of the six muscle groups gets two grades on that
 ladder:
 
-* **passive** (position-dependent: contracture, stiffness) - the largest passive torque the
-  group puts against a slow stretch of the joint it is graded on (:data:`GRADED_STRETCH`),
-  over the same for the unimpaired arm (same segments and geometry, unimpaired muscles:
-  :meth:`fieldbank.params.ArmParams.with_unimpaired_muscles`). For a change of Km alone it is
-  the Km ratio, the seed's scale; a slack offset (lengthening, casting, contracture) moves it
-  too. MAS-4 boundary (:attr:`SeverityScale.passive_upper_ratio`, 10): peak resistive elbow
-  torque over the passive range rises ≈ 0.9 → 9.8 N·m from MAS 0 to 4 (Pei et al. 2021),
-  unimpaired elbow stiffness 0.4-1.8 N·m/rad (Wiegner & Watts 1986); the seed's
-  "≈ 10 × unimpaired".
-* **dynamic** (velocity-dependent: spasticity, the stretch reflex) - the resistance the group
-  puts against the fast stretch (180°/s) with its passive part held at the unimpaired value,
-  over the same for the unimpaired arm::
+* **passive** (position-dependent: contracture, stiffness) - the passive torque the group adds
+  to a slow stretch of the joint it is graded on (:data:`GRADED_STRETCH`), angle by angle, over
+  the unimpaired arm's (same segments and geometry, unimpaired muscles:
+  :meth:`fieldbank.params.ArmParams.with_unimpaired_muscles`)::
 
-      D = max_θ [P_ref(θ) + V(θ)] / max_θ [P_ref(θ) + V_ref(θ)]
+      P* = 1 + max_θ [P(θ) − P_ref(θ)] / max_θ P_ref(θ)
+
+  For a change of Km alone P = r P_ref and P* = r, the seed's Km ratio. A contracture of the
+  slack length (a shorter rest length, ``slack_offset_m`` < 0) with normal stiffness adds torque
+  where the unimpaired arm is still slack - the resistance comes earlier in the range - and is
+  graded by it, although its largest torque at the end of the range barely changes (the passive
+  force of seed eq. 5 saturates: 20 mm shorter adds ≈ 0.26 N·m at 67° to an elbow whose
+  unimpaired peak is 0.37 N·m, P* ≈ 1.7, but only 14% at the end of the range). MAS-4 boundary
+  (:attr:`SeverityScale.passive_upper_ratio`, 10): peak resistive elbow torque over the passive
+  range rises ≈ 0.9 → 9.8 N·m from MAS 0 to 4 (Pei et al. 2021), unimpaired elbow stiffness
+  0.4-1.8 N·m/rad (Wiegner & Watts 1986); the seed's "≈ 10 × unimpaired".
+* **dynamic** (velocity-dependent: spasticity, the stretch reflex) - the velocity-dependent torque
+  (fast minus slow stretch, 180°/s against 5°/s) the group adds, angle by angle, over the
+  unimpaired group's, against the unimpaired resistance to the fast stretch::
+
+      D = 1 + max_θ [V(θ) − V_ref(θ)] / max_θ [P_ref(θ) + V_ref(θ)]
 
   P_ref the unimpaired group's passive torque along the stretch, V the group's
-  velocity-dependent torque (fast minus slow stretch). D = 1 when the reflex is unimpaired, and
-  D = 10 when the fast stretch meets ten times the unimpaired resistance because of the reflex
-  alone. MAS-4 boundary (:attr:`SeverityScale.dynamic_upper_ratio`, 10; assumption): the same
-  "≈ 10 × unimpaired" as the passive scale, applied to the resistance felt at a fast stretch,
-  where MAS is graded (Liang et al. 2020: 1.3 → 6.7 N·m from MAS 0 to 4 at ≥ 150°/s, ≈ 5 ×;
-  Pei et al. 2021 ≈ 10 ×; McPherson 2018: the reflex needs stretches faster than 100°/s).
+  velocity-dependent torque. D = 1 when the reflex is unimpaired, and D = 10 when the fast
+  stretch meets ten times the unimpaired resistance because of the reflex alone. Where the
+  reflex adds most where the passive torque peaks (the end of the range: the scale's own
+  synthesized arms) this is max_θ [P_ref + V] / max_θ [P_ref + V_ref]; a reflex that catches
+  mid-range is graded by what it adds there. MAS-4 boundary
+  (:attr:`SeverityScale.dynamic_upper_ratio`, 10; assumption): the same "≈ 10 × unimpaired" as
+  the passive scale, applied to the resistance felt at a fast stretch, where MAS is graded
+  (Liang et al. 2020: 1.3 → 6.7 N·m from MAS 0 to 4 at ≥ 150°/s, ≈ 5 ×; Pei et al. 2021 ≈ 10 ×;
+  McPherson 2018: the reflex needs stretches faster than 100°/s).
+
+A group that adds nothing anywhere (a weakened, released or lengthened group) gets the ratio of
+its peak to the unimpaired peak instead (< 1: less than unimpaired).
+
+**What a hand feels below the first step.** The levels are one free-exploration stiffness JND
+apart (w = 0.6), so the nearest-level rule alone would call everything up to ≈ 1.56 ×
+unimpaired "unimpaired" - α raised tenfold at the unimpaired gain (0.1 N·m more at the end of a
+fast elbow stretch, D ≈ 1.25) among it. A clinician stretching the limb compares forces at a
+place in the range, where the force-magnitude JND is ≈ 7-10 % (Jones 1989; Pang, Tan & Durlach
+1991): MAS 1 is "a catch and release or minimal resistance at the end of the range". So a
+component is *unimpaired* only while what the group adds stays within
+:attr:`SeverityScale.felt_fraction` (10 %) of the unimpaired peak; a felt addition below very
+mild is graded very mild, and above it the nearest level. Each grade reports the torque added,
+the angle where it is largest and the angle from which it is felt (the resistance's onset for
+the passive grade, the catch for the dynamic one), so the grade says where in the range it was
+felt.
 
 The clinical read-outs the grades rest on (slow- and fast-stretch torque, the velocity-dependent
 part, the Tardieu catch) are computed per joint and direction in
@@ -68,6 +94,14 @@ from fieldbank.evaluate.probing import (
     stretch_profiles,
     unimpaired_reference,
 )
+from fieldbank.evaluate.tone import (
+    FELT_FRACTION,
+    GRADED_STRETCH,
+    Added,
+    GroupTone,
+    dynamic_ratio,
+    group_tone,
+)
 from fieldbank.model import Arm
 from fieldbank.params import (
     DEFAULT_ALPHA_N,
@@ -75,7 +109,6 @@ from fieldbank.params import (
     GROUP_INDEX,
     GROUP_LEGEND,
     GROUP_NAMES,
-    GROUPS,
     JOINT_GROUPS,
     ArmParams,
 )
@@ -87,14 +120,6 @@ LEVELS: tuple[str, ...] = ("unimpaired", "very mild", "mild", "moderate", "sever
 COMPONENTS: tuple[str, ...] = ("passive", "dynamic")
 
 MUSCLE_GROUP_NAMES: dict[str, str] = GROUP_NAMES
-#: The stretch each group is graded on: the single-joint stretch that lengthens it. The
-#: bi-articular groups (biceps short, triceps long) are graded at the elbow, where the clinic
-#: tests them and where their moment arm is the larger (BRIEF §3).
-GRADED_STRETCH: dict[str, tuple[str, str]] = {
-    "sf": ("shoulder", "extension"), "se": ("shoulder", "flexion"),
-    "ef": ("elbow", "extension"), "ee": ("elbow", "flexion"),
-    "bf": ("elbow", "extension"), "be": ("elbow", "flexion"),
-}
 #: The fitted parameters each component rests on, per group.
 COMPONENT_PARAMETERS: dict[str, tuple[str, ...]] = {"passive": ("km",),
                                                     "dynamic": ("alpha", "beta")}
@@ -129,15 +154,22 @@ class SeverityScale:
         Spacing of the levels below severe (seed: 0.6).
     passive_upper_ratio, dynamic_upper_ratio : float
         MAS-4 boundary of each component as a ratio to unimpaired.
+    felt_fraction : float
+        Added torque, as a fraction of the unimpaired peak, below which a component reads
+        unimpaired (force-magnitude JND, 10 %); above it and below very mild it reads very mild.
     """
 
     weber_fraction: float = WEBER_FRACTION
     passive_upper_ratio: float = UPPER_RATIO
     dynamic_upper_ratio: float = UPPER_RATIO
+    felt_fraction: float = FELT_FRACTION
 
     def __post_init__(self) -> None:
         if not self.weber_fraction > 0:
             raise ParameterError(f"weber_fraction must be > 0; got {self.weber_fraction!r}.")
+        if not 0 < self.felt_fraction < self.weber_fraction:
+            raise ParameterError(f"felt_fraction must lie in (0, weber_fraction); got "
+                                 f"{self.felt_fraction!r}.")
         for name in ("passive_upper_ratio", "dynamic_upper_ratio"):
             upper = getattr(self, name)
             if not upper > (1.0 + self.weber_fraction) ** 3:
@@ -166,9 +198,12 @@ class SeverityScale:
         return 1.0 + math.log(ratio / vm) / math.log(1.0 + self.weber_fraction)
 
     def level(self, ratio: float, component: str = "passive") -> str:
-        """The nearest level in log-ratio distance."""
-        r = max(ratio, 1e-12)
-        return min(LEVELS, key=lambda lvl: abs(math.log(r / self.level_ratio(lvl, component))))
+        """'unimpaired' while the ratio stays within the felt fraction of 1, else the nearest
+        impaired level in log-ratio distance (very mild for a felt ratio below it)."""
+        if ratio <= 1.0 + self.felt_fraction:
+            return "unimpaired"
+        return min(LEVELS[1:], key=lambda lvl: abs(math.log(ratio / self.level_ratio(
+            lvl, component))))
 
     def beyond(self, ratio: float, component: str = "passive") -> bool:
         """Above severe by more than half a Weber step."""
@@ -274,56 +309,6 @@ def parse_severity_options(items: Iterable[str]) -> dict[str, str]:
     return out
 
 
-# --- measures --------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class GroupTone:
-    """The torques one group's grades rest on, along its graded stretch (N·m).
-
-    passive_n_m, passive_ref_n_m : largest passive torque against the slow stretch, this arm
-        and the unimpaired one
-    velocity_dependent_n_m, velocity_dependent_ref_n_m : largest velocity-dependent torque
-        (fast minus slow)
-    passive_ratio, dynamic_ratio : the grades' measures (module docstring)
-    """
-
-    group: str
-    passive_n_m: float
-    passive_ref_n_m: float
-    velocity_dependent_n_m: float
-    velocity_dependent_ref_n_m: float
-    passive_ratio: float
-    dynamic_ratio: float
-
-
-def _dynamic_ratio(v: np.ndarray, p_ref: np.ndarray, v_ref: np.ndarray) -> float:
-    return float(np.max(p_ref + v) / np.max(p_ref + v_ref))
-
-
-def group_tone(arm: Arm, reference: Arm | None = None, profiles: Profiles | None = None,
-               reference_profiles: Profiles | None = None) -> dict[str, GroupTone]:
-    """Per muscle group, the measures of its passive and dynamic grade (module docstring).
-
-    ``reference`` is the unimpaired arm (default: ``arm``'s,
-    :func:`fieldbank.evaluate.probing.unimpaired_reference`); ``profiles`` and
-    ``reference_profiles`` the stretch profiles of both when already computed.
-    """
-    prof = profiles if profiles is not None else stretch_profiles(arm)
-    ref_prof = reference_profiles
-    if ref_prof is None:
-        ref = reference if reference is not None else unimpaired_reference(arm)
-        ref_prof = prof if ref is arm else stretch_profiles(ref)
-    out: dict[str, GroupTone] = {}
-    for g in GROUPS:
-        i = GROUP_INDEX[g]
-        a, r = prof[GRADED_STRETCH[g]], ref_prof[GRADED_STRETCH[g]]
-        p, p_ref = a.passive_n_m[:, i], r.passive_n_m[:, i]
-        v, v_ref = a.velocity_dependent_n_m[:, i], r.velocity_dependent_n_m[:, i]
-        out[g] = GroupTone(g, float(p.max()), float(p_ref.max()), float(v.max()),
-                           float(v_ref.max()), float(p.max() / p_ref.max()),
-                           _dynamic_ratio(v, p_ref, v_ref))
-    return out
-
-
 # --- classification --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ComponentGrade:
@@ -378,11 +363,13 @@ class GroupSeverity:
             "group": self.group, "name": self.name, "graded_on": self.stretch,
             "passive": {**self.passive.to_dict(),
                         "peak_torque_n_m": t.passive_n_m,
-                        "unimpaired_peak_torque_n_m": t.passive_ref_n_m},
+                        "unimpaired_peak_torque_n_m": t.passive_ref_n_m,
+                        **t.passive_added.to_dict()},
             "dynamic": {**self.dynamic.to_dict(),
                         "velocity_dependent_torque_n_m": t.velocity_dependent_n_m,
                         "unimpaired_velocity_dependent_torque_n_m":
-                            t.velocity_dependent_ref_n_m},
+                            t.velocity_dependent_ref_n_m,
+                        **t.dynamic_added.to_dict()},
         }
 
 
@@ -411,7 +398,8 @@ def classify(arm: Arm, unidentified: Collection[str] = (), reference: Arm | None
     """
     flagged = set(unidentified)
     out: dict[str, GroupSeverity] = {}
-    for g, t in group_tone(arm, reference, profiles, reference_profiles).items():
+    for g, t in group_tone(arm, reference, profiles, reference_profiles,
+                           scale.felt_fraction).items():
         grades = {}
         for comp, ratio in (("passive", t.passive_ratio), ("dynamic", t.dynamic_ratio)):
             names = tuple(f"{k}_{g}" for k in COMPONENT_PARAMETERS[comp]
@@ -445,6 +433,31 @@ def _reflex_path(s: float) -> tuple[float, float]:
     return DEFAULT_ALPHA_N * r, beta
 
 
+def reflex_path(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """α (N) and β on the synthesis path (module docstring) at path parameters ``s`` (any
+    shape; α = 100 N · 10^s, β rising geometrically from 0.1 to 1 at s = 1)."""
+    sa = np.asarray(s, dtype=float)
+    beta = np.minimum(BETA_SEVERE, DEFAULT_BETA * (BETA_SEVERE / DEFAULT_BETA) ** (
+        sa / math.log10(UPPER_RATIO)))
+    return DEFAULT_ALPHA_N * 10.0 ** sa, beta
+
+
+#: Largest path parameter of the dynamic synthesis (public name of the module's limit).
+REFLEX_PATH_MAX = _S_MAX
+
+
+def ratio_of_score(score: float, component: str = "passive",
+                   scale: SeverityScale = SCALE) -> float:
+    """The ratio to unimpaired at a continuous score (the inverse of
+    :meth:`SeverityScale.score`; 0 → 1, 1 → very mild, 4 → severe)."""
+    vm = scale.level_ratio("very mild", component)
+    if score <= 0.0:
+        return 1.0
+    if score < 1.0:
+        return float(vm ** score)
+    return float(vm * (1.0 + scale.weber_fraction) ** (score - 1.0))
+
+
 def _solve_dynamic(arm: Arm, ref_prof: StretchProfile, group: str, target: float) -> float:
     """Path parameter s at which ``group``'s dynamic ratio reaches ``target`` (≥ 1)."""
     i = GROUP_INDEX[group]
@@ -456,7 +469,7 @@ def _solve_dynamic(arm: Arm, ref_prof: StretchProfile, group: str, target: float
         a, b = _reflex_path(s)
         trial = arm.with_muscles(arm.params.with_group(group, alpha_n=a, beta=b))
         v = stretch_profile(trial, joint, direction).velocity_dependent_n_m[:, i]
-        return _dynamic_ratio(v, p_ref, v_ref)
+        return dynamic_ratio(v, p_ref, v_ref, ref_prof.angles_rad)[0]
 
     if target <= ratio(0.0) * (1 + 1e-12):
         return 0.0
@@ -479,12 +492,31 @@ def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
     same group and component. Groups and components not named keep the base values (default:
     unimpaired, 75 kg, 1.75 m).
     """
-    p = base if base is not None else ArmParams.from_anthropometry()
-    wanted: dict[tuple[str, str], str] = {}
+    wanted: dict[tuple[str, str], float] = {}
     for target, lvl in severities.items():
         level = level_name(lvl)
+        for g, comp in expand_target(target):
+            wanted[(g, comp)] = scale.level_ratio(level, comp)
+    return _synthesize(wanted, base, scale)
+
+
+def synthesize_ratios(ratios: Mapping[str, float], base: ArmParams | None = None,
+                      scale: SeverityScale = SCALE) -> ArmParams:
+    """An arm with the named targets at a ratio to unimpaired (≥ 1; any value, between the
+    levels too: a patient need not sit on the scale's steps), as :func:`synthesize`."""
+    wanted: dict[tuple[str, str], float] = {}
+    for target, ratio in ratios.items():
+        if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and ratio >= 1.0):
+            raise ParameterError(f"severity ratio of {target!r} must be a number >= 1; got "
+                                 f"{ratio!r}.")
         for pair in expand_target(target):
-            wanted[pair] = level
+            wanted[pair] = float(ratio)
+    return _synthesize(wanted, base, scale)
+
+
+def _synthesize(wanted: Mapping[tuple[str, str], float], base: ArmParams | None,
+                scale: SeverityScale) -> ArmParams:
+    p = base if base is not None else ArmParams.from_anthropometry()
     if not wanted:
         return p
     km = np.array(p.km_n_per_m)
@@ -494,9 +526,8 @@ def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
     ref_prof = stretch_profiles(unimpaired_reference(base_arm))
     if any(c == "passive" for _, c in wanted):
         unit = stretch_profiles(base_arm.with_muscles(p.replace(km_n_per_m=(1.0,) * 6)))
-    for (g, comp), level in wanted.items():
+    for (g, comp), ratio in wanted.items():
         i = GROUP_INDEX[g]
-        ratio = scale.level_ratio(level, comp)
         rp = ref_prof[GRADED_STRETCH[g]]
         if comp == "passive":
             per_newton_per_m = float(unit[GRADED_STRETCH[g]].passive_n_m[:, i].max())
@@ -509,11 +540,14 @@ def synthesize(severities: Mapping[str, str], base: ArmParams | None = None,
 
 __all__ = [
     "COMPONENTS",
+    "FELT_FRACTION",
     "GRADED_STRETCH",
     "LEVELS",
     "LEVEL_RATIO",
     "MUSCLE_GROUP_NAMES",
+    "REFLEX_PATH_MAX",
     "SCALE",
+    "Added",
     "ComponentGrade",
     "GroupSeverity",
     "GroupTone",
@@ -523,8 +557,11 @@ __all__ = [
     "group_tone",
     "level_name",
     "parse_severity_options",
+    "ratio_of_score",
+    "reflex_path",
     "severity_dict",
     "summary",
     "synthesize",
+    "synthesize_ratios",
     "target_name",
 ]

@@ -23,9 +23,30 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.errors import FitError
-from fieldbank.evaluate.severity import classify, severity_dict
+from fieldbank.errors import FitError, ParameterError
+from fieldbank.evaluate.probing import stretch_profiles, unimpaired_reference
+from fieldbank.evaluate.severity import (
+    COMPONENTS,
+    SCALE,
+    GroupSeverity,
+    classify,
+    ratio_of_score,
+    severity_dict,
+)
+from fieldbank.fitting.holds import (
+    attribution,
+    held_intervals,
+    hold_unidentified,
+    with_attribution,
+)
 from fieldbank.fitting.identify import Unidentified, identify
+from fieldbank.fitting.prior import (
+    GuessRange,
+    Prior,
+    draw,
+    fit_ranges,
+    prior_dict,
+)
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.quality import (
     DEFAULT_THRESHOLDS,
@@ -38,7 +59,6 @@ from fieldbank.fitting.quality import (
 from fieldbank.fitting.search import (
     ALGORITHMS,
     DEFAULT_ALGORITHM,
-    HOLD_EVALS,
     Progress,
     run_dual_annealing,
     run_nlopt,
@@ -48,8 +68,10 @@ from fieldbank.fitting.uncertainty import (
     DEFAULT_METHOD,
     DEFAULT_REPLICATES,
     METHODS,
+    FitSamples,
     Uncertainty,
     estimate,
+    reduced_problem,
 )
 from fieldbank.maps import FRAMES, FieldMap
 from fieldbank.model import Arm, FloatArray
@@ -62,14 +84,14 @@ SI_VALUE_UNIT = {"postural": ("n",), "stiffness": ("n/m", "n m^-1", "n·m^-1")}
 #: Metadata keys naming the patient a map belongs to.
 PATIENT_KEYS = ("patient", "patient_code")
 
-#: Significance level of the test that may keep unidentified parameters at unimpaired values.
-HOLD_TEST_LEVEL = 0.95
+#: Percentiles of the grade ranges over the fit's samples.
+GRADE_PERCENTILES = (2.5, 97.5)
 
 _RESULTS = ("held_", "hold_test_", "params_", "theta_", "cost_", "chi2_", "residuals_", "r2_",
             "uncertainty_", "relative_sd_", "residual_variance_", "unidentified_", "status_",
             "at_bounds_", "n_evals_", "stop_reason_", "time_s_", "algorithm_", "seed_", "maps_",
             "severity_", "problem_", "space_", "base_", "goodness_", "intervals_",
-            "uncertainty_detail_")
+            "uncertainty_detail_", "prior_ranges_", "attribution_")
 
 
 def _unit(value: str) -> str:
@@ -264,21 +286,38 @@ class ArmFitter:
         self.held_: list[str] = []
         self.hold_test_: dict[str, Any] | None = None
         if self.hold_unidentified and ident.unidentified:
-            held = _hold_unidentified(problem, theta, ident.unidentified, self.algorithm, seed)
+            held = hold_unidentified(problem, theta, ident.unidentified, self.algorithm, seed)
             n_evals += held.n_evals
             self.hold_test_ = held.test
-            flagged = tuple(dataclasses.replace(u, reason=u.reason + held.note(u.name))
-                            for u in ident.unidentified)
             if held.accepted:
                 theta = held.theta
                 self.held_ = list(held.names)
                 stop_reason += f"; unidentified held at unimpaired: {held.stop_reason}"
-                ident = identify(problem, theta)  # uncertainty at the final point
-            # what the full fit could not identify stays reported, held or not
-            ident = dataclasses.replace(ident, unidentified=flagged)
+            final = identify(problem, theta)  # uncertainty at the final point
+            # what the full fit could not identify stays reported, held or not - unless the
+            # maps rejected its hold and identify it at the point they led to
+            still = {u.name for u in final.unidentified}
+            flagged = tuple(dataclasses.replace(u, reason=u.reason + held.note(u.name))
+                            for u in ident.unidentified
+                            if u.name in self.held_ or not held.was_released(u.name)
+                            or u.name in still)
+            ident = dataclasses.replace(final, unidentified=flagged)
+        self.attribution_ = attribution(problem, theta, self.held_, seed)
+        if self.attribution_:
+            ident = dataclasses.replace(ident, unidentified=with_attribution(
+                ident.unidentified, self.attribution_))
+            n_evals += sum(int(a["n_evals"]) for a in self.attribution_)
+        fitted_params = space.to_params(theta, base)
+        prior = Prior.for_arm(arm.with_muscles(fitted_params)
+                              if fitted_params.q_rest_rad == base.q_rest_rad
+                              else Arm.from_params(fitted_params))
+        self.prior_ranges_: tuple[GuessRange, ...] = (
+            fit_ranges(reduced_problem(problem, theta, self.held_), theta, self.held_, prior)
+            if self.held_ else ())
         unc = estimate(problem, theta, self.held_,
                        unidentified=[u.name for u in ident.unidentified],
-                       method=self.uncertainty, n_replicates=self.replicates, seed=seed)
+                       method=self.uncertainty, n_replicates=self.replicates, seed=seed,
+                       held_intervals=held_intervals(self.prior_ranges_, prior, seed))
         n_evals += unc.n_evals
         yhat = problem.predict(theta)
         self.time_s_ = time.perf_counter() - t0
@@ -316,7 +355,10 @@ class ArmFitter:
         self.stop_reason_ = stop_reason
         self.algorithm_ = self.algorithm
         self.seed_ = seed
-        self.severity_ = _severity(self.params_, [u.name for u in self.unidentified_])
+        samples = draw(FitSamples(unc.names, unc.samples), self.prior_ranges_, prior, seed=seed)
+        self.severity_ = _severity(self.params_, [u.name for u in self.unidentified_],
+                                   samples.params(self.params_))
+        self.prior_ = prior
         return self
 
     # --- using a fit --------------------------------------------------------------------------
@@ -367,6 +409,8 @@ class ArmFitter:
             "at_bounds": self.at_bounds_,
             "held_at_unimpaired": self.held_,
             "hold_test": self.hold_test_,
+            "prior": prior_dict(self.prior_ranges_, self.prior_),
+            "attribution": self.attribution_,
             "unidentified": [u.to_dict() for u in self.unidentified_],
             "maps": [
                 {"index": k, "kind": m.kind, "n": m.n, "velocity_m_per_s": list(
@@ -382,55 +426,43 @@ class ArmFitter:
         }
 
 
-def _severity(params: ArmParams, unidentified: Sequence[str]) -> dict[str, Any]:
+def _severity(params: ArmParams, unidentified: Sequence[str],
+              samples: Sequence[ArmParams] = ()) -> dict[str, Any]:
     """Severity per muscle group, passive and dynamic
     (:func:`fieldbank.evaluate.severity.classify`), as plain values; each grade lists the
-    parameters behind it that the maps did not identify."""
-    return severity_dict(classify(Arm.from_params(params), unidentified))
+    parameters behind it that the maps did not identify and, over the fit's parameter samples
+    (held parameters drawn from their prior range), the 95% range of its score and levels."""
+    arm = Arm.from_params(params)
+    ref = unimpaired_reference(arm)
+    ref_prof = stretch_profiles(ref)
+    out = severity_dict(classify(arm, unidentified, ref, reference_profiles=ref_prof))
+    if not samples:
+        return out
+    scores: dict[tuple[str, str], list[float]] = {}
+    for p in samples:
+        try:
+            trial = arm.with_muscles(p)
+        except ParameterError:  # a sample with its own rest posture
+            trial = Arm.from_params(p)
+        graded: dict[str, GroupSeverity] = classify(trial, reference=ref,
+                                                    reference_profiles=ref_prof)
+        for g, sev in graded.items():
+            for c in COMPONENTS:
+                scores.setdefault((g, c), []).append(sev.component(c).score)
+    lo_p, hi_p = GRADE_PERCENTILES
+    for (g, c), vals in scores.items():
+        grade = out[g][c]
+        assert isinstance(grade, dict)
+        # the fitted model's own grade belongs to the range (held parameters: its unimpaired
+        # end, which the percentiles of the draws may cut off)
+        point = float(grade["score"])
+        lo, hi = (float(v) for v in np.percentile(vals, [lo_p, hi_p]))
+        lo, hi = min(lo, point), max(hi, point)
+        grade["score_range"] = [round(lo, 4), round(hi, 4)]
+        grade["level_range"] = [_level_of_score(lo, c), _level_of_score(hi, c)]
+    return out
 
 
-@dataclasses.dataclass(frozen=True)
-class _Hold:
-    accepted: bool
-    theta: FloatArray
-    names: tuple[str, ...]
-    n_evals: int
-    stop_reason: str
-    test: dict[str, Any]
-
-    def note(self, name: str) -> str:
-        if name not in self.names:
-            return ""
-        t = self.test
-        if self.accepted:
-            return (f"; held at the unimpaired value (the maps do not reject it: Δχ² "
-                    f"{t['delta_chi2']:.3g} <= {t['threshold']:.3g})")
-        return (f"; the maps reject holding the unidentified parameters at unimpaired values "
-                f"(Δχ² {t['delta_chi2']:.3g} > {t['threshold']:.3g}), so the fitted value is "
-                "kept")
-
-
-def _hold_unidentified(problem: FitProblem, theta: FloatArray,
-                       unidentified: Sequence[Unidentified], algorithm: str, seed: int) -> _Hold:
-    """Refit with the unidentified parameters at their prior means; test against the fit."""
-    from scipy.stats import chi2
-
-    space = problem.space
-    names = tuple(u.name for u in unidentified)
-    idx = [space.names.index(n) for n in names]
-    fitted = space.fitted.copy()
-    fitted[idx] = False
-    base = theta.copy()
-    base[idx] = space.prior_mean[idx]
-    reduced_space = dataclasses.replace(space, fitted=fitted, base=base)
-    reduced = dataclasses.replace(problem, space=reduced_space, n_evals=0, _xkm_cache=None)
-    name = algorithm if algorithm in ALGORITHMS and algorithm != "dual_annealing" \
-        else DEFAULT_ALGORITHM
-    res = run_nlopt(reduced, name, seed, HOLD_EVALS)
-    r_full = problem.residuals(theta)
-    r_held = problem.residuals(res.theta)
-    delta = float(r_held @ r_held - r_full @ r_full)
-    threshold = float(chi2.ppf(HOLD_TEST_LEVEL, len(idx)))
-    test = {"held": list(names), "delta_chi2": delta, "threshold": threshold,
-            "level": HOLD_TEST_LEVEL, "accepted": delta <= threshold}
-    return _Hold(delta <= threshold, res.theta, names, reduced.n_evals, res.stop_reason, test)
+def _level_of_score(score: float, component: str) -> str:
+    """The level a continuous score (0 unimpaired … 4 severe) is graded."""
+    return SCALE.level(ratio_of_score(score, component), component)

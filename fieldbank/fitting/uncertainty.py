@@ -42,10 +42,12 @@ The choice: Gauss–Newton where it holds, a parametric bootstrap where it does 
    replicates' 2.5–97.5 percentiles (asymmetric near a bound).
 
 Parameters held at the unimpaired value (not identified, :class:`~fieldbank.fitting.ArmFitter`)
-get the prior's SD and interval (basis 'prior'): the data say nothing about them. Samples keep
-them at the held value; what rests on them is a guess the what-if names separately
-(:mod:`fieldbank.interventions.guesses`), because the prior's range (10× unimpaired) would
-swamp every interval.
+get the interval of their stated prior range (basis 'prior', :mod:`fieldbank.fitting.prior`:
+unimpaired to the top of the severity scale's severe band, as far as the maps allow): the
+data say nothing more about them. The stored samples keep them at the held value, so the
+samples of what the maps identified stay as they are; prediction intervals draw the held
+parameters from their range (:func:`fieldbank.fitting.prior.draw`), so a prediction that
+rests on a guess is as wide as the guess.
 
 Samples: the bootstrap's replicates, or (Gauss–Newton) as many draws from the Gaussian, clipped
 to the bounds. They travel with the fit (:meth:`Uncertainty.to_dict`) so a what-if can apply its
@@ -340,7 +342,9 @@ def refit_local(problem: FitProblem, y: FloatArray, theta0: FloatArray,
 
 def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (), *,
              unidentified: Collection[str] = (), method: str = DEFAULT_METHOD,
-             n_replicates: int = DEFAULT_REPLICATES, seed: int = 0) -> Uncertainty:
+             n_replicates: int = DEFAULT_REPLICATES, seed: int = 0,
+             held_intervals: Mapping[str, tuple[float, float, float]] | None = None
+             ) -> Uncertainty:
     """The uncertainty of the fit ``theta`` of ``problem`` (see the module docstring).
 
     Parameters
@@ -359,6 +363,10 @@ def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (),
         Bootstrap replicates, and Gaussian draws kept as samples.
     seed : int
         Seeds the replicates' noise.
+    held_intervals : mapping, optional
+        (sd, low, high) of held parameters over their stated prior range
+        (:mod:`fieldbank.fitting.prior`); a held parameter not in it gets the fit's prior SD
+        and ±1.96 SD.
     """
     if method not in METHODS:
         raise FitError(f"unknown uncertainty method {method!r}; choose one of "
@@ -442,8 +450,12 @@ def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (),
             continue
         all_names.append(name)
         if name in held_set:
-            sd_p = float(full.prior_sd[j])
             v = float(theta[j])
+            if held_intervals is not None and name in held_intervals:
+                sd_p, low_p, high_p = held_intervals[name]
+                out_params.append(ParameterUncertainty(name, v, sd_p, low_p, high_p, "prior"))
+                continue
+            sd_p = float(full.prior_sd[j])
             out_params.append(ParameterUncertainty(
                 name, v, sd_p, max(float(full.lower[j]), v - Z95 * sd_p),
                 min(float(full.upper[j]), v + Z95 * sd_p), "prior"))

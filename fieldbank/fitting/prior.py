@@ -1,0 +1,329 @@
+"""The stated range of what the maps did not identify, and draws from it.
+
+A fit holds a parameter the maps do not identify at its unimpaired value
+(:class:`~fieldbank.fitting.ArmFitter`): the value is a guess, not a measurement. A prediction
+that rests on it must be as wide as the guess (BRIEF §14), so every prediction interval draws
+the held parameters from a stated prior range instead of keeping them at the held value:
+
+* **the range**, per muscle group and component, runs along the severity scale
+  (:mod:`fieldbank.evaluate.severity`, BRIEF §5) from unimpaired (score 0) to the top of its
+  severe band (score :data:`SCORE_HIGH` = 4.5: the MAS-4 boundary, 10 × unimpaired, raised by
+  half a Weber step - the largest ratio the scale still calls severe rather than beyond it,
+  10 · √1.6 ≈ 12.6). A severe group lies inside the range, not on its edge;
+* **passive** (Km of the group): Km = Km_unimpaired · r, r the passive ratio (for Km alone the
+  passive ratio is the Km ratio: 600 to 7,590 N/m on the default arm);
+* **dynamic** (α and β of the group): the point of the scale's synthesis path (α = 100 N ·
+  10^s, β rising from 0.1 to 1) at which the group's dynamic ratio is r - on the default arm
+  the elbow flexors run from α 100 N, β 0.1 to α ≈ 1,300 N, β 1. When only one of α and β is
+  held the other keeps its fitted samples;
+* **draws**: the severity score uniform on [0, top] - each level equally likely - stratified
+  (one draw in each of n equal slices, in a seeded random order), so 40 samples reach both
+  ends of the range. The held units of one sample share their place in their ranges (the
+  same fraction of each unit's top): the guesses move together from all unimpaired to all
+  past severe. Every headline metric grows with each group's Km and reflex, so an interval
+  between those ends holds any mixture of them (a severe elbow-flexor reflex beside an
+  unimpaired bi-articular one included), where independent draws would leave out both ends
+  of a sum of guesses (the 2.5th percentile of two independent reflexes is already well
+  above unimpaired);
+* **what the maps allow**: a held parameter can be poorly constrained rather than free. At fit
+  time the top of each unit's range is checked against the maps (:func:`fit_ranges`): the
+  unit at the top, everything else at the fit, the fitted linear parameters (Km, α) re-solved;
+  when Δχ² of the maps exceeds the χ² quantile :data:`RANGE_TEST_LEVEL` with the unit's
+  degrees of freedom, the top is lowered by bisection to the highest score the maps allow. The
+  fit report keeps the ranges (``prior``), and the fit's stored samples keep the held value (so
+  what the maps identified is unchanged); prediction intervals draw at use time
+  (:func:`draw`), deterministically for a seed.
+
+:data:`PRIOR_VERSION` names this definition: anything cached from the draws (intervals kept
+with a fit) must be keyed by it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fieldbank.armbatch import ArmBatch
+from fieldbank.errors import FitError
+from fieldbank.evaluate.batch import stretch_torques
+from fieldbank.evaluate.probing import stretch_profile, unimpaired_reference
+from fieldbank.evaluate.severity import (
+    GRADED_STRETCH,
+    REFLEX_PATH_MAX,
+    SCALE,
+    SeverityScale,
+    ratio_of_score,
+    reflex_path,
+)
+from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.uncertainty import FitSamples
+from fieldbank.model import Arm, FloatArray
+from fieldbank.params import GROUP_INDEX, GROUPS
+
+#: Version of the prior's definition (range, path, draws). Raise it when any of them changes.
+PRIOR_VERSION = 1
+#: Top of every range on the severity score: the severe band's upper edge (4 + 1/2 step).
+SCORE_HIGH = 4.5
+#: The maps allow the top of a range while Δχ² stays within this χ² quantile.
+RANGE_TEST_LEVEL = 0.95
+#: Bisection steps when the maps lower the top of a range (a 4.5 / 2¹² ≈ 0.001 score).
+RANGE_BISECTIONS = 12
+#: Path parameters tabulated per group, evenly over [0, PATH_TOP]; the table grows to the
+#: path's own top when a group's reflex needs more to reach the top of the severe band.
+PATH_POINTS = 65
+PATH_TOP = 1.6
+#: Kind of each fitted parameter -> the component of the severity grade it sizes.
+COMPONENT_OF: dict[str, str] = {"km": "passive", "alpha": "dynamic", "beta": "dynamic"}
+
+
+def unit_of(name: str) -> tuple[str, str]:
+    """(group, component) of a fitted parameter name ('alpha_ef' -> ('ef', 'dynamic')).
+
+    Raises
+    ------
+    FitError
+        Not a per-group Km, α or β name (q_rest has no severity range).
+    """
+    kind, _, group = name.rpartition("_")
+    if kind not in COMPONENT_OF or group not in GROUP_INDEX:
+        raise FitError(f"{name!r} has no prior range on the severity scale (only Km, α and β "
+                       "of a muscle group do).")
+    return group, COMPONENT_OF[kind]
+
+
+def units(names: Collection[str]) -> dict[tuple[str, str], tuple[str, ...]]:
+    """The names grouped by (group, component), in the fit's order (Km, α, β per group);
+    names without a range (q_rest) are left out."""
+    out: dict[tuple[str, str], list[str]] = {}
+    for kind in ("km", "alpha", "beta"):
+        for g in GROUPS:
+            name = f"{kind}_{g}"
+            if name in names:
+                out.setdefault((g, COMPONENT_OF[kind]), []).append(name)
+    return {k: tuple(v) for k, v in out.items()}
+
+
+@dataclass(frozen=True)
+class GuessRange:
+    """The prior range of one held unit (a group's Km, or its α and β).
+
+    ``score_high``: top of the range on the severity score (:data:`SCORE_HIGH` unless the maps
+    lowered it); ``delta_chi2_at_top``: what the maps say about the full range's top (None when
+    not checked).
+    """
+
+    group: str
+    component: str
+    names: tuple[str, ...]
+    score_high: float = SCORE_HIGH
+    delta_chi2_at_top: float | None = None
+    threshold: float | None = None
+
+    @property
+    def limited_by_maps(self) -> bool:
+        return self.score_high < SCORE_HIGH
+
+    @property
+    def ratio_high(self) -> float:
+        return ratio_of_score(self.score_high, self.component)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"group": self.group, "component": self.component, "names": list(self.names),
+                "score_high": self.score_high, "ratio_high": self.ratio_high,
+                "limited_by_maps": self.limited_by_maps,
+                "delta_chi2_at_top": self.delta_chi2_at_top, "threshold": self.threshold}
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> GuessRange:
+        names = tuple(str(n) for n in doc.get("names", ()))
+        group, component = str(doc.get("group")), str(doc.get("component"))
+        if not names or any(unit_of(n) != (group, component) for n in names):
+            raise FitError(f"prior range of {group} {component}: names {list(names)} do not "
+                           "belong to it.")
+        high = float(doc.get("score_high", SCORE_HIGH))
+        if not 0.0 <= high <= SCORE_HIGH:
+            raise FitError(f"prior range of {group} {component}: score_high must lie in "
+                           f"[0, {SCORE_HIGH}]; got {high!r}.")
+        d = doc.get("delta_chi2_at_top")
+        t = doc.get("threshold")
+        return cls(group, component, names, high, None if d is None else float(d),
+                   None if t is None else float(t))
+
+
+def full_ranges(held: Collection[str]) -> tuple[GuessRange, ...]:
+    """The unchecked ranges of the held parameters (a fit stored before ranges were kept)."""
+    return tuple(GuessRange(g, c, names) for (g, c), names in units(held).items())
+
+
+def ranges_from_report(report: Mapping[str, Any] | None) -> tuple[GuessRange, ...]:
+    """The ranges a fit report keeps (``prior.ranges``), else the full ranges of its held
+    parameters (``held_at_unimpaired``)."""
+    doc = (report or {}).get("prior")
+    if isinstance(doc, Mapping) and isinstance(doc.get("ranges"), list):
+        return tuple(GuessRange.from_dict(r) for r in doc["ranges"] if isinstance(r, Mapping))
+    return full_ranges([str(h) for h in (report or {}).get("held_at_unimpaired", []) or []])
+
+
+@dataclass(frozen=True, eq=False)
+class Prior:
+    """The severity scale's parameter values for one arm geometry (module docstring).
+
+    ``reference``: the arm with unimpaired muscles; ``path_s`` (K,) the tabulated path
+    parameters; ``path_ratio`` (6, K) each group's dynamic ratio along the path.
+    """
+
+    reference: Arm
+    scale: SeverityScale
+    path_s: FloatArray
+    path_ratio: FloatArray
+
+    @classmethod
+    def for_arm(cls, arm: Arm, scale: SeverityScale = SCALE) -> Prior:
+        """Tabulate each group's dynamic ratio along the synthesis path, all groups and path
+        points in one vectorised pass (:class:`~fieldbank.model.ArmBatch`)."""
+        top = ratio_of_score(SCORE_HIGH, "dynamic", scale)
+        for end in (PATH_TOP, REFLEX_PATH_MAX):
+            table = cls._table(arm, scale, np.linspace(0.0, end, PATH_POINTS))
+            if table.path_ratio[:, -1].min() >= top:
+                break
+        return table
+
+    @classmethod
+    def _table(cls, arm: Arm, scale: SeverityScale, s: FloatArray) -> Prior:
+        ref = unimpaired_reference(arm)
+        p0 = ref.params
+        alpha, beta = reflex_path(s)
+        ratio = np.ones((len(GROUPS), s.size))
+        for stretch in dict.fromkeys(GRADED_STRETCH.values()):
+            graded = [g for g in GROUPS if GRADED_STRETCH[g] == stretch]
+            sets = [p0] + [p0.with_group(g, alpha_n=float(a), beta=float(b))
+                           for g in graded for a, b in zip(alpha, beta, strict=True)]
+            st = stretch_torques(ArmBatch.from_params(sets, ref), *stretch)
+            v_all = st.fast_n_m - st.slow_n_m
+            prof = stretch_profile(ref, *stretch)
+            for k, g in enumerate(graded):
+                i = GROUP_INDEX[g]
+                rows = slice(1 + k * s.size, 1 + (k + 1) * s.size)
+                added = (v_all[rows] - v_all[0]).max(axis=1)  # only g differs from set 0
+                peak = float((prof.passive_n_m[:, i] + prof.velocity_dependent_n_m[:, i]).max())
+                ratio[i] = 1.0 + np.maximum(added, 0.0) / peak
+        return cls(ref, scale, s, ratio)
+
+    def path_at(self, group: str, ratio: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """α (N) and β on the path where ``group``'s dynamic ratio is ``ratio`` (any shape)."""
+        r = self.path_ratio[GROUP_INDEX[group]]
+        # the ratio rises with s; flat stretches (the reflex not yet firing) are nudged up so
+        # the table inverts
+        lr = np.maximum.accumulate(np.log(r)) + 1e-12 * np.arange(r.size)
+        want = np.log(np.asarray(ratio, dtype=float))
+        if np.any(want > lr[-1]):
+            raise FitError(f"{group}: the synthesis path does not reach a dynamic ratio of "
+                           f"{float(np.exp(want.max())):.3g}.")
+        return reflex_path(np.interp(want, lr, self.path_s))
+
+    def values(self, group: str, component: str, scores: FloatArray
+               ) -> dict[str, FloatArray]:
+        """The parameters of ``group``'s ``component`` at severity scores (n,): {name: (n,)}."""
+        sc = np.atleast_1d(np.asarray(scores, dtype=float))
+        ratio = np.array([ratio_of_score(float(x), component, self.scale) for x in sc])
+        i = GROUP_INDEX[group]
+        if component == "passive":
+            return {f"km_{group}": self.reference.params.km_n_per_m[i] * ratio}
+        alpha, beta = self.path_at(group, ratio)
+        return {f"alpha_{group}": alpha, f"beta_{group}": beta}
+
+    def interval(self, rng: GuessRange) -> dict[str, tuple[float, float]]:
+        """Each name's values at the bottom and the top of ``rng``: {name: (low, high)}."""
+        lo = self.values(rng.group, rng.component, np.array([0.0]))
+        hi = self.values(rng.group, rng.component, np.array([rng.score_high]))
+        return {n: (float(lo[n][0]), float(hi[n][0])) for n in rng.names}
+
+
+def stratified_scores(n: int, high: float, rng: np.random.Generator) -> FloatArray:
+    """n scores uniform on [0, high], one in each of n equal slices, in random order."""
+    return np.asarray((rng.permutation(n) + rng.uniform(size=n)) / n * high, dtype=float)
+
+
+def draw(samples: FitSamples, ranges: Sequence[GuessRange], prior: Prior, n: int | None = None,
+         seed: int = 0) -> FitSamples:
+    """``n`` samples (default: as many as the fit's) with every held parameter of ``ranges``
+    drawn from its range (module docstring); identified parameters keep the fit's samples,
+    taken in order and cycled when ``n`` exceeds them (the draws of the guesses then still
+    differ). A held name the samples lack becomes a new column."""
+    count = samples.values.shape[0]
+    size = count if n is None else int(n)
+    if count == 0 or size < 1:
+        raise FitError(f"draws need at least one fit sample and n >= 1; got {count} and "
+                       f"{size}.")
+    rows = samples.values[np.arange(size) % count]
+    names = list(samples.names)
+    cols = {name: rows[:, k].copy() for k, name in enumerate(names)}
+    # one position in the range per sample, shared by every held unit
+    where = stratified_scores(size, 1.0, np.random.default_rng(seed))
+    for r in ranges:
+        drawn = prior.values(r.group, r.component, where * r.score_high)
+        for name in r.names:
+            if name not in cols:
+                names.append(name)
+            cols[name] = drawn[name]
+    values = np.column_stack([cols[name] for name in names]) if names else rows
+    return FitSamples(tuple(names), np.asarray(values, dtype=float))
+
+
+def fit_ranges(problem: FitProblem, theta: FloatArray, held: Collection[str], prior: Prior
+               ) -> tuple[GuessRange, ...]:
+    """The range of each held unit, its top checked against the maps (module docstring).
+
+    ``problem``: the fit's problem with the held parameters fixed at their values in
+    ``theta`` (:func:`fieldbank.fitting.uncertainty.reduced_problem`).
+    """
+    base = problem.project(theta).r
+    from scipy.stats import chi2  # heavy: loaded when a fit runs, not with the module
+
+    chi0 = float(base @ base)
+    out = []
+    idx = {name: k for k, name in enumerate(problem.space.names)}
+
+    def delta(rng: GuessRange, score: float) -> float:
+        t = np.array(theta, dtype=float)
+        for name, v in prior.values(rng.group, rng.component, np.array([score])).items():
+            if name in rng.names:
+                t[idx[name]] = float(v[0])
+        r = problem.project(t).r
+        return float(r @ r) - chi0
+
+    for (g, c), names in units(held).items():
+        rng = GuessRange(g, c, names)
+        limit = float(chi2.ppf(RANGE_TEST_LEVEL, len(names)))
+        top = delta(rng, SCORE_HIGH)
+        high = SCORE_HIGH
+        if top > limit:
+            lo, hi = 0.0, SCORE_HIGH
+            for _ in range(RANGE_BISECTIONS):
+                mid = 0.5 * (lo + hi)
+                if delta(rng, mid) > limit:
+                    hi = mid
+                else:
+                    lo = mid
+            high = lo
+        out.append(GuessRange(g, c, names, high, top, limit))
+    return tuple(out)
+
+
+def prior_dict(ranges: Sequence[GuessRange], prior: Prior) -> dict[str, Any]:
+    """The fit report's ``prior`` entry: the definition's version, the scale's ends and each
+    held unit's range with its parameter values."""
+    return {
+        "version": PRIOR_VERSION,
+        "description": ("held parameters are drawn, for prediction intervals, from the "
+                        "severity scale between unimpaired (score 0) and the top of its "
+                        f"severe band (score {SCORE_HIGH:g}, {ratio_of_score(SCORE_HIGH):.3g} "
+                        "× unimpaired), uniform in the score, unless the maps allow less"),
+        "score_high": SCORE_HIGH,
+        "ranges": [{**r.to_dict(), "values": {n: list(v) for n, v in
+                                              prior.interval(r).items()}} for r in ranges],
+    }
+
