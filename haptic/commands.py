@@ -42,7 +42,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, TypeAlias
 
 from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
 from fieldbank.haptic.errors import CommandError, HapticError
@@ -63,12 +63,12 @@ from fieldbank.params import ArmParams
 from fieldbank.probepath import ProbePath
 
 if TYPE_CHECKING:  # typing only
-    from fieldbank.sim import ArmSim
+    from fieldbank.armkernel import ArmPair
 
 #: A command's answer: a JSON-able mapping.
 Result = dict[str, Any]
 #: Compiled arms A (before) and B (after), built outside the loop.
-SimPair = tuple["ArmSim", "ArmSim"]
+SimPair: TypeAlias = "ArmPair"
 #: Database ids of the rendered models, ``{"A": id, "B": id}`` (None: not stored).
 ModelIds = Mapping[str, "int | None"]
 

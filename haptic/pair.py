@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from fieldbank.armkernel import ArmPair
 from fieldbank.haptic.commands import ModelIds, SimPair
 from fieldbank.haptic.modelinfo import ModelInfoPair, to_wire
 from fieldbank.model import Arm
@@ -72,12 +73,17 @@ class ModelPair:
     crossfade_s, push_fade_s : float, s
         Ramp of an A↔B switch; fade out before and in after a swap.
     coupling : CouplingConfig, optional
+    compiled : bool
+        Tick both arms and the blend in one compiled call (:class:`fieldbank.armkernel.ArmPair`);
+        False: the plain-Python reference tick of each arm.
     """
 
     def __init__(self, before: ArmParams, after: ArmParams, dt_s: float, crossfade_s: float,
-                 push_fade_s: float, coupling: CouplingConfig | None = None) -> None:
+                 push_fade_s: float, coupling: CouplingConfig | None = None,
+                 compiled: bool = True) -> None:
         self.dt_s = dt_s
         self.coupling = coupling
+        self.compiled = compiled
         self.crossfade_ticks = round(crossfade_s / dt_s)
         self.push_fade_ticks = round(push_fade_s / dt_s)
         self.params = (before, after)
@@ -90,8 +96,8 @@ class ModelPair:
 
     def compile(self, before: ArmParams, after: ArmParams) -> SimPair:
         """Both models compiled for this loop's period (slow: call outside the loop)."""
-        return (build_sim(before, self.dt_s, self.coupling),
-                build_sim(after, self.dt_s, self.coupling))
+        return ArmPair(Arm.from_params(before), Arm.from_params(after), self.dt_s,
+                       self.coupling, self.compiled)
 
     def crossfade(self, weight: float) -> None:
         """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""

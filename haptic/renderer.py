@@ -99,6 +99,9 @@ class RendererConfig:
         Keep a trace row per tick.
     arm_on_start : bool
         Arm as soon as the first STATE arrives.
+    compiled_tick : bool
+        Tick both arms and the blend in one compiled call (:mod:`fieldbank.armkernel`);
+        False: the plain-Python reference (:meth:`fieldbank.sim.ArmSim.tick`), same forces.
     """
 
     rate_hz: int = 1000
@@ -111,6 +114,7 @@ class RendererConfig:
     realtime_priority: bool = True
     record: bool = True
     arm_on_start: bool = True
+    compiled_tick: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self, RENDERER_BOUNDS, what="renderer parameter")
@@ -145,7 +149,7 @@ class Renderer:
         self.clock: Clock = clock or RealClock(self.config.spin_us)
         self.coupling = coupling
         self.pair = ModelPair(before, after, self.dt_s, self.config.crossfade_s,
-                              self.config.push_fade_s, coupling)
+                              self.config.push_fade_s, coupling, self.config.compiled_tick)
         self.commands: queue.SimpleQueue[Request] = queue.SimpleQueue()
         self.events: list[dict[str, Any]] = []
         self.abx: AbxSession | None = None
@@ -400,27 +404,25 @@ class Renderer:
             safety.check_crc(link.crc_errors)
         c2 = pc()
         pair = self.pair
-        sim_a, sim_b = pair.sims
-        fa_x = fa_y = fb_x = fb_y = 0.0
+        arms = pair.sims
+        # the blend and gain of this tick first: the compiled call blends as it ticks
+        w = pair.blend.step()
+        g = pair.gain.step()
+        mx = my = 0.0
         if math.isfinite(x) and math.isfinite(y) and math.isfinite(vx) and math.isfinite(vy):
             try:
-                fa_x, fa_y = sim_a.tick(x, y, vx, vy)
-                fb_x, fb_y = sim_b.tick(x, y, vx, vy)
+                mx, my, fa_x, fa_y, fb_x, fb_y = arms.tick(x, y, vx, vy, w, g)
                 ok = math.isfinite(fa_x + fa_y) and math.isfinite(fb_x + fb_y)
             except (ArithmeticError, ValueError):  # overflow inside a diverging arm
                 ok = False
             if not ok:
                 self._trip(FaultCode.MODEL, "a virtual arm diverged (non-finite force)")
                 self._reset_arms()
-                fa_x = fa_y = fb_x = fb_y = 0.0
-        w = pair.blend.step()
-        g = pair.gain.step()
+                mx = my = 0.0
         if pair.pending is not None and g == 0.0 and not pair.gain.moving:
             self._swap()
             if safety.mode == Mode.ARMED:
                 pair.fade(1.0)
-        mx = g * ((1.0 - w) * fa_x + w * fb_x)
-        my = g * ((1.0 - w) * fa_y + w * fb_y)
         c3 = pc()
         fx, fy = safety.output(mx, my, vx, vy)
         if safety.limiter.nan_seen:
@@ -443,9 +445,7 @@ class Renderer:
         buf = self._buf
         snap = self.snapshot
         if buf is not None or snap is not None:
-            sa, sb = sim_a.state, sim_b.state
-            row = (link.x, link.y, vx, vy, fx, fy, mx, my, w, g,
-                   sa.q1, sa.q2, sa.qd1, sa.qd2, sb.q1, sb.q2, sb.qd1, sb.qd2,
+            row = (link.x, link.y, vx, vy, fx, fy, mx, my, w, g, *arms.joints(),
                    float(safety.mode), float(safety.latched), float(new),
                    safety.passivity.energy_j)
             if buf is not None:
