@@ -16,6 +16,7 @@ import click
 from fieldbank.cli.haptic import resolve_models, socket_option
 from fieldbank.cli.options import db_option, emit, json_option
 from fieldbank.haptic.client import ControlClient, push_models
+from fieldbank.haptic.modelinfo import describe_text
 
 
 def _request(socket_path: Path | None, cmd: str, **args: Any) -> Any:
@@ -64,15 +65,10 @@ def status(socket_path: Path | None, as_json: bool) -> None:
     emit(s, as_json, status_table(s))
 
 
-def _model_line(which: str, m: Any) -> str:
+def _model_line(m: Any) -> str:
     if not isinstance(m, dict):
         return "hidden (a blinded block is running)"
-    bits = [m.get("label") or "not described"]
-    ids = [f"model {m['model_id']}" if m.get("model_id") else "",
-           f"patient {m['patient']}" if m.get("patient") else "",
-           f'plan "{m["plan"]}"' if m.get("plan") else ""]
-    extra = ", ".join(b for b in ids if b)
-    return f"{which}: {bits[0]}" + (f" [{extra}]" if extra else "")
+    return describe_text(m)
 
 
 def status_table(s: dict[str, Any]) -> str:
@@ -83,13 +79,13 @@ def status_table(s: dict[str, Any]) -> str:
                              f"({s.get('ticks', 0)} ticks)"))
     models = s.get("models")
     if isinstance(models, dict):
-        rows.append(("model A", _model_line("before", models.get("A"))))
-        rows.append(("model B", _model_line("after", models.get("B"))))
+        rows.append(("A · before", _model_line(models.get("A"))))
+        rows.append(("B · after", _model_line(models.get("B"))))
     elif models is not None:
-        rows.append(("models", _model_line("", models)))
+        rows.append(("models", _model_line(models)))
     blend = s.get("blend")
     if isinstance(blend, (int, float)):
-        felt = "A (before)" if blend < 0.5 else "B (after)"
+        felt = s.get("felt") or ("A (before)" if blend < 0.5 else "B (after)")
         moving = " crossfading" if 0.02 < blend < 0.98 else ""
         rows.append(("felt now", f"{felt}{moving}; blend {blend:.2f}, gain "
                                  f"{s.get('gain', 0):.2f}"))
@@ -102,6 +98,16 @@ def status_table(s: dict[str, Any]) -> str:
     latched = s.get("latched_faults") or []
     rows.append(("faults", (", ".join(latched) + " latched" if latched else "none latched")
                  + f"; {s.get('faults_logged', 0)} logged"))
+    for f in s.get("faults_now") or []:
+        rows.append((f"  {f['name']}", f"{f['what']} ({f['message']}, t = {f['t_s']:.2f} s). "
+                                      f"{f['todo']}"))
+    refused = s.get("rearm_refused_because") or []
+    if s.get("mode") != "ARMED":
+        rows.append(("re-arm", "would be refused: " + "; ".join(refused) if refused
+                     else "would be accepted ('fieldbank haptic arm')"))
+    if s.get("paused"):
+        rows.append(("paused", "the running A/B/X block or training waits for a re-arm; no "
+                               "answer is taken meanwhile"))
     loop = s.get("loop_last_10s") or {}
     pe = loop.get("period_error_us") or {}
     if pe:
@@ -156,15 +162,13 @@ def abx() -> None:
 @abx.command("start")
 @click.option("--trials", type=click.IntRange(1, 1000), default=10, show_default=True)
 @click.option("--seed", type=int, default=None, help="Randomization seed (default: random).")
-@click.option("--show-labels", is_flag=True, help="A = before and B = after (not hidden).")
 @socket_option
 @json_option
-def abx_start(trials: int, seed: int | None, show_labels: bool, socket_path: Path | None,
+def abx_start(trials: int, seed: int | None, socket_path: Path | None,
               as_json: bool) -> None:
-    """Start a block of TRIALS A/B/X trials."""
+    """Start a block of TRIALS A/B/X trials: A is before, B after; X is one of them, hidden."""
     seed = seed if seed is not None else int.from_bytes(os.urandom(4), "little")
-    r = _request(socket_path, "abx", action="start", n_trials=trials, seed=seed,
-                 hide_labels=not show_labels)
+    r = _request(socket_path, "abx", action="start", n_trials=trials, seed=seed)
     emit(r, as_json, f"A/B/X block of {trials} trials started (seed {seed})")
 
 
@@ -186,7 +190,12 @@ def abx_answer(answer: str, socket_path: Path | None, as_json: bool) -> None:
     """Record that X felt like A or B; go to the next trial."""
     r = _request(socket_path, "abx", action="answer", answer=answer.upper())
     msg = f"answer recorded; next trial {r['trial'] + 1}"
+    if r.get("flagged"):
+        msg = (f"answer recorded but flagged, not counted ({'; '.join(r['flags'])}); next "
+               f"trial {r['trial'] + 1}")
     if r.get("done"):
         res = r["result"]
-        msg = f"block done: {res['correct']} of {res['answered']} correct"
+        msg = (f"block done: {res['correct']} of {res['counted']} counted answers correct"
+               + (f"; {res['flagged']} flagged (fault or no force) and left out"
+                  if res.get("flagged") else ""))
     emit(r, as_json, msg)

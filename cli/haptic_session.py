@@ -42,7 +42,10 @@ def protocol_named(text: str) -> TrainingProtocol:
         raise click.BadParameter(f"a training protocol is seed, short or a JSON file; got "
                                  f"{text!r}", param_hint="--training-protocol")
     try:
-        return TrainingProtocol.from_dict(read_json_document(path))
+        doc = read_json_document(path)
+        if isinstance(doc, dict) and not doc.get("name"):
+            doc = {**doc, "name": path.stem}  # the page names the protocol by its file
+        return TrainingProtocol.from_dict(doc)
     except ValueError as exc:
         raise click.BadParameter(f"{path}: {exc}", param_hint="--training-protocol") from None
 

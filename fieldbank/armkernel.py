@@ -198,7 +198,7 @@ def _field(i: int, kind: type = float) -> property:
     """A property reading and writing element ``i`` of the state row."""
 
     def get(self: ArrayState) -> float:
-        return kind(self._row[i])  # type: ignore[no-any-return]
+        return kind(self._row[i])
 
     def put(self: ArrayState, v: float) -> None:
         self._row[i] = v
@@ -216,12 +216,12 @@ class ArrayState(SimState):
         self._row = row
         row[:] = (q1, q2, 0.0, 0.0, 0.0, 0.0)
 
-    q1 = _field(0)  # type: ignore[assignment]
-    q2 = _field(1)  # type: ignore[assignment]
-    qd1 = _field(2)  # type: ignore[assignment]
-    qd2 = _field(3)  # type: ignore[assignment]
-    t_s = _field(4)  # type: ignore[assignment]
-    ticks = _field(5, int)  # type: ignore[assignment]
+    q1 = _field(0)
+    q2 = _field(1)
+    qd1 = _field(2)
+    qd2 = _field(3)
+    t_s = _field(4)
+    ticks = _field(5, int)
 
 
 class ArmPair(tuple[ArmSim, ArmSim]):
@@ -263,10 +263,10 @@ class ArmPair(tuple[ArmSim, ArmSim]):
              g: float) -> list[float]:
         """Tick both arms; ``[Fx, Fy, FAx, FAy, FBx, FBy]`` (N): the blend
         F = g((1 − w) F_A + w F_B) and each arm's force on the handle."""
-        if self.params is not None:
+        if self.params is not None and self.state is not None:
             out = self.out
             tick_pair(self.params, self.state, out, hx, hy, hvx, hvy, w, g)
-            return out.tolist()  # type: ignore[no-any-return]
+            return out.tolist()
         fa_x, fa_y = self[0].tick(hx, hy, hvx, hvy)
         fb_x, fb_y = self[1].tick(hx, hy, hvx, hvy)
         return [g * ((1.0 - w) * fa_x + w * fb_x), g * ((1.0 - w) * fa_y + w * fb_y),

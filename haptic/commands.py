@@ -21,7 +21,7 @@ Control-channel requests (JSON lines, :mod:`haptic.control`) and the command eac
      "model_info": {"A": {"label": …, "model_id": …, "patient": …, "plan": …}, "B": {…}}}
                                                                         -> Push
     {"cmd": "switch", "to": "A" | "B" | "before" | "after"}              -> Switch
-    {"cmd": "abx", "action": "start", "n_trials": 10, "seed": 7, "hide_labels": true}
+    {"cmd": "abx", "action": "start", "n_trials": 10, "seed": 7}
                                                                         -> AbxStart
     {"cmd": "abx", "action": "present", "label": "A" | "B" | "X"}       -> AbxPresent
     {"cmd": "abx", "action": "answer", "answer": "A" | "B"}             -> AbxAnswer
@@ -47,7 +47,6 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, TypeAlias
 from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
 from fieldbank.haptic.errors import CommandError, HapticError
 from fieldbank.haptic.modelinfo import (
-    ModelInfo,
     ModelInfoPair,
     check_model_id,
     model_info_pair,
@@ -90,7 +89,13 @@ class CommandTarget(Protocol):
     def compile_pair(self, before: ArmParams, after: ArmParams) -> SimPair: ...
     def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
                      model_ids: ModelIds | None,
-                     model_info: ModelInfoPair | None = None) -> None: ...
+                     model_info: ModelInfoPair | None = None, session: bool = True) -> None: ...
+    def require_armed(self, what: str) -> None: ...
+    def open_window(self) -> None: ...
+    def trial_window(self) -> dict[str, Any]: ...
+    def begin_training(self) -> None: ...
+    def end_training(self) -> None: ...
+    def felt(self) -> Result: ...
     def arm(self) -> None: ...
     def disarm(self) -> None: ...
     def request_stop(self) -> None: ...
@@ -197,10 +202,16 @@ class Switch(RendererCommand):
         return cls(req.get("to"))
 
     def apply(self, target: CommandTarget) -> Result:
+        if target.mode_name == "FAULT":
+            target.require_armed("switch")
+        if target.abx is not None or (target.training is not None
+                                      and not target.training.done):
+            raise CommandError("switch refused: a blinded block or a training protocol runs; "
+                               "it chooses what is felt")
         w = self.weight
         target.crossfade(w)
         target.log_event("switch", to=w)
-        return {"blend_target": w}
+        return {"blend_target": w, **target.felt()}
 
 
 @dataclass(frozen=True)
@@ -239,10 +250,12 @@ class Push(RendererCommand):
             raise CommandError("push: the models were not compiled (submit it to the renderer)")
         if target.training is not None and not target.training.done:
             raise CommandError("push refused: a training protocol is running (stop it first)")
+        if target.mode_name == "FAULT":
+            target.require_armed("push")
         target.queue_models(self.sims, (self.before, self.after), self.model_ids,
                             self.model_info)
         target.log_event("push", model_ids=dict(self.model_ids or {}))
-        return {"pushed": True}
+        return {"pushed": True, **target.felt()}
 
 
 @dataclass(frozen=True)
@@ -313,12 +326,12 @@ def _abx(target: CommandTarget) -> AbxSession:
 
 @dataclass(frozen=True)
 class AbxStart(RendererCommand):
-    """Start a block of ``n_trials`` blinded A/B/X trials (:class:`haptic.abx.AbxSession`)."""
+    """Start a block of ``n_trials`` blinded A/B/X trials (:class:`haptic.abx.AbxSession`):
+    A is always before and B after; only X is hidden."""
 
     name: ClassVar[str] = "abx_start"
     n_trials: int = 10
     seed: int = 0
-    hide_labels: bool = True
 
     def __post_init__(self) -> None:
         int_field({"n_trials": self.n_trials}, "n_trials", 10, 1, MAX_ABX_TRIALS, "abx start")
@@ -326,15 +339,19 @@ class AbxStart(RendererCommand):
 
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> AbxStart:
+        if req.get("hide_labels"):
+            raise CommandError('abx start: "hide_labels" is not offered: A is always the model '
+                               "before and B the one after; only X is hidden")
         return cls(int_field(req, "n_trials", 10, 1, MAX_ABX_TRIALS, "abx start"),
-                   int_field(req, "seed", 0, 0, 2**63 - 1, "abx start"),
-                   bool_field(req, "hide_labels", True, "abx start"))
+                   int_field(req, "seed", 0, 0, 2**63 - 1, "abx start"))
 
     def apply(self, target: CommandTarget) -> Result:
         if target.training is not None and not target.training.done:
             raise CommandError("an A/B/X block cannot start while a training protocol runs")
-        abx = AbxSession(self.n_trials, self.seed, self.hide_labels)
+        target.require_armed("A/B/X start")
+        abx = AbxSession(self.n_trials, self.seed)
         target.abx = abx
+        target.open_window()
         target.log_event("abx_start", n_trials=abx.n_trials, seed=abx.seed)
         return {"trial": 0, "n_trials": abx.n_trials}
 
@@ -356,6 +373,7 @@ class AbxPresent(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         abx = _abx(target)
+        target.require_armed("A/B/X")
         label = str(self.label).upper()
         target.crossfade(float(abx.model_for(label)))
         target.log_event("abx_present", label=label, trial=abx.trial)
@@ -379,9 +397,13 @@ class AbxAnswer(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         abx = _abx(target)
-        rec = abx.answer(str(self.answer), target.t_s)
-        target.log_event("abx_answer", trial=rec["trial"], answer=rec["answer"])
-        out: Result = {"trial": rec["trial"] + 1, "done": abx.done}
+        target.require_armed("A/B/X answer")  # no answer counts while nothing is felt
+        rec = abx.answer(str(self.answer), target.t_s, target.trial_window())
+        target.open_window()
+        target.log_event("abx_answer", trial=rec["trial"], answer=rec["answer"],
+                         flagged=rec["flagged"])
+        out: Result = {"trial": rec["trial"] + 1, "done": abx.done,
+                       "flagged": rec["flagged"], "flags": rec["flags"]}
         if abx.done:
             target.abx_results.append(abx.result())
             out["result"] = abx.result()
@@ -398,6 +420,7 @@ def _training(target: CommandTarget) -> TrainingSession:
 def _record_training(target: CommandTarget, tr: TrainingSession) -> Result:
     res = tr.result()
     target.training_results.append(res)
+    target.end_training()
     target.log_event("train_end", abandoned=tr.abandoned, answered=len(
         [r for r in tr.records if r["answer"] is not None]))
     return res
@@ -420,8 +443,10 @@ class TrainStart(RendererCommand):
             raise CommandError("training cannot start while an A/B/X block runs")
         if target.training is not None and not target.training.done:
             raise CommandError("a training protocol is already running (train stop ends it)")
+        target.require_armed("training start")
         tr = TrainingSession(self.protocol)
         target.training = tr
+        target.begin_training()
         target.log_event("train_start", n_trials=len(tr.trials),
                          instruction=self.protocol.instruction, seed=self.protocol.seed)
         return tr.state(target.t_s)
@@ -444,6 +469,7 @@ class TrainNext(RendererCommand):
         nxt: Trial | None = tr.next_trial
         if nxt is None:
             return replace(self, index=-1, session=tr)
+        target.require_armed("next trial")
         if tr.awaiting_answer:
             raise CommandError("training: answer this trial first (shoulder, elbow or both)")
         p = nxt.params(tr.protocol.base())
@@ -460,17 +486,15 @@ class TrainNext(RendererCommand):
             raise CommandError("train next: the training protocol changed; ask again")
         if self.index == -1:
             if not tr.done:
-                tr.finish(target.t_s)
+                tr.finish(target.t_s, window=target.trial_window())
                 if tr.done:
                     _record_training(target, tr)
             return tr.state(target.t_s)
         assert self.sims is not None and self.params is not None
-        trial = tr.begin(self.index, target.t_s, self.paths)
-        label = (trial.legend if trial.phase == "familiarisation"
-                 else f"assessment trial {trial.index + 1}")
-        same = ModelInfo.describe(f"training: {label}")
-        info = {"A": same, "B": same}
-        target.queue_models(self.sims, (self.params, self.params), None, info)
+        target.require_armed("next trial")
+        trial = tr.begin(self.index, target.t_s, self.paths, window=target.trial_window())
+        target.open_window()
+        target.queue_models(self.sims, (self.params, self.params), None, None, session=False)
         target.log_event("train_trial", trial=trial.index, phase=trial.phase,
                          condition=trial.condition)
         return tr.state(target.t_s)
@@ -494,9 +518,12 @@ class TrainAnswer(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         tr = _training(target)
-        rec = tr.answer(self.answer, target.t_s)
-        target.log_event("train_answer", trial=rec["trial"], answer=rec["answer"])
-        out: Result = {"trial": rec["trial"] + 1, "recorded": True, "done": tr.done}
+        target.require_armed("training answer")  # no answer counts while nothing is felt
+        rec = tr.answer(self.answer, target.t_s, window=target.trial_window())
+        target.log_event("train_answer", trial=rec["trial"], answer=rec["answer"],
+                         flagged=rec["flagged"])
+        out: Result = {"trial": rec["trial"] + 1, "recorded": True, "done": tr.done,
+                       "flagged": rec["flagged"], "flags": rec["flags"]}
         if tr.done:
             out["result"] = _record_training(target, tr)
         return out
@@ -511,7 +538,7 @@ class TrainStop(RendererCommand):
     def apply(self, target: CommandTarget) -> Result:
         tr = _training(target)
         if not tr.done:
-            tr.finish(target.t_s, abandon=True)
+            tr.finish(target.t_s, abandon=True, window=target.trial_window())
             _record_training(target, tr)
         return tr.state(target.t_s)
 

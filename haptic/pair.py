@@ -87,12 +87,15 @@ class ModelPair:
         self.crossfade_ticks = round(crossfade_s / dt_s)
         self.push_fade_ticks = round(push_fade_s / dt_s)
         self.params = (before, after)
+        #: The session's models (the clinician's choice), whatever a training renders now.
+        self.session_params = self.params
         self.sims = self.compile(before, after)
         self.blend = Ramp(0.0)
         self.gain = Ramp(0.0)
-        #: compiled models waiting for the gain to reach zero, with their ids and descriptions
+        #: compiled models waiting for the gain to reach zero, with their ids and descriptions,
+        #: and whether they become the session's models
         self.pending: tuple[SimPair, tuple[ArmParams, ArmParams], ModelIds | None,
-                            ModelInfoPair | None] | None = None
+                            ModelInfoPair | None, bool] | None = None
 
     def compile(self, before: ArmParams, after: ArmParams) -> SimPair:
         """Both models compiled for this loop's period (slow: call outside the loop)."""
@@ -108,9 +111,11 @@ class ModelPair:
         self.gain.go(gain, self.push_fade_ticks)
 
     def queue(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-              model_ids: ModelIds | None, model_info: ModelInfoPair | None) -> None:
-        """Hold compiled models for :meth:`swap`."""
-        self.pending = (sims, params, model_ids, model_info)
+              model_ids: ModelIds | None, model_info: ModelInfoPair | None,
+              session: bool = True) -> None:
+        """Hold compiled models for :meth:`swap` (``session``: they become the session's
+        models; False: a training arm, rendered but not the session's)."""
+        self.pending = (sims, params, model_ids, model_info, session)
 
     @property
     def swapping(self) -> bool:
@@ -123,13 +128,16 @@ class ModelPair:
         return self.pending is not None and self.gain.value == 0.0 and not self.gain.moving
 
     def swap(self, metadata: dict[str, Any]) -> None:
-        """Put the pending models in place; their ids and descriptions replace those in the
-        trace's ``metadata``."""
+        """Put the pending models in place; the session's models' ids and descriptions replace
+        those in the trace's ``metadata`` (a training arm's do not)."""
         assert self.pending is not None
-        sims, params, ids, info = self.pending
+        sims, params, ids, info, session = self.pending
         self.pending = None
         self.sims = sims
         self.params = params
+        if not session:
+            return
+        self.session_params = params
         if ids:
             metadata["model_ids"] = dict(ids)
         else:

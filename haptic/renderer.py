@@ -56,6 +56,7 @@ from fieldbank.haptic.recording import Trace, TraceBuffer
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.training import TrainingSession
+from fieldbank.haptic.trialwindow import TrialWindow
 from fieldbank.params import ArmParams
 from fieldbank.sim import CouplingConfig
 from fieldbank.validation import Interval, check_fields, check_tuple
@@ -180,6 +181,13 @@ class Renderer:
         self._tick_ns = self.times.tick_ns
         self.realtime_scheduling: bool | None = None
         self.metadata: dict[str, Any] = {}
+        #: Ticks on which the renderer was not armed (force zero by command), since the start.
+        self.unarmed_ticks = 0
+        #: Largest ‖F‖² commanded since the current trial's window opened, N².
+        self.peak_force_n2 = 0.0
+        self._window = TrialWindow()
+        #: The patient's pair while a training protocol renders its own arms (restored after).
+        self._home: tuple[SimPair, tuple[ArmParams, ArmParams]] | None = None
 
     @property
     def skipped_ticks(self) -> int:
@@ -266,14 +274,16 @@ class Renderer:
         return self.pair.compile(before, after)
 
     def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None, model_info: ModelInfoPair | None = None
-                     ) -> None:
+                     model_ids: ModelIds | None, model_info: ModelInfoPair | None = None,
+                     session: bool = True) -> None:
         """Swap in compiled models: at once when idle, else behind a fade out and in.
 
-        ``model_info``: what a display says about each (``{"A": ModelInfo, "B": ModelInfo}``),
-        kept in the trace's metadata from the swap on.
+        ``model_info``: what a display says about each (``{"A": ModelInfo, "B": ModelInfo}``).
+        ``session``: the pair becomes the session's models (the clinician's choice: their ids
+        and descriptions go into the trace's metadata, their parameters into its models);
+        False for a training arm, which the session does not keep.
         """
-        self.pair.queue(sims, params, model_ids, model_info)
+        self.pair.queue(sims, params, model_ids, model_info, session)
         if not self.running:
             self._swap()
         else:
@@ -300,16 +310,70 @@ class Renderer:
             except (UnreachableError, ValueError):
                 sim.reset()
 
-    def arm(self) -> None:
-        """Arm (or re-arm after a fault): refused while the link is down, the device reports a
-        fault in its latest STATE, or the handle state is unsafe. The tick that applies it runs
-        every safety check before any force goes out."""
+    def arm_problems(self) -> list[str]:
+        """Why arming would be refused now, in words (empty: it would be accepted): the link
+        is down, the robot reports a device fault in its newest state, no state arrives, or
+        the handle is outside the workspace, too fast or not a number. Safe to call from any
+        thread (it only reads)."""
         if self._link_down:
-            raise CommandError("cannot arm: the robot link is down")
+            return ["the robot link is down: reconnect the robot and start a new session"]
         link = self.link
+        out = []
         if link.flags & FLAG_FAULT:
-            raise CommandError("cannot arm: the robot reports a device fault in its latest "
-                               "state; clear it on the robot first")
+            out.append("the robot reports a device fault in its latest state: clear it on the "
+                       "robot first")
+        if self.running and self._stale > self._timeout_ticks:
+            out.append(f"no state from the robot for {self._stale * self.dt_s * 1e3:.0f} ms")
+        code, msg = self.safety.check_handle(link.x, link.y, link.vx, link.vy)
+        if code:
+            out.append(msg)
+        return out
+
+    def require_armed(self, what: str) -> None:
+        """CommandError saying why ``what`` waits, unless the renderer is armed: a protocol
+        pauses on a fault (and while disarmed) and goes on only after a re-arm."""
+        mode = self.safety.mode
+        if mode == Mode.ARMED:
+            return
+        if mode == Mode.FAULT:
+            recs = self.safety.latched_records()
+            why = "; ".join(f"{FaultCode(r.code).name}: {r.message}" for r in recs)
+            raise CommandError(f"{what} refused: paused by a fault ({why or 'latched'}); "
+                               "re-arm the robot to go on")
+        raise CommandError(f"{what} refused: the robot is disarmed (no force is rendered); "
+                           "arm it to go on")
+
+    def open_window(self) -> None:
+        """A trial starts: judge the coming window from here (:mod:`haptic.trialwindow`)."""
+        self._window = TrialWindow(self.ticks, self.unarmed_ticks,
+                                   len(self.safety.log_records),
+                                   self.safety.mode == Mode.FAULT)
+        self.peak_force_n2 = 0.0
+
+    def trial_window(self) -> dict[str, Any]:
+        """The verdict on the window since :meth:`open_window`: flagged, flags, peak force."""
+        return self._window.judge(self.ticks, self.unarmed_ticks, self.safety.log_records,
+                                  math.sqrt(self.peak_force_n2), self.dt_s)
+
+    def begin_training(self) -> None:
+        """Keep the patient's pair while a training protocol renders its own arms."""
+        self._home = (self.pair.sims, self.pair.params)
+
+    def end_training(self) -> None:
+        """Put the patient's pair (and its blend) back after a training protocol."""
+        if self._home is not None:
+            sims, params = self._home
+            self._home = None
+            self.queue_models(sims, params, None, None, session=False)
+            self.log_event("training_pair_restored")
+
+    def arm(self) -> None:
+        """Arm (or re-arm after a fault), refused with every reason of :meth:`arm_problems`.
+        The tick that applies it runs every safety check before any force goes out."""
+        problems = self.arm_problems()
+        if problems:
+            raise CommandError("cannot arm: " + "; ".join(problems))
+        link = self.link
         if self.safety.latched & (1 << (FaultCode.MODEL - 1)):
             self._reset_arms()
         self.safety.rearm((link.x, link.y, link.vx, link.vy))
@@ -441,6 +505,11 @@ class Renderer:
                 self._trip(FaultCode.DISCONNECT, str(exc))
                 fx = fy = 0.0
         self.fx, self.fy = fx, fy
+        f2 = fx * fx + fy * fy
+        if f2 > self.peak_force_n2:
+            self.peak_force_n2 = f2
+        if safety.mode != Mode.ARMED:
+            self.unarmed_ticks += 1
         c5 = pc()
         buf = self._buf
         snap = self.snapshot
@@ -497,7 +566,8 @@ class Renderer:
         self._drain()
         close_blocks(self.t_s, self.abx, self.abx_results, self.training, self.training_results)
         self.trace = assemble_trace(
-            self._buf, rate_hz=self.config.rate_hz, params=self.pair.params, events=self.events,
+            self._buf, rate_hz=self.config.rate_hz, params=self.pair.session_params,
+            events=self.events,
             safety=self.safety, stats=self.loop_stats(), metadata=self.metadata,
             renderer_config=self.config, device=self.link.device, abx_results=self.abx_results,
             training_results=self.training_results)
@@ -576,3 +646,7 @@ class Renderer:
     def info(self) -> Result:
         """What a display needs besides the snapshot (:func:`haptic.readouts.info`)."""
         return readouts.info(self)
+
+    def felt(self) -> Result:
+        """The renderer's true state in a few fields (:func:`haptic.readouts.felt`)."""
+        return readouts.felt(self)

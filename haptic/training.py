@@ -55,6 +55,8 @@ PROBES: dict[str, Callable[[Arm], probing.ProbeMotion]] = {
     "pull": probing.pull, "semi-ellipse": probing.semi_ellipse,
 }
 MAX_EXTRA_PROBES = MAX_DRAWN_PROBES
+#: Longest protocol name.
+MAX_NAME_CHARS = 64
 
 #: Allowed range of each numeric field of :class:`TrainingProtocol` (messages are generated).
 TRAINING_BOUNDS: dict[str, Interval] = {
@@ -152,6 +154,9 @@ class TrainingProtocol:
         The body of the rendered arms (anthropometric defaults, BRIEF §3).
     side : str
         'right' or 'left'.
+    name : str
+        What the protocol is called on the station and in results ("" : :attr:`title` says
+        "seed", "short" or "custom" from the counts).
     """
 
     instruction: str = "non-instructed"
@@ -167,8 +172,12 @@ class TrainingProtocol:
     body_mass_kg: float = 75.0
     height_m: float = 1.75
     side: str = "right"
+    name: str = ""
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or len(self.name) > MAX_NAME_CHARS:
+            raise ParameterError(f"The 'name' training parameter must be text of at most "
+                                 f"{MAX_NAME_CHARS} characters; got {self.name!r} instead.")
         if self.instruction not in INSTRUCTIONS:
             raise ParameterError(f"The 'instruction' training parameter must be one of "
                                  f"{', '.join(INSTRUCTIONS)}; got {self.instruction!r} instead.")
@@ -213,6 +222,23 @@ class TrainingProtocol:
         1 repetition of each group × severity (12 trials)."""
         return cls(instruction=instruction, familiarisation_rounds=1, assessment_repetitions=1,
                    seed=seed)
+
+    @property
+    def title(self) -> str:
+        """The protocol's name: :attr:`name`, else "seed" or "short" when its counts and
+        durations are those of :meth:`seed_protocol` or :meth:`short`, else "custom"."""
+        if self.name:
+            return self.name
+        f = TrainingProtocol.__dataclass_fields__
+        same = all(getattr(self, k) == f[k].default for k in (
+            "familiarisation_s", "assessment_s", "groups", "severities"))
+        counts = (self.familiarisation_rounds, self.assessment_repetitions)
+        if same and counts == (f["familiarisation_rounds"].default,
+                               f["assessment_repetitions"].default):
+            return "seed"
+        if same and counts == (1, 1):
+            return "short"
+        return "custom"
 
     @property
     def n_trials(self) -> int:
@@ -317,8 +343,10 @@ class TrainingSession:
         cur = self.current
         return cur is not None and cur.phase == "assessment" and not self.done
 
-    def begin(self, index: int, t_s: float, paths: Sequence[ProbePath] = ()) -> Trial:
-        """Start trial ``index`` (the next one) at session time ``t_s``."""
+    def begin(self, index: int, t_s: float, paths: Sequence[ProbePath] = (),
+              window: Mapping[str, Any] | None = None) -> Trial:
+        """Start trial ``index`` (the next one) at session time ``t_s``; ``window``: the
+        verdict on the window of the familiarisation trial it closes."""
         if self.abandoned:
             raise CommandError("the training session was stopped; start a new one")
         if index != self.index + 1 or self.next_trial is None:
@@ -327,21 +355,26 @@ class TrainingSession:
         if self.awaiting_answer:
             raise CommandError(f"training: answer trial {self.index + 1} first (shoulder, "
                                f"elbow or both)")
-        self._close_familiarisation(t_s)
+        self._close_familiarisation(t_s, window)
         self.index = index
         self.started_s = t_s
         self.paths = tuple(paths)
         return self.trials[index]
 
-    def _close_familiarisation(self, t_s: float) -> None:
+    def _close_familiarisation(self, t_s: float,
+                               window: Mapping[str, Any] | None = None) -> None:
         cur = self.current
         if cur is not None and cur.phase == "familiarisation" and self.started_s is not None:
-            self.records.append(self._record(cur, self.started_s, t_s))
+            self.records.append(self._record(cur, self.started_s, t_s, None, window))
             self.started_s = None
 
     def _record(self, trial: Trial, started_s: float, ended_s: float,
-                answer: str | None = None) -> dict[str, Any]:
+                answer: str | None = None,
+                window: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        w = window or {}
         return {
+            "flagged": bool(w.get("flagged")), "flags": list(w.get("flags", [])),
+            "peak_force_n": w.get("peak_force_n"),
             "trial": trial.index, "phase": trial.phase, "condition": trial.condition,
             "group": trial.group, "severity": trial.severity,
             "instruction": self.protocol.instruction,
@@ -352,22 +385,26 @@ class TrainingSession:
             "correct": (answer == trial.expected_answer) if answer is not None else None,
         }
 
-    def answer(self, choice: str, t_s: float) -> dict[str, Any]:
-        """Record the answer to the current assessment trial ('shoulder', 'elbow', 'both')."""
+    def answer(self, choice: str, t_s: float,
+               window: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Record the answer to the current assessment trial ('shoulder', 'elbow', 'both');
+        ``window``: the verdict on its window (:mod:`haptic.trialwindow`): a flagged trial is
+        kept and left out of the accuracy."""
         choice = str(choice).strip().lower()
         if choice not in ANSWERS:
             raise CommandError(f"a training answer is shoulder, elbow or both; got {choice!r}")
         cur = self.current
         if cur is None or not self.awaiting_answer or self.started_s is None:
             raise CommandError("training: no assessment trial is waiting for an answer")
-        rec = self._record(cur, self.started_s, t_s, choice)
+        rec = self._record(cur, self.started_s, t_s, choice, window)
         self.records.append(rec)
         self.started_s = None
         return rec
 
-    def finish(self, t_s: float, abandon: bool = False) -> None:
+    def finish(self, t_s: float, abandon: bool = False,
+               window: Mapping[str, Any] | None = None) -> None:
         """Close the last familiarisation trial; ``abandon`` stops the session early."""
-        self._close_familiarisation(t_s)
+        self._close_familiarisation(t_s, window)
         if abandon and not self.done:
             self.abandoned = True
             self.started_s = None
@@ -376,6 +413,7 @@ class TrainingSession:
         """What a display may show now (nothing that names the arm during an assessment)."""
         cur = self.current
         out: dict[str, Any] = {
+            "protocol": self.protocol.title,
             "instruction": self.protocol.instruction, "n_trials": len(self.trials),
             "trial": None if cur is None else cur.index + 1,
             "phase": None if cur is None else cur.phase, "done": self.done,
@@ -397,7 +435,8 @@ class TrainingSession:
 
     def result(self) -> dict[str, Any]:
         """The protocol, every trial's record and the summary (:func:`summarise`)."""
-        return {"protocol": self.protocol.to_dict(), "abandoned": self.abandoned,
+        return {"protocol": self.protocol.to_dict(), "protocol_name": self.protocol.title,
+                "abandoned": self.abandoned,
                 "trials": list(self.records), "summary": summarise(self.records)}
 
 
@@ -411,16 +450,20 @@ def summarise(records: Sequence[Mapping[str, Any]],
     Parameters
     ----------
     records : sequence of mapping
-        Trial records (:meth:`TrainingSession.answer`); only answered assessment trials count.
+        Trial records (:meth:`TrainingSession.answer`); only answered assessment trials whose
+        window was not flagged (a fault, or no force: :mod:`haptic.trialwindow`) count.
 
     Returns
     -------
     dict
         ``confusion``: rows (true groups), columns (answers), counts; ``accuracy``: overall
         {n, correct, accuracy}; ``by_severity``: the same per level; ``by_instruction``: the same
-        per instruction; ``chance``: 1 / number of answers.
+        per instruction; ``chance``: 1 / number of answers; ``flagged``: answered assessment
+        trials left out, with ``flagged_trials`` (their numbers, from 1).
     """
-    rows = [r for r in records if r.get("phase") == "assessment" and r.get("answer")]
+    answered = [r for r in records if r.get("phase") == "assessment" and r.get("answer")]
+    rows = [r for r in answered if not r.get("flagged")]
+    left_out = [r for r in answered if r.get("flagged")]
     counts = [[sum(1 for r in rows if r["group"] == g and r["answer"] == a) for a in ANSWERS]
               for g in groups]
 
@@ -436,6 +479,8 @@ def summarise(records: Sequence[Mapping[str, Any]],
         "by_instruction": {i: acc([r for r in rows if r.get("instruction") == i])
                            for i in INSTRUCTIONS if any(r.get("instruction") == i for r in rows)},
         "chance": 1.0 / len(ANSWERS),
+        "flagged": len(left_out),
+        "flagged_trials": [int(r["trial"]) + 1 for r in left_out],
         "median_response_time_s": _median([float(r["response_time_s"]) for r in rows
                                            if r.get("response_time_s") is not None]),
     }
@@ -482,6 +527,8 @@ def results_html(summary: Mapping[str, Any], title: str = "Training results",
     a = summary["accuracy"]
     out.append(f'<p>{a["correct"]} of {a["n"]} assessment answers correct '
                f'(<b>{_pct(a["accuracy"])}</b>; chance {_pct(summary["chance"])}).</p>')
+    if summary.get("flagged"):
+        out.append(f'<p class="fb-note">{_flagged_text(summary)}</p>')
     out.append("<h3>Confusion matrix: true impaired group (rows) against the answer "
                "(columns)</h3><table><tr><th>true group</th>"
                + "".join(f"<th>{e(c)}</th>" for c in cols) + "<th>n</th></tr>")
@@ -530,12 +577,20 @@ def results_page(sections: Sequence[str], title: str = "Training results") -> st
             + "\n".join(sections) + "\n</body></html>\n")
 
 
+def _flagged_text(summary: Mapping[str, Any]) -> str:
+    n = summary["flagged"]
+    which = ", ".join(str(t) for t in summary.get("flagged_trials", []))
+    return (f"{n} answered trial{'s' if n != 1 else ''} ({which}) flagged - a fault or no force "
+            "during the trial - and left out of every accuracy")
+
+
 def accuracy_text(summary: Mapping[str, Any]) -> list[str]:
     """The confusion matrix and accuracy per severity as plain-text lines (for the terminal)."""
     conf = summary["confusion"]
     a = summary["accuracy"]
     lines = [f"assessment: {a['correct']} of {a['n']} correct ({_pct(a['accuracy'])}; chance "
              f"{_pct(summary['chance'])})",
+             *([_flagged_text(summary)] if summary.get("flagged") else []),
              "confusion (rows: true group, columns: answer):",
              "  " + " " * 13 + "".join(f"{c:>10s}" for c in conf["columns"])]
     for g, row in zip(conf["rows"], conf["counts"], strict=True):

@@ -258,7 +258,6 @@ class Station:
             args = {"action": "start", "protocol": proto}
         if cmd == "abx" and args.get("action") == "start":
             args.setdefault("seed", secrets.randbelow(2**31))
-            args["hide_labels"] = True
         try:
             result = await self.request(cmd, **args)
             out = {**reply, "ok": True, "result": result}
