@@ -16,6 +16,7 @@ import click
 from fieldbank.cli.haptic import resolve_models, socket_option
 from fieldbank.cli.options import db_option, emit, json_option
 from fieldbank.haptic.client import ControlClient, push_models
+from fieldbank.haptic.clock import Grant
 from fieldbank.haptic.modelinfo import describe_text
 
 
@@ -117,7 +118,10 @@ def status_table(s: dict[str, Any]) -> str:
                                    f"overruns {loop.get('overruns', 0)}; tick p99 "
                                    f"{tt.get('p99', 0):.1f} µs"))
     rt = loop.get("realtime_scheduling")
-    if rt is not None:
+    grant = loop.get("realtime") or {}
+    if grant:
+        rows.append(("scheduling", Grant.from_dict(grant).text()))
+    elif rt is not None:
         rows.append(("scheduling", "SCHED_FIFO" if rt else "normal (SCHED_FIFO refused)"))
     abx = s.get("abx_trial")
     rows.append(("A/B/X", "none running" if abx is None else f"trial {abx + 1} running"))

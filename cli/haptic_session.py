@@ -16,6 +16,7 @@ from fieldbank.cli.haptic import resolve_sources, socket_option
 from fieldbank.cli.options import db_option, emit, json_option, open_db, say, xy_metres
 from fieldbank.files import read_json_document, write_atomic
 from fieldbank.haptic import session
+from fieldbank.haptic.clock import cpu_plan, enter_device_realtime
 from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.probe import probe
@@ -244,6 +245,8 @@ def sim_robot(motion: str, mode: str, start: str | None) -> None:
                   .rest_position())
     robot = PtyRobot(SimRobotConfig(mode=mode, motion=motion, x0_m=x0, y0_m=y0))
     click.echo(robot.port)
+    grant = enter_device_realtime(cpu_plan()[1])
+    click.echo(f"device: {grant.text()}", err=True)
     try:
         serve_fd(robot.device, robot.master_fd)
     except KeyboardInterrupt:

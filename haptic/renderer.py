@@ -44,7 +44,7 @@ from fieldbank.errors import UnreachableError
 from fieldbank.haptic import commands, readouts
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.assemble import assemble_trace, close_blocks, utc_now
-from fieldbank.haptic.clock import Clock, RealClock, realtime
+from fieldbank.haptic.clock import Clock, Grant, RealClock, realtime
 from fieldbank.haptic.commands import ModelIds, RendererCommand, Request, Result, SimPair
 from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
@@ -168,6 +168,7 @@ class Renderer:
         self._fault_flags_seen = 0
         self._fault_flags_before_poll = 0
         self._watchdog_flags_seen = 0
+        self._reply_spin_s = min(self.config.spin_us * 1e-6, 0.5 * self.dt_s)
         self._stop = False
         self.running = False
         self.t_s = 0.0
@@ -180,6 +181,8 @@ class Renderer:
         self._cost = self.times.phase_ns
         self._tick_ns = self.times.tick_ns
         self.realtime_scheduling: bool | None = None
+        #: What the OS granted the loop: priority, core, refusals (haptic.clock.Grant).
+        self.realtime_grant: Grant | None = None
         self.metadata: dict[str, Any] = {}
         #: Ticks on which the renderer was not armed (force zero by command), since the start.
         self.unarmed_ticks = 0
@@ -429,7 +432,9 @@ class Renderer:
             try:
                 wait = self.config.state_wait_s
                 # lockstep devices answer each FORCE with one STATE: wait for it, not for more
-                new = link.wait_state(wait) if wait > 0 and self._awaiting else link.poll()
+                # (a bounded spin first, then sleep: a device sharing the core is not starved)
+                new = (link.wait_state(wait, self._reply_spin_s) if wait > 0 and self._awaiting
+                       else link.poll())
             except LinkDown as exc:
                 self._link_down = True
                 self._trip(FaultCode.DISCONNECT, str(exc))
@@ -588,7 +593,8 @@ class Renderer:
         # the process is prepared before arming: nothing may stand between the ARM frame and
         # the first FORCE (haptic.clock.realtime)
         with realtime(cfg.realtime_priority) as granted:
-            self.realtime_scheduling = granted
+            self.realtime_scheduling = granted.fifo
+            self.realtime_grant = granted
             try:
                 self.start(first_state_timeout_s, n_ticks)
                 with np.errstate(over="ignore", invalid="ignore"):  # diverging arms are faults
@@ -631,7 +637,9 @@ class Renderer:
                           overrun_ms=self.config.overrun_ms,
                           realtime_scheduling=self.realtime_scheduling,
                           passivity_active_ticks=self.safety.passivity.active_ticks,
-                          link=self.link, last=last)
+                          link=self.link, last=last,
+                          realtime=None if self.realtime_grant is None
+                          else self.realtime_grant.to_dict())
 
     def status(self) -> Result:
         """What ``fieldbank haptic status`` shows (:func:`haptic.readouts.status`)."""

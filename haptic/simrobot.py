@@ -43,6 +43,7 @@ from urllib.parse import parse_qsl, urlencode
 
 from fieldbank.errors import ParameterError
 from fieldbank.haptic import protocol as P
+from fieldbank.haptic.clock import Grant, cpu_plan, enter_device_realtime
 from fieldbank.haptic.motions import MOTIONS, MotionFn, make_motion, parse_path, wander
 from fieldbank.validation import Interval, check_fields
 
@@ -305,7 +306,9 @@ class PtyRobot:
 
     ``PtyRobot(config).start_thread()`` runs it in a thread of this process (fault injection
     through :attr:`device`); ``start_process()`` runs it in its own process, so its physics does
-    not compete with the host loop for the interpreter lock.
+    not compete with the host loop for the interpreter lock, at real-time priority and on a
+    core of its own where the machine has two (:func:`haptic.clock.cpu_plan`), like a robot's
+    firmware.
     """
 
     def __init__(self, config: SimRobotConfig) -> None:
@@ -317,7 +320,9 @@ class PtyRobot:
         self.device = SimDevice(config)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._proc: subprocess.Popen[bytes] | None = None
+        self._proc: subprocess.Popen[str] | None = None
+        #: What the OS granted the device's own process (:meth:`start_process`).
+        self.grant: Grant | None = None
 
     def start_thread(self) -> PtyRobot:
         self._thread = threading.Thread(target=self._run_thread, name="sim-robot", daemon=True)
@@ -331,15 +336,32 @@ class PtyRobot:
         except OSError:
             pass
 
-    def start_process(self) -> PtyRobot:
+    def start_process(self, pin: bool = True, timeout_s: float = 20.0) -> PtyRobot:
+        """Run the device in its own process at real-time priority, pinned to the device's
+        core of :func:`haptic.clock.cpu_plan` (``pin``); :attr:`grant` says what the OS
+        granted it (also when it refused)."""
         cmd = [sys.executable, "-m", "fieldbank.haptic.simrobot", "--fd", str(self.master_fd),
                "--config", json.dumps(asdict(self.config))]
+        cpu = cpu_plan()[1] if pin else None
+        if cpu is not None:
+            cmd += ["--cpu", str(cpu)]
         # the child must import this package from wherever this process imported it
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
-        self._proc = subprocess.Popen(cmd, pass_fds=(self.master_fd,), env=env)
+        self._proc = subprocess.Popen(cmd, pass_fds=(self.master_fd,), env=env,
+                                      stdout=subprocess.PIPE, text=True)
+        assert self._proc.stdout is not None
+        ready, _, _ = select.select([self._proc.stdout], [], [], timeout_s)
+        line = self._proc.stdout.readline() if ready else ""
+        if line.startswith("GRANT "):
+            self.grant = Grant.from_dict(json.loads(line[6:]))
         return self
+
+    @property
+    def pid(self) -> int | None:
+        """The device process's id (None: not running in a process of its own)."""
+        return None if self._proc is None else self._proc.pid
 
     def unplug(self) -> None:
         """Close the device end, as if the cable were pulled."""
@@ -406,16 +428,14 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description="simulated planar robot on a file descriptor")
     ap.add_argument("--fd", type=int, required=True)
     ap.add_argument("--config", default="{}")
+    ap.add_argument("--cpu", type=int, default=None, help="core to pin the device to")
     a = ap.parse_args(argv)
     cfg = SimRobotConfig(**json.loads(a.config))
-    if cfg.mode == "realtime" and hasattr(os, "sched_setscheduler"):
-        # a robot's firmware runs real-time; grant the simulation the same where the OS allows
-        # (one step below the host loop's priority), silently otherwise
-        try:
-            prio = max(1, os.sched_get_priority_max(os.SCHED_FIFO) - 20)
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
-        except OSError:
-            pass
+    # a robot's firmware runs real-time: so does the simulation, in every mode, on a core of
+    # its own where there is one (one step below the host loop's priority); what the OS
+    # granted goes to the parent as the first line on stdout
+    grant = enter_device_realtime(a.cpu)
+    print("GRANT " + json.dumps(grant.to_dict()), flush=True)
     try:
         serve_fd(SimDevice(cfg), a.fd)
     except (OSError, KeyboardInterrupt):

@@ -1,0 +1,82 @@
+"""The mechanism that keeps the loop on time on a busy machine (not its timing: no wall-clock
+bound is asserted): the simulated device's own process runs at real-time priority in every
+mode, pinned to a core other than the host loop's where there are two; the host loop thread
+gets SCHED_FIFO and its own core inside ``realtime()`` and gives both back after; the waits
+spin only a bounded time before they sleep; where the OS refuses, everything runs and says so.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from fieldbank.haptic import clock
+from fieldbank.haptic.clock import RealClock, cpu_plan, realtime
+from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
+
+ROOT = os.geteuid() == 0 if hasattr(os, "geteuid") else False
+TWO_CORES = len(os.sched_getaffinity(0)) >= 2 if hasattr(os, "sched_getaffinity") else False
+
+
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+def test_the_device_process_runs_real_time_on_its_own_core(mode: str) -> None:
+    with PtyRobot(SimRobotConfig(mode=mode)) as robot:
+        robot.start_process()
+        assert robot.grant is not None and robot.pid is not None
+        link = RobotLink.open(robot.port)
+        link.handshake(1000, 20, timeout_s=5.0)  # it serves
+        link.close()
+        if ROOT:  # as in CI: granted, and the kernel agrees
+            assert robot.grant.fifo and robot.grant.notes == ()
+            assert os.sched_getscheduler(robot.pid) == os.SCHED_FIFO
+            assert os.sched_getparam(robot.pid).sched_priority == robot.grant.priority
+        if ROOT and TWO_CORES:
+            host, device = cpu_plan()
+            assert host != device and robot.grant.cpu == device
+            assert os.sched_getaffinity(robot.pid) == {device}
+
+
+def test_the_loop_thread_takes_priority_and_a_core_and_gives_them_back() -> None:
+    before_policy = os.sched_getscheduler(0)
+    before_mask = os.sched_getaffinity(0)
+    host = cpu_plan()[0]
+    with realtime() as g:
+        if ROOT:
+            assert g.fifo and os.sched_getscheduler(0) == os.SCHED_FIFO
+        if ROOT and TWO_CORES:
+            assert g.cpu == host and os.sched_getaffinity(0) == {host}
+    assert os.sched_getscheduler(0) == before_policy
+    assert os.sched_getaffinity(0) == before_mask
+
+
+def test_refusals_are_said_and_the_loop_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    def refuse(*a: object) -> None:
+        raise PermissionError("not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    monkeypatch.setattr(os, "sched_setaffinity", refuse)
+    monkeypatch.setattr(clock, "cpu_plan", lambda: (0, 1))
+    with realtime() as g:
+        assert not g.fifo and g.cpu is None
+        assert any("SCHED_FIFO refused" in n for n in g.notes)
+        assert any("core 0 refused" in n for n in g.notes)
+    d = clock.enter_device_realtime(1)
+    assert not d.fifo and d.cpu is None and len(d.notes) == 2
+    assert "normal priority, any core" in d.text()
+
+
+def test_waits_spin_a_bounded_time_then_sleep(monkeypatch: pytest.MonkeyPatch) -> None:
+    """RealClock spins only the last spin_us before a deadline; before that it sleeps."""
+    slept: list[float] = []
+    real_sleep = time.sleep
+    monkeypatch.setattr(time, "sleep", lambda s: (slept.append(s), real_sleep(s)))
+    c = RealClock(spin_us=200.0)
+    t0 = time.perf_counter_ns()
+    c.sleep_until(t0 + 5_000_000)  # 5 ms ahead: sleeps about 4.8 ms, spins the rest
+    assert slept and 4.0e-3 < slept[0] <= 4.8e-3 + 1e-9
+    slept.clear()
+    c.sleep_until(time.perf_counter_ns() + 100_000)  # inside the spin window: no sleep
+    assert slept == []
