@@ -29,6 +29,7 @@ import gc
 import logging
 import os
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -41,9 +42,40 @@ log = logging.getLogger("fieldbank.haptic.clock")
 SWITCH_INTERVAL_S = 1e-4
 #: Highest SCHED_FIFO priority asked for: below the kernel's own real-time threads.
 MAX_FIFO_PRIORITY = 80
-#: How far below the maximum the host loop and a simulated device ask for SCHED_FIFO.
+#: How far below the maximum the host loop and a simulated device ask for SCHED_FIFO, and the
+#: threads that share the loop's interpreter (:func:`keep_up_with_the_loop`).
 HOST_PRIORITY_BELOW_MAX = 10
 DEVICE_PRIORITY_BELOW_MAX = 20
+SHARER_PRIORITY_BELOW_MAX = 30
+
+#: SCHED_FIFO priority of the real-time loop running in this process (None: none runs).
+_loop_priority: int | None = None
+_thread_state = threading.local()
+
+
+def keep_up_with_the_loop() -> None:
+    """For a thread that shares the loop's interpreter (the control channel), before each
+    piece of work: while a real-time loop runs in this process, run at SCHED_FIFO below the
+    loop and the device; else at the normal policy again.
+
+    Why: a thread holding the interpreter lock that a busy machine preempts (load above the
+    core count) holds the loop up until the scheduler runs it again - tens of ms, more than the
+    device watchdog allows. At SCHED_FIFO no ordinary process preempts it, and its work is
+    short (requests are bounded), so it hands the lock back at once.
+    """
+    want = _loop_priority
+    have = getattr(_thread_state, "priority", None)
+    if want == have or not hasattr(os, "sched_setscheduler"):
+        return
+    try:
+        if want is None:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        else:
+            prio = max(1, want - (SHARER_PRIORITY_BELOW_MAX - HOST_PRIORITY_BELOW_MAX))
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+        _thread_state.priority = want
+    except OSError:
+        _thread_state.priority = want  # refused: the loop's own grant already says so
 
 
 @dataclass(frozen=True)
@@ -248,9 +280,12 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
         cpu = None
     old_switch = sys.getswitchinterval()
     sys.setswitchinterval(switch_interval_s)
+    global _loop_priority
+    _loop_priority = prio if old_sched is not None else None
     try:
         yield Grant(old_sched is not None, prio, cpu, tuple(notes))
     finally:
+        _loop_priority = None
         sys.setswitchinterval(old_switch)
         if gc_was_enabled:
             gc.enable()

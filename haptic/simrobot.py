@@ -33,6 +33,7 @@ import json
 import math
 import os
 import select
+import signal
 import subprocess
 import sys
 import threading
@@ -164,6 +165,8 @@ class SimDevice:
         self.drop_frames = 0
         self.nan_frames = 0
         self.frozen = False
+        #: the device's own fault (flag bit 2 in every STATE while set; it disarms itself)
+        self.device_fault = False
         self._wall0: float | None = None
         self._next_state_wall = 0.0
 
@@ -242,7 +245,11 @@ class SimDevice:
         # HEARTBEAT and FAULT from the host need no action beyond being received
 
     def send_state(self) -> None:
-        flags = ((P.FLAG_ARMED if self.armed else 0)
+        if self.device_fault and self.armed:  # a device disarms on its own faults
+            self.armed = False
+            self.fx_cmd = self.fy_cmd = 0.0
+        flags = ((P.FLAG_FAULT if self.device_fault else 0)
+                 | (P.FLAG_ARMED if self.armed else 0)
                  | (P.FLAG_WATCHDOG if self.watchdog_tripped else 0))
         x, y, vx, vy = self.x, self.y, self.vx, self.vy
         if self.nan_frames > 0:
@@ -358,6 +365,14 @@ class PtyRobot:
             self.grant = Grant.from_dict(json.loads(line[6:]))
         return self
 
+    def inject_device_fault(self, on: bool = True) -> None:
+        """Put the device in fault (it disarms and sets flag bit 2 in every STATE) or clear
+        it: in its own process by a signal, in a thread directly."""
+        if self._proc is not None:
+            os.kill(self._proc.pid, signal.SIGUSR1 if on else signal.SIGUSR2)
+        else:
+            self.device.device_fault = on
+
     @property
     def pid(self) -> int | None:
         """The device process's id (None: not running in a process of its own)."""
@@ -435,9 +450,14 @@ def main(argv: list[str] | None = None) -> int:
     # its own where there is one (one step below the host loop's priority); what the OS
     # granted goes to the parent as the first line on stdout
     grant = enter_device_realtime(a.cpu)
+    device = SimDevice(cfg)
+    # fault injection for tests and demonstrations: SIGUSR1 puts the device in fault (it
+    # disarms and reports flag bit 2), SIGUSR2 clears it
+    signal.signal(signal.SIGUSR1, lambda *_: setattr(device, "device_fault", True))
+    signal.signal(signal.SIGUSR2, lambda *_: setattr(device, "device_fault", False))
     print("GRANT " + json.dumps(grant.to_dict()), flush=True)
     try:
-        serve_fd(SimDevice(cfg), a.fd)
+        serve_fd(device, a.fd)
     except (OSError, KeyboardInterrupt):
         pass
     return 0

@@ -80,3 +80,25 @@ def test_waits_spin_a_bounded_time_then_sleep(monkeypatch: pytest.MonkeyPatch) -
     slept.clear()
     c.sleep_until(time.perf_counter_ns() + 100_000)  # inside the spin window: no sleep
     assert slept == []
+
+
+def test_threads_sharing_the_interpreter_keep_up_with_a_real_time_loop() -> None:
+    """A control thread holding the interpreter lock must not be preempted by a busy machine
+    while the loop waits for the lock: it runs SCHED_FIFO below the loop while one runs."""
+    seen: list[int] = []
+
+    def work() -> None:
+        clock.keep_up_with_the_loop()
+        seen.append(os.sched_getscheduler(0))
+
+    import threading
+
+    with realtime() as g:
+        th = threading.Thread(target=work)
+        th.start()
+        th.join()
+    th = threading.Thread(target=work)
+    th.start()
+    th.join()
+    if ROOT and g.fifo:
+        assert seen == [os.SCHED_FIFO, os.SCHED_OTHER]

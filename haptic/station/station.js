@@ -250,8 +250,10 @@ let fpsCount = 0, fpsT0 = performance.now();
 function draw() {
   requestAnimationFrame(draw);
   if (!frame || !info) return;
-  if (!view || canvas.width !== Math.round(canvas.clientWidth * (window.devicePixelRatio || 1))) {
-    fitView();
+  const dpr = window.devicePixelRatio || 1;
+  if (!view || canvas.width !== Math.round(canvas.clientWidth * dpr)
+      || canvas.height !== Math.round(canvas.clientHeight * dpr)) {
+    fitView();  // also when the fault box or the legend changes the canvas's height
   }
   const f = frame;
   ctx.setTransform(view.dpr, 0, 0, view.dpr, 0, 0);
@@ -296,7 +298,9 @@ function updateBadges(f) {
   } else {
     const k = f.blend >= 0.5 ? "B" : "A";
     const moving = f.blend > 0.02 && f.blend < 0.98 ? " (crossfading)" : "";
-    r.textContent = `Feeling ${k} · ${k === "A" ? "before" : "after"}${moving}`;
+    const which = `${k} · ${k === "A" ? "before" : "after"}`;
+    r.textContent = f.mode === "ARMED" ? `Feeling ${which}${moving}`
+      : `${which} selected · no force while ${f.mode === "FAULT" ? "in fault" : "disarmed"}`;
     r.className = "badge";
     $("btn-a").classList.toggle("active", k === "A");
     $("btn-b").classList.toggle("active", k === "B");
@@ -416,6 +420,7 @@ function renderPanel() {
       (tr.phase === "assessment" ? " Which muscles are hypertonic?" : "") +
       (!tr.trial ? " Press Next trial to begin." : "");
     $("train-answers").hidden = !tr.awaiting_answer;
+    $("train-auto").parentElement.hidden = tr.phase === "assessment";
     $("train-next").disabled = tr.awaiting_answer || !!fb.paused;
   }
 }
