@@ -251,6 +251,9 @@ class ArmPair(tuple[ArmSim, ArmSim]):
         if compiled:
             self.params = np.stack([pack(a, dt_s, coupling), pack(b, dt_s, coupling)])
             self.state = state
+            # load (or compile) the machine code now, never on a loop's first tick: on a
+            # scratch copy, so the arms' state is untouched
+            tick_pair(self.params, state.copy(), self.out, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         else:
             self.params = self.state = None
         return self
