@@ -64,7 +64,9 @@ def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
 @click.command("serve")
 @click.option("--robot", required=True, help="Robot port URL: /dev/ttyUSB0, a pty path, "
               "socket://host:port, or sim://?mode=realtime&motion=explore for the simulation.")
-@click.option("--rate-hz", type=click.IntRange(500, 4000), default=1000, show_default=True)
+@click.option("--rate-hz", "--rate", "rate_hz", type=click.IntRange(500, 4000), default=1000,
+              show_default=True, help="Tick rate, Hz (4000 for stiffer rendering and lower "
+              "latency; the session records it).")
 @click.option("--duration-s", type=click.FloatRange(min=0.001), default=None,
               help="Stop after this long (default: until 'fieldbank haptic stop' or Ctrl-C).")
 @click.option("--before", "before_file", type=click.Path(exists=True, path_type=Path),
