@@ -44,7 +44,8 @@ def push(before_file: Path | None, after_file: Path | None, before_severity: str
                                         (before_severity, after_severity), (before_id, after_id))
     res = push_models(before, after, socket_path,
                       ids if any(i is not None for i in ids) else None)
-    emit(res, as_json, "models pushed")
+    emit(res, as_json, "models pushed; " + state_words(res)
+         + (" (fading out, swapping, fading in)" if res.get("swapping") else ""))
 
 
 @click.command("switch")
@@ -54,7 +55,16 @@ def push(before_file: Path | None, after_file: Path | None, before_severity: str
 def switch(to: str, socket_path: Path | None, as_json: bool) -> None:
     """Crossfade the rendered model to A (before) or B (after)."""
     to = to.upper() if len(to) == 1 else to.lower()
-    emit(_request(socket_path, "switch", to=to), as_json, f"switching to {to}")
+    res = _request(socket_path, "switch", to=to)
+    emit(res, as_json, f"switching to {to}; {state_words(res)}")
+
+
+def state_words(res: dict[str, Any]) -> str:
+    """The renderer's true state from a ``push`` or ``switch`` answer, in words."""
+    mode = res.get("mode")
+    if mode == "ARMED":
+        return f"renderer armed, felt now: {res.get('felt')}"
+    return f"renderer {str(mode).lower()}: no force until it is armed ('fieldbank haptic arm')"
 
 
 @click.command("status")

@@ -413,7 +413,8 @@ def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-unt
     r = run.invoke(haptic, ["status", *s, "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["mode"] == "ARMED"
-    assert run.invoke(haptic, ["switch", "after", *s]).exit_code == 0
+    r = run.invoke(haptic, ["switch", "after", *s])
+    assert r.exit_code == 0 and "switching to after; renderer armed, felt now: " in r.output
     r = run.invoke(haptic, ["abx", "start", "--trials", "2", "--seed", "9", *s, "--json"])
     assert r.exit_code == 0 and json.loads(r.stdout)["n_trials"] == 2
     assert json.loads(run.invoke(haptic, ["status", *s, "--json"]).stdout)["blend"] == "hidden"
@@ -426,6 +427,8 @@ def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-unt
     assert isinstance(r.exception, HapticError)
     assert run.invoke(haptic, ["disarm", *s]).exit_code == 0
     assert rd.safety.mode == Mode.DISARMED
+    r = run.invoke(haptic, ["switch", "A", *s])
+    assert "renderer disarmed: no force until it is armed" in r.output
     assert run.invoke(haptic, ["arm", *s]).exit_code == 0
     assert rd.safety.mode == Mode.ARMED
 
