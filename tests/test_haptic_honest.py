@@ -211,3 +211,45 @@ def test_rearm_says_every_reason_it_refuses() -> None:
         _do(rd, "arm")
     rd.finish()
     rd.link.close()
+
+
+@pytest.mark.parametrize("backend", ["sqlite", pytest.param("postgres",
+                                                            marks=pytest.mark.postgres)])
+def test_migration_0007_keeps_stored_trials_unflagged(backend: str, tmp_path: Path,
+                                                      request: pytest.FixtureRequest) -> None:
+    """Trials stored before windows were judged read back unflagged, every field as it was;
+    down again, the rows are still there."""
+    import datetime as dt
+
+    from sqlalchemy import text
+
+    from fieldbank.storage import make_engine, migrate
+
+    url = (request.getfixturevalue("pg_url") if backend == "postgres"
+           else f"sqlite:///{tmp_path / 'old.sqlite'}")
+    engine = make_engine(url)
+    try:
+        migrate.upgrade(engine, "0003")
+        now = dt.datetime(2026, 1, 2, 3, 4, 5)
+        with engine.begin() as c:
+            c.execute(text("INSERT INTO models (id, origin, label, params_json, created_at) "
+                           "VALUES (1, 'synthetic', 'm', :p, :t)"),
+                      {"p": '{"x": 1}', "t": now})
+            c.execute(text("INSERT INTO haptic_sessions (id, model_a_id, started_at, "
+                           "ended_at, robot_url, stats_json) VALUES (1, 1, :t, :t, 'sim://', "
+                           "'{}')"), {"t": now})
+            c.execute(text("INSERT INTO haptic_trials (haptic_session_id, kind, block, trial, "
+                           "phase, condition, answer, correct, detail_json) VALUES (1, "
+                           "'training', 0, 0, 'assessment', 'elbow mild', 'elbow', :ok, "
+                           "'{}')"), {"ok": True})
+        migrate.upgrade(engine)
+        migrate.check_drift(engine)
+        db = Database(engine, None, "test")  # type: ignore[arg-type]  # no arrays read here
+        (t,) = db.list_haptic_trials(1)
+        assert (t.answer, t.correct, t.flagged, t.condition) == ("elbow", True, False,
+                                                                 "elbow mild")
+        migrate.downgrade(engine, "0003")
+        with engine.connect() as c:
+            assert c.execute(text("SELECT count(*) FROM haptic_trials")).scalar() == 1
+    finally:
+        engine.dispose()
