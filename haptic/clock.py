@@ -14,7 +14,9 @@ machine has two or more (:func:`cpu_plan`: the host loop on one, a simulated dev
 another, so neither waits for the other or for a busy neighbour's time slice), and a short
 thread switch interval, so another thread (the control channel) hands the interpreter back
 within a tick. Where the OS refuses priority or affinity, the loop runs anyway: a warning is
-logged and the loop's statistics say so (:class:`Grant`).
+logged and the loop's statistics say so (:class:`Grant`). Log records are written by a thread
+of their own meanwhile (:func:`logging_off_the_loop`): the loop thread does no I/O but the
+robot's.
 
 The loop never spins unboundedly: :class:`RealClock` sleeps until ``spin_us`` before each
 deadline and spins only the rest, and a lockstep wait for the device's reply spins at most as
@@ -27,7 +29,9 @@ from __future__ import annotations
 import contextlib
 import gc
 import logging
+import logging.handlers
 import os
+import queue
 import sys
 import threading
 import time
@@ -245,6 +249,33 @@ def _leave_fifo(old: tuple[int, os.sched_param] | None) -> None:
 
 
 @contextlib.contextmanager
+def logging_off_the_loop(name: str = "fieldbank.haptic") -> Iterator[None]:
+    """Inside, records of logger ``name`` (and its children) are queued by the thread that logs
+    them and written by a thread of their own: a fault logged in the loop never waits for a
+    terminal or a disk (a write to a busy disk can take 100 ms, five device watchdogs). The
+    records go to the handlers they went to before (the root's), in order, all of them by the
+    time the context ends."""
+    logger = logging.getLogger(name)
+    target = logger.handlers or logging.getLogger().handlers
+    if not target:  # nothing would write them: nothing to move
+        yield
+        return
+    q: queue.SimpleQueue[logging.LogRecord] = queue.SimpleQueue()
+    listener = logging.handlers.QueueListener(q, *target, respect_handler_level=True)
+    handler = logging.handlers.QueueHandler(q)
+    old_handlers, old_propagate = logger.handlers[:], logger.propagate
+    logger.handlers = [handler]
+    logger.propagate = False
+    listener.start()
+    try:
+        yield
+    finally:
+        logger.handlers = old_handlers
+        logger.propagate = old_propagate
+        listener.stop()
+
+
+@contextlib.contextmanager
 def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S,
              pin: bool | None = None) -> Iterator[Grant]:
     """Run the enclosed loop with the collector frozen and off, SCHED_FIFO, the thread pinned
@@ -265,6 +296,8 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
     Grant
         What was granted (``bool(grant.fifo)``: whether SCHED_FIFO was).
     """
+    logs = logging_off_the_loop()
+    logs.__enter__()
     gc.collect()
     gc.freeze()
     gc_was_enabled = gc.isenabled()
@@ -292,3 +325,4 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
         gc.unfreeze()
         _leave_fifo(old_sched)
         _unpin(old_mask)
+        logs.__exit__(None, None, None)

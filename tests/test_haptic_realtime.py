@@ -102,3 +102,30 @@ def test_threads_sharing_the_interpreter_keep_up_with_a_real_time_loop() -> None
     th.join()
     if ROOT and g.fifo:
         assert seen == [os.SCHED_FIFO, os.SCHED_OTHER]
+
+
+def test_the_loop_logs_without_writing(caplog: pytest.LogCaptureFixture) -> None:
+    """Inside realtime() a fault logged by the loop thread is written by another thread, and
+    every record is there, in order, when the context ends."""
+    import logging
+    import threading
+
+    seen: list[tuple[str, str]] = []
+
+    class Spy(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            seen.append((record.getMessage(), threading.current_thread().name))
+
+    spy = Spy()
+    logging.getLogger().addHandler(spy)
+    try:
+        log = logging.getLogger("fieldbank.haptic.safety")
+        with caplog.at_level(logging.INFO), realtime(priority=False):
+            for k in range(50):
+                log.warning("fault %d", k)
+        log.warning("after")
+    finally:
+        logging.getLogger().removeHandler(spy)
+    assert [m for m, _ in seen] == [f"fault {k}" for k in range(50)] + ["after"]
+    assert {t for m, t in seen[:-1]} != {threading.current_thread().name}
+    assert seen[-1][1] == threading.current_thread().name
