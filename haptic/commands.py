@@ -444,9 +444,9 @@ class TrainStart(RendererCommand):
         if target.training is not None and not target.training.done:
             raise CommandError("a training protocol is already running (train stop ends it)")
         target.require_armed("training start")
+        target.begin_training()
         tr = TrainingSession(self.protocol)
         target.training = tr
-        target.begin_training()
         target.log_event("train_start", n_trials=len(tr.trials),
                          instruction=self.protocol.instruction, seed=self.protocol.seed)
         return tr.state(target.t_s)

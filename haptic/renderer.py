@@ -359,7 +359,11 @@ class Renderer:
                                   math.sqrt(self.peak_force_n2), self.dt_s)
 
     def begin_training(self) -> None:
-        """Keep the patient's pair while a training protocol renders its own arms."""
+        """Keep the patient's pair while a training protocol renders its own arms (refused
+        while pushed models are still waiting to be swapped in: they would be lost)."""
+        if self.pair.pending is not None:
+            raise CommandError("training start refused: pushed models are being swapped in; "
+                               "start it once they are rendered")
         self._home = (self.pair.sims, self.pair.params)
 
     def end_training(self) -> None:
