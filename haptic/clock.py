@@ -13,8 +13,10 @@ and nothing may stand between the ARM frame and the first FORCE), the collector 
 machine has two or more (:func:`cpu_plan`: the host loop on one, a simulated device process on
 another, so neither waits for the other or for a busy neighbour's time slice), and a short
 thread switch interval, so another thread (the control channel) hands the interpreter back
-within a tick. Where the OS refuses priority or affinity, the loop runs anyway: a warning is
-logged and the loop's statistics say so (:class:`Grant`). Log records are written by a thread
+within a tick, and every other thread of the process (control channel, log writer) runs at
+SCHED_FIFO below the loop meanwhile, so a busy machine cannot preempt one while it holds the
+interpreter lock the loop needs. Where the OS refuses priority or affinity, the loop runs
+anyway: a warning is logged and the loop's statistics say so (:class:`Grant`). Log records are written by a thread
 of their own meanwhile (:func:`logging_off_the_loop`): the loop thread does no I/O but the
 robot's.
 
@@ -65,7 +67,9 @@ def keep_up_with_the_loop() -> None:
     Why: a thread holding the interpreter lock that a busy machine preempts (load above the
     core count) holds the loop up until the scheduler runs it again - tens of ms, more than the
     device watchdog allows. At SCHED_FIFO no ordinary process preempts it, and its work is
-    short (requests are bounded), so it hands the lock back at once.
+    short (requests are bounded), so it hands the lock back at once. (:func:`realtime` raises
+    the threads that exist when the loop starts; this covers those started later by a thread
+    that was not raised.)
     """
     want = _loop_priority
     have = getattr(_thread_state, "priority", None)
@@ -75,8 +79,7 @@ def keep_up_with_the_loop() -> None:
         if want is None:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         else:
-            prio = max(1, want - (SHARER_PRIORITY_BELOW_MAX - HOST_PRIORITY_BELOW_MAX))
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(_sharer_priority(want)))
         _thread_state.priority = want
     except OSError:
         _thread_state.priority = want  # refused: the loop's own grant already says so
@@ -248,6 +251,39 @@ def _leave_fifo(old: tuple[int, os.sched_param] | None) -> None:
             pass
 
 
+def _sharer_priority(loop_priority: int) -> int:
+    return max(1, loop_priority - (SHARER_PRIORITY_BELOW_MAX - HOST_PRIORITY_BELOW_MAX))
+
+
+def _raise_sharers(loop_priority: int | None) -> list[int]:
+    """Every other thread of this process (the control channel's, the log writer, …) to
+    SCHED_FIFO below the loop, so none is preempted while it holds the interpreter lock; the
+    threads they start inherit it. The native ids raised."""
+    if loop_priority is None or not hasattr(os, "sched_setscheduler"):
+        return []
+    me = threading.get_native_id()
+    out = []
+    for th in threading.enumerate():
+        tid = th.native_id
+        if tid is None or tid == me:
+            continue
+        try:
+            os.sched_setscheduler(tid, os.SCHED_FIFO,
+                                  os.sched_param(_sharer_priority(loop_priority)))
+            out.append(tid)
+        except OSError:  # refused, or the thread has just ended
+            pass
+    return out
+
+
+def _lower_sharers(tids: list[int]) -> None:
+    for tid in tids:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:  # the thread has ended
+            pass
+
+
 @contextlib.contextmanager
 def logging_off_the_loop(name: str = "fieldbank.haptic") -> Iterator[None]:
     """Inside, records of logger ``name`` (and its children) are queued by the thread that logs
@@ -297,7 +333,7 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
         What was granted (``bool(grant.fifo)``: whether SCHED_FIFO was).
     """
     logs = logging_off_the_loop()
-    logs.__enter__()
+    logs.__enter__()  # its writer thread is one of the sharers raised below
     gc.collect()
     gc.freeze()
     gc_was_enabled = gc.isenabled()
@@ -315,10 +351,12 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
     sys.setswitchinterval(switch_interval_s)
     global _loop_priority
     _loop_priority = prio if old_sched is not None else None
+    raised = _raise_sharers(_loop_priority)
     try:
         yield Grant(old_sched is not None, prio, cpu, tuple(notes))
     finally:
         _loop_priority = None
+        _lower_sharers(raised)
         sys.setswitchinterval(old_switch)
         if gc_was_enabled:
             gc.enable()

@@ -129,3 +129,20 @@ def test_the_loop_logs_without_writing(caplog: pytest.LogCaptureFixture) -> None
     assert [m for m, _ in seen] == [f"fault {k}" for k in range(50)] + ["after"]
     assert {t for m, t in seen[:-1]} != {threading.current_thread().name}
     assert seen[-1][1] == threading.current_thread().name
+
+
+def test_threads_alive_when_the_loop_starts_are_raised_and_lowered_again() -> None:
+    import threading
+
+    ready, go = threading.Event(), threading.Event()
+    th = threading.Thread(target=lambda: (ready.set(), go.wait(10)), daemon=True)
+    th.start()
+    ready.wait(5)
+    assert th.native_id is not None
+    with realtime() as g:
+        inside = os.sched_getscheduler(th.native_id)
+    after = os.sched_getscheduler(th.native_id)
+    go.set()
+    th.join(5)
+    if ROOT and g.fifo:
+        assert inside == os.SCHED_FIFO and after == os.SCHED_OTHER
