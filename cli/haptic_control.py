@@ -16,6 +16,8 @@ import click
 from fieldbank.cli.haptic import resolve_models, socket_option
 from fieldbank.cli.options import db_option, emit, json_option
 from fieldbank.haptic.client import ControlClient, push_models
+from fieldbank.haptic.clock import Grant
+from fieldbank.haptic.modelinfo import describe_text
 
 
 def _request(socket_path: Path | None, cmd: str, **args: Any) -> Any:
@@ -42,7 +44,8 @@ def push(before_file: Path | None, after_file: Path | None, before_severity: str
                                         (before_severity, after_severity), (before_id, after_id))
     res = push_models(before, after, socket_path,
                       ids if any(i is not None for i in ids) else None)
-    emit(res, as_json, "models pushed")
+    emit(res, as_json, "models pushed; " + state_words(res)
+         + (" (fading out, swapping, fading in)" if res.get("swapping") else ""))
 
 
 @click.command("switch")
@@ -52,7 +55,16 @@ def push(before_file: Path | None, after_file: Path | None, before_severity: str
 def switch(to: str, socket_path: Path | None, as_json: bool) -> None:
     """Crossfade the rendered model to A (before) or B (after)."""
     to = to.upper() if len(to) == 1 else to.lower()
-    emit(_request(socket_path, "switch", to=to), as_json, f"switching to {to}")
+    res = _request(socket_path, "switch", to=to)
+    emit(res, as_json, f"switching to {to}; {state_words(res)}")
+
+
+def state_words(res: dict[str, Any]) -> str:
+    """The renderer's true state from a ``push`` or ``switch`` answer, in words."""
+    mode = res.get("mode")
+    if mode == "ARMED":
+        return f"renderer armed, felt now: {res.get('felt')}"
+    return f"renderer {str(mode).lower()}: no force until it is armed ('fieldbank haptic arm')"
 
 
 @click.command("status")
@@ -64,15 +76,10 @@ def status(socket_path: Path | None, as_json: bool) -> None:
     emit(s, as_json, status_table(s))
 
 
-def _model_line(which: str, m: Any) -> str:
+def _model_line(m: Any) -> str:
     if not isinstance(m, dict):
         return "hidden (a blinded block is running)"
-    bits = [m.get("label") or "not described"]
-    ids = [f"model {m['model_id']}" if m.get("model_id") else "",
-           f"patient {m['patient']}" if m.get("patient") else "",
-           f'plan "{m["plan"]}"' if m.get("plan") else ""]
-    extra = ", ".join(b for b in ids if b)
-    return f"{which}: {bits[0]}" + (f" [{extra}]" if extra else "")
+    return describe_text(m)
 
 
 def status_table(s: dict[str, Any]) -> str:
@@ -83,13 +90,13 @@ def status_table(s: dict[str, Any]) -> str:
                              f"({s.get('ticks', 0)} ticks)"))
     models = s.get("models")
     if isinstance(models, dict):
-        rows.append(("model A", _model_line("before", models.get("A"))))
-        rows.append(("model B", _model_line("after", models.get("B"))))
+        rows.append(("A · before", _model_line(models.get("A"))))
+        rows.append(("B · after", _model_line(models.get("B"))))
     elif models is not None:
-        rows.append(("models", _model_line("", models)))
+        rows.append(("models", _model_line(models)))
     blend = s.get("blend")
     if isinstance(blend, (int, float)):
-        felt = "A (before)" if blend < 0.5 else "B (after)"
+        felt = s.get("felt") or ("A (before)" if blend < 0.5 else "B (after)")
         moving = " crossfading" if 0.02 < blend < 0.98 else ""
         rows.append(("felt now", f"{felt}{moving}; blend {blend:.2f}, gain "
                                  f"{s.get('gain', 0):.2f}"))
@@ -102,6 +109,16 @@ def status_table(s: dict[str, Any]) -> str:
     latched = s.get("latched_faults") or []
     rows.append(("faults", (", ".join(latched) + " latched" if latched else "none latched")
                  + f"; {s.get('faults_logged', 0)} logged"))
+    for f in s.get("faults_now") or []:
+        rows.append((f"  {f['name']}", f"{f['what']} ({f['message']}, t = {f['t_s']:.2f} s). "
+                                      f"{f['todo']}"))
+    refused = s.get("rearm_refused_because") or []
+    if s.get("mode") != "ARMED":
+        rows.append(("re-arm", "would be refused: " + "; ".join(refused) if refused
+                     else "would be accepted ('fieldbank haptic arm')"))
+    if s.get("paused"):
+        rows.append(("paused", "the running A/B/X block or training waits for a re-arm; no "
+                               "answer is taken meanwhile"))
     loop = s.get("loop_last_10s") or {}
     pe = loop.get("period_error_us") or {}
     if pe:
@@ -111,7 +128,10 @@ def status_table(s: dict[str, Any]) -> str:
                                    f"overruns {loop.get('overruns', 0)}; tick p99 "
                                    f"{tt.get('p99', 0):.1f} µs"))
     rt = loop.get("realtime_scheduling")
-    if rt is not None:
+    grant = loop.get("realtime") or {}
+    if grant:
+        rows.append(("scheduling", Grant.from_dict(grant).text()))
+    elif rt is not None:
         rows.append(("scheduling", "SCHED_FIFO" if rt else "normal (SCHED_FIFO refused)"))
     abx = s.get("abx_trial")
     rows.append(("A/B/X", "none running" if abx is None else f"trial {abx + 1} running"))
@@ -156,16 +176,14 @@ def abx() -> None:
 @abx.command("start")
 @click.option("--trials", type=click.IntRange(1, 1000), default=10, show_default=True)
 @click.option("--seed", type=int, default=None, help="Randomization seed (default: random).")
-@click.option("--show-labels", is_flag=True, help="A = before and B = after (not hidden).")
 @socket_option
 @json_option
-def abx_start(trials: int, seed: int | None, show_labels: bool, socket_path: Path | None,
+def abx_start(trials: int, seed: int | None, socket_path: Path | None,
               as_json: bool) -> None:
-    """Start a block of A/B/X trials (as many as --trials): X is A or B at random, hidden
-    unless --show-labels."""
+    """Start a block of A/B/X trials (as many as --trials): A is before, B after; X is one of
+    them, hidden."""
     seed = seed if seed is not None else int.from_bytes(os.urandom(4), "little")
-    r = _request(socket_path, "abx", action="start", n_trials=trials, seed=seed,
-                 hide_labels=not show_labels)
+    r = _request(socket_path, "abx", action="start", n_trials=trials, seed=seed)
     emit(r, as_json, f"A/B/X block of {trials} trials started (seed {seed})")
 
 
@@ -187,7 +205,12 @@ def abx_answer(answer: str, socket_path: Path | None, as_json: bool) -> None:
     """Record that X felt like A or B; go to the next trial."""
     r = _request(socket_path, "abx", action="answer", answer=answer.upper())
     msg = f"answer recorded; next trial {r['trial'] + 1}"
+    if r.get("flagged"):
+        msg = (f"answer recorded but flagged, not counted ({'; '.join(r['flags'])}); next "
+               f"trial {r['trial'] + 1}")
     if r.get("done"):
         res = r["result"]
-        msg = f"block done: {res['correct']} of {res['answered']} correct"
+        msg = (f"block done: {res['correct']} of {res['counted']} counted answers correct"
+               + (f"; {res['flagged']} flagged (fault or no force) and left out"
+                  if res.get("flagged") else ""))
     emit(r, as_json, msg)

@@ -37,7 +37,10 @@ def protocol_named(text: str) -> TrainingProtocol:
         raise click.BadParameter(f"a training protocol is seed, short or a JSON file; got "
                                  f"{text!r}", param_hint="--training-protocol")
     try:
-        return TrainingProtocol.from_dict(read_json_document(path))
+        doc = read_json_document(path)
+        if isinstance(doc, dict) and not doc.get("name"):
+            doc = {**doc, "name": path.stem}  # the page names the protocol by its file
+        return TrainingProtocol.from_dict(doc)
     except ValueError as exc:
         raise click.BadParameter(f"{path}: {exc}", param_hint="--training-protocol") from None
 
@@ -56,7 +59,9 @@ def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
 @click.option("--robot", default=None, help="Robot port URL: /dev/ttyUSB0, a pty path, "
               "socket://host:port, or sim://?mode=realtime&motion=explore for the simulation "
               "(default: FIELDBANK_ROBOT, else robot in fieldbank.toml).")
-@click.option("--rate-hz", type=click.IntRange(500, 4000), default=1000, show_default=True)
+@click.option("--rate-hz", "--rate", "rate_hz", type=click.IntRange(500, 4000), default=1000,
+              show_default=True, help="Tick rate, Hz (4000 for stiffer rendering and lower "
+              "latency; the session records it).")
 @click.option("--duration-s", type=click.FloatRange(min=0.001), default=None,
               help="Stop after this long (default: until 'fieldbank haptic stop' or Ctrl-C).")
 @click.option("--before", "before_file", type=click.Path(exists=True, path_type=Path),
@@ -256,6 +261,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
 @click.option("--start", help="Start of the motion X,Y in m (robot frame).")
 def sim_robot(motion: str, mode: str, start: str | None) -> None:
     """Run the simulated robot on a pty and print the port to give to 'serve --robot'."""
+    from fieldbank.haptic.clock import cpu_plan, enter_device_realtime
     from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
     from fieldbank.model import Arm
 
@@ -266,6 +272,8 @@ def sim_robot(motion: str, mode: str, start: str | None) -> None:
                   .rest_position())
     robot = PtyRobot(SimRobotConfig(mode=mode, motion=motion, x0_m=x0, y0_m=y0))
     click.echo(robot.port)
+    grant = enter_device_realtime(cpu_plan()[1])
+    click.echo(f"device: {grant.text()}", err=True)
     try:
         serve_fd(robot.device, robot.master_fd)
     except KeyboardInterrupt:
@@ -278,7 +286,7 @@ def sim_robot(motion: str, mode: str, start: str | None) -> None:
 
 def training_lines(result: dict[str, object]) -> list[str]:
     """A training session's result as terminal lines."""
-    from fieldbank.haptic.training import accuracy_text
+    from fieldbank.haptic.trainingresults import accuracy_text
 
     summary = result.get("summary")
     if not isinstance(summary, dict):

@@ -21,21 +21,28 @@ def _duration(s: HapticSessionRecord) -> float | None:
     return None if s.ended_at is None else (s.ended_at - s.started_at).total_seconds()
 
 
-def _model(db: Database, model_id: int | None) -> dict[str, Any] | None:
+def _model(db: Database, model_id: int | None, plan_id: int | None) -> dict[str, Any] | None:
     if model_id is None:
         return None
     m = db.get_model(model_id)
-    plans = [p for p in db.list_plans(m.patient_code) if p.result_model_id == m.id]
+    plans = [p for p in db.list_plans(m.patient_code)
+             if p.result_model_id == m.id and (plan_id is None or p.id == plan_id)]
     return {"id": m.id, "origin": m.origin, "label": m.label, "patient": m.patient_code,
-            "plan": plans[-1].label if plans else None}
+            "plan": plans[-1].label if plans else None,
+            "plan_id": plans[-1].id if plans else None}
 
 
 def _session_doc(db: Database, s: HapticSessionRecord) -> dict[str, Any]:
+    from fieldbank.haptic.dbsink import session_plan_id
+
+    plan_id = session_plan_id(s.stats.get("metadata") or {})
     return {"id": s.id, "patient": s.patient_code, "patient_note": s.patient_note,
             "started_at": s.started_at.isoformat(),
             "ended_at": None if s.ended_at is None else s.ended_at.isoformat(),
             "duration_s": _duration(s), "robot": s.robot_url,
-            "model_a": _model(db, s.model_a_id), "model_b": _model(db, s.model_b_id),
+            "rate_hz": s.stats.get("rate_hz"), "plan_id": plan_id,
+            "model_a": _model(db, s.model_a_id, plan_id),
+            "model_b": _model(db, s.model_b_id, plan_id),
             "trials": s.n_trials, "name": s.stats.get("name")}
 
 
@@ -66,8 +73,11 @@ def _trial_line(t: HapticTrialRecord) -> str:
     rt = "" if t.response_time_s is None else f"{t.response_time_s:6.1f} s"
     window = ("" if t.started_s is None else
               f"t = {t.started_s:.2f}–{(t.answered_s or t.detail.get('ended_s') or 0):.2f} s")
+    flag = ""
+    if t.flagged:
+        flag = "  FLAGGED, not counted: " + "; ".join(t.detail.get("flags") or ["fault"])
     return (f"  {t.kind:8s} {t.block:>2d} {t.trial + 1:>4d}  {t.phase:15s} {t.condition:22s} "
-            f"{t.answer or '-':9s} {right:5s} {rt:>8s}  {window}")
+            f"{t.answer or '-':9s} {right:5s} {rt:>8s}  {window}{flag}")
 
 
 @sessions.command("show")
@@ -76,7 +86,8 @@ def _trial_line(t: HapticTrialRecord) -> str:
 @json_option
 def show(session_id: int, db_url: str | None, as_json: bool) -> None:
     """One session: times, models, patient, every trial's answer, the results."""
-    from fieldbank.haptic.training import accuracy_text, summarise
+    from fieldbank.haptic.training import summarise
+    from fieldbank.haptic.trainingresults import accuracy_text
 
     with open_db(db_url) as db:
         s = db.get_haptic_session(session_id)
@@ -97,13 +108,15 @@ def show(session_id: int, db_url: str | None, as_json: bool) -> None:
              + (f" ({doc['duration_s']:.1f} s)" if doc["duration_s"] is not None else ""),
              f"  patient   {s.patient_code or '-'}"
              + (f" (note: {s.patient_note})" if s.patient_note else ""),
-             f"  robot     {s.robot_url}"]
+             f"  robot     {s.robot_url}"
+             + (f" at {doc['rate_hz']:g} Hz" if doc["rate_hz"] else "")]
     for key, name in (("model_a", "model A"), ("model_b", "model B")):
         m = doc[key]
         if m:
             lines.append(f"  {name}   {m['id']}: {m['label']} ({m['origin']}"
                          + (f", patient {m['patient']}" if m["patient"] else "")
-                         + (f', plan "{m["plan"]}"' if m["plan"] else "") + ")")
+                         + (f', plan {m["plan_id"]} "{m["plan"]}"' if m["plan"] else "")
+                         + ")")
     pe = (loop.get("period_error_us") or {})
     if pe:
         lines.append(f"  loop      period error p99 {pe.get('p99', 0):.1f} µs, overruns "
@@ -119,8 +132,11 @@ def show(session_id: int, db_url: str | None, as_json: bool) -> None:
         blocks = sorted({t.block for t in abx})
         for b in blocks:
             bt = [t for t in abx if t.block == b]
-            lines.append(f"  A/B/X block {b}: {sum(bool(t.correct) for t in bt)} of {len(bt)} "
-                         f"correct")
+            counted = [t for t in bt if not t.flagged]
+            lines.append(f"  A/B/X block {b}: {sum(bool(t.correct) for t in counted)} of "
+                         f"{len(counted)} counted answers correct (A before, B after)"
+                         + (f"; {len(bt) - len(counted)} flagged (fault or no force) and "
+                            "left out" if len(bt) > len(counted) else ""))
     if training:
         lines += ["  " + line for line in accuracy_text(doc["training_summary"])]
     emit(doc, as_json, "\n".join(lines))

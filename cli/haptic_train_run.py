@@ -39,12 +39,8 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
     from fieldbank.haptic import trainee
     from fieldbank.haptic.dbsink import DatabaseTraceSink
     from fieldbank.haptic.session import trace_name_now
-    from fieldbank.haptic.training import (
-        TrainingProtocol,
-        accuracy_text,
-        results_html,
-        results_page,
-    )
+    from fieldbank.haptic.training import TrainingProtocol
+    from fieldbank.haptic.trainingresults import accuracy_text, results_html, results_page
 
     kw: dict[str, Any] = {"instruction": "instructed" if instructed else "non-instructed",
                           "seed": seed}
@@ -92,7 +88,8 @@ def results(sessions: tuple[int, ...], patient: str | None, html_out: Path | Non
 
     SESSIONS are haptic session ids (default: every session with training trials).
     """
-    from fieldbank.haptic.training import accuracy_text, results_html, results_page, summarise
+    from fieldbank.haptic.training import summarise
+    from fieldbank.haptic.trainingresults import accuracy_text, results_html, results_page
 
     with open_db(db_url) as db:
         chosen = {s.id for s in db.list_haptic_sessions(patient)}

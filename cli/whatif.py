@@ -83,7 +83,9 @@ from fieldbank.haptic.client import push_models
 @db_option
 @click.option("--render", is_flag=True,
               help="Push before and after to a running 'fieldbank haptic serve' (A = before, "
-                   "B = after) to feel them side by side.")
+                   "B = after) to feel them side by side. For a patient's stored model the "
+                   "plan and its after model are stored (as with --save), so the session "
+                   "refers to them.")
 @click.option("--socket", "control_path", default=None, metavar="SOCKET",
               help="Control socket of the renderer for --render (default: the one "
                    "'fieldbank haptic serve' uses).")
@@ -134,9 +136,12 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             total_units, None if opt_groups is None else
             tuple(g.strip() for g in opt_groups.split(",")),
             value("botulinum.weeks_since") if weeks is None else weeks)
+    # a rendered plan on a stored model is stored too: the session then records the plan and
+    # its after model, never a copy
+    store = save or (render and source.model_id is not None)
     res = run_whatif(source, plan, search=search, timecourse=timecourse,
                      plot_path=plot_path, out_dir=out_dir,
-                     save_to=(lambda: open_db(db_url)) if save else None,
+                     save_to=(lambda: open_db(db_url)) if store else None,
                      session_limit_units=session_limit,
                      accept_poor_fit=accept_poor_fit,
                      interval_samples=(WHATIF_INTERVAL_SAMPLES if interval_samples is None
@@ -148,8 +153,9 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
                (source.model_id, None))
         plan_text = plan_label(res.plan)
         info = {"A": ModelInfo.describe(source.description, ids[0], source.patient_code),
-                "B": ModelInfo.describe(f"after: {plan_text}", ids[1], source.patient_code,
-                                        plan_text)}
+                "B": ModelInfo.describe(f"what-if result on {source.description}", ids[1],
+                                        source.patient_code, plan_text,
+                                        res.saved.plan_id if res.saved else None)}
         doc["rendered"] = push_models(res.before, res.after, control_path, model_ids=ids,
                                       model_info=info)
     if as_json:

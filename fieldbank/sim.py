@@ -8,7 +8,9 @@ muscles, and returns the force the handle feels (the opposite of the coupling fo
 hand).
 
 The tick is plain-float Python on purpose: numpy on 2×2 arrays costs ~20 µs a call, an order of
-magnitude over the budget. The constants are bound once into a closure (fast cell loads); the
+magnitude over the budget. It is the reference: the haptic loop ticks both of its arms and their
+blend in one call compiled from the same arithmetic (:mod:`fieldbank.armkernel`), tested
+against this one. The constants are bound once into a closure (fast cell loads); the
 integrator is semi-implicit (symplectic) Euler, stable for ω·dt < 2 and without the energy drift
 of explicit Euler. Beyond the range of motion a stiff, damped joint stop holds the virtual arm.
 """
@@ -81,15 +83,20 @@ class ArmSim:
     dt_s : float
         Tick period, s (1e-3 for 1 kHz; 2.5e-4 to 2e-3 accepted).
     coupling : CouplingConfig, optional
+    state : SimState, optional
+        Where the arm's state lives (default: a new :class:`SimState` at rest); the compiled
+        pair (:mod:`fieldbank.armkernel`) passes views into its own state array.
     """
 
-    def __init__(self, arm: Arm, dt_s: float = 1e-3, coupling: CouplingConfig | None = None):
+    def __init__(self, arm: Arm, dt_s: float = 1e-3, coupling: CouplingConfig | None = None,
+                 state: SimState | None = None):
         if not (isinstance(dt_s, (int, float)) and 1e-6 <= dt_s <= 0.01):
             raise ParameterError(f"The 'dt_s' parameter must be in [1e-6, 0.01] s; got {dt_s!r}.")
         self.arm = arm
         self.dt_s = float(dt_s)
         self.coupling = coupling or CouplingConfig()
-        self.state = SimState(float(arm.q_rest[0]), float(arm.q_rest[1]))
+        self.state = state if state is not None else SimState(float(arm.q_rest[0]),
+                                                               float(arm.q_rest[1]))
         self.tick: TickFn = _make_tick(arm, self.state, self.dt_s, self.coupling)
 
     def reset(self, q: tuple[float, float] | None = None,

@@ -11,12 +11,14 @@ The package may use the fieldbank core (models, storage); it never imports
   robot and operator
 - :mod:`haptic.safety` — limits (one bounds table), passivity observer/controller, latched faults
 - :mod:`haptic.clock` — real and virtual clocks, the ``realtime()`` context of the loop
+  (SCHED_FIFO, a core of its own, what was granted), the simulated device's priority
 - :mod:`haptic.renderer` — the real-time loop: ``RendererConfig``, ``Renderer`` (tick, start,
   run, finish), A↔B crossfade
 - :mod:`haptic.loopstats` — period error, overruns, tick cost, status figures
 - :mod:`haptic.commands` — the typed command table (switch, push, arm, disarm, stop, status,
   A/B/X): parsed from control requests, applied by the loop
-- :mod:`haptic.abx` — blinded A/B/X trials
+- :mod:`haptic.abx` — blinded A/B/X trials (A before, B after; X hidden)
+- :mod:`haptic.trialwindow` — whether a trial was felt (faults, zero force): flagged trials
 - :mod:`haptic.client` — control-channel client (light: what the live commands load)
 - :mod:`haptic.control` — control-channel server (Unix socket)
 - :mod:`haptic.session` — a whole session: link, handshake, render, trace file, database

@@ -1,9 +1,11 @@
 """Blinded comparison of two models: A/B/X trials with seeded randomization.
 
 In each trial the clinician can feel A, B and X as often as they like; X is secretly A or B
-(drawn per trial); they answer which one X is. With ``hide_labels`` the assignment of A and B to
-the before and after models is also drawn at random once per session, so neither label reveals
-the intervention. Every presentation and answer is recorded with its time.
+(drawn per trial, balanced); they answer which one X is. A and B mean one thing everywhere in
+the product: A is the model before, B the model after; only X is hidden, and the result says
+per trial whether X was before or after. Every presentation and answer is recorded with its
+time and with the verdict on its window (:mod:`haptic.trialwindow`): an answer whose window
+held a fault or no force is kept, flagged, and left out of the score.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from fieldbank.haptic.errors import CommandError
 
 #: Most trials in one block (a request cannot make the renderer hold more).
 MAX_ABX_TRIALS = 1000
+#: What model index 0 and 1 are, in the words a result uses ("X was before").
+X_WAS = ("before", "after")
 
 
 @dataclass
@@ -26,14 +30,11 @@ class AbxSession:
     ----------
     n_trials : int
     seed : int
-        Seeds the draw of X per trial (and of the A/B labels with ``hide_labels``).
-    hide_labels : bool
-        Randomize which model (0 = before, 1 = after) is called A.
+        Seeds the draw of X per trial.
     """
 
     n_trials: int = 10
     seed: int = 0
-    hide_labels: bool = True
     answers: list[dict[str, Any]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -42,8 +43,8 @@ class AbxSession:
             raise CommandError(f"A/B/X needs 1 to {MAX_ABX_TRIALS} trials; got "
                                f"{self.n_trials!r}")
         rng = random.Random(self.seed)
-        a_model = rng.randrange(2) if self.hide_labels else 0
-        self.label_model = {"A": a_model, "B": 1 - a_model}
+        #: model index of each label: A is before (0), B after (1), always
+        self.label_model = {"A": 0, "B": 1}
         # balanced: half the trials X = A, half X = B, in random order
         xs = ["A"] * (self.n_trials // 2) + ["B"] * (self.n_trials - self.n_trials // 2)
         rng.shuffle(xs)
@@ -65,24 +66,34 @@ class AbxSession:
             return self.label_model[self.x_labels[self.trial]]
         raise CommandError(f"A/B/X presents 'A', 'B' or 'X'; got {label!r}")
 
-    def answer(self, choice: str, t_s: float) -> dict[str, Any]:
-        """Record that X sounded like ``choice`` ('A' or 'B'); advance to the next trial."""
+    def answer(self, choice: str, t_s: float,
+               window: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Record that X felt like ``choice`` ('A' or 'B'); advance to the next trial.
+
+        ``window``: the verdict on the trial's window (:meth:`TrialWindow.judge
+        <haptic.trialwindow.TrialWindow.judge>`); a flagged trial does not count.
+        """
         choice = choice.upper()
         if choice not in ("A", "B"):
             raise CommandError(f"an A/B/X answer is 'A' or 'B'; got {choice!r}")
         if self.done:
             raise CommandError(f"the A/B/X block of {self.n_trials} trials is finished")
         x = self.x_labels[self.trial]
+        w = window or {}
         rec = {"trial": self.trial, "answer": choice, "x_is": x, "correct": choice == x,
-               "x_model": self.label_model[x], "t_s": t_s}
+               "x_model": self.label_model[x], "x_was": X_WAS[self.label_model[x]],
+               "t_s": t_s, "flagged": bool(w.get("flagged")), "flags": list(w.get("flags", [])),
+               "peak_force_n": w.get("peak_force_n")}
         self.answers.append(rec)
         self.trial += 1
         return rec
 
     def result(self) -> dict[str, Any]:
-        """Answers so far, with the key (revealed only here) and the score."""
+        """Answers so far, with the key (revealed only here) and the score: ``correct`` of
+        ``counted`` (answered and not flagged); ``flagged`` answers are listed, not scored."""
         n = len(self.answers)
-        k = sum(1 for a in self.answers if a["correct"])
-        return {"n_trials": self.n_trials, "answered": n, "correct": k, "seed": self.seed,
-                "hide_labels": self.hide_labels, "label_model": dict(self.label_model),
-                "answers": list(self.answers)}
+        counted = [a for a in self.answers if not a.get("flagged")]
+        k = sum(1 for a in counted if a["correct"])
+        return {"n_trials": self.n_trials, "answered": n, "counted": len(counted),
+                "flagged": n - len(counted), "correct": k, "seed": self.seed,
+                "label_model": dict(self.label_model), "answers": list(self.answers)}

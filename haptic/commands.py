@@ -21,7 +21,7 @@ Control-channel requests (JSON lines, :mod:`haptic.control`) and the command eac
      "model_info": {"A": {"label": …, "model_id": …, "patient": …, "plan": …}, "B": {…}}}
                                                                         -> Push
     {"cmd": "switch", "to": "A" | "B" | "before" | "after"}              -> Switch
-    {"cmd": "abx", "action": "start", "n_trials": 10, "seed": 7, "hide_labels": true}
+    {"cmd": "abx", "action": "start", "n_trials": 10, "seed": 7}
                                                                         -> AbxStart
     {"cmd": "abx", "action": "present", "label": "A" | "B" | "X"}       -> AbxPresent
     {"cmd": "abx", "action": "answer", "answer": "A" | "B"}             -> AbxAnswer
@@ -42,13 +42,17 @@ from __future__ import annotations
 import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+from typing import Any, ClassVar
 
 from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
+from fieldbank.haptic.commandbase import CommandTarget as CommandTarget
+from fieldbank.haptic.commandbase import RendererCommand as RendererCommand
+from fieldbank.haptic.commandbase import Result as Result
+from fieldbank.haptic.commandbase import SimPair as SimPair
+from fieldbank.haptic.commandbase import int_field
 from fieldbank.haptic.errors import CommandError, HapticError
 from fieldbank.haptic.modelinfo import (
     ModelIds,
-    ModelInfo,
     ModelInfoPair,
     check_model_ids,
     model_info_pair,
@@ -62,100 +66,6 @@ from fieldbank.haptic.training import (
 from fieldbank.model import Arm as CompiledArm
 from fieldbank.params import ArmParams
 from fieldbank.probepath import ProbePath
-
-if TYPE_CHECKING:  # typing only
-    from fieldbank.sim import ArmSim
-
-#: A command's answer: a JSON-able mapping.
-Result = dict[str, Any]
-#: Compiled arms A (before) and B (after), built outside the loop.
-SimPair = tuple["ArmSim", "ArmSim"]
-
-
-class CommandTarget(Protocol):
-    """The renderer as its commands see it (:class:`haptic.renderer.Renderer`)."""
-
-    running: bool
-    t_s: float
-    abx: AbxSession | None
-    abx_results: list[dict[str, Any]]
-    training: TrainingSession | None
-    training_results: list[dict[str, Any]]
-
-    @property
-    def mode_name(self) -> str: ...
-    def crossfade(self, weight: float) -> None: ...
-    def log_event(self, kind: str, **data: Any) -> dict[str, Any]: ...
-    def compile_pair(self, before: ArmParams, after: ArmParams) -> SimPair: ...
-    def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None,
-                     model_info: ModelInfoPair | None = None) -> None: ...
-    def arm(self) -> None: ...
-    def disarm(self) -> None: ...
-    def request_stop(self) -> None: ...
-    def status(self) -> Result: ...
-    def info(self) -> Result: ...
-
-
-def int_field(req: Mapping[str, Any], key: str, default: int, lo: int, hi: int,
-              where: str) -> int:
-    """An integer field of a request, ``lo`` ≤ value ≤ ``hi`` (an integer or its digits;
-    never a bool, a fraction, NaN or infinity)."""
-    v = req.get(key, default)
-    ok = not isinstance(v, bool) and isinstance(v, (int, str, float))
-    n = None
-    if ok:
-        try:
-            if isinstance(v, float):
-                n = int(v) if v.is_integer() else None
-            else:
-                n = int(v)
-        except (ValueError, OverflowError):
-            n = None
-    if n is None or not lo <= n <= hi:
-        raise CommandError(f'{where}: "{key}" must be an integer from {lo} to {hi}; got {v!r}')
-    return n
-
-
-def bool_field(req: Mapping[str, Any], key: str, default: bool, where: str) -> bool:
-    v = req.get(key, default)
-    if v not in (True, False):  # also 0 and 1
-        raise CommandError(f'{where}: "{key}" must be true or false; got {v!r}')
-    return bool(v)
-
-
-class RendererCommand:
-    """Base of every command.
-
-    Attributes
-    ----------
-    name : str
-        The command's name (``Renderer.submit(name, **keywords)`` builds it from
-        :data:`COMMANDS`).
-    needs_running : bool
-        Refused unless the loop runs.
-    in_loop : bool
-        Applied by the loop at a tick boundary (False: at once, in the caller's thread).
-    """
-
-    name: ClassVar[str]
-    needs_running: ClassVar[bool] = True
-    in_loop: ClassVar[bool] = True
-
-    def prepare(self, target: CommandTarget) -> RendererCommand:
-        """The command ready to apply; runs in the caller's thread (default: itself)."""
-        del target
-        return self
-
-    def apply(self, target: CommandTarget) -> Result:
-        raise NotImplementedError
-
-    @classmethod
-    def from_json(cls, req: Mapping[str, Any]) -> RendererCommand:
-        """The command of a control-channel request (default: one without fields)."""
-        del req
-        return cls()
-
 
 _SWITCH_WEIGHTS: dict[object, float] = {"A": 0.0, "B": 1.0, "before": 0.0, "after": 1.0,
                                         0: 0.0, 1: 1.0}
@@ -187,10 +97,16 @@ class Switch(RendererCommand):
         return cls(req.get("to"))
 
     def apply(self, target: CommandTarget) -> Result:
+        if target.mode_name == "FAULT":
+            target.require_armed("switch")
+        if target.abx is not None or (target.training is not None
+                                      and not target.training.done):
+            raise CommandError("switch refused: a blinded block or a training protocol runs; "
+                               "it chooses what is felt")
         w = self.weight
         target.crossfade(w)
         target.log_event("switch", to=w)
-        return {"blend_target": w}
+        return {"blend_target": w, **target.felt()}
 
 
 @dataclass(frozen=True)
@@ -229,10 +145,12 @@ class Push(RendererCommand):
             raise CommandError("push: the models were not compiled (submit it to the renderer)")
         if target.training is not None and not target.training.done:
             raise CommandError("push refused: a training protocol is running (stop it first)")
+        if target.mode_name == "FAULT":
+            target.require_armed("push")
         target.queue_models(self.sims, (self.before, self.after), self.model_ids,
                             self.model_info)
         target.log_event("push", model_ids=dict(self.model_ids or {}))
-        return {"pushed": True}
+        return {"pushed": True, **target.felt()}
 
 
 @dataclass(frozen=True)
@@ -304,12 +222,12 @@ def _abx(target: CommandTarget) -> AbxSession:
 
 @dataclass(frozen=True)
 class AbxStart(RendererCommand):
-    """Start a block of ``n_trials`` blinded A/B/X trials (:class:`haptic.abx.AbxSession`)."""
+    """Start a block of ``n_trials`` blinded A/B/X trials (:class:`haptic.abx.AbxSession`):
+    A is always before and B after; only X is hidden."""
 
     name: ClassVar[str] = "abx_start"
     n_trials: int = 10
     seed: int = 0
-    hide_labels: bool = True
 
     def __post_init__(self) -> None:
         int_field({"n_trials": self.n_trials}, "n_trials", 10, 1, MAX_ABX_TRIALS, "abx start")
@@ -317,15 +235,19 @@ class AbxStart(RendererCommand):
 
     @classmethod
     def from_json(cls, req: Mapping[str, Any]) -> AbxStart:
+        if req.get("hide_labels"):
+            raise CommandError('abx start: "hide_labels" is not offered: A is always the model '
+                               "before and B the one after; only X is hidden")
         return cls(int_field(req, "n_trials", 10, 1, MAX_ABX_TRIALS, "abx start"),
-                   int_field(req, "seed", 0, 0, 2**63 - 1, "abx start"),
-                   bool_field(req, "hide_labels", True, "abx start"))
+                   int_field(req, "seed", 0, 0, 2**63 - 1, "abx start"))
 
     def apply(self, target: CommandTarget) -> Result:
         if target.training is not None and not target.training.done:
             raise CommandError("an A/B/X block cannot start while a training protocol runs")
-        abx = AbxSession(self.n_trials, self.seed, self.hide_labels)
+        target.require_armed("A/B/X start")
+        abx = AbxSession(self.n_trials, self.seed)
         target.abx = abx
+        target.open_window()
         target.log_event("abx_start", n_trials=abx.n_trials, seed=abx.seed)
         return {"trial": 0, "n_trials": abx.n_trials}
 
@@ -347,6 +269,7 @@ class AbxPresent(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         abx = _abx(target)
+        target.require_armed("A/B/X")
         label = str(self.label).upper()
         target.crossfade(float(abx.model_for(label)))
         target.log_event("abx_present", label=label, trial=abx.trial)
@@ -370,9 +293,13 @@ class AbxAnswer(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         abx = _abx(target)
-        rec = abx.answer(str(self.answer), target.t_s)
-        target.log_event("abx_answer", trial=rec["trial"], answer=rec["answer"])
-        out: Result = {"trial": rec["trial"] + 1, "done": abx.done}
+        target.require_armed("A/B/X answer")  # no answer counts while nothing is felt
+        rec = abx.answer(str(self.answer), target.t_s, target.trial_window())
+        target.open_window()
+        target.log_event("abx_answer", trial=rec["trial"], answer=rec["answer"],
+                         flagged=rec["flagged"])
+        out: Result = {"trial": rec["trial"] + 1, "done": abx.done,
+                       "flagged": rec["flagged"], "flags": rec["flags"]}
         if abx.done:
             target.abx_results.append(abx.result())
             out["result"] = abx.result()
@@ -389,6 +316,7 @@ def _training(target: CommandTarget) -> TrainingSession:
 def _record_training(target: CommandTarget, tr: TrainingSession) -> Result:
     res = tr.result()
     target.training_results.append(res)
+    target.end_training()
     target.log_event("train_end", abandoned=tr.abandoned, answered=len(
         [r for r in tr.records if r["answer"] is not None]))
     return res
@@ -411,6 +339,8 @@ class TrainStart(RendererCommand):
             raise CommandError("training cannot start while an A/B/X block runs")
         if target.training is not None and not target.training.done:
             raise CommandError("a training protocol is already running (train stop ends it)")
+        target.require_armed("training start")
+        target.begin_training()
         tr = TrainingSession(self.protocol)
         target.training = tr
         target.log_event("train_start", n_trials=len(tr.trials),
@@ -435,6 +365,7 @@ class TrainNext(RendererCommand):
         nxt: Trial | None = tr.next_trial
         if nxt is None:
             return replace(self, index=-1, session=tr)
+        target.require_armed("next trial")
         if tr.awaiting_answer:
             raise CommandError("training: answer this trial first (shoulder, elbow or both)")
         p = nxt.params(tr.protocol.base())
@@ -451,17 +382,15 @@ class TrainNext(RendererCommand):
             raise CommandError("train next: the training protocol changed; ask again")
         if self.index == -1:
             if not tr.done:
-                tr.finish(target.t_s)
+                tr.finish(target.t_s, window=target.trial_window())
                 if tr.done:
                     _record_training(target, tr)
             return tr.state(target.t_s)
         assert self.sims is not None and self.params is not None
-        trial = tr.begin(self.index, target.t_s, self.paths)
-        label = (trial.legend if trial.phase == "familiarisation"
-                 else f"assessment trial {trial.index + 1}")
-        same = ModelInfo.describe(f"training: {label}")
-        info = {"A": same, "B": same}
-        target.queue_models(self.sims, (self.params, self.params), None, info)
+        target.require_armed("next trial")
+        trial = tr.begin(self.index, target.t_s, self.paths, window=target.trial_window())
+        target.open_window()
+        target.queue_models(self.sims, (self.params, self.params), None, None, session=False)
         target.log_event("train_trial", trial=trial.index, phase=trial.phase,
                          condition=trial.condition)
         return tr.state(target.t_s)
@@ -485,9 +414,12 @@ class TrainAnswer(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         tr = _training(target)
-        rec = tr.answer(self.answer, target.t_s)
-        target.log_event("train_answer", trial=rec["trial"], answer=rec["answer"])
-        out: Result = {"trial": rec["trial"] + 1, "recorded": True, "done": tr.done}
+        target.require_armed("training answer")  # no answer counts while nothing is felt
+        rec = tr.answer(self.answer, target.t_s, window=target.trial_window())
+        target.log_event("train_answer", trial=rec["trial"], answer=rec["answer"],
+                         flagged=rec["flagged"])
+        out: Result = {"trial": rec["trial"] + 1, "recorded": True, "done": tr.done,
+                       "flagged": rec["flagged"], "flags": rec["flags"]}
         if tr.done:
             out["result"] = _record_training(target, tr)
         return out
@@ -502,7 +434,7 @@ class TrainStop(RendererCommand):
     def apply(self, target: CommandTarget) -> Result:
         tr = _training(target)
         if not tr.done:
-            tr.finish(target.t_s, abandon=True)
+            tr.finish(target.t_s, abandon=True, window=target.trial_window())
             _record_training(target, tr)
         return tr.state(target.t_s)
 

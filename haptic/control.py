@@ -45,6 +45,7 @@ from fieldbank.haptic.client import (
     default_socket_path,
     push_models,
 )
+from fieldbank.haptic.clock import keep_up_with_the_loop
 from fieldbank.haptic.commands import RendererCommand, Request, Result, parse_request
 from fieldbank.haptic.errors import CommandError, ControlError
 
@@ -187,6 +188,7 @@ class ControlServer:
                     line = lines.next()
                     if line is None:
                         return
+                    keep_up_with_the_loop()  # it will hold the interpreter the loop needs
                     if len(line) > MAX_REQUEST_BYTES:
                         conn.sendall(b'{"ok": false, "error": "request too large"}\n')
                         return

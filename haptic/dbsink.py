@@ -6,8 +6,11 @@ the session itself started and ended, and as its statistics the loop figures, fa
 A/B/X and training results and metadata), one trace per column — time and every per-tick
 column of :data:`haptic.recording.COLUMNS`, each an array in the HDF5 array store with its
 unit, checksummed by the storage layer — and one ``haptic_trials`` row per A/B/X or training
-trial (:func:`trial_rows`). Models rendered without a database id are stored first (origin
-'synthetic', labelled as haptic-session models).
+trial (:func:`trial_rows`). The session's models are the ones the clinician chose - those it
+started with, or the last pair pushed - never a training protocol's arms; stored models are
+referred to by id (with the plan, for a what-if pair), and only models rendered without a
+database id (from a file or a severity) are stored first (origin 'synthetic', labelled as
+haptic-session models).
 
 The sink is typed against :class:`HapticStore`, the part of the ``Database`` API it uses, so the
 storage layer (SQLAlchemy) is loaded by whoever opens a database, not by this module.
@@ -124,6 +127,17 @@ class DatabaseTraceSink:
         return f"{SESSION_PREFIX}{sess.id}"
 
 
+def session_plan_id(metadata: Mapping[str, Any]) -> int | None:
+    """The stored plan of the session's models (model B's, else A's), or None: the session
+    record keeps it in its statistics document, with the models' descriptions."""
+    info = metadata.get("model_info") or {}
+    for k in ("B", "A"):
+        pid = (info.get(k) or {}).get("plan_id")
+        if isinstance(pid, int) and not isinstance(pid, bool):
+            return pid
+    return None
+
+
 def _when(text: object) -> _dt.datetime | None:
     """An ISO 8601 time from a trace's metadata (None when absent or unreadable)."""
     if not isinstance(text, str):
@@ -151,11 +165,14 @@ def trial_rows(events: Sequence[Mapping[str, Any]],
             answered = float(a["t_s"])
             rows.append({
                 "kind": "abx", "block": block, "trial": int(a["trial"]), "phase": "abx",
-                "condition": f"X={a['x_is']}", "answer": a["answer"], "correct": a["correct"],
+                "condition": f"X={a['x_is']}" + (f" ({a['x_was']})" if a.get("x_was") else ""),
+                "answer": a["answer"], "correct": a["correct"],
                 "started_s": prev, "answered_s": answered,
                 "response_time_s": None if prev is None else answered - prev,
-                "x_model": a.get("x_model"), "label_model": res.get("label_model"),
-                "seed": res.get("seed"), "hide_labels": res.get("hide_labels"),
+                "x_model": a.get("x_model"), "x_was": a.get("x_was"),
+                "label_model": res.get("label_model"), "seed": res.get("seed"),
+                "flagged": bool(a.get("flagged")), "flags": a.get("flags") or [],
+                "peak_force_n": a.get("peak_force_n"),
             })
             prev = answered
         block += 1
@@ -170,7 +187,10 @@ def trial_rows(events: Sequence[Mapping[str, Any]],
                 "group": t.get("group"), "severity": t.get("severity"),
                 "instruction": t.get("instruction"), "legend_shown": t.get("legend_shown"),
                 "ended_s": t.get("ended_s"), "duration_s": t.get("duration_s"),
-                "protocol_seed": proto.get("seed"), "abandoned": res.get("abandoned", False),
+                "protocol_seed": proto.get("seed"), "protocol": res.get("protocol_name"),
+                "abandoned": res.get("abandoned", False),
+                "flagged": bool(t.get("flagged")), "flags": t.get("flags") or [],
+                "peak_force_n": t.get("peak_force_n"),
             })
         block += 1
     return rows

@@ -28,7 +28,7 @@ PHASES = ("link_in", "checks", "models", "safety", "link_out", "record")
 
 #: The figures ``status`` shows for the recent past of a running loop.
 STATUS_KEYS = ("period_error_us", "overruns", "skipped_ticks", "tick_total_us",
-               "realtime_scheduling")
+               "realtime_scheduling", "realtime")
 
 
 class LoopTimes:
@@ -77,7 +77,8 @@ def link_counters(link: RobotLink) -> dict[str, Any]:
 
 def loop_stats(times: LoopTimes, *, ticks: int, rate_hz: int, overrun_ms: float,
                realtime_scheduling: bool | None, passivity_active_ticks: int,
-               link: RobotLink, last: int | None = None) -> dict[str, Any]:
+               link: RobotLink, last: int | None = None,
+               realtime: dict[str, Any] | None = None) -> dict[str, Any]:
     """The loop's figures (module docstring) over the whole session or its ``last`` iterations.
 
     Safe to call from another thread while the loop runs: it works on copies (a numpy view
@@ -99,6 +100,9 @@ def loop_stats(times: LoopTimes, *, ticks: int, rate_hz: int, overrun_ms: float,
     link : RobotLink
     last : int, optional
         Only the last this many iterations (the tick cost means are always whole-session).
+    realtime : dict, optional
+        What the OS granted the loop (:meth:`haptic.clock.Grant.to_dict`: SCHED_FIFO and its
+        priority, the core it is pinned to, what was refused).
     """
     # the loop may append while this copies (wake before late): the same iterations of both,
     # up to the last one whose lateness is recorded
@@ -108,7 +112,7 @@ def loop_stats(times: LoopTimes, *, ticks: int, rate_hz: int, overrun_ms: float,
     late = np.array(times.late_ns[k:end], dtype=np.float64)
     tick_ns = np.array(times.tick_ns[-last if last else 0:], dtype=np.float64)
     out: dict[str, Any] = {"ticks": ticks, "rate_hz": rate_hz,
-                           "realtime_scheduling": realtime_scheduling}
+                           "realtime_scheduling": realtime_scheduling, "realtime": realtime}
     if late.size >= 2:
         periods_ns = np.diff(wake)
         out["period_error_us"] = _percentiles(np.abs(periods_ns - round(1e9 / rate_hz)), 1e3)

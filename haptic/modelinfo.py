@@ -4,7 +4,7 @@ A display (the clinician's station, ``fieldbank haptic status``) names the two r
 by what the renderer was told about them: a label, the stored model's id, the patient and, for
 a what-if result, the plan. The command line builds the record (:meth:`ModelInfo.describe`
 shortens over-long text to :data:`MAX_LABEL_CHARS`); the wire carries its dictionary
-(``{"A": {"label", "model_id", "patient", "plan"}, "B": {…}}``), read back strictly by
+(``{"A": {"label", "model_id", "patient", "plan", "plan_id"}, "B": {…}}``), read back strictly by
 :func:`model_info_pair` (over-long text or a wrong key is refused, never cut). The trace keeps
 the same dictionary in its metadata.
 
@@ -25,7 +25,7 @@ MAX_LABEL_CHARS = 200
 #: Largest model id accepted from the wire (ids are database integers).
 MAX_MODEL_ID = 2**63 - 1
 #: The fields of a model's description, in wire order.
-FIELDS = ("label", "model_id", "patient", "plan")
+FIELDS = ("label", "model_id", "patient", "plan", "plan_id")
 
 
 def check_model_id(value: object, key: str, where: str) -> int | None:
@@ -51,38 +51,47 @@ class ModelInfo:
         The patient's code.
     plan : str or None
         The plan's label when the model is a what-if result.
+    plan_id : int or None
+        The stored plan's id (None: not stored).
     """
 
     label: str | None = None
     model_id: int | None = None
     patient: str | None = None
     plan: str | None = None
+    plan_id: int | None = None
 
     def __post_init__(self) -> None:
         _check(self, "", "model info")
 
     @classmethod
     def describe(cls, label: str | None, model_id: int | None = None,
-                 patient: str | None = None, plan: str | None = None) -> ModelInfo:
+                 patient: str | None = None, plan: str | None = None,
+                 plan_id: int | None = None) -> ModelInfo:
         """The record of a model described by the product itself: text longer than
         :data:`MAX_LABEL_CHARS` is shortened (ending in an ellipsis) rather than refused."""
-        return cls(_shorten(label), model_id, _shorten(patient), _shorten(plan))
+        return cls(_shorten(label), model_id, _shorten(patient), _shorten(plan), plan_id)
 
     @classmethod
     def from_dict(cls, d: object, key: str, where: str) -> ModelInfo:
         """The record of one wire entry, checked strictly."""
         if not isinstance(d, Mapping) or not set(d) <= set(FIELDS):
             raise CommandError(f"{where}: model_info {key} has the keys label, model_id, "
-                               "patient, plan")
+                               "patient, plan, plan_id")
         vals = {f: d.get(f) for f in FIELDS}
         for f in ("label", "patient", "plan"):  # before the record is built: with its key
             _check_text(vals[f], f"model_info {key}.{f}", where)
         return cls(vals["label"], check_model_id(vals["model_id"], key, where), vals["patient"],
-                   vals["plan"])
+                   vals["plan"], check_model_id(vals["plan_id"], key, where))
 
     def to_dict(self) -> dict[str, Any]:
         return {"label": self.label, "model_id": self.model_id, "patient": self.patient,
-                "plan": self.plan}
+                "plan": self.plan, "plan_id": self.plan_id}
+
+    def text(self) -> str:
+        """One line for a display: the label, then the id, patient and plan each once (what
+        the label already says is not said again)."""
+        return describe_text(self.to_dict())
 
 
 #: What the renderer is told about models A and B.
@@ -116,6 +125,21 @@ def to_wire(info: ModelInfoPair | None) -> dict[str, dict[str, Any]] | None:
     return None if info is None else {k: v.to_dict() for k, v in info.items()}
 
 
+def describe_text(m: Mapping[str, Any]) -> str:
+    """:meth:`ModelInfo.text` of a wire dictionary (``fieldbank haptic status`` reads those)."""
+    label = m.get("label") or ""
+    low = label.lower()
+    bits = [label] if label else []
+    if m.get("model_id") and f"model {m['model_id']}" not in low:
+        bits.append(f"model {m['model_id']}")
+    if m.get("patient") and str(m["patient"]).lower() not in low:
+        bits.append(f"patient {m['patient']}")
+    if m.get("plan") and str(m["plan"]).lower() not in low:
+        plan_id = f" (plan {m['plan_id']})" if m.get("plan_id") else ""
+        bits.append(f'plan "{m["plan"]}"{plan_id}')
+    return " · ".join(bits) or "not described"
+
+
 def _check_text(value: object, name: str, where: str) -> None:
     if value is not None and (not isinstance(value, str) or len(value) > MAX_LABEL_CHARS):
         raise CommandError(f"{where}: {name} must be text of at most {MAX_LABEL_CHARS} "
@@ -126,6 +150,7 @@ def _check(info: ModelInfo, key: str, where: str) -> None:
     for f in ("label", "patient", "plan"):
         _check_text(getattr(info, f), f, where)
     check_model_id(info.model_id, key, where)
+    check_model_id(info.plan_id, key, where)
 
 
 def _shorten(text: str | None) -> str | None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from fieldbank.armkernel import ArmPair
 from fieldbank.haptic.commands import SimPair
 from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair, to_wire
 from fieldbank.model import Arm
@@ -72,26 +73,34 @@ class ModelPair:
     crossfade_s, push_fade_s : float, s
         Ramp of an A↔B switch; fade out before and in after a swap.
     coupling : CouplingConfig, optional
+    compiled : bool
+        Tick both arms and the blend in one compiled call (:class:`fieldbank.armkernel.ArmPair`);
+        False: the plain-Python reference tick of each arm.
     """
 
     def __init__(self, before: ArmParams, after: ArmParams, dt_s: float, crossfade_s: float,
-                 push_fade_s: float, coupling: CouplingConfig | None = None) -> None:
+                 push_fade_s: float, coupling: CouplingConfig | None = None,
+                 compiled: bool = True) -> None:
         self.dt_s = dt_s
         self.coupling = coupling
+        self.compiled = compiled
         self.crossfade_ticks = round(crossfade_s / dt_s)
         self.push_fade_ticks = round(push_fade_s / dt_s)
         self.params = (before, after)
+        #: The session's models (the clinician's choice), whatever a training renders now.
+        self.session_params = self.params
         self.sims = self.compile(before, after)
         self.blend = Ramp(0.0)
         self.gain = Ramp(0.0)
-        #: compiled models waiting for the gain to reach zero, with their ids and descriptions
+        #: compiled models waiting for the gain to reach zero, with their ids and descriptions,
+        #: and whether they become the session's models
         self.pending: tuple[SimPair, tuple[ArmParams, ArmParams], ModelIds | None,
-                            ModelInfoPair | None] | None = None
+                            ModelInfoPair | None, bool] | None = None
 
     def compile(self, before: ArmParams, after: ArmParams) -> SimPair:
         """Both models compiled for this loop's period (slow: call outside the loop)."""
-        return (build_sim(before, self.dt_s, self.coupling),
-                build_sim(after, self.dt_s, self.coupling))
+        return ArmPair(Arm.from_params(before), Arm.from_params(after), self.dt_s,
+                       self.coupling, self.compiled)
 
     def crossfade(self, weight: float) -> None:
         """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""
@@ -102,9 +111,11 @@ class ModelPair:
         self.gain.go(gain, self.push_fade_ticks)
 
     def queue(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-              model_ids: ModelIds | None, model_info: ModelInfoPair | None) -> None:
-        """Hold compiled models for :meth:`swap`."""
-        self.pending = (sims, params, model_ids, model_info)
+              model_ids: ModelIds | None, model_info: ModelInfoPair | None,
+              session: bool = True) -> None:
+        """Hold compiled models for :meth:`swap` (``session``: they become the session's
+        models; False: a training arm, rendered but not the session's)."""
+        self.pending = (sims, params, model_ids, model_info, session)
 
     @property
     def swapping(self) -> bool:
@@ -117,13 +128,16 @@ class ModelPair:
         return self.pending is not None and self.gain.value == 0.0 and not self.gain.moving
 
     def swap(self, metadata: dict[str, Any]) -> None:
-        """Put the pending models in place; their ids and descriptions replace those in the
-        trace's ``metadata``."""
+        """Put the pending models in place; the session's models' ids and descriptions replace
+        those in the trace's ``metadata`` (a training arm's do not)."""
         assert self.pending is not None
-        sims, params, ids, info = self.pending
+        sims, params, ids, info, session = self.pending
         self.pending = None
         self.sims = sims
         self.params = params
+        if not session:
+            return
+        self.session_params = params
         if ids:
             metadata["model_ids"] = dict(ids)
         else:

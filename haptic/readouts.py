@@ -1,7 +1,11 @@
 """What a running renderer tells other processes besides the per-tick snapshot.
 
-* :func:`status` - what ``fieldbank haptic status`` shows: mode, blend, force, faults, the loop's
-  timing over the last 10 s, the A/B/X trial and the training state;
+* :func:`status` - what ``fieldbank haptic status`` shows: mode, what is felt, blend, force,
+  the latched faults in words with what to do, why a re-arm would be refused now, whether a
+  protocol is paused, the loop's timing over the last 10 s, the A/B/X trial and the training
+  state;
+* :func:`felt` - the renderer's true state in a few fields, the answer to ``switch`` and
+  ``push``;
 * :func:`info` - what a display needs once (the clinician's station): the models and their
   parameters, the arm geometry, the workspace, the A/B/X block and the training protocol.
 
@@ -18,6 +22,7 @@ from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.commands import Result
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.loopstats import status_figures
+from fieldbank.haptic.modelinfo import describe_text
 from fieldbank.haptic.pair import ModelPair
 from fieldbank.haptic.protocol import FaultCode
 from fieldbank.haptic.safety import Safety
@@ -48,6 +53,44 @@ class LoopView(Protocol):
     @property
     def shoulder_offset_m(self) -> tuple[float, float]: ...
     def loop_stats(self, last: int | None = None) -> dict[str, Any]: ...
+    def arm_problems(self) -> list[str]: ...
+
+
+def _felt_now(rd: LoopView) -> str:
+    tr = rd.training
+    if rd.blinded:
+        return "hidden (blinded)"
+    if tr is not None and not tr.done:
+        cur = tr.current
+        return "training arm" + (f": {cur.legend}" if cur is not None else "")
+    w = rd.pair.blend.value
+    return "A (before)" if w < 0.5 else "B (after)"
+
+
+def fault_state(rd: LoopView) -> Result:
+    """The faults latched now, each in words with what to do; why a re-arm would be refused
+    now (empty when it would be accepted); whether a running protocol waits for a re-arm."""
+    s = rd.safety
+    armed = s.mode.name == "ARMED"
+    running = rd.abx is not None or (rd.training is not None and not rd.training.done)
+    return {
+        "faults_now": [r.explained() for r in s.latched_records()],
+        "rearm_refused_because": [] if armed else rd.arm_problems(),
+        "paused": running and not armed,
+    }
+
+
+def felt(rd: LoopView) -> Result:
+    """The renderer's true state in a few fields: mode, what is felt, the blend (hidden while
+    blinded), the gain, whether pushed models are still being swapped in, and the faults."""
+    w = rd.pair.blend
+    return {
+        "mode": rd.safety.mode.name, "felt": _felt_now(rd),
+        "blend": "hidden" if rd.blinded else w.value,
+        "blend_target": "hidden" if rd.blinded else w.end,
+        "gain": rd.pair.gain.value, "swapping": rd.pair.swapping,
+        **fault_state(rd),
+    }
 
 
 def status(rd: LoopView) -> Result:
@@ -57,6 +100,7 @@ def status(rd: LoopView) -> Result:
         "running": rd.running, "mode": s.mode.name, "t_s": round(rd.t_s, 4),
         "ticks": rd.ticks, "gain": rd.pair.gain.value,
         "blend": "hidden" if rd.blinded else rd.pair.blend.value,
+        "felt": _felt_now(rd), "swapping": rd.pair.swapping, **fault_state(rd),
         "force_n": [rd.fx, rd.fy],
         "handle_m": [rd.link.x, rd.link.y],
         "latched_faults": [c.name for c in FaultCode if s.latched & (1 << (c - 1))],
@@ -77,8 +121,10 @@ def models(rd: LoopView) -> dict[str, Any] | str:
     ids = rd.metadata.get("model_ids") or {}
     out: dict[str, Any] = {}
     for k in ("A", "B"):
-        d = {"label": None, "model_id": ids.get(k), "patient": None, "plan": None}
+        d = {"label": None, "model_id": ids.get(k), "patient": None, "plan": None,
+             "plan_id": None}
         d.update({f: v for f, v in dict(known.get(k) or {}).items() if v is not None})
+        d["text"] = describe_text(d)
         out[k] = d
     return out
 
@@ -95,7 +141,8 @@ def info(rd: LoopView) -> Result:
     abx = rd.abx
     return {
         "running": rd.running, "mode": rd.safety.mode.name, "t_s": rd.t_s,
-        "events": len(rd.events), "blinded": blinded,
+        "events": len(rd.events), "blinded": blinded, "felt": _felt_now(rd),
+        **fault_state(rd),
         "models": models(rd),
         "params": None if blinded else {"A": params[0].to_dict(), "B": params[1].to_dict()},
         "geometry": geometry,

@@ -35,7 +35,6 @@ import logging
 import math
 import queue
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,7 +43,7 @@ from fieldbank.errors import UnreachableError
 from fieldbank.haptic import commands, readouts
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.assemble import assemble_trace, close_blocks, utc_now
-from fieldbank.haptic.clock import Clock, RealClock, realtime
+from fieldbank.haptic.clock import Clock, Grant, RealClock, realtime
 from fieldbank.haptic.commands import RendererCommand, Request, Result, SimPair
 from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
@@ -53,70 +52,16 @@ from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair
 from fieldbank.haptic.pair import ModelPair
 from fieldbank.haptic.protocol import FLAG_FAULT, FaultCode
 from fieldbank.haptic.recording import Trace, TraceBuffer
+from fieldbank.haptic.rendererconfig import RENDERER_BOUNDS as RENDERER_BOUNDS
+from fieldbank.haptic.rendererconfig import RendererConfig as RendererConfig
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.training import TrainingSession
+from fieldbank.haptic.trialwindow import TrialWindow
 from fieldbank.params import ArmParams
 from fieldbank.sim import CouplingConfig
-from fieldbank.validation import Interval, check_fields, check_tuple
 
 log = logging.getLogger("fieldbank.haptic.renderer")
-
-#: Allowed range of each numeric setting of :class:`RendererConfig` (messages are generated).
-RENDERER_BOUNDS: dict[str, Interval] = {
-    "rate_hz": Interval.whole(500, 4000, "Hz"),
-    "crossfade_s": Interval(0.0, None, "s"),
-    "push_fade_s": Interval(0.0, None, "s"),
-    "state_wait_s": Interval(0.0, None, "s"),
-    "spin_us": Interval(0.0, None, "µs"),
-    "overrun_ms": Interval(0.0, None, "ms"),
-}
-
-
-@dataclass(frozen=True)
-class RendererConfig:
-    """Loop settings, SI; ranges in :data:`RENDERER_BOUNDS`.
-
-    Attributes
-    ----------
-    rate_hz : int, Hz
-        Tick rate, 500–4000.
-    crossfade_s : float, s
-        Raised-cosine ramp of an A↔B switch.
-    push_fade_s : float, s
-        Fade out before and in after swapping pushed models.
-    shoulder_offset_m : tuple of 2 float, m
-        The shoulder's position in robot coordinates (robot frame − offset = shoulder frame).
-    state_wait_s : float, s
-        > 0: block up to this long for each STATE (lockstep devices); 0: never block.
-    spin_us : float, µs
-        The real clock spins (instead of sleeping) this long before each deadline.
-    overrun_ms : float, ms
-        A tick waking later than this is counted as an overrun.
-    realtime_priority : bool
-        Ask for SCHED_FIFO.
-    record : bool
-        Keep a trace row per tick.
-    arm_on_start : bool
-        Arm as soon as the first STATE arrives.
-    """
-
-    rate_hz: int = 1000
-    crossfade_s: float = 0.5            # A↔B switch ramp
-    push_fade_s: float = 0.3            # fade out, swap models, fade in
-    shoulder_offset_m: tuple[float, float] = (0.0, 0.0)
-    state_wait_s: float = 0.0           # > 0: block up to this long for each STATE (lockstep)
-    spin_us: float = 200.0
-    overrun_ms: float = 1.0
-    realtime_priority: bool = True
-    record: bool = True
-    arm_on_start: bool = True
-
-    def __post_init__(self) -> None:
-        check_fields(self, RENDERER_BOUNDS, what="renderer parameter")
-        check_tuple("shoulder_offset_m", self.shoulder_offset_m, 2, Interval(None, None, "m"),
-                    what="renderer parameter")
-
 
 class Renderer:
     """Renders model A (before) and B (after) through ``link``.
@@ -145,7 +90,7 @@ class Renderer:
         self.clock: Clock = clock or RealClock(self.config.spin_us)
         self.coupling = coupling
         self.pair = ModelPair(before, after, self.dt_s, self.config.crossfade_s,
-                              self.config.push_fade_s, coupling)
+                              self.config.push_fade_s, coupling, self.config.compiled_tick)
         self.commands: queue.SimpleQueue[Request] = queue.SimpleQueue()
         self.events: list[dict[str, Any]] = []
         self.abx: AbxSession | None = None
@@ -163,6 +108,7 @@ class Renderer:
         self._fault_flags_seen = 0
         self._fault_flags_before_poll = 0
         self._watchdog_flags_seen = 0
+        self._reply_spin_s = min(self.config.spin_us * 1e-6, 0.5 * self.dt_s)
         self._stop = False
         self.running = False
         self.t_s = 0.0
@@ -175,7 +121,16 @@ class Renderer:
         self._cost = self.times.phase_ns
         self._tick_ns = self.times.tick_ns
         self.realtime_scheduling: bool | None = None
+        #: What the OS granted the loop: priority, core, refusals (haptic.clock.Grant).
+        self.realtime_grant: Grant | None = None
         self.metadata: dict[str, Any] = {}
+        #: Ticks on which the renderer was not armed (force zero by command), since the start.
+        self.unarmed_ticks = 0
+        #: Largest ‖F‖² commanded since the current trial's window opened, N².
+        self.peak_force_n2 = 0.0
+        self._window = TrialWindow()
+        #: The patient's pair while a training protocol renders its own arms (restored after).
+        self._home: tuple[SimPair, tuple[ArmParams, ArmParams]] | None = None
 
     @property
     def skipped_ticks(self) -> int:
@@ -262,14 +217,16 @@ class Renderer:
         return self.pair.compile(before, after)
 
     def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None, model_info: ModelInfoPair | None = None
-                     ) -> None:
+                     model_ids: ModelIds | None, model_info: ModelInfoPair | None = None,
+                     session: bool = True) -> None:
         """Swap in compiled models: at once when idle, else behind a fade out and in.
 
-        ``model_info``: what a display says about each (``{"A": ModelInfo, "B": ModelInfo}``),
-        kept in the trace's metadata from the swap on.
+        ``model_info``: what a display says about each (``{"A": ModelInfo, "B": ModelInfo}``).
+        ``session``: the pair becomes the session's models (the clinician's choice: their ids
+        and descriptions go into the trace's metadata, their parameters into its models);
+        False for a training arm, which the session does not keep.
         """
-        self.pair.queue(sims, params, model_ids, model_info)
+        self.pair.queue(sims, params, model_ids, model_info, session)
         if not self.running:
             self._swap()
         else:
@@ -296,16 +253,65 @@ class Renderer:
             except (UnreachableError, ValueError):
                 sim.reset()
 
-    def arm(self) -> None:
-        """Arm (or re-arm after a fault): refused while the link is down, the device reports a
-        fault in its latest STATE, or the handle state is unsafe. The tick that applies it runs
-        every safety check before any force goes out."""
+    def arm_problems(self) -> list[str]:
+        """Why arming would be refused now, in words (empty: it would be accepted): the link
+        is down, the robot reports a device fault in its newest state, no state arrives, or
+        the handle is outside the workspace, too fast or not a number. Safe to call from any
+        thread (it only reads)."""
         if self._link_down:
-            raise CommandError("cannot arm: the robot link is down")
+            return ["the robot link is down: reconnect the robot and start a new session"]
         link = self.link
+        out = []
         if link.flags & FLAG_FAULT:
-            raise CommandError("cannot arm: the robot reports a device fault in its latest "
-                               "state; clear it on the robot first")
+            out.append("the robot reports a device fault in its latest state: clear it on the "
+                       "robot first")
+        if self.running and self._stale > self._timeout_ticks:
+            out.append(f"no state from the robot for {self._stale * self.dt_s * 1e3:.0f} ms")
+        code, msg = self.safety.check_handle(link.x, link.y, link.vx, link.vy)
+        if code:
+            out.append(msg)
+        return out
+
+    def require_armed(self, what: str) -> None:
+        """CommandError saying why ``what`` waits, unless the renderer is armed: a protocol
+        pauses on a fault (and while disarmed) and goes on only after a re-arm."""
+        self.safety.require_armed(what)
+
+    def open_window(self) -> None:
+        """A trial starts: judge the coming window from here (:mod:`haptic.trialwindow`)."""
+        self._window = TrialWindow(self.ticks, self.unarmed_ticks,
+                                   len(self.safety.log_records),
+                                   self.safety.mode == Mode.FAULT)
+        self.peak_force_n2 = 0.0
+
+    def trial_window(self) -> dict[str, Any]:
+        """The verdict on the window since :meth:`open_window`: flagged, flags, peak force."""
+        return self._window.judge(self.ticks, self.unarmed_ticks, self.safety.log_records,
+                                  math.sqrt(self.peak_force_n2), self.dt_s)
+
+    def begin_training(self) -> None:
+        """Keep the patient's pair while a training protocol renders its own arms (refused
+        while pushed models are still waiting to be swapped in: they would be lost)."""
+        if self.pair.pending is not None:
+            raise CommandError("training start refused: pushed models are being swapped in; "
+                               "start it once they are rendered")
+        self._home = (self.pair.sims, self.pair.params)
+
+    def end_training(self) -> None:
+        """Put the patient's pair (and its blend) back after a training protocol."""
+        if self._home is not None:
+            sims, params = self._home
+            self._home = None
+            self.queue_models(sims, params, None, None, session=False)
+            self.log_event("training_pair_restored")
+
+    def arm(self) -> None:
+        """Arm (or re-arm after a fault), refused with every reason of :meth:`arm_problems`.
+        The tick that applies it runs every safety check before any force goes out."""
+        problems = self.arm_problems()
+        if problems:
+            raise CommandError("cannot arm: " + "; ".join(problems))
+        link = self.link
         if self.safety.latched & (1 << (FaultCode.MODEL - 1)):
             self._reset_arms()
         self.safety.rearm((link.x, link.y, link.vx, link.vy))
@@ -361,7 +367,9 @@ class Renderer:
             try:
                 wait = self.config.state_wait_s
                 # lockstep devices answer each FORCE with one STATE: wait for it, not for more
-                new = link.wait_state(wait) if wait > 0 and self._awaiting else link.poll()
+                # (a bounded spin first, then sleep: a device sharing the core is not starved)
+                new = (link.wait_state(wait, self._reply_spin_s) if wait > 0 and self._awaiting
+                       else link.poll())
             except LinkDown as exc:
                 self._link_down = True
                 self._trip(FaultCode.DISCONNECT, str(exc))
@@ -400,27 +408,25 @@ class Renderer:
             safety.check_crc(link.crc_errors)
         c2 = pc()
         pair = self.pair
-        sim_a, sim_b = pair.sims
-        fa_x = fa_y = fb_x = fb_y = 0.0
+        arms = pair.sims
+        # the blend and gain of this tick first: the compiled call blends as it ticks
+        w = pair.blend.step()
+        g = pair.gain.step()
+        mx = my = 0.0
         if math.isfinite(x) and math.isfinite(y) and math.isfinite(vx) and math.isfinite(vy):
             try:
-                fa_x, fa_y = sim_a.tick(x, y, vx, vy)
-                fb_x, fb_y = sim_b.tick(x, y, vx, vy)
+                mx, my, fa_x, fa_y, fb_x, fb_y = arms.tick(x, y, vx, vy, w, g)
                 ok = math.isfinite(fa_x + fa_y) and math.isfinite(fb_x + fb_y)
             except (ArithmeticError, ValueError):  # overflow inside a diverging arm
                 ok = False
             if not ok:
                 self._trip(FaultCode.MODEL, "a virtual arm diverged (non-finite force)")
                 self._reset_arms()
-                fa_x = fa_y = fb_x = fb_y = 0.0
-        w = pair.blend.step()
-        g = pair.gain.step()
+                mx = my = 0.0
         if pair.pending is not None and g == 0.0 and not pair.gain.moving:
             self._swap()
             if safety.mode == Mode.ARMED:
                 pair.fade(1.0)
-        mx = g * ((1.0 - w) * fa_x + w * fb_x)
-        my = g * ((1.0 - w) * fa_y + w * fb_y)
         c3 = pc()
         fx, fy = safety.output(mx, my, vx, vy)
         if safety.limiter.nan_seen:
@@ -439,13 +445,16 @@ class Renderer:
                 self._trip(FaultCode.DISCONNECT, str(exc))
                 fx = fy = 0.0
         self.fx, self.fy = fx, fy
+        f2 = fx * fx + fy * fy
+        if f2 > self.peak_force_n2:
+            self.peak_force_n2 = f2
+        if safety.mode != Mode.ARMED:
+            self.unarmed_ticks += 1
         c5 = pc()
         buf = self._buf
         snap = self.snapshot
         if buf is not None or snap is not None:
-            sa, sb = sim_a.state, sim_b.state
-            row = (link.x, link.y, vx, vy, fx, fy, mx, my, w, g,
-                   sa.q1, sa.q2, sa.qd1, sa.qd2, sb.q1, sb.q2, sb.qd1, sb.qd2,
+            row = (link.x, link.y, vx, vy, fx, fy, mx, my, w, g, *arms.joints(),
                    float(safety.mode), float(safety.latched), float(new),
                    safety.passivity.energy_j)
             if buf is not None:
@@ -497,7 +506,8 @@ class Renderer:
         self._drain()
         close_blocks(self.t_s, self.abx, self.abx_results, self.training, self.training_results)
         self.trace = assemble_trace(
-            self._buf, rate_hz=self.config.rate_hz, params=self.pair.params, events=self.events,
+            self._buf, rate_hz=self.config.rate_hz, params=self.pair.session_params,
+            events=self.events,
             safety=self.safety, stats=self.loop_stats(), metadata=self.metadata,
             renderer_config=self.config, device=self.link.device, abx_results=self.abx_results,
             training_results=self.training_results)
@@ -518,7 +528,8 @@ class Renderer:
         # the process is prepared before arming: nothing may stand between the ARM frame and
         # the first FORCE (haptic.clock.realtime)
         with realtime(cfg.realtime_priority) as granted:
-            self.realtime_scheduling = granted
+            self.realtime_scheduling = granted.fifo
+            self.realtime_grant = granted
             try:
                 self.start(first_state_timeout_s, n_ticks)
                 with np.errstate(over="ignore", invalid="ignore"):  # diverging arms are faults
@@ -561,7 +572,9 @@ class Renderer:
                           overrun_ms=self.config.overrun_ms,
                           realtime_scheduling=self.realtime_scheduling,
                           passivity_active_ticks=self.safety.passivity.active_ticks,
-                          link=self.link, last=last)
+                          link=self.link, last=last,
+                          realtime=None if self.realtime_grant is None
+                          else self.realtime_grant.to_dict())
 
     def status(self) -> Result:
         """What ``fieldbank haptic status`` shows (:func:`haptic.readouts.status`)."""
@@ -576,3 +589,7 @@ class Renderer:
     def info(self) -> Result:
         """What a display needs besides the snapshot (:func:`haptic.readouts.info`)."""
         return readouts.info(self)
+
+    def felt(self) -> Result:
+        """The renderer's true state in a few fields (:func:`haptic.readouts.felt`)."""
+        return readouts.felt(self)

@@ -120,6 +120,32 @@ class SafetyConfig:
             )
 
 
+#: Each fault in the clinic's words: what happened, and what to do before re-arming.
+FAULT_WORDS: dict[FaultCode, tuple[str, str]] = {
+    FaultCode.CRC: ("The link to the robot garbled too many frames.",
+                    "Check the robot's cable and connector, then re-arm."),
+    FaultCode.TIMEOUT: ("The robot stopped reporting the handle's position.",
+                        "Check that the robot is on and connected, then re-arm."),
+    FaultCode.SEQ_GAP: ("Reports from the robot were lost on the way.",
+                        "Check the robot's cable, then re-arm."),
+    FaultCode.NAN: ("The robot reported an invalid handle position or speed.",
+                    "Check the robot's sensors, then re-arm."),
+    FaultCode.WORKSPACE: ("The handle left the safe workspace.",
+                          "Bring the handle back inside the dashed box, then re-arm."),
+    FaultCode.SPEED: ("The handle moved faster than the speed limit.",
+                      "Hold the handle still, then re-arm."),
+    FaultCode.DISCONNECT: ("The link to the robot is broken.",
+                           "Reconnect the robot and start a new session; re-arming is "
+                           "refused while the link is down."),
+    FaultCode.DEVICE: ("The robot stopped itself: it reported a fault, or its watchdog saw no "
+                       "force command in time.",
+                       "Make sure the robot shows no fault of its own, then re-arm."),
+    FaultCode.MODEL: ("A virtual arm became numerically unstable.",
+                      "Re-arm: both arms restart at the handle."),
+    FaultCode.OPERATOR: ("Stopped by the operator.", "Re-arm when ready."),
+}
+
+
 @dataclass(frozen=True)
 class FaultRecord:
     """One fault: time (s since session start), code, human message."""
@@ -131,6 +157,11 @@ class FaultRecord:
     def to_dict(self) -> dict[str, object]:
         return {"t_s": self.t_s, "code": self.code, "name": FaultCode(self.code).name,
                 "message": self.message}
+
+    def explained(self) -> dict[str, object]:
+        """:meth:`to_dict` with the fault in words (``what``) and what to do (``todo``)."""
+        what, todo = FAULT_WORDS[FaultCode(self.code)]
+        return {**self.to_dict(), "what": what, "todo": todo}
 
 
 class ForceLimiter:
@@ -264,6 +295,27 @@ class Safety:
         rec = FaultRecord(t_s, int(code), message)
         self.log_records.append(rec)
         log.warning("haptic fault %s at t=%.4f s: %s", FaultCode(code).name, t_s, message)
+
+    def latched_records(self) -> list[FaultRecord]:
+        """The newest record of each fault latched now, oldest first."""
+        newest: dict[int, FaultRecord] = {}
+        for rec in self.log_records:
+            if self.latched & (1 << (rec.code - 1)):
+                newest[rec.code] = rec
+        return sorted(newest.values(), key=lambda r: r.t_s)
+
+    def require_armed(self, what: str) -> None:
+        """CommandError saying why ``what`` waits, unless armed: a protocol pauses on a fault
+        (and while disarmed) and goes on only after a re-arm."""
+        if self.mode == Mode.ARMED:
+            return
+        if self.mode == Mode.FAULT:
+            why = "; ".join(f"{FaultCode(r.code).name}: {r.message}"
+                            for r in self.latched_records())
+            raise CommandError(f"{what} refused: paused by a fault ({why or 'latched'}); "
+                               "re-arm the robot to go on")
+        raise CommandError(f"{what} refused: the robot is disarmed (no force is rendered); "
+                           "arm it to go on")
 
     def rearm(self, handle: tuple[float, float, float, float]) -> None:
         """Clear latched faults and arm, if the handle state is safe now; else CommandError."""

@@ -178,7 +178,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
           station: StationOptions | None = None,
           switches: Sequence[ScheduledSwitch] = (),
           trace_dir: str | Path | None = None, trace_name: str | None = None,
-          db: HapticStore | StoreOpener | None = None, say: Say = _quiet) -> SessionResult:
+          db: HapticStore | StoreOpener | None = None, say: Say = _quiet,
+          watchdog_ms: int = WATCHDOG_MS) -> SessionResult:
     """Render ``before`` (A) and ``after`` (B) on ``robot``; store the trace.
 
     Parameters
@@ -224,6 +225,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         again here. None: no record.
     say : callable(str), optional
         Receives one line of progress per step.
+    watchdog_ms : int, ms
+        The device watchdog asked for in the handshake (the device may keep a shorter one).
 
     Returns
     -------
@@ -247,7 +250,7 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         robot = sim_url(before, SIM_MOTION, cfg.shoulder_offset_m, robot)
     link = RobotLink.open(robot)
     try:
-        device = link.handshake(cfg.rate_hz, WATCHDOG_MS)
+        device = link.handshake(cfg.rate_hz, watchdog_ms)
         say(f"robot {device.device_id!r}: protocol {device.protocol_version}, up to "
             f"{device.max_rate_hz} Hz, device force limit {device.force_limit_n:g} N, "
             f"watchdog {device.watchdog_ms} ms")

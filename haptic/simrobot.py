@@ -41,6 +41,7 @@ import math
 import os
 import random
 import select
+import signal
 import subprocess
 import sys
 import threading
@@ -51,6 +52,7 @@ from urllib.parse import parse_qsl, urlencode
 
 from fieldbank.errors import ParameterError
 from fieldbank.haptic import protocol as P
+from fieldbank.haptic.clock import Grant, cpu_plan, enter_device_realtime
 from fieldbank.haptic.motions import MOTIONS, MotionFn, make_motion, parse_path, wander
 from fieldbank.haptic.patient import (
     DEFAULT_FORCE_NOISE_N,
@@ -211,6 +213,8 @@ class SimDevice:
         self.drop_frames = 0
         self.nan_frames = 0
         self.frozen = False
+        #: the device's own fault (flag bit 2 in every STATE while set; it disarms itself)
+        self.device_fault = False
         self._wall0: float | None = None
         self._next_state_wall = 0.0
 
@@ -291,7 +295,11 @@ class SimDevice:
         # HEARTBEAT and FAULT from the host need no action beyond being received
 
     def send_state(self) -> None:
-        flags = ((P.FLAG_ARMED if self.armed else 0)
+        if self.device_fault and self.armed:  # a device disarms on its own faults
+            self.armed = False
+            self.fx_cmd = self.fy_cmd = 0.0
+        flags = ((P.FLAG_FAULT if self.device_fault else 0)
+                 | (P.FLAG_ARMED if self.armed else 0)
                  | (P.FLAG_WATCHDOG if self.watchdog_tripped else 0))
         x, y, vx, vy = self.x, self.y, self.vx, self.vy
         t_us = int(self.t_s * 1e6) & 0xFFFFFFFF
@@ -373,7 +381,9 @@ class PtyRobot:
 
     ``PtyRobot(config).start_thread()`` runs it in a thread of this process (fault injection
     through :attr:`device`); ``start_process()`` runs it in its own process, so its physics does
-    not compete with the host loop for the interpreter lock.
+    not compete with the host loop for the interpreter lock, at real-time priority and on a
+    core of its own where the machine has two (:func:`haptic.clock.cpu_plan`), like a robot's
+    firmware.
     """
 
     def __init__(self, config: SimRobotConfig) -> None:
@@ -385,7 +395,9 @@ class PtyRobot:
         self.device = SimDevice(config)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._proc: subprocess.Popen[bytes] | None = None
+        self._proc: subprocess.Popen[str] | None = None
+        #: What the OS granted the device's own process (:meth:`start_process`).
+        self.grant: Grant | None = None
 
     def start_thread(self) -> PtyRobot:
         self._thread = threading.Thread(target=self._run_thread, name="sim-robot", daemon=True)
@@ -399,15 +411,40 @@ class PtyRobot:
         except OSError:
             pass
 
-    def start_process(self) -> PtyRobot:
+    def start_process(self, pin: bool = True, timeout_s: float = 20.0) -> PtyRobot:
+        """Run the device in its own process at real-time priority, pinned to the device's
+        core of :func:`haptic.clock.cpu_plan` (``pin``); :attr:`grant` says what the OS
+        granted it (also when it refused)."""
         cmd = [sys.executable, "-m", "fieldbank.haptic.simrobot", "--fd", str(self.master_fd),
                "--config", json.dumps(asdict(self.config))]
+        cpu = cpu_plan()[1] if pin else None
+        if cpu is not None:
+            cmd += ["--cpu", str(cpu)]
         # the child must import this package from wherever this process imported it
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
-        self._proc = subprocess.Popen(cmd, pass_fds=(self.master_fd,), env=env)
+        self._proc = subprocess.Popen(cmd, pass_fds=(self.master_fd,), env=env,
+                                      stdout=subprocess.PIPE, text=True)
+        assert self._proc.stdout is not None
+        ready, _, _ = select.select([self._proc.stdout], [], [], timeout_s)
+        line = self._proc.stdout.readline() if ready else ""
+        if line.startswith("GRANT "):
+            self.grant = Grant.from_dict(json.loads(line[6:]))
         return self
+
+    def inject_device_fault(self, on: bool = True) -> None:
+        """Put the device in fault (it disarms and sets flag bit 2 in every STATE) or clear
+        it: in its own process by a signal, in a thread directly."""
+        if self._proc is not None:
+            os.kill(self._proc.pid, signal.SIGUSR1 if on else signal.SIGUSR2)
+        else:
+            self.device.device_fault = on
+
+    @property
+    def pid(self) -> int | None:
+        """The device process's id (None: not running in a process of its own)."""
+        return None if self._proc is None else self._proc.pid
 
     def unplug(self) -> None:
         """Close the device end, as if the cable were pulled."""
@@ -474,18 +511,21 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description="simulated planar robot on a file descriptor")
     ap.add_argument("--fd", type=int, required=True)
     ap.add_argument("--config", default="{}")
+    ap.add_argument("--cpu", type=int, default=None, help="core to pin the device to")
     a = ap.parse_args(argv)
     cfg = SimRobotConfig(**json.loads(a.config))
-    if cfg.mode == "realtime" and hasattr(os, "sched_setscheduler"):
-        # a robot's firmware runs real-time; grant the simulation the same where the OS allows
-        # (one step below the host loop's priority), silently otherwise
-        try:
-            prio = max(1, os.sched_get_priority_max(os.SCHED_FIFO) - 20)
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
-        except OSError:
-            pass
+    # a robot's firmware runs real-time: so does the simulation, in every mode, on a core of
+    # its own where there is one (one step below the host loop's priority); what the OS
+    # granted goes to the parent as the first line on stdout
+    grant = enter_device_realtime(a.cpu)
+    device = SimDevice(cfg)
+    # fault injection for tests and demonstrations: SIGUSR1 puts the device in fault (it
+    # disarms and reports flag bit 2), SIGUSR2 clears it
+    signal.signal(signal.SIGUSR1, lambda *_: setattr(device, "device_fault", True))
+    signal.signal(signal.SIGUSR2, lambda *_: setattr(device, "device_fault", False))
+    print("GRANT " + json.dumps(grant.to_dict()), flush=True)
     try:
-        serve_fd(SimDevice(cfg), a.fd)
+        serve_fd(device, a.fd)
     except (OSError, KeyboardInterrupt):
         pass
     return 0

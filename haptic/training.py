@@ -29,7 +29,6 @@ trial's window [started_s, ended_s] is its reference into the session's trace.
 
 from __future__ import annotations
 
-import html
 import random
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -55,6 +54,8 @@ PROBES: dict[str, Callable[[Arm], probing.ProbeMotion]] = {
     "pull": probing.pull, "semi-ellipse": probing.semi_ellipse,
 }
 MAX_EXTRA_PROBES = MAX_DRAWN_PROBES
+#: Longest protocol name.
+MAX_NAME_CHARS = 64
 
 #: Allowed range of each numeric field of :class:`TrainingProtocol` (messages are generated).
 TRAINING_BOUNDS: dict[str, Interval] = {
@@ -152,6 +153,9 @@ class TrainingProtocol:
         The body of the rendered arms (anthropometric defaults, BRIEF §3).
     side : str
         'right' or 'left'.
+    name : str
+        What the protocol is called on the station and in results ("" : :attr:`title` says
+        "seed", "short" or "custom" from the counts).
     """
 
     instruction: str = "non-instructed"
@@ -167,8 +171,12 @@ class TrainingProtocol:
     body_mass_kg: float = 75.0
     height_m: float = 1.75
     side: str = "right"
+    name: str = ""
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or len(self.name) > MAX_NAME_CHARS:
+            raise ParameterError(f"The 'name' training parameter must be text of at most "
+                                 f"{MAX_NAME_CHARS} characters; got {self.name!r} instead.")
         if self.instruction not in INSTRUCTIONS:
             raise ParameterError(f"The 'instruction' training parameter must be one of "
                                  f"{', '.join(INSTRUCTIONS)}; got {self.instruction!r} instead.")
@@ -213,6 +221,23 @@ class TrainingProtocol:
         1 repetition of each group × severity (12 trials)."""
         return cls(instruction=instruction, familiarisation_rounds=1, assessment_repetitions=1,
                    seed=seed)
+
+    @property
+    def title(self) -> str:
+        """The protocol's name: :attr:`name`, else "seed" or "short" when its counts and
+        durations are those of :meth:`seed_protocol` or :meth:`short`, else "custom"."""
+        if self.name:
+            return self.name
+        f = TrainingProtocol.__dataclass_fields__
+        same = all(getattr(self, k) == f[k].default for k in (
+            "familiarisation_s", "assessment_s", "groups", "severities"))
+        counts = (self.familiarisation_rounds, self.assessment_repetitions)
+        if same and counts == (f["familiarisation_rounds"].default,
+                               f["assessment_repetitions"].default):
+            return "seed"
+        if same and counts == (1, 1):
+            return "short"
+        return "custom"
 
     @property
     def n_trials(self) -> int:
@@ -317,8 +342,10 @@ class TrainingSession:
         cur = self.current
         return cur is not None and cur.phase == "assessment" and not self.done
 
-    def begin(self, index: int, t_s: float, paths: Sequence[ProbePath] = ()) -> Trial:
-        """Start trial ``index`` (the next one) at session time ``t_s``."""
+    def begin(self, index: int, t_s: float, paths: Sequence[ProbePath] = (),
+              window: Mapping[str, Any] | None = None) -> Trial:
+        """Start trial ``index`` (the next one) at session time ``t_s``; ``window``: the
+        verdict on the window of the familiarisation trial it closes."""
         if self.abandoned:
             raise CommandError("the training session was stopped; start a new one")
         if index != self.index + 1 or self.next_trial is None:
@@ -327,21 +354,26 @@ class TrainingSession:
         if self.awaiting_answer:
             raise CommandError(f"training: answer trial {self.index + 1} first (shoulder, "
                                f"elbow or both)")
-        self._close_familiarisation(t_s)
+        self._close_familiarisation(t_s, window)
         self.index = index
         self.started_s = t_s
         self.paths = tuple(paths)
         return self.trials[index]
 
-    def _close_familiarisation(self, t_s: float) -> None:
+    def _close_familiarisation(self, t_s: float,
+                               window: Mapping[str, Any] | None = None) -> None:
         cur = self.current
         if cur is not None and cur.phase == "familiarisation" and self.started_s is not None:
-            self.records.append(self._record(cur, self.started_s, t_s))
+            self.records.append(self._record(cur, self.started_s, t_s, None, window))
             self.started_s = None
 
     def _record(self, trial: Trial, started_s: float, ended_s: float,
-                answer: str | None = None) -> dict[str, Any]:
+                answer: str | None = None,
+                window: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        w = window or {}
         return {
+            "flagged": bool(w.get("flagged")), "flags": list(w.get("flags", [])),
+            "peak_force_n": w.get("peak_force_n"),
             "trial": trial.index, "phase": trial.phase, "condition": trial.condition,
             "group": trial.group, "severity": trial.severity,
             "instruction": self.protocol.instruction,
@@ -352,22 +384,26 @@ class TrainingSession:
             "correct": (answer == trial.expected_answer) if answer is not None else None,
         }
 
-    def answer(self, choice: str, t_s: float) -> dict[str, Any]:
-        """Record the answer to the current assessment trial ('shoulder', 'elbow', 'both')."""
+    def answer(self, choice: str, t_s: float,
+               window: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """Record the answer to the current assessment trial ('shoulder', 'elbow', 'both');
+        ``window``: the verdict on its window (:mod:`haptic.trialwindow`): a flagged trial is
+        kept and left out of the accuracy."""
         choice = str(choice).strip().lower()
         if choice not in ANSWERS:
             raise CommandError(f"a training answer is shoulder, elbow or both; got {choice!r}")
         cur = self.current
         if cur is None or not self.awaiting_answer or self.started_s is None:
             raise CommandError("training: no assessment trial is waiting for an answer")
-        rec = self._record(cur, self.started_s, t_s, choice)
+        rec = self._record(cur, self.started_s, t_s, choice, window)
         self.records.append(rec)
         self.started_s = None
         return rec
 
-    def finish(self, t_s: float, abandon: bool = False) -> None:
+    def finish(self, t_s: float, abandon: bool = False,
+               window: Mapping[str, Any] | None = None) -> None:
         """Close the last familiarisation trial; ``abandon`` stops the session early."""
-        self._close_familiarisation(t_s)
+        self._close_familiarisation(t_s, window)
         if abandon and not self.done:
             self.abandoned = True
             self.started_s = None
@@ -376,6 +412,7 @@ class TrainingSession:
         """What a display may show now (nothing that names the arm during an assessment)."""
         cur = self.current
         out: dict[str, Any] = {
+            "protocol": self.protocol.title,
             "instruction": self.protocol.instruction, "n_trials": len(self.trials),
             "trial": None if cur is None else cur.index + 1,
             "phase": None if cur is None else cur.phase, "done": self.done,
@@ -397,7 +434,8 @@ class TrainingSession:
 
     def result(self) -> dict[str, Any]:
         """The protocol, every trial's record and the summary (:func:`summarise`)."""
-        return {"protocol": self.protocol.to_dict(), "abandoned": self.abandoned,
+        return {"protocol": self.protocol.to_dict(), "protocol_name": self.protocol.title,
+                "abandoned": self.abandoned,
                 "trials": list(self.records), "summary": summarise(self.records)}
 
 
@@ -411,16 +449,20 @@ def summarise(records: Sequence[Mapping[str, Any]],
     Parameters
     ----------
     records : sequence of mapping
-        Trial records (:meth:`TrainingSession.answer`); only answered assessment trials count.
+        Trial records (:meth:`TrainingSession.answer`); only answered assessment trials whose
+        window was not flagged (a fault, or no force: :mod:`haptic.trialwindow`) count.
 
     Returns
     -------
     dict
         ``confusion``: rows (true groups), columns (answers), counts; ``accuracy``: overall
         {n, correct, accuracy}; ``by_severity``: the same per level; ``by_instruction``: the same
-        per instruction; ``chance``: 1 / number of answers.
+        per instruction; ``chance``: 1 / number of answers; ``flagged``: answered assessment
+        trials left out, with ``flagged_trials`` (their numbers, from 1).
     """
-    rows = [r for r in records if r.get("phase") == "assessment" and r.get("answer")]
+    answered = [r for r in records if r.get("phase") == "assessment" and r.get("answer")]
+    rows = [r for r in answered if not r.get("flagged")]
+    left_out = [r for r in answered if r.get("flagged")]
     counts = [[sum(1 for r in rows if r["group"] == g and r["answer"] == a) for a in ANSWERS]
               for g in groups]
 
@@ -436,6 +478,8 @@ def summarise(records: Sequence[Mapping[str, Any]],
         "by_instruction": {i: acc([r for r in rows if r.get("instruction") == i])
                            for i in INSTRUCTIONS if any(r.get("instruction") == i for r in rows)},
         "chance": 1.0 / len(ANSWERS),
+        "flagged": len(left_out),
+        "flagged_trials": [int(r["trial"]) + 1 for r in left_out],
         "median_response_time_s": _median([float(r["response_time_s"]) for r in rows
                                            if r.get("response_time_s") is not None]),
     }
@@ -447,102 +491,3 @@ def _median(x: list[float]) -> float | None:
     s = sorted(x)
     n = len(s)
     return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
-
-
-def _pct(v: float | None) -> str:
-    return "–" if v is None else f"{100.0 * v:.0f}%"
-
-
-_GROUP_WORDS = {"shoulder": "shoulder", "elbow": "elbow", "biarticular": "bi-articular"}
-
-_CSS = """
-.fb-training{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;color:#1d2330;
-  max-width:46rem}
-.fb-training h2{font-size:1.25rem;margin:.2rem 0 .6rem}
-.fb-training h3{font-size:1rem;margin:1rem 0 .4rem}
-.fb-training table{border-collapse:collapse;margin:.2rem 0 .6rem}
-.fb-training th,.fb-training td{border:1px solid #c9ced8;padding:.3rem .6rem;text-align:center;
-  font-variant-numeric:tabular-nums}
-.fb-training th{background:#eef1f6;font-weight:600}
-.fb-training td.fb-diag{font-weight:700}
-.fb-training .fb-bar{display:inline-block;height:.7rem;background:#2f6fb3;vertical-align:middle;
-  margin-right:.4rem}
-.fb-training .fb-note{color:#596173;font-size:.85rem;margin:.3rem 0}
-"""
-
-
-def results_html(summary: Mapping[str, Any], title: str = "Training results",
-                 note: str = "") -> str:
-    """A self-contained HTML ``<section>`` (its own style) with the confusion matrix and the
-    accuracy per severity of :func:`summarise`."""
-    e = html.escape
-    conf = summary["confusion"]
-    cols = conf["columns"]
-    out = [f'<section class="fb-training"><style>{_CSS}</style>', f"<h2>{e(title)}</h2>"]
-    a = summary["accuracy"]
-    out.append(f'<p>{a["correct"]} of {a["n"]} assessment answers correct '
-               f'(<b>{_pct(a["accuracy"])}</b>; chance {_pct(summary["chance"])}).</p>')
-    out.append("<h3>Confusion matrix: true impaired group (rows) against the answer "
-               "(columns)</h3><table><tr><th>true group</th>"
-               + "".join(f"<th>{e(c)}</th>" for c in cols) + "<th>n</th></tr>")
-    for g, row in zip(conf["rows"], conf["counts"], strict=True):
-        n = sum(row)
-        cells = []
-        for c, k in zip(cols, row, strict=True):
-            share = k / n if n else 0.0
-            diag = ANSWER_OF_GROUP.get(g) == c
-            shade = f"rgba(47,111,179,{0.08 + 0.6 * share:.2f})" if k else "transparent"
-            cells.append(f'<td class="{"fb-diag" if diag else ""}" style="background:{shade}">'
-                         f'{k}<br><small>{_pct(share) if n else "–"}</small></td>')
-        out.append(f"<tr><th>{e(_GROUP_WORDS.get(g, g))}</th>{''.join(cells)}<td>{n}</td></tr>")
-    out.append("</table>")
-    out.append("<h3>Accuracy per severity</h3><table><tr><th>severity</th><th>correct</th>"
-               "<th>accuracy</th></tr>")
-    for s, v in summary["by_severity"].items():
-        w = 0 if v["accuracy"] is None else round(120 * v["accuracy"])
-        out.append(f"<tr><th>{e(s)}</th><td>{v['correct']} / {v['n']}</td>"
-                   f'<td style="text-align:left"><span class="fb-bar" style="width:{w}px">'
-                   f"</span>{_pct(v['accuracy'])}</td></tr>")
-    out.append("</table>")
-    if len(summary.get("by_instruction", {})) > 1:
-        out.append("<h3>Instructed against non-instructed</h3><table><tr><th>instruction</th>"
-                   "<th>correct</th><th>accuracy</th></tr>")
-        for i, v in summary["by_instruction"].items():
-            out.append(f"<tr><th>{e(i)}</th><td>{v['correct']} / {v['n']}</td>"
-                       f"<td>{_pct(v['accuracy'])}</td></tr>")
-        out.append("</table>")
-    rt = summary.get("median_response_time_s")
-    if rt is not None:
-        out.append(f'<p class="fb-note">Median response time {rt:.1f} s (from the start of '
-                   "the trial; the answer has no time limit).</p>")
-    out.append('<p class="fb-note">Answers: shoulder, elbow, or both (bi-articular muscles). '
-               "Severities on the seed's scale (Weber fraction 0.6 between levels).</p>")
-    if note:
-        out.append(f'<p class="fb-note">{e(note)}</p>')
-    out.append("</section>")
-    return "\n".join(out)
-
-
-def results_page(sections: Sequence[str], title: str = "Training results") -> str:
-    """A small HTML document around :func:`results_html` sections."""
-    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<title>{html.escape(title)}</title></head><body style=\"margin:1.5rem\">\n"
-            + "\n".join(sections) + "\n</body></html>\n")
-
-
-def accuracy_text(summary: Mapping[str, Any]) -> list[str]:
-    """The confusion matrix and accuracy per severity as plain-text lines (for the terminal)."""
-    conf = summary["confusion"]
-    a = summary["accuracy"]
-    lines = [f"assessment: {a['correct']} of {a['n']} correct ({_pct(a['accuracy'])}; chance "
-             f"{_pct(summary['chance'])})",
-             "confusion (rows: true group, columns: answer):",
-             "  " + " " * 13 + "".join(f"{c:>10s}" for c in conf["columns"])]
-    for g, row in zip(conf["rows"], conf["counts"], strict=True):
-        lines.append(f"  {_GROUP_WORDS.get(g, g):13s}" + "".join(f"{k:10d}" for k in row))
-    lines.append("accuracy per severity:")
-    for s, v in summary["by_severity"].items():
-        lines.append(f"  {s:13s} {v['correct']:3d} / {v['n']:<3d} {_pct(v['accuracy']):>5s}")
-    for i, v in summary.get("by_instruction", {}).items():
-        lines.append(f"  {i}: {v['correct']} / {v['n']} ({_pct(v['accuracy'])})")
-    return lines

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import re
 import threading
 import time
 from pathlib import Path
@@ -154,7 +155,7 @@ def test_sessions_list_and_show_on_the_command_line(db: Database, tmp_path: Path
     assert "P-7" in r.stdout and "started (UTC)" in r.stdout
     r = run.invoke(haptic, ["sessions", "show", str(sid), "--db", url])
     assert r.exit_code == 0, r.output
-    assert "A/B/X block 0: 1 of 2 correct" in r.stdout and "X=B" in r.stdout
+    assert "A/B/X block 0: 1 of 2 counted answers correct" in r.stdout and "X=B" in r.stdout
     assert f"haptic_session:{sid}" in r.stdout and "patient   P-7" in r.stdout
     r = run.invoke(haptic, ["sessions", "show", str(sid), "--db", url, "--json"])
     assert len(json.loads(r.stdout)["trial_records"]) == 2
@@ -184,9 +185,9 @@ def test_pushed_model_ids_are_checked_against_the_database(db: Database, tmp_pat
 
     def run() -> None:
         out["res"] = session.serve(
-            "sim://?mode=realtime&motion=hold", severe_shoulder(), severe_shoulder(),
-            model_ids=(own, own), duration_s=30.0, socket_path=sock, db=db,
-            config=session.RendererConfig(realtime_priority=False))
+            "sim://?mode=realtime&motion=hold&watchdog_ms=1000", severe_shoulder(),
+            severe_shoulder(), model_ids=(own, own), duration_s=30.0, socket_path=sock, db=db,
+            config=session.RendererConfig(realtime_priority=False), watchdog_ms=1000)
 
     th = threading.Thread(target=run, daemon=True)
     th.start()
@@ -202,10 +203,10 @@ def test_pushed_model_ids_are_checked_against_the_database(db: Database, tmp_pat
         push_models(unimpaired(), unimpaired(), sock, model_ids=(999, None))
     with pytest.raises(CommandError, match="model 2 is patient P-2's"):
         push_models(unimpaired(), unimpaired(), sock, model_ids=(own, other))
-    assert push_models(severe_shoulder(), unimpaired(), sock, model_ids=(own, None)) == {
-        "pushed": True}
+    assert push_models(severe_shoulder(), unimpaired(), sock,
+                       model_ids=(own, None))["pushed"] is True
     table = status_table(c.request("status"))
-    assert "renderer" in table and "model A" in table and "felt now" in table
+    assert "renderer" in table and "A · before" in table and "felt now" in table
     c.request("stop")
     th.join(10)
     res = out["res"]
@@ -231,10 +232,22 @@ def test_status_table_reads_like_a_table() -> None:
     t = status_table(st)
     lines = t.splitlines()
     assert lines[0].startswith("renderer    running · ARMED · t = 12.50 s")
-    assert "before: fitted model [model 3, patient P-1]" in t
-    assert 'after: after botox [model 7, patient P-1, plan "botox ef=200U"]' in t
+    assert "A · before  fitted model · model 3 · patient P-1" in t
+    assert 'B · after   after botox · model 7 · patient P-1 · plan "botox ef=200U"' in t
+    assert "after: after" not in t and "re-arm" not in t
     assert "felt now    B (after); blend 1.00" in t
     assert "force 5.00 N" in t and "p99 40.0 µs" in t
     blinded = status_table({**st, "blend": "hidden", "models": "hidden", "abx_trial": 2})
     assert "hidden (blinded)" in blinded and "trial 3 running" in blinded
     assert "fitted model" not in blinded
+    faulted = status_table({**st, "mode": "FAULT", "latched_faults": ["DEVICE"],
+                            "faults_now": [{"name": "DEVICE", "t_s": 3.2,
+                                            "message": "device watchdog tripped",
+                                            "what": "The robot stopped itself.",
+                                            "todo": "Re-arm."}],
+                            "rearm_refused_because": ["handle speed 3 m/s over the limit"],
+                            "paused": True})
+    assert re.search(r"\n  DEVICE +The robot stopped itself\. \(device watchdog tripped, "
+                     r"t = 3\.20 s\)\. Re-arm\.", faulted)
+    assert re.search(r"\nre-arm +would be refused: handle speed 3 m/s over the limit", faulted)
+    assert "paused" in faulted

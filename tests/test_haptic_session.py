@@ -118,15 +118,24 @@ def test_abx_is_seeded_balanced_and_scored() -> None:
     assert sorted(a.x_labels) == ["A"] * 5 + ["B"] * 5
     assert AbxSession(n_trials=10, seed=5).x_labels != a.x_labels or \
         AbxSession(n_trials=10, seed=6).x_labels != a.x_labels
-    labels = {AbxSession(n_trials=2, seed=s).label_model["A"] for s in range(20)}
-    assert labels == {0, 1}  # hide_labels draws which model is A
-    assert AbxSession(n_trials=2, seed=1, hide_labels=False).label_model == {"A": 0, "B": 1}
+    # one meaning of A and B everywhere: A is before, B after, whatever the seed
+    assert {tuple(AbxSession(n_trials=2, seed=s).label_model.items())
+            for s in range(20)} == {(("A", 0), ("B", 1))}
     for i in range(10):
         x = a.model_for("X")
         truth = "A" if x == a.label_model["A"] else "B"
         a.answer(truth if i % 2 else ("B" if truth == "A" else "A"), t_s=float(i))
     res = a.result()
-    assert res["answered"] == 10 and res["correct"] == 5
+    assert res["answered"] == 10 and res["correct"] == 5 and res["counted"] == 10
+    assert {r["x_was"] for r in res["answers"]} == {"before", "after"}
+    assert all(r["x_was"] == ("before" if r["x_is"] == "A" else "after")
+               for r in res["answers"])
+    # a flagged answer (a fault or no force in its window) is kept and not scored
+    c = AbxSession(n_trials=2, seed=4)
+    c.answer(c.x_labels[0], 1.0, {"flagged": True, "flags": ["fault during the trial"]})
+    c.answer(c.x_labels[1], 2.0, {"flagged": False, "flags": []})
+    r = c.result()
+    assert (r["answered"], r["counted"], r["flagged"], r["correct"]) == (2, 1, 1, 1)
     with pytest.raises(HapticError, match="finished"):
         a.answer("A", 11.0)
     with pytest.raises(HapticError):
@@ -139,7 +148,7 @@ def test_abx_through_the_renderer_hides_and_records() -> None:
     link.handshake(1000, 20)
     rd = Renderer(link, p, unimpaired(), RendererConfig(state_wait_s=0.05), clock=VirtualClock())
     rd.start(expected_ticks=3000)
-    cmds = [rd.submit("abx_start", n_trials=2, seed=3, hide_labels=True)]
+    cmds = [rd.submit("abx_start", n_trials=2, seed=3)]
     rd.tick()
     assert rd.status()["blend"] == "hidden"
     for ans in ("A", "B"):
@@ -162,10 +171,14 @@ def test_abx_through_the_renderer_hides_and_records() -> None:
 # --- control channel ------------------------------------------------------------------------
 @pytest.fixture()
 def served(tmp_path: Path):  # type: ignore[no-untyped-def]
-    """A renderer on the in-process simulated robot (real time) with its control socket."""
+    """A renderer on the in-process simulated robot (real time) with its control socket.
+
+    The device's watchdog is 1 s here: these tests are about the control channel, and on a
+    loaded test machine a thread of this process can stall longer than the 20 ms a real
+    session allows (which then trips, as it should: tests/test_haptic_faults.py)."""
     p = severe_shoulder()
-    link = RobotLink.open(sim_url(p, "circle", base="sim://?mode=realtime"))
-    link.handshake(1000, 20)
+    link = RobotLink.open(sim_url(p, "circle", base="sim://?mode=realtime&watchdog_ms=1000"))
+    link.handshake(1000, 1000)
     rd = Renderer(link, p, p, RendererConfig(realtime_priority=False))
     sock = tmp_path / "run" / "haptic.sock"
     server = ControlServer(rd, sock).start()
@@ -194,12 +207,15 @@ def test_control_push_switch_status_stop(served) -> None:  # type: ignore[no-unt
     st = c.request("status")
     assert st["running"] and st["mode"] == "ARMED"
     before, after = unimpaired(), synthesize({"elbow": "severe"})
-    assert push_models(before, after, sock) == {"pushed": True}
+    pushed = push_models(before, after, sock)
+    # the answer is the renderer's true state: armed, fading to the new pair
+    assert pushed["pushed"] is True and pushed["mode"] == "ARMED" and pushed["swapping"]
     deadline = time.time() + 3
     while rd.params[1] != after and time.time() < deadline:
         time.sleep(0.01)
     assert rd.params == (before, after)  # swapped in by the loop after the fade-out
-    assert c.request("switch", to="B") == {"blend_target": 1.0}
+    sw = c.request("switch", to="B")
+    assert sw["blend_target"] == 1.0 and sw["mode"] == "ARMED" and sw["faults_now"] == []
     with pytest.raises(HapticError, match="switch to"):
         c.request("switch", to="C")
     with pytest.raises(HapticError, match="unknown control command"):
@@ -409,7 +425,8 @@ def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-unt
     r = run.invoke(haptic, ["status", *s, "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["mode"] == "ARMED"
-    assert run.invoke(haptic, ["switch", "after", *s]).exit_code == 0
+    r = run.invoke(haptic, ["switch", "after", *s])
+    assert r.exit_code == 0 and "switching to after; renderer armed, felt now: " in r.output
     r = run.invoke(haptic, ["abx", "start", "--trials", "2", "--seed", "9", *s, "--json"])
     assert r.exit_code == 0 and json.loads(r.stdout)["n_trials"] == 2
     assert json.loads(run.invoke(haptic, ["status", *s, "--json"]).stdout)["blend"] == "hidden"
@@ -422,6 +439,8 @@ def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-unt
     assert isinstance(r.exception, HapticError)
     assert run.invoke(haptic, ["disarm", *s]).exit_code == 0
     assert rd.safety.mode == Mode.DISARMED
+    r = run.invoke(haptic, ["switch", "A", *s])
+    assert "renderer disarmed: no force until it is armed" in r.output
     assert run.invoke(haptic, ["arm", *s]).exit_code == 0
     assert rd.safety.mode == Mode.ARMED
 
@@ -460,7 +479,8 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     r = CliRunner().invoke(cli, ["whatif", "--severity", "elbow=severe", "--botox", "ef=200",
                                     "--render", "--socket", str(sock), "--json"])
     assert r.exit_code == 0, r.output
-    assert json.loads(r.stdout)["rendered"] == {"pushed": True}
+    rendered = json.loads(r.stdout)["rendered"]
+    assert rendered["pushed"] is True and rendered["mode"] == "ARMED"
     before = synthesize({"elbow": "severe"})
     deadline = time.time() + 3
     while rd.params[0] != before and time.time() < deadline:
@@ -470,7 +490,7 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     assert b != before and b.km_n_per_m == before.km_n_per_m  # botulinum acts on α, β only
     assert b.alpha_n[2] < before.alpha_n[2]
     told = rd.metadata["model_info"]  # built through haptic.modelinfo.ModelInfo
-    assert told["A"]["plan"] is None and told["B"]["label"].startswith("after: ")
+    assert told["A"]["plan"] is None and told["B"]["label"].startswith("what-if result on ")
     assert told["B"]["plan"] and "botulinum" in told["B"]["plan"].lower()
     # no renderer: a clean error, not a traceback
     r = CliRunner().invoke(cli, ["whatif", "--severity", "elbow=severe", "--botox", "ef=200",

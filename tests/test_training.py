@@ -25,9 +25,9 @@ from fieldbank.haptic.training import (
     TrainingProtocol,
     TrainingSession,
     probe_paths,
-    results_html,
     summarise,
 )
+from fieldbank.haptic.trainingresults import results_html
 from fieldbank.model import Arm
 from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.probepath import ProbePath

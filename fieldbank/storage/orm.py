@@ -338,6 +338,8 @@ class HapticTrialRow(Base):
     answered_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     response_time_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     detail_json: Mapped[str] = mapped_column(Text)
+    # the trial's window held a fault or no force: kept, left out of every accuracy
+    flagged: Mapped[bool] = mapped_column(Boolean, server_default="0")
 
 
 class TraceRow(Base):

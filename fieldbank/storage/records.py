@@ -205,13 +205,15 @@ class HapticTrialRecord:
     answered_s: float | None
     response_time_s: float | None
     detail: dict[str, Any]
+    flagged: bool = False
 
     def to_dict(self) -> dict[str, Any]:
-        return {"id": self.id, "haptic_session_id": self.haptic_session_id, "kind": self.kind,
-                "block": self.block, "trial": self.trial, "phase": self.phase,
-                "condition": self.condition, "answer": self.answer, "correct": self.correct,
-                "started_s": self.started_s, "answered_s": self.answered_s,
-                "response_time_s": self.response_time_s, **self.detail}
+        return {**self.detail, "id": self.id, "haptic_session_id": self.haptic_session_id,
+                "kind": self.kind, "block": self.block, "trial": self.trial,
+                "phase": self.phase, "condition": self.condition, "answer": self.answer,
+                "correct": self.correct, "started_s": self.started_s,
+                "answered_s": self.answered_s, "response_time_s": self.response_time_s,
+                "flagged": self.flagged}
 
 
 @dataclass(frozen=True)

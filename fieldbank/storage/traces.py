@@ -43,7 +43,7 @@ from fieldbank.storage.records import HapticSessionRecord, HapticTrialRecord, Tr
 #: Longest stated reason for a session filed under another patient than its models'.
 MAX_PATIENT_NOTE_CHARS = 500
 _TRIAL_FIELDS = ("kind", "block", "trial", "phase", "condition", "answer", "correct",
-                 "started_s", "answered_s", "response_time_s")
+                 "started_s", "answered_s", "response_time_s", "flagged")
 
 
 class Traces(DatabaseCore):
@@ -165,7 +165,8 @@ class Traces(DatabaseCore):
 
         Each trial is a mapping with ``kind`` ('abx' | 'training'), ``block``, ``trial``,
         ``phase``, ``condition``, and optionally ``answer``, ``correct``, ``started_s``,
-        ``answered_s``, ``response_time_s``; any other key is kept as its detail.
+        ``answered_s``, ``response_time_s``, ``flagged`` (its window held a fault or no force);
+        any other key is kept as its detail.
         """
         with self._write() as s:
             if s.get(HapticSessionRow, haptic_session_id) is None:
@@ -183,6 +184,7 @@ class Traces(DatabaseCore):
                     condition=str(t["condition"]), answer=t.get("answer"),
                     correct=t.get("correct"), started_s=t.get("started_s"),
                     answered_s=t.get("answered_s"), response_time_s=t.get("response_time_s"),
+                    flagged=bool(t.get("flagged")),
                     detail_json=json.dumps(detail, sort_keys=True, default=str)))
             s.flush()
             self._audit(s, "add", "haptic_trials", haptic_session_id, {"n": len(trials)})
@@ -200,7 +202,8 @@ class Traces(DatabaseCore):
         with self._read() as s:
             return [HapticTrialRecord(r.id, r.haptic_session_id, r.kind, r.block, r.trial,
                                       r.phase, r.condition, r.answer, r.correct, r.started_s,
-                                      r.answered_s, r.response_time_s, json.loads(r.detail_json))
+                                      r.answered_s, r.response_time_s, json.loads(r.detail_json),
+                                      bool(r.flagged))
                     for r in s.scalars(q)]
 
     def add_trace(self, haptic_session_id: int, name: str, array: ArrayLike, unit: str,

@@ -42,11 +42,13 @@ import numpy as np
 from aiohttp import WSMsgType, web
 
 from fieldbank.errors import FieldbankError
+from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES
 from fieldbank.haptic.client import ControlClient
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.safety import FaultCode, Mode
 from fieldbank.haptic.snapshot import SnapshotReader
 from fieldbank.haptic.station.config import StationConfig
+from fieldbank.haptic.training import TrainingProtocol
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 
@@ -258,7 +260,6 @@ class Station:
             args = {"action": "start", "protocol": proto}
         if cmd == "abx" and args.get("action") == "start":
             args.setdefault("seed", secrets.randbelow(2**31))
-            args["hide_labels"] = True
         try:
             result = await self.request(cmd, **args)
             out = {**reply, "ok": True, "result": result}
@@ -289,6 +290,14 @@ def make_app(station: Station) -> web.Application:
     script = (resources.files("fieldbank.haptic.station") / "station.js").read_text("utf-8")
     style = (resources.files("fieldbank.haptic.station") / "station.css").read_text("utf-8")
 
+    # what the page knows from the start: the view, what 'Start training' runs, the muscles
+    proto = TrainingProtocol.from_dict(cfg.training or {})
+    page_config = json.dumps({
+        "view": cfg.view,
+        "training": {"name": proto.title, "n_trials": proto.n_trials},
+        "muscles": [{"code": k, "name": v} for k, v in MUSCLE_GROUP_NAMES.items()],
+    }).replace("<", "\\u003c")
+
     @web.middleware
     async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
         if request.path == "/favicon.ico":  # browsers ask without the token; nothing to give
@@ -307,7 +316,7 @@ def make_app(station: Station) -> web.Application:
         nonce = secrets.token_urlsafe(16)
         body = (template.replace("{{nonce}}", nonce).replace("{{style}}", style)
                 .replace("{{script}}", script)
-                .replace("{{config}}", json.dumps({"view": cfg.view})))
+                .replace("{{config}}", page_config))
         resp = web.Response(text=body, content_type="text/html")
         resp.headers["Content-Security-Policy"] = (
             f"default-src 'none'; script-src 'nonce-{nonce}'; style-src 'nonce-{nonce}'; "

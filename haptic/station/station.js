@@ -9,9 +9,12 @@ const canvas = $("arm");
 const ctx = canvas.getContext("2d");
 
 // What tests and the benchmark read: the last frames drawn, where the handle was drawn.
-const fb = window.fb = { frames: [], info: null, fps: 0, drawn: 0, last: null, replies: [] };
+const fb = window.fb = { frames: [], info: null, fps: 0, drawn: 0, last: null, replies: [],
+                         paused: false };
 
 let ws = null;
+let bands = [];            // muscle bands as drawn (canvas px), for the hover label
+const MUSCLES = STATION_CONFIG.muscles || [];
 let frame = null;          // newest frame received
 let drawnSeq = null;       // seq of the frame last drawn
 let info = null;
@@ -80,7 +83,7 @@ function fitView() {
   pts.push([0, 0], [trunkX() * 2.2, -0.15]);
   const xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
   const x0 = Math.min(...xs), x1 = Math.max(...xs), y0 = Math.min(...ys), y1 = Math.max(...ys);
-  const top = 96, margin = 28;
+  const top = 18, margin = 22;  // the badges and the scale live outside the canvas
   const s = Math.min((w - 2 * margin) / (x1 - x0), (h - top - margin) / (y1 - y0));
   // 'opposite': the patient faces the clinician (seed): forward (+y) points down the screen,
   // the patient's right (+x) is the clinician's left. 'behind': as seen over the shoulder.
@@ -89,6 +92,7 @@ function fitView() {
   const cxw = (x0 + x1) / 2, cyw = (y0 + y1) / 2;
   const cx = w / 2, cy = top + (h - top - margin) / 2;
   view = { s, dpr, px: (x) => cx + mx * s * (x[0] - cxw), py: (x) => cy + my * s * (x[1] - cyw) };
+  $("scale-bar").style.width = `${Math.max(4, Math.round(0.1 * s))}px`;  // 10 cm
 }
 
 function P(x) { return [view.px(x), view.py(x)]; }
@@ -187,24 +191,25 @@ function tensionColour(n) {
   return `rgba(${r},${g},${b},${0.55 + 0.45 * t})`;
 }
 
-function drawMuscleLegend() {
-  const x = canvas.clientWidth - 185, y = canvas.clientHeight - 70;
-  const grad = ctx.createLinearGradient(x, 0, x + 120, 0);
-  grad.addColorStop(0, tensionColour(0)); grad.addColorStop(1, tensionColour(40));
-  ctx.fillStyle = grad; ctx.fillRect(x, y, 120, 8);
-  ctx.fillStyle = "#5d6678"; ctx.font = "12px system-ui";
-  ctx.fillText("muscle force 0", x - 84, y + 8); ctx.fillText("40 N", x + 126, y + 8);
-}
-
 function drawArm(f) {
   const S = [0, 0], E = f.elbow_m, H = f.hand_m;
   if (f.muscles_n) {
     ctx.lineCap = "round";
+    bands = [];
     muscleCurves(f).forEach(([a, c, b], i) => {
       ctx.lineWidth = Math.max(5, 0.016 * view.s); ctx.strokeStyle = tensionColour(f.muscles_n[i]);
       ctx.beginPath(); ctx.moveTo(...P(a)); ctx.quadraticCurveTo(...P(c), ...P(b)); ctx.stroke();
+      // points along the band, for the hover label
+      const pa = P(a), pc = P(c), pb = P(b), pts = [];
+      for (let k = 0; k <= 12; k++) {
+        const t = k / 12, u = 1 - t;
+        pts.push([u * u * pa[0] + 2 * u * t * pc[0] + t * t * pb[0],
+                  u * u * pa[1] + 2 * u * t * pc[1] + t * t * pb[1]]);
+      }
+      bands.push(pts);
     });
-    drawMuscleLegend();
+  } else {
+    bands = [];
   }
   line(S, E, 0.045 * view.s, "#6b7385");
   line(E, H, 0.038 * view.s, "#6b7385");
@@ -240,22 +245,15 @@ function drawForce(f) {
   ctx.fillText(`${n.toFixed(1)} N`, bx + off, by + 5);
 }
 
-function drawScale() {
-  const y = canvas.clientHeight - 36, x = canvas.clientWidth - 150 - 0.1 * view.s;
-  ctx.strokeStyle = "#5d6678"; ctx.lineWidth = 2; ctx.beginPath();
-  ctx.moveTo(x, y); ctx.lineTo(x + 0.1 * view.s, y); ctx.stroke();
-  ctx.fillStyle = "#5d6678"; ctx.font = "12px system-ui";
-  ctx.fillText("10 cm", x + 0.05 * view.s - 15, y - 6);
-  ctx.fillText("force: 10 N = 6 cm", x + 0.1 * view.s + 12, y + 4);
-}
-
 let fpsCount = 0, fpsT0 = performance.now();
 
 function draw() {
   requestAnimationFrame(draw);
   if (!frame || !info) return;
-  if (!view || canvas.width !== Math.round(canvas.clientWidth * (window.devicePixelRatio || 1))) {
-    fitView();
+  const dpr = window.devicePixelRatio || 1;
+  if (!view || canvas.width !== Math.round(canvas.clientWidth * dpr)
+      || canvas.height !== Math.round(canvas.clientHeight * dpr)) {
+    fitView();  // also when the fault box or the legend changes the canvas's height
   }
   const f = frame;
   ctx.setTransform(view.dpr, 0, 0, view.dpr, 0, 0);
@@ -266,7 +264,6 @@ function draw() {
   drawArm(f);
   drawForce(f);
   const [px, py] = drawHandle(f);
-  drawScale();
   if (f.seq !== drawnSeq) {
     drawnSeq = f.seq; fpsCount++; fb.drawn++;
     fb.last = { t_s: f.t_s, x: f.handle_m[0], y: f.handle_m[1], px, py };
@@ -282,6 +279,8 @@ function draw() {
     }
   }
   updateBadges(f);
+  updateMuscleLegend(f);
+  updateFault(f);
   tickClock(f);
 }
 
@@ -299,11 +298,78 @@ function updateBadges(f) {
   } else {
     const k = f.blend >= 0.5 ? "B" : "A";
     const moving = f.blend > 0.02 && f.blend < 0.98 ? " (crossfading)" : "";
-    r.textContent = `Feeling ${k} · ${k === "A" ? "before" : "after"}${moving}`;
+    const which = `${k} · ${k === "A" ? "before" : "after"}`;
+    r.textContent = f.mode === "ARMED" ? `Feeling ${which}${moving}`
+      : `${which} selected · no force while ${f.mode === "FAULT" ? "in fault" : "disarmed"}`;
     r.className = "badge";
     $("btn-a").classList.toggle("active", k === "A");
     $("btn-b").classList.toggle("active", k === "B");
   }
+}
+
+// --- muscle legend, hover, fault box -----------------------------------------------------------
+function buildMuscleLegend() {
+  $("muscle-legend").innerHTML = MUSCLES.map((m, i) =>
+    `<span class="m" data-i="${i}" title="${esc(m.name)}"><span class="sw"></span>` +
+    `<b>${esc(m.code)}</b> ${esc(m.name)}<span class="mf"></span></span>`).join("") +
+    '<span class="m">muscle force: pale 0 → red 40 N</span>';
+}
+
+function updateMuscleLegend(f) {
+  document.querySelectorAll("#muscle-legend .m[data-i]").forEach((el) => {
+    const i = Number(el.dataset.i), n = f.muscles_n ? f.muscles_n[i] : null;
+    el.querySelector(".sw").style.background = n === null ? "#e4e6ea" : tensionColour(n);
+    el.querySelector(".mf").textContent = n === null ? "" : ` ${n.toFixed(0)} N`;
+  });
+}
+
+canvas.addEventListener("mousemove", (ev) => {
+  const r = canvas.getBoundingClientRect(), x = ev.clientX - r.left, y = ev.clientY - r.top;
+  let best = -1, dist = 14;
+  bands.forEach((pts, i) => pts.forEach(([px, py]) => {
+    const d = Math.hypot(px - x, py - y);
+    if (d < dist) { dist = d; best = i; }
+  }));
+  const tip = $("tip");
+  if (best < 0 || !MUSCLES[best]) { tip.hidden = true; return; }
+  const n = frame && frame.muscles_n ? ` · ${frame.muscles_n[best].toFixed(1)} N` : "";
+  tip.textContent = `${MUSCLES[best].code} · ${MUSCLES[best].name}${n}`;
+  tip.style.left = `${x + 14}px`; tip.style.top = `${y + 10}px`; tip.hidden = false;
+});
+canvas.addEventListener("mouseleave", () => { $("tip").hidden = true; });
+
+let faultShown = "";
+
+function updateFault(f) {
+  const box = $("fault"), faults = (info && info.faults_now) || [];
+  const on = f.mode === "FAULT";
+  box.hidden = !on;
+  fb.paused = on || f.mode === "DISARMED";
+  document.querySelectorAll(".paused-note").forEach((el) => { el.hidden = !fb.paused; });
+  document.querySelectorAll(".train-answer, .abx-answer, .abx-present").forEach((b) => {
+    b.disabled = fb.paused;
+  });
+  if ($("train-next")) $("train-next").disabled = fb.paused || !!(info && info.training && info.training.awaiting_answer);
+  if (!on) { faultShown = ""; return; }
+  const key = JSON.stringify([faults, info && info.rearm_refused_because, info && info.paused]);
+  if (key === faultShown) return;
+  faultShown = key;
+  $("fault-title").textContent = faults.length
+    ? `Fault: ${faults.map((x) => x.name).join(", ")} · force is zero`
+    : `Fault: ${f.faults.join(", ")} · force is zero`;
+  $("fault-list").innerHTML = faults.map((x) =>
+    `<p>${esc(x.what)} <span class="small">(${esc(x.message)}, at ${x.t_s.toFixed(1)} s)</span></p>` +
+    `<p class="todo">${esc(x.todo)}</p>`).join("");
+  $("fault-paused").hidden = !(info && info.paused);
+  const why = (info && info.rearm_refused_because) || [];
+  $("rearm-why").textContent = why.length ? `Re-arm will be refused now: ${why.join("; ")}.`
+    : "Re-arm re-runs every safety check; output ramps back in over 0.3 s.";
+}
+
+function rearm() {
+  send("arm").then((r) => {
+    if (r && !r.ok) $("rearm-why").textContent = r.error;
+  });
 }
 
 // --- the panel ------------------------------------------------------------------------------
@@ -311,13 +377,7 @@ const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&l
 const pct = (v) => (v === null || v === undefined ? "–" : `${Math.round(100 * v)}%`);
 
 function describe(m) {
-  if (!m) return "";
-  const bits = [];
-  if (m.label) bits.push(esc(m.label));
-  if (m.model_id) bits.push(`model ${esc(m.model_id)}`);
-  if (m.patient) bits.push(`patient ${esc(m.patient)}`);
-  if (m.plan) bits.push(`plan “${esc(m.plan)}”`);
-  return bits.join(" · ") || "not stored";
+  return m ? esc(m.text || m.label || "not described") : "";
 }
 
 function renderPanel() {
@@ -335,6 +395,8 @@ function renderPanel() {
   if (abx) $("abx-trial").textContent = `Trial ${Math.min(abx.trial + 1, abx.n_trials)} of ${abx.n_trials}: feel A, B and X as often as you like, then answer.`;
   $("abx-result").innerHTML = info.abx_last_result && !abx ? abxResult(info.abx_last_result) : "";
   // training
+  const proto = training ? { name: tr.protocol, n_trials: tr.n_trials } : (STATION_CONFIG.training || {});
+  $("protocol-name").textContent = proto.name ? `${proto.name} protocol · ${proto.n_trials} trials` : "";
   $("train-idle").hidden = training;
   $("train-start").disabled = !!abx;
   $("train-run").hidden = !training;
@@ -358,16 +420,20 @@ function renderPanel() {
       (tr.phase === "assessment" ? " Which muscles are hypertonic?" : "") +
       (!tr.trial ? " Press Next trial to begin." : "");
     $("train-answers").hidden = !tr.awaiting_answer;
-    $("train-next").disabled = tr.awaiting_answer;
+    $("train-auto").parentElement.hidden = tr.phase === "assessment";
+    $("train-next").disabled = tr.awaiting_answer || !!fb.paused;
   }
 }
 
 function abxResult(r) {
-  const rows = r.answers.map((a) => `<tr><td>${a.trial + 1}</td><td>${a.answer}</td><td>${a.x_is}</td>` +
-    `<td>${a.correct ? "✓" : "✗"}</td></tr>`).join("");
-  return `<p class="result-title">Block: ${r.correct} of ${r.answered} correct</p>` +
+  const rows = r.answers.map((a) => `<tr><td>${a.trial + 1}</td><td>${a.answer}</td>` +
+    `<td>${a.x_was || (a.x_model === 0 ? "before" : "after")}</td>` +
+    `<td>${a.flagged ? "flagged" : (a.correct ? "✓" : "✗")}</td></tr>`).join("");
+  const counted = r.counted === undefined ? r.answered : r.counted;
+  const flagged = r.flagged ? ` · ${r.flagged} flagged (a fault or no force) and left out` : "";
+  return `<p class="result-title">Block: ${r.correct} of ${counted} counted answers correct${flagged}</p>` +
     `<table><tr><th>trial</th><th>answer</th><th>X was</th><th></th></tr>${rows}</table>` +
-    `<p class="small">A was the ${r.label_model.A === 0 ? "before" : "after"} model, B the ${r.label_model.B === 0 ? "before" : "after"} model.</p>`;
+    '<p class="small">A is the model before, B the model after; X was one of them.</p>';
 }
 
 function trainingResult(s, tr) {
@@ -384,7 +450,8 @@ function trainingResult(s, tr) {
   }).join("");
   const sev = Object.entries(s.by_severity).map(([k, v]) =>
     `<tr><th>${k}</th><td>${v.correct} / ${v.n}</td><td>${pct(v.accuracy)}</td></tr>`).join("");
-  return `<p class="result-title">${tr.abandoned ? "Stopped early: " : ""}${s.accuracy.correct} of ${s.accuracy.n} correct (${pct(s.accuracy.accuracy)}, chance ${pct(s.chance)})</p>` +
+  const flagged = s.flagged ? `<p class="small">${s.flagged} answered trial(s) (${s.flagged_trials.join(", ")}) flagged - a fault or no force during the trial - and left out.</p>` : "";
+  return `<p class="result-title">${tr.abandoned ? "Stopped early: " : ""}${s.accuracy.correct} of ${s.accuracy.n} correct (${pct(s.accuracy.accuracy)}, chance ${pct(s.chance)})</p>` + flagged +
     `<table><tr><th>true \\ answer</th>${head}</tr>${rows}</table>` +
     `<table><tr><th>severity</th><th>correct</th><th>accuracy</th></tr>${sev}</table>`;
 }
@@ -400,7 +467,8 @@ function tickClock(f) {
   const left = tr.duration_s - (tr.elapsed_s + (f.t_s - (info.t_s || infoAt)));
   el.textContent = left > 0 ? `${left.toFixed(0)} s` : (tr.awaiting_answer ? "time is up: answer" : "time is up");
   el.classList.toggle("up", left <= 0);
-  if (left <= 0 && tr.phase === "familiarisation" && $("train-auto").checked && autoNextSent !== tr.trial) {
+  if (left <= 0 && tr.phase === "familiarisation" && $("train-auto").checked && !fb.paused &&
+      autoNextSent !== tr.trial) {
     autoNextSent = tr.trial;
     send("train", { action: "next" });
   }
@@ -418,7 +486,8 @@ $("train-start").onclick = () => send("train", { action: "start", instruction: $
 $("train-next").onclick = () => send("train", { action: "next" });
 $("train-stop").onclick = () => send("train", { action: "stop" });
 document.querySelectorAll(".train-answer").forEach((b) => { b.onclick = () => send("train", { action: "answer", answer: b.dataset.answer }); });
-$("btn-arm").onclick = () => send("arm");
+$("btn-arm").onclick = rearm;
+$("btn-rearm").onclick = rearm;
 $("btn-disarm").onclick = () => send("disarm");
 
 document.addEventListener("keydown", (ev) => {
@@ -441,5 +510,6 @@ document.addEventListener("keydown", (ev) => {
 });
 
 window.addEventListener("resize", () => { view = null; });
+buildMuscleLegend();
 connect();
 requestAnimationFrame(draw);
