@@ -37,6 +37,8 @@ COMMANDS: dict[str, LazyCommand] = {
                "Run a scripted probing motion and report the force profile felt at the handle."),
     "replay": C(_SESSION, "replay",
                 "Summarise a recorded session; export it; re-run it offline."),
+    "measure": C("fieldbank.cli.haptic_measure", "measure",
+                 "Measure PATIENT's postural and stiffness maps on the robot and store them."),
     "sim-robot": C(_SESSION, "sim_robot",
                    "Run the simulated robot on a pty and print the port to give to 'serve "
                    "--robot'."),

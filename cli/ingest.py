@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
-from fieldbank.ingest import IngestLimits, ingest_paths
+from fieldbank.ingest import IngestLimits, ReadOptions, ingest_paths
 from fieldbank.sanitize import printable
 
 if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to show a bar
@@ -32,16 +32,31 @@ PROGRESS_MIN_FILES = 20
               help="Override an ingest limit (repeatable): max_file_bytes, "
                    "max_decompressed_bytes, max_compression_ratio, max_rows, max_maps, "
                    "max_problems, max_force_n, max_stiffness_n_per_m (docs/formats.md).")
+@click.option("--kind", type=click.Choice(["postural", "stiffness"]),
+              help="Kind of map, for files that do not say (a file saying otherwise is refused).")
+@click.option("--frame", type=click.Choice(["shoulder"]), help="Frame, for files that do not say.")
+@click.option("--sign", type=click.Choice(["arm-on-handle", "handle-on-arm"]),
+              help="Whose force, for files that do not say.")
+@click.option("--velocity", metavar="SPEED|VX,VY",
+              help="Endpoint velocity of a stiffness map in m/s (0 = static), for files that "
+                   "do not say.")
+@click.option("--column", "columns", multiple=True, metavar="NAME=HEADER",
+              help="Read the file's column (or raw channel) HEADER as NAME, e.g. x_mm=HandX, "
+                   "fx_n=ForceX; for C3D/NWB recordings NAME is x, y, vx, vy, fx, fy "
+                   "(repeatable).")
 @json_option
 def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, session_label: str,
            session_date: datetime | None, dry_run: bool, limit_items: tuple[str, ...],
-           as_json: bool) -> None:
-    """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3).
+           kind: str | None, frame: str | None, sign: str | None, velocity: str | None,
+           columns: tuple[str, ...], as_json: bool) -> None:
+    """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3), or
+    raw NWB and C3D recordings whose maps are estimated (docs/measuring.md).
 
     Every file is validated first; any problem anywhere stores nothing. A file already
     stored (same SHA-256) is reported and not stored again.
     """
     limits = IngestLimits.from_environment(limit_items)
+    options = ReadOptions.from_flags(kind, frame, sign, velocity, columns)
     bar: tqdm | None = None
     if len(files) >= PROGRESS_MIN_FILES:
         from tqdm import tqdm
@@ -58,7 +73,7 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
         with open_db(db_url) as db:
             report = ingest_paths(db, [Path(f) for f in files], patient_code, session_label,
                                   session_date.date() if session_date else None, dry_run,
-                                  progress, limits)
+                                  progress, limits, options)
     finally:
         if bar is not None:
             bar.close()

@@ -26,3 +26,17 @@ def normalise(unit: str) -> str:
 def factor(unit: str, table: dict[str, float]) -> float | None:
     """SI factor of ``unit`` in ``table``, or None if the unit is unknown there."""
     return table.get(normalise(unit))
+
+#: The tables by quantity, for channels of raw recordings (C3D, NWB) that name their unit.
+QUANTITIES = {"length": LENGTH, "force": FORCE, "speed": SPEED}
+#: Unit words some writers use (NWB's 'meters'), as table keys.
+_WORDS = {"meters": "m", "meter": "m", "metres": "m", "metre": "m", "millimeters": "mm",
+          "millimetres": "mm", "centimeters": "cm", "newtons": "n", "newton": "n",
+          "meters_per_second": "m_per_s", "meters_per_s": "m_per_s"}
+
+
+def channel_factor(unit: str, quantity: str) -> float | None:
+    """SI factor of a recording channel's ``unit`` for ``quantity`` ('length', 'force',
+    'speed'), or None when the unit is unknown for it."""
+    key = normalise(unit)
+    return QUANTITIES[quantity].get(_WORDS.get(key, key))

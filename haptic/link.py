@@ -45,7 +45,9 @@ class RobotLink:
 
     Attributes (newest STATE): ``t_us``, ``x``, ``y``, ``vx``, ``vy`` (m, m/s, robot frame),
     ``flags``, ``echo_seq`` (last FORCE seq the device applied), ``states`` (STATE frames
-    received so far). Counters: ``frames_lost``, ``max_gap``, ``duplicates``, ``resyncs``,
+    received so far). Newest force-sensor reading, once :meth:`sensor_on` was sent to a device
+    that has one: ``sensor_t_us``, ``sensor_fx``, ``sensor_fy`` (N, force of the hand on the
+    handle, robot frame), ``sensors`` (SENSOR frames so far). Counters: ``frames_lost``, ``max_gap``, ``duplicates``, ``resyncs``,
     ``device_faults`` (FAULT frames), ``fault_flag_frames`` and ``watchdog_flag_frames``
     (STATE frames with those flags), ``decode_errors`` (by kind, from the frame reader).
     """
@@ -61,6 +63,9 @@ class RobotLink:
         self.flags = 0
         self.echo_seq = 0
         self.states = 0
+        self.sensor_t_us = 0
+        self.sensor_fx = self.sensor_fy = 0.0
+        self.sensors = 0
         self.frames_rx = 0
         self.frames_tx = 0
         self.frames_lost = 0
@@ -150,6 +155,10 @@ class RobotLink:
     def disarm(self) -> None:
         self._send(P.MsgType.DISARM)
 
+    def sensor_on(self) -> None:
+        """Ask the device for its force sensor: a SENSOR frame before every STATE."""
+        self._send(P.MsgType.SENSOR_ON)
+
     def heartbeat(self) -> None:
         self._send(P.MsgType.HEARTBEAT)
 
@@ -209,6 +218,10 @@ class RobotLink:
                 new += 1
                 if self.flags & P.FLAG_WATCHDOG:
                     self.watchdog_flag_frames += 1
+            elif t == P.MsgType.SENSOR:
+                self.sensor_t_us, self.sensor_fx, self.sensor_fy = P.SENSOR_FMT.unpack(
+                    frame.payload)
+                self.sensors += 1
             elif t == P.MsgType.HELLO_ACK:
                 self.device = P.DeviceInfo.from_payload(frame.payload)
             elif t == P.MsgType.FAULT:

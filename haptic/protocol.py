@@ -37,9 +37,11 @@ class MsgType(IntEnum):
     HELLO = 0x01       # host -> device: protocol version, tick rate, watchdog request
     HELLO_ACK = 0x02   # device -> host: version, device id, max rate, force limit, watchdog
     STATE = 0x10       # device -> host: device time, handle position and velocity, flags
+    SENSOR = 0x11      # device -> host: the handle's force sensor (after SENSOR_ON)
     FORCE = 0x20       # host -> device: force to apply to the handle
     ARM = 0x30         # host -> device: enable force output
     DISARM = 0x31      # host -> device: zero force and disable output
+    SENSOR_ON = 0x32   # host -> device: send a SENSOR frame before every STATE from now on
     FAULT = 0x40       # either way: a fault code and detail
     HEARTBEAT = 0x50   # either way: keeps the link alive when no FORCE is due
 
@@ -71,6 +73,10 @@ HELLO_ACK_FMT = struct.Struct("<B16sHfH")         # version, device_id, max_rate
 STATE_FMT = struct.Struct("<IffffBH")             # t_us, x, y, vx, vy, flags, last force seq
 FORCE_FMT = struct.Struct("<ff")                  # fx, fy
 FAULT_FMT = struct.Struct("<BH")                  # code, detail
+SENSOR_FMT = struct.Struct("<Iff")                # t_us, fx, fy (force of the hand on the handle)
+
+#: FAULT detail a device answers SENSOR_ON with when it has no force sensor (code DEVICE).
+FAULT_DETAIL_NO_SENSOR = 2
 
 PAYLOAD_SIZES: dict[int, int] = {
     MsgType.HELLO: HELLO_FMT.size,
@@ -79,6 +85,8 @@ PAYLOAD_SIZES: dict[int, int] = {
     MsgType.FORCE: FORCE_FMT.size,
     MsgType.ARM: 0,
     MsgType.DISARM: 0,
+    MsgType.SENSOR: SENSOR_FMT.size,
+    MsgType.SENSOR_ON: 0,
     MsgType.FAULT: FAULT_FMT.size,
     MsgType.HEARTBEAT: 0,
 }

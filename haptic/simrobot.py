@@ -9,7 +9,9 @@ Physics (robot frame, SI), integrated with semi-implicit Euler at ``substep_s``:
     m a = F_cmd + F_op − b v − f_c tanh(v / v_c)
     F_op = K_op (r(t) − x) + B_op (ṙ(t) − v)           the operator's hand impedance
 
-r(t) is a scripted reference motion (:mod:`haptic.motions`). F_cmd is the last FORCE received,
+r(t) is a scripted reference motion (:mod:`haptic.motions`). With a virtual patient attached
+(``patient=…``, :mod:`haptic.patient`) the operator is gone and F_op is the force of the
+patient's relaxed hand on the handle instead. F_cmd is the last FORCE received,
 clamped to the device force limit, zero while disarmed; if no FORCE arrives for ``watchdog_ms``
 while armed, the device zeroes the force, sets the watchdog flag and disarms (the host must
 send ARM again).
@@ -25,6 +27,11 @@ Two timing modes:
 reached as ``sim://`` through pyserial (:mod:`haptic.protocol_sim`) or runs on the device end of
 a pty pair in a thread or a separate process (:class:`PtyRobot`), so the host opens the other end
 as a real serial port. Fault injection hooks (corrupt, drop, freeze, NaN) serve the tests.
+
+The handle carries a force sensor: after SENSOR_ON the device sends, before every STATE, the
+force the hand (operator or patient) puts on the handle, with ``force_noise_n`` of Gaussian
+noise; ``position_noise_m`` is the encoders' noise on the reported position (both 0 by default,
+0.2 N and 0.02 mm with a patient attached; :mod:`haptic.patient`).
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import random
 import select
 import subprocess
 import sys
@@ -44,6 +52,12 @@ from urllib.parse import parse_qsl, urlencode
 from fieldbank.errors import ParameterError
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.motions import MOTIONS, MotionFn, make_motion, parse_path, wander
+from fieldbank.haptic.patient import (
+    DEFAULT_FORCE_NOISE_N,
+    DEFAULT_POSITION_NOISE_M,
+    PatientPlacement,
+    VirtualPatient,
+)
 from fieldbank.validation import Interval, check_number
 
 #: Allowed range of every numeric field of :class:`SimRobotConfig` (messages are generated).
@@ -63,6 +77,10 @@ SIM_BOUNDS: dict[str, Interval] = {
     "watchdog_ms": Interval(0.0, None, "ms", low_closed=False),
     "max_rate_hz": Interval(None, None, "Hz"),
     "substep_s": Interval(0.0, None, "s", low_closed=False),
+    "patient_x_m": Interval(-2.0, 2.0, "m"),
+    "patient_y_m": Interval(-2.0, 2.0, "m"),
+    "force_noise_n": Interval(None, 10.0, "N"),
+    "position_noise_m": Interval(None, 0.01, "m"),
 }
 
 
@@ -91,6 +109,11 @@ class SimRobotConfig:
     max_rate_hz: int = 4000
     substep_s: float = 2.5e-4
     device_id: str = "fieldbank-sim"
+    patient: str = ""                   # virtual patient (haptic.patient): model id, file:, severity
+    patient_x_m: float = 0.0            # the patient's shoulder in robot coordinates
+    patient_y_m: float = 0.0
+    force_noise_n: float = -1.0         # < 0: 0.2 N with a patient, else 0
+    position_noise_m: float = -1.0      # < 0: 2e-5 m with a patient, else 0
 
     def __post_init__(self) -> None:
         if self.mode not in ("lockstep", "realtime"):
@@ -123,6 +146,20 @@ class SimRobotConfig:
                 ) from None
         return cls(**values)  # type: ignore[arg-type]
 
+    @property
+    def force_noise(self) -> float:
+        """Force-sensor noise in force, N (the default resolved)."""
+        if self.force_noise_n >= 0:
+            return self.force_noise_n
+        return DEFAULT_FORCE_NOISE_N if self.patient else 0.0
+
+    @property
+    def position_noise(self) -> float:
+        """Position noise in force, m (the default resolved)."""
+        if self.position_noise_m >= 0:
+            return self.position_noise_m
+        return DEFAULT_POSITION_NOISE_M if self.patient else 0.0
+
     def to_query(self) -> str:
         d = asdict(self)
         return urlencode({k: v for k, v in d.items() if v != getattr(SimRobotConfig, k)})
@@ -147,6 +184,17 @@ class SimDevice:
         self.motion = config.make_motion()
         x, y, _, _ = self.motion(0.0)
         self.x, self.y, self.vx, self.vy = x, y, 0.0, 0.0
+        self.patient: VirtualPatient | None = None
+        if config.patient:
+            self.patient = VirtualPatient.from_spec(
+                config.patient, PatientPlacement(config.patient_x_m, config.patient_y_m),
+                config.substep_s)
+            self.patient.grasp(x, y)
+        self.hand_fx = self.hand_fy = 0.0   # force of the hand on the handle (last substep)
+        self.sensor_on = False
+        self._rng = random.Random(config.seed)
+        self._force_noise = config.force_noise
+        self._position_noise = config.position_noise
         self.t_s = 0.0                    # device physics time
         self.fx_cmd = 0.0
         self.fy_cmd = 0.0
@@ -239,16 +287,28 @@ class SimDevice:
         elif t == P.MsgType.DISARM:
             self.armed = False
             self.fx_cmd = self.fy_cmd = 0.0
+        elif t == P.MsgType.SENSOR_ON:
+            self.sensor_on = True
         # HEARTBEAT and FAULT from the host need no action beyond being received
 
     def send_state(self) -> None:
         flags = ((P.FLAG_ARMED if self.armed else 0)
                  | (P.FLAG_WATCHDOG if self.watchdog_tripped else 0))
         x, y, vx, vy = self.x, self.y, self.vx, self.vy
+        t_us = int(self.t_s * 1e6) & 0xFFFFFFFF
+        if self._position_noise > 0.0:
+            x += self._rng.gauss(0.0, self._position_noise)
+            y += self._rng.gauss(0.0, self._position_noise)
+        if self.sensor_on:
+            fx, fy = self.hand_fx, self.hand_fy
+            if self._force_noise > 0.0:
+                fx += self._rng.gauss(0.0, self._force_noise)
+                fy += self._rng.gauss(0.0, self._force_noise)
+            self._send(P.MsgType.SENSOR, P.SENSOR_FMT.pack(t_us, fx, fy))
         if self.nan_frames > 0:
             self.nan_frames -= 1
             x = float("nan")
-        payload = P.STATE_FMT.pack(int(self.t_s * 1e6) & 0xFFFFFFFF, x, y, vx, vy, flags,
+        payload = P.STATE_FMT.pack(t_us, x, y, vx, vy, flags,
                                    self.last_force_seq)
         self._send(P.MsgType.STATE, payload)
 
@@ -270,16 +330,24 @@ class SimDevice:
         kop, bop = c.operator_k_n_per_m, c.operator_b_n_s_per_m
         b, fc, vc = c.viscous_n_s_per_m, c.coulomb_n, c.coulomb_v_m_per_s
         motion = self.motion
+        patient = self.patient
+        hx = hy = 0.0
         for _ in range(n):
-            rx, ry, rvx, rvy = motion(t)
-            ax = (fx_c + kop * (rx - x) + bop * (rvx - vx) - b * vx - fc * math.tanh(vx / vc)) / m
-            ay = (fy_c + kop * (ry - y) + bop * (rvy - vy) - b * vy - fc * math.tanh(vy / vc)) / m
+            if patient is None:
+                rx, ry, rvx, rvy = motion(t)
+                hx = kop * (rx - x) + bop * (rvx - vx)
+                hy = kop * (ry - y) + bop * (rvy - vy)
+            else:
+                hx, hy = patient.force(x, y, vx, vy)
+            ax = (fx_c + hx - b * vx - fc * math.tanh(vx / vc)) / m
+            ay = (fy_c + hy - b * vy - fc * math.tanh(vy / vc)) / m
             vx += h * ax
             vy += h * ay
             x += h * vx
             y += h * vy
             t += h
         self.x, self.y, self.vx, self.vy, self.t_s = x, y, vx, vy, t
+        self.hand_fx, self.hand_fy = hx, hy
 
     def poll_realtime(self, now: float) -> None:
         """Realtime mode: run the watchdog, advance physics to ``now``, emit due STATE frames."""

@@ -4,7 +4,8 @@
    (:func:`fieldbank.files.read_regular_file`: a FIFO, a device or a link to one is refused
    without being read); its SHA-256 is taken over the exact bytes.
 2. The format is detected from the content (not the extension): fieldbank HDF5, MATLAB v5,
-   MATLAB v7.3, or CSV text. Readers are bounded (:mod:`fieldbank.ingest.limits`); anything a
+   MATLAB v7.3, CSV text, or a raw recording — NWB (an HDF5 file with ``nwb_version``) or C3D
+   — whose maps the estimator computes (:mod:`fieldbank.ingest.rawfmt`). Readers are bounded (:mod:`fieldbank.ingest.limits`); anything a
    reader did not foresee in a damaged file is still a located problem, never a traceback.
 3. Every map of every file is validated against the patient's arm and the plausibility
    limits, and must not name another patient; every problem of every file is collected,
@@ -17,7 +18,8 @@
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable, Sequence
+import io
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import date
 from pathlib import Path
@@ -28,18 +30,36 @@ from fieldbank.files import read_regular_file
 from fieldbank.ingest.csvfmt import read_csv
 from fieldbank.ingest.hdf5fmt import read_hdf5
 from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
+from fieldbank.ingest.options import ReadOptions
 from fieldbank.ingest.matfmt import read_mat5, read_mat73
 from fieldbank.ingest.parsed import ParsedMap, validate_map
+from fieldbank.ingest.rawfmt import read_c3d, read_nwb
+from fieldbank.measure.c3draw import is_c3d
 from fieldbank.model import Arm
 from fieldbank.storage import Database, IncomingFile, IngestOutcome
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-FORMATS = ("csv", "hdf5", "mat5", "mat73")
-FORMAT_NAMES = {"csv": "CSV", "hdf5": "HDF5", "mat5": "MATLAB v5", "mat73": "MATLAB v7.3"}
+FORMATS = ("csv", "hdf5", "mat5", "mat73", "nwb", "c3d")
+FORMAT_NAMES = {"csv": "CSV", "hdf5": "HDF5", "mat5": "MATLAB v5", "mat73": "MATLAB v7.3",
+                "nwb": "NWB", "c3d": "C3D"}
 
 Reader = Callable[[str, bytes, IngestLimits], tuple[list[ParsedMap], list[Problem]]]
 READERS: dict[str, Reader] = {"csv": read_csv, "hdf5": read_hdf5, "mat5": read_mat5,
                               "mat73": read_mat73}
+RawReader = Callable[[str, bytes, IngestLimits, Arm | None, Mapping[str, str] | None],
+                     tuple[list[ParsedMap], list[Problem]]]
+#: Raw recordings: the estimator needs the patient's arm and the channel names.
+RAW_READERS: dict[str, RawReader] = {"nwb": read_nwb, "c3d": read_c3d}
+
+
+def _is_nwb(data: bytes) -> bool:
+    import h5py
+
+    try:
+        with h5py.File(io.BytesIO(data), "r") as f:
+            return "nwb_version" in f.attrs
+    except (OSError, ValueError):
+        return False
 
 
 def detect_format(data: bytes) -> str | None:
@@ -49,7 +69,9 @@ def detect_format(data: bytes) -> str | None:
     if data.startswith(b"MATLAB 5.0 MAT-file"):
         return "mat5"
     if data.startswith(HDF5_SIGNATURE):
-        return "hdf5"
+        return "nwb" if _is_nwb(data) else "hdf5"
+    if is_c3d(data):
+        return "c3d"
     if data[:1024].find(b"\0") >= 0:
         return None
     try:
@@ -95,8 +117,9 @@ class IngestReport:
 
 
 def read_file(name: str, data: bytes, arm: Arm | None, patient: str = "",
-              limits: IngestLimits = DEFAULT_LIMITS) -> tuple[IncomingFile | None,
-                                                             list[Problem]]:
+              limits: IngestLimits = DEFAULT_LIMITS,
+              options: ReadOptions | None = None) -> tuple[IncomingFile | None,
+                                                           list[Problem]]:
     """Detect, read and validate one file's bytes; the IncomingFile or its problems.
 
     ``patient``: the code the file is ingested for; a file whose metadata names another
@@ -109,10 +132,16 @@ def read_file(name: str, data: bytes, arm: Arm | None, patient: str = "",
     sha = hashlib.sha256(data).hexdigest()
     fmt = detect_format(data)
     if fmt is None:
-        return None, [Problem(name, "unknown format: expected map CSV, fieldbank HDF5, or "
-                              "MATLAB .mat v5/v7.3")]
+        return None, [Problem(name, "unknown format: expected map CSV, fieldbank HDF5, "
+                              "MATLAB .mat v5/v7.3, or a raw NWB or C3D recording")]
+    opts = options or ReadOptions()
     try:
-        parsed, problems = READERS[fmt](name, data, limits)
+        if fmt in RAW_READERS:
+            parsed, problems = RAW_READERS[fmt](name, data, limits, arm, opts.columns)
+        elif fmt == "csv":
+            parsed, problems = read_csv(name, data, limits, opts.csv_defaults(), opts.columns)
+        else:
+            parsed, problems = READERS[fmt](name, data, limits)
         if len(parsed) > limits.max_maps:
             return None, [Problem(name, f"{len(parsed):,} maps, more than {limits.max_maps:,} "
                                   f"{limits.hint('max_maps')}")]
@@ -152,34 +181,56 @@ def ingest_paths(
     dry_run: bool = False,
     progress: Callable[[int, int, str], None] | None = None,
     limits: IngestLimits = DEFAULT_LIMITS,
+    options: ReadOptions | None = None,
 ) -> IngestReport:
     """Validate then store a batch of files for one patient's session (see module docstring).
 
-    ``progress(done, total, file_name)`` is called as files are read and as they are stored.
+    ``progress(done, total, file_name)`` is called as files are read and as they are stored;
+    ``options`` supplies what plain files lack (:class:`~fieldbank.ingest.options.ReadOptions`).
     """
+    blobs: list[tuple[str, bytes | None]] = []
+    refused: list[Problem] = []
+    for p in paths:
+        path = Path(p)
+        try:
+            blobs.append((str(path), read_regular_file(path, limits.max_file_bytes,
+                                                       limits.hint("max_file_bytes"))))
+        except FileRefused as exc:
+            refused.append(Problem(str(path), str(exc).removeprefix(f"{path}: ")))
+            blobs.append((str(path), None))
+    return _ingest(db, blobs, refused, patient_code, session_label, session_date, dry_run,
+                   progress, limits, options)
+
+
+def ingest_data(db: Database, blobs: Sequence[tuple[str, bytes]], patient_code: str,
+                session_label: str, session_date: date | None = None,
+                limits: IngestLimits = DEFAULT_LIMITS,
+                options: ReadOptions | None = None) -> IngestReport:
+    """As :func:`ingest_paths`, for files already in memory as (name, bytes)."""
+    return _ingest(db, list(blobs), [], patient_code, session_label, session_date, False,
+                   None, limits, options)
+
+
+def _ingest(db: Database, blobs: Sequence[tuple[str, bytes | None]], problems: list[Problem],
+            patient_code: str, session_label: str, session_date: date | None, dry_run: bool,
+            progress: Callable[[int, int, str], None] | None, limits: IngestLimits,
+            options: ReadOptions | None) -> IngestReport:
     patient = db.get_patient(patient_code)
     arm = Arm.from_params(patient.arm_params())
     files: list[IncomingFile] = []
-    problems: list[Problem] = []
-    bad: set[str] = set()
-    total = len(paths)
-    for k, p in enumerate(paths):
-        path = Path(p)
-        try:
-            data = read_regular_file(path, limits.max_file_bytes,
-                                     limits.hint("max_file_bytes"))
-        except FileRefused as exc:
-            problems.append(Problem(str(path), str(exc).removeprefix(f"{path}: ")))
-            bad.add(str(path))
+    bad: set[str] = {p.location for p in problems}
+    total = len(blobs)
+    for k, (where, data) in enumerate(blobs):
+        if data is None:
             continue
-        inc, probs = read_file(path.name, data, arm, patient.code, limits)
+        inc, probs = read_file(Path(where).name, data, arm, patient.code, limits, options)
         problems += probs
         if probs:
-            bad.add(str(path))
+            bad.add(where)
         if inc is not None:
             files.append(inc)
         if progress is not None:
-            progress(k + 1, 2 * total, path.name)
+            progress(k + 1, 2 * total, Path(where).name)
     if problems:
         n = sum(not p.reason.startswith("... and ") for p in problems)
         raise ValidationError(problems, header=f"Nothing was stored: {n} problem(s) in "

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -74,9 +75,16 @@ def _dialect(lines: list[str]) -> type[csv.Dialect] | csv.Dialect:
     return dialect
 
 
-def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
+def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS,
+             defaults: Mapping[str, str] | None = None,
+             columns: Mapping[str, str] | None = None
              ) -> tuple[list[ParsedMap], list[Problem]]:
-    """Parse one CSV map file; returns the map (if the structure allows) and file problems."""
+    """Parse one CSV map file; returns the map (if the structure allows) and file problems.
+
+    ``defaults``: metadata the file may lack (kind, frame, sign, velocity; a file that states
+    another value is a problem); ``columns``: our column name → the file's header
+    (:class:`fieldbank.ingest.options.ReadOptions`).
+    """
     problems: list[Problem] = []
     try:
         text = data.decode("utf-8-sig")
@@ -104,6 +112,13 @@ def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
         body.append((lineno, raw))
     if not body:
         return [], [*problems, Problem(name, "no header row (expected e.g. x_m,y_m,fx_n,fy_n)")]
+    for key, value in (defaults or {}).items():
+        stated = meta.get(key)
+        if stated is None:
+            meta[key] = value
+        elif stated.strip().lower() != value.strip().lower() and key != "velocity_m_per_s":
+            problems.append(Problem(name, f"the file says {key}: {stated!r}, the command "
+                                    f"line says {value!r}; remove one"))
     dialect = _dialect([t for _, t in body])
     rows = list(csv.reader([t for _, t in body], dialect))
     header_line = body[0][0]
@@ -113,6 +128,13 @@ def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
     if row_names:  # R's write.csv: an unnamed first column of row names
         header = header[1:]
         cells_of = [(ln, r[1:]) for ln, r in cells_of]
+    for ours, theirs in (columns or {}).items():
+        if theirs in header:
+            header[header.index(theirs)] = ours
+        else:
+            problems.append(Problem(f"{name}:row {header_line}", f"--column {ours}={theirs}: "
+                                    f"the file has no column {theirs!r} (columns: "
+                                    f"{', '.join(header)})"))
     kind = meta.get("kind")
     hloc = f"{name}:row {header_line}"
     # Which value columns to expect: from the kind when valid, else guessed from the header.
