@@ -16,6 +16,7 @@ trace's metadata when the pair is swapped in.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 from fieldbank.haptic.commands import ModelIds, SimPair
@@ -61,6 +62,14 @@ def build_sim(params: ArmParams, dt_s: float, coupling: CouplingConfig | None = 
     return ArmSim(Arm.from_params(params), dt_s=dt_s, coupling=coupling)
 
 
+#: What the loop ticks in place of a compiled arm: built from a model, the loop's period and
+#: the coupling, it answers ``tick(x, y, vx, vy) -> (fx, fy)``, keeps a ``state`` (q1, q2,
+#: qd1, qd2) and can be ``reset``/``reset_at_hand`` like :class:`fieldbank.sim.ArmSim` (the
+#: remote link, :mod:`haptic.remote`, puts a distant patient there). It may raise
+#: :class:`~haptic.errors.CommandError` to refuse a model (a push).
+Environment = Callable[[ArmParams, float, CouplingConfig | None], ArmSim]
+
+
 class ModelPair:
     """Arms A and B, the blend between them and the gain around a swap.
 
@@ -72,12 +81,16 @@ class ModelPair:
     crossfade_s, push_fade_s : float, s
         Ramp of an A↔B switch; fade out before and in after a swap.
     coupling : CouplingConfig, optional
+    environment : callable, optional
+        Builds what is ticked for each model (:data:`Environment`; default :func:`build_sim`).
     """
 
     def __init__(self, before: ArmParams, after: ArmParams, dt_s: float, crossfade_s: float,
-                 push_fade_s: float, coupling: CouplingConfig | None = None) -> None:
+                 push_fade_s: float, coupling: CouplingConfig | None = None,
+                 environment: Environment | None = None) -> None:
         self.dt_s = dt_s
         self.coupling = coupling
+        self.environment: Environment = environment or build_sim
         self.crossfade_ticks = round(crossfade_s / dt_s)
         self.push_fade_ticks = round(push_fade_s / dt_s)
         self.params = (before, after)
@@ -90,8 +103,8 @@ class ModelPair:
 
     def compile(self, before: ArmParams, after: ArmParams) -> SimPair:
         """Both models compiled for this loop's period (slow: call outside the loop)."""
-        return (build_sim(before, self.dt_s, self.coupling),
-                build_sim(after, self.dt_s, self.coupling))
+        make = self.environment
+        return (make(before, self.dt_s, self.coupling), make(after, self.dt_s, self.coupling))
 
     def crossfade(self, weight: float) -> None:
         """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""

@@ -5,10 +5,11 @@
 :class:`~fieldbank.storage.core.DatabaseCore` (engine, array store, actor, transactions, audit,
 patient and session rows)::
 
-    Database(MapStore, Lineage, Traces)      this module: open/close, patients, sessions, audit,
-    ├── MapStore(DatabaseCore)                 mapstore.py: ingest, maps, source files
-    ├── Lineage(DatabaseCore)                  lineage.py: models, fits, plans
-    └── Traces(DatabaseCore)                   traces.py: haptic sessions, traces
+    Database(MapStore, Lineage, Traces, RemoteLinks)   this module: open/close, patients,
+    ├── MapStore(DatabaseCore)                 mapstore.py: ingest, maps, source files     sessions,
+    ├── Lineage(DatabaseCore)                  lineage.py: models, fits, plans             audit
+    ├── Traces(DatabaseCore)                   traces.py: haptic sessions, traces
+    └── RemoteLinks(DatabaseCore)              remote.py: remote links, assessments
 
 Why mixins rather than objects the facade holds: the aggregates share one engine, one store and
 one actor, and several writes span two of them in ONE transaction (an ingest creates the
@@ -51,6 +52,7 @@ from fieldbank.storage.lineage import Lineage
 from fieldbank.storage.mapstore import MapStore
 from fieldbank.storage.orm import AuditRow, MapRow, PatientRow, SessionRow
 from fieldbank.storage.records import AuditEntry, CheckReport, PatientInfo, SessionInfo
+from fieldbank.storage.remote import RemoteLinks
 from fieldbank.storage.traces import Traces
 
 SIDES = ("left", "right")
@@ -72,7 +74,7 @@ def _patient_info(r: PatientRow) -> PatientInfo:
                        to_utc(r.created_at))
 
 
-class Database(MapStore, Lineage, Traces):
+class Database(MapStore, Lineage, Traces, RemoteLinks):
     """The field database and its array store. Create with :meth:`open`."""
 
     # --- opening ----------------------------------------------------------------------------
