@@ -15,10 +15,13 @@
   delay T has both sites set to T. HELLO, WELCOME and BYE are not impaired. The draws come
   from a seeded generator: a lockstep run is repeatable.
 * **Lockstep** (faster than real time, both sites on virtual clocks): every STATE carries its
-  tick, and before its tick n a site waits until the peer's STATE of tick n − 1 has arrived
-  (:meth:`Endpoint.wait_peer_tick`), so the two virtual clocks advance together however fast
-  the processes run; delay and jitter then count in virtual time. Real time: no waiting; the
-  clocks are the machines'.
+  tick and its sender's virtual time; it is released one tick after it was sent plus the
+  injected delay and jitter, all in virtual time, so a run is the same however fast or slow
+  the processes go. Before its tick n a site waits until the peer's STATEs released by then
+  have arrived (:meth:`Endpoint.wait_peer_tick`): the peer's tick n − 1 without delay, tick
+  n − 1 − D with an injected delay of at least D ticks — so the two sites may run up to D ticks
+  apart and wait on each other rarely. Real time: no waiting; a datagram is released the
+  injected delay after it arrives, by the receiving machine's clock.
 
 The endpoint also measures the link: the round trip from each STATE's echo of the newest
 datagram the peer had received (and how long it held it), the datagrams lost (sequence gaps),
@@ -219,15 +222,22 @@ class Endpoint:
     auth : Authenticator
     impairment : Impairment, optional
     lockstep : bool
-        Virtual time: wait for the peer's previous tick before each tick.
+        Virtual time (module docstring).
+    tick_s : float, s
+        The loop's period (lockstep: the least time a datagram takes).
     """
 
     def __init__(self, transport: Transport, auth: Authenticator,
-                 impairment: Impairment | None = None, lockstep: bool = False) -> None:
+                 impairment: Impairment | None = None, lockstep: bool = False,
+                 tick_s: float = 1e-3) -> None:
         self.transport = transport
         self.auth = auth
         self.impairment = impairment or Impairment()
         self.lockstep = lockstep
+        self.tick_s = tick_s
+        #: lockstep: how many ticks behind the peer may be (the least injected delay)
+        self.lead_ticks = max(0, int((self.impairment.delay_s - self.impairment.jitter_s)
+                                     / tick_s + 1e-9)) if lockstep else 0
         self._rng = random.Random(self.impairment.seed * 2 + int(auth.role))
         self._queue: list[tuple[float, int, Datagram]] = []
         self._order = 0
@@ -279,7 +289,8 @@ class Endpoint:
             if imp.jitter_s:
                 delay = max(0.0, delay + self._rng.uniform(-imp.jitter_s, imp.jitter_s))
             self._order += 1
-            heapq.heappush(self._queue, (now_s + delay, self._order, d))
+            sent = d.t_us * 1e-6 + self.tick_s if self.lockstep else now_s
+            heapq.heappush(self._queue, (sent + delay, self._order, d))
 
     def receive(self, now_s: float) -> State | None:
         """Drain the transport; the newest STATE released by ``now_s`` (None: nothing new)."""
@@ -313,9 +324,14 @@ class Endpoint:
     peer_flags: int = 0
 
     def wait_peer_tick(self, tick: int, now_s: float, timeout_s: float) -> bool:
-        """Lockstep: wait until the peer's STATE of ``tick`` (or a later one) has arrived;
-        False after ``timeout_s`` of wall time (the peer is then taken as silent, and no later
-        tick waits until it is heard again)."""
+        """Lockstep: wait until the peer's STATE of ``tick`` minus :attr:`lead_ticks` (or a
+        later one) has arrived; False after ``timeout_s`` of wall time (the peer is then taken
+        as silent, and no later tick waits until it is heard again).
+
+        With a lead, a wait lasts until the peer is half the lead further on, and it sleeps
+        instead of waiting on the socket: a waiter on the socket would be woken by each
+        datagram, and waking it would cost the sender its time slice on every tick."""
+        tick -= self.lead_ticks
         if tick < 0 or self.peer_tick >= tick:
             self.peer_silent = False
             return True
@@ -324,16 +340,22 @@ class Endpoint:
             if self.peer_tick >= tick:
                 self.peer_silent = False
             return not self.peer_silent
+        target = tick + self.lead_ticks // 2
         deadline = time.monotonic() + timeout_s
         while True:
             self._drain(now_s)
-            if self.peer_tick >= tick:
+            if self.peer_tick >= target:
                 return True
             left = deadline - time.monotonic()
             if left <= 0:
+                if self.peer_tick >= tick:
+                    return True
                 self.peer_silent = True
                 return False
-            self.transport.wait_readable(min(left, 0.05))
+            if self.lead_ticks:
+                time.sleep(min(left, 5e-4))
+            else:
+                self.transport.wait_readable(min(left, 0.05))
 
     def wait_message(self, kinds: tuple[Kind, ...], timeout_s: float,
                      now: Any = None) -> Datagram | None:

@@ -229,7 +229,7 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
     transport = UdpTransport(bind or default_bind(peer), peer)
     session_id = secrets.randbits(63)
     endpoint = Endpoint(transport, Authenticator(key, Role.CLINICIAN, session_id),
-                        cfg.impairment, cfg.lockstep)
+                        cfg.impairment, cfg.lockstep, dt)
     tap: TapWriter | None = None
     tmp: tempfile.TemporaryDirectory[str] | None = None
     try:

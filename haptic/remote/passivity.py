@@ -16,14 +16,16 @@ oscillate. Time-domain passivity keeps it passive at any delay:
 
       H = E_in + E_received − E_out − E_sent  ≥ 0,
 
-  and hands everything above a small reserve R to the other side (``E_sent`` is cumulative and
+  and hands everything above a reserve R to the other side (``E_sent`` is cumulative and
   travels in every STATE, so a lost datagram only delays a hand-over). The link's stored energy
   is H_clinician + H_patient + what is in flight (sent, not yet received) — every term ≥ 0 — and
   equals all that entered minus all that left: the link never creates energy, whatever the
-  delay, its jitter or the datagrams lost. The reserve lets a port answer the small back and
-  forth of a hand holding still at once, instead of waiting a round trip for energy to come back
-  (which makes a purely delayed budget chatter on every hold); it costs the patient's side a lag
-  of R / F when it starts a stretch against a force F (0.3 mm at 1 mJ and 3 N);
+  delay, its jitter or the datagrams lost. The clinician's port keeps a reserve (1 mJ): it
+  answers the small give of a hand holding still against a force at once, instead of waiting
+  a round trip for the patient's side to hand energy back (a budget that always waits makes
+  every hold chatter); the patient's port keeps none and hands back at once what the patient
+  returns. The reserve costs the patient's side a lag of R / F when it starts a stretch
+  against a force F (0.3 mm at 1 mJ and 3 N);
 * **controller**: when a tick would empty the tank, it dissipates exactly the excess:
 
       clinician port (force out):     F' = F − α v,  α = (E_out + F·v Δt − budget) / (‖v‖² Δt)

@@ -298,7 +298,7 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
             f"{dev.force_limit_n:g} N")
         transport = UdpTransport(bind)
         endpoint = Endpoint(transport, Authenticator(key, Role.PATIENT), cfg.impairment,
-                            cfg.lockstep)
+                            cfg.lockstep, dt)
         endpoint.learn_peer = True
         host, port = transport.address
         say(f"listening for the clinician on {host}:{port} (UDP; key {key_fingerprint(key)})")

@@ -23,9 +23,10 @@ The patient's side (:class:`PatientPort`) turns the clinician's position into th
 the patient's robot: the nominal velocity is the clinician's, plus a pull back toward the
 clinician's position over ``drift_time_s`` (the passivity controller may have held the robot
 back); the passivity controller may slow it; the integral is the robot's reference x_cmd. The
-servo force is K (x_cmd − x) + B (v_cmd − v) + k_ff F_patient-compensation (``servo_ff``: the
-patient's measured force fed forward, so the robot tracks the clinician's motion closely
-however hard the arm resists; the clinician then feels the arm, not the servo).
+servo force is K (x_cmd − x) + B (v_cmd − v) − k_ff F_patient (``servo_ff``: the patient's
+measured force fed forward; off by default). The pull back toward the clinician's position
+never acts against the clinician's motion: when the clinician gives way the robot follows at
+once, and that is what hands the patient's energy back.
 """
 
 from __future__ import annotations
@@ -59,7 +60,9 @@ LINK_BOUNDS: dict[str, Interval] = {
     "servo_b_n_s_per_m": Interval(0.0, 2000.0, "N·s/m"),
     "servo_ff": Interval(0.0, 1.0, "1"),
     "reserve_j": Interval(0.0, 1.0, "J"),
+    "patient_reserve_j": Interval(0.0, 1.0, "J"),
     "damping_n_s_per_m": Interval(0.0, 200.0, "N·s/m"),
+    "force_filter_hz": Interval(0.0, 500.0, "Hz"),
 }
 #: Passivity modes: the time-domain controller of :mod:`haptic.remote.passivity`, or none
 #: (observer only: for measuring what the link would create).
@@ -92,8 +95,17 @@ class LinkConfig:
     servo_ff : float
         Patient's side: fraction of the patient's measured force the servo compensates.
     reserve_j : float, J
-        Energy each port's tank keeps before handing the rest to the other side
-        (:mod:`haptic.remote.passivity`).
+        Energy the clinician's port keeps in its tank before handing the rest to the
+        patient's (:mod:`haptic.remote.passivity`): it pays the small give of a hand holding
+        still against a force without waiting a round trip. The patient's port keeps none: it
+        hands back at once whatever the patient returns.
+    damping_n_s_per_m : float, N·s/m
+        Clinician's side: a damper added to what is displayed (0: none).
+    force_filter_hz : float, Hz
+        Patient's side: cut-off of the low-pass filter (second-order Butterworth) on the
+        patient's measured force before it is used and sent (0: none). A hand gripping a
+        handle through a stiff grip rings at a few hundred hertz, and the force sensor reads
+        it; nobody feels it at the hand, but it would shake the clinician's handle.
     passivity : str
         'tdpa' (time-domain passivity controller) or 'off' (observer only).
     """
@@ -108,7 +120,9 @@ class LinkConfig:
     servo_b_n_s_per_m: float = 120.0
     servo_ff: float = 0.0
     reserve_j: float = DEFAULT_RESERVE_J
+    patient_reserve_j: float = 0.0
     damping_n_s_per_m: float = 0.0
+    force_filter_hz: float = 80.0
     passivity: str = "tdpa"
 
     def __post_init__(self) -> None:
@@ -194,6 +208,37 @@ PATIENT_COLUMNS: tuple[tuple[str, str], ...] = (
     ("gain", "1"), ("link_ok", "1"), ("engaged", "1"), ("rtt_s", "s"),
     ("new_state", "1"), ("lost", "1"),
 )
+
+
+class LowPass:
+    """Second-order Butterworth low-pass (bilinear transform), one per axis, plain floats."""
+
+    __slots__ = ("a1", "a2", "b0", "b1", "b2", "zs")
+
+    def __init__(self, cutoff_hz: float, dt_s: float, axes: int = 2) -> None:
+        k = math.tan(math.pi * cutoff_hz * dt_s)
+        q = math.sqrt(2.0)
+        norm = 1.0 / (1.0 + q * k + k * k)
+        self.b0 = k * k * norm
+        self.b1 = 2.0 * self.b0
+        self.b2 = self.b0
+        self.a1 = 2.0 * (k * k - 1.0) * norm
+        self.a2 = (1.0 - q * k + k * k) * norm
+        self.zs = [[0.0, 0.0] for _ in range(axes)]
+
+    def reset(self, values: tuple[float, ...]) -> None:
+        """Start at rest at ``values`` (no transient)."""
+        for z, v in zip(self.zs, values, strict=True):
+            z[0] = v * (1.0 - self.b0)
+            z[1] = v * (self.b2 - self.a2)
+
+    def __call__(self, i: int, x: float) -> float:
+        """Filter one sample of axis ``i`` (transposed direct form II)."""
+        z = self.zs[i]
+        y = self.b0 * x + z[0]
+        z[0] = self.b1 * x - self.a1 * y + z[1]
+        z[1] = self.b2 * x - self.a2 * y
+        return y
 
 
 class _Watchdog:
@@ -400,12 +445,15 @@ class PatientPort(_Port):
 
     def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float) -> None:
         super().__init__(endpoint, config, dt_s, PATIENT_COLUMNS)
-        self.pc = VelocityPort(dt_s, config.reserve_j)
+        self.pc = VelocityPort(dt_s, config.patient_reserve_j)
         self.robot_ok: Callable[[], bool] = lambda: True
         self.engaged = False
         self.cmd = (math.nan, math.nan)
         self._peer_at = 0.0
         self.fx = self.fy = 0.0
+        self.filter = (LowPass(config.force_filter_hz, dt_s)
+                       if config.force_filter_hz > 0 else None)
+        self._filter_primed = False
 
     def tick(self, x: float, y: float, vx: float, vy: float, hand_fx: float,
              hand_fy: float) -> tuple[float, float]:
@@ -414,6 +462,12 @@ class PatientPort(_Port):
         command on the patient's robot, N."""
         cfg = self.config
         t = self.now()
+        lp = self.filter
+        if lp is not None:
+            if not self._filter_primed:
+                lp.reset((hand_fx, hand_fy))
+                self._filter_primed = True
+            hand_fx, hand_fy = lp(0, hand_fx), lp(1, hand_fy)
         self._receive(t)
         if self.new_state:
             self._peer_at = t
@@ -444,7 +498,12 @@ class PatientPort(_Port):
             tvx, tvy = peer.vx, peer.vy
             cx, cy = self.cmd
             k = 1.0 / cfg.drift_time_s
-            nvx, nvy = tvx + k * (tx - cx), tvy + k * (ty - cy)
+            dx, dy = k * (tx - cx), k * (ty - cy)
+            if dx * tvx + dy * tvy < 0.0:
+                # never pull back against the clinician's motion: following it is what hands
+                # the patient's energy back when the clinician gives way
+                dx = dy = 0.0
+            nvx, nvy = tvx + dx, tvy + dy
             if g < 1.0:  # ramping in or out: the reference follows only as far as the gain
                 nvx, nvy = g * nvx, g * nvy
             if cfg.passivity == "tdpa":

@@ -180,16 +180,16 @@ def clinician_robot(hand_m: tuple[float, float], rate_hz: int,
     return link
 
 
-def linked_endpoints(impairment: Impairment, key: bytes | None = None
+def linked_endpoints(impairment: Impairment, tick_s: float, key: bytes | None = None
                      ) -> tuple[Endpoint, Endpoint]:
     """The clinician's and the patient's endpoints of an in-memory link (lockstep), each
     impairing what it receives (the patient's side with the next seed)."""
     key = key or new_key()
     session = secrets.randbits(63)
     a, b = MemoryTransport.pair()
-    ce = Endpoint(a, Authenticator(key, Role.CLINICIAN, session), impairment, lockstep=True)
+    ce = Endpoint(a, Authenticator(key, Role.CLINICIAN, session), impairment, True, tick_s)
     pe = Endpoint(b, Authenticator(key, Role.PATIENT, session),
-                  replace(impairment, seed=impairment.seed + 1), lockstep=True)
+                  replace(impairment, seed=impairment.seed + 1), True, tick_s)
     return ce, pe
 
 
@@ -212,7 +212,7 @@ class Pair:
                  patient_seed: int = 0, force_noise_n: float = PATIENT_FORCE_NOISE_N) -> None:
         self.config = config
         dt = 1.0 / config.rate_hz
-        ce, pe = linked_endpoints(config.impairment)
+        ce, pe = linked_endpoints(config.impairment, dt)
         self.plink = patient_robot(patient, config.rate_hz, seed=patient_seed,
                                    force_noise_n=force_noise_n)
         self.patient = PatientSite(self.plink, pe, config, (0.0, 0.0))
@@ -242,6 +242,24 @@ class Pair:
         self.link.close()
         return LinkRun(self.port.log.arrays(), self.patient.port.log.arrays(), trace,
                        self.port.summary(), self.patient.port.summary())
+
+
+def push_patient(pair: Pair, at_s: float, force_n: tuple[float, float]) -> None:
+    """From ``at_s`` of the session on, the simulated patient's hand pushes ``force_n`` more on
+    its handle (shoulder frame, N): a step of the patient's force (the force step response)."""
+    dev = pair.plink.port.device  # type: ignore[attr-defined]
+    assert isinstance(dev, SimDevice) and dev.patient is not None
+    inner = dev.patient.force
+    port = pair.patient.port
+    fx0, fy0 = force_n
+
+    def force(x: float, y: float, vx: float, vy: float) -> tuple[float, float]:
+        fx, fy = inner(x, y, vx, vy)
+        if port.tick_n * port.dt >= at_s:
+            return fx + fx0, fy + fy0
+        return fx, fy
+
+    dev.patient.force = force  # type: ignore[method-assign]
 
 
 def run_link(patient: ArmParams, script: ProbePath | Script, *,

@@ -149,6 +149,24 @@ def new_key() -> bytes:
     return os.urandom(KEY_BYTES)
 
 
+def write_key(path: str | Path, key: bytes) -> Path:
+    """Write ``key`` to a new file readable by its owner only (never over an existing file,
+    never through a link)."""
+    p = Path(path)
+    try:
+        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0),
+                     0o600)
+    except FileExistsError:
+        raise HapticError(f"{p}: exists; a session key is never written over a file") from None
+    except OSError as exc:
+        raise HapticError(f"{p}: cannot write the session key: {exc.strerror or exc}") from None
+    with os.fdopen(fd, "w", encoding="ascii") as f:
+        f.write(key.hex() + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+    return p
+
+
 def key_fingerprint(key: bytes) -> str:
     """What may be shown and stored about a key: 16 hex digits of its SHA-256."""
     return hashlib.sha256(b"fieldbank-remote-fingerprint" + key).hexdigest()[:16]
