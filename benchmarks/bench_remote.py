@@ -6,7 +6,7 @@ robot follows a scripted probing (a slow stretch of the elbow, 5 cm in 2.5 s, an
 sites exchange authenticated datagrams through an in-memory link with the injected one-way
 delay, jitter and loss, on virtual clocks (lockstep: faster than real time, repeatable).
 
-For each setting it prints (:func:`haptic.remote.simulate.transparency`): the stiffness and the
+For each setting (the script twice over, so each read-out averages two stretches) it prints (:func:`haptic.remote.simulate.transparency`): the stiffness and the
 velocity-dependent resistance the clinician felt against the patient's own (each side against
 its own motion), the peak force felt against the patient's, the largest energy the link
 created over the session (≤ 0: passive), what the passivity controllers dissipated and on what
@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=5, help="seeds of the 30 s session")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
-    p, script = patient_and_script()
+    p, script = patient_and_script(repeat=2)
     out: dict[str, Any] = {"load_average_start": os.getloadavg()}
     rows = [row(p, script, d, lo, j) for d, lo, j in (QUICK if a.quick else SETTINGS)]
     out["transparency"] = rows

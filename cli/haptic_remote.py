@@ -132,7 +132,7 @@ def patient(robot: str, bind: str, shoulder: str | None, drawing_file: Path | No
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(message)s")
     description = ""
     if robot.startswith("sim://") and "patient=" in urllib.parse.urlsplit(robot).query:
-        params, shoulder_m, description = sim_patient(robot)
+        robot, params, shoulder_m, description = sim_patient(robot)
     else:
         if shoulder is None:
             raise click.UsageError("--shoulder X,Y is needed for a robot other than a "
@@ -146,7 +146,8 @@ def patient(robot: str, bind: str, shoulder: str | None, drawing_file: Path | No
                         config=_site(link), duration_s=link["duration_s"], wait_s=wait_s,
                         log_dir=log_dir or session.default_trace_dir(),
                         description=description, say=say)
-    emit(res.summary, as_json, f"patient's site: {res.ticks} ticks; {res.summary['reason']}"
+    emit(res.summary | {"log_file": res.log_file}, as_json,
+         f"patient's site: {res.ticks} ticks; {res.summary['reason']}"
          + (f"\nlog: {res.log_file}" if res.log_file else ""))
 
 

@@ -28,7 +28,8 @@ from fieldbank.storage.records import AssessmentRecord, RemoteLinkRecord
 ROLES = ("clinician", "patient")
 #: Longest clinician's note kept with an answer.
 MAX_NOTE_CHARS = 2000
-_DETAIL = ("group_posterior", "level_posterior", "next_probe", "link", "predictor")
+_DETAIL = ("group_posterior", "level_posterior", "next_probe", "link", "predictor",
+           "revisions")
 
 
 def _json(doc: Any) -> str:
@@ -86,7 +87,8 @@ class RemoteLinks(DatabaseCore):
         Each row: ``probe`` (int), ``posterior`` ({candidate: p}), ``verdict`` (text), and
         optionally ``started_s``, ``ended_s``, ``prior``, ``group``, ``group_probability``,
         ``level``, ``level_probability``, ``explains``, ``group_posterior``,
-        ``level_posterior``, ``next_probe``, ``link``, ``answer_group``, ``answer_level``,
+        ``level_posterior``, ``next_probe``, ``link``, ``revisions`` (posteriors recomputed
+        for the probe under another prior), ``answer_group``, ``answer_level``,
         ``answer_note``, ``answered_s``.
         """
         with self._write() as s:

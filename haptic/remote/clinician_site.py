@@ -167,17 +167,24 @@ def read_assessment_log(path: Path) -> list[dict[str, Any]]:
 
 
 def assessment_rows(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """One row per posterior (after each probe), the clinician's latest answer given after it
-    and before the next posterior beside it."""
+    """One row per probe: the posterior computed when the probe ended, the clinician's latest
+    answer given after it (and before the next probe) beside it; posteriors recomputed later for
+    the same probe (the clinician changed the prior) are kept in its ``revisions``."""
+    keys = ("probe", "started_s", "ended_s", "prior", "posterior", "group",
+            "group_probability", "level", "level_probability", "explains", "next_probe",
+            "verdict", "link", "group_posterior", "level_posterior", "predictor")
     rows: list[dict[str, Any]] = []
     for rec in records:
         if rec.get("kind") == "posterior":
-            rows.append({k: rec.get(k) for k in (
-                "probe", "started_s", "ended_s", "prior", "posterior", "group",
-                "group_probability", "level", "level_probability", "explains",
-                "next_probe", "verdict", "link")}
-                | {"answer_group": None, "answer_level": None, "answer_note": None,
-                   "answered_s": None})
+            if rows and rows[-1]["probe"] == rec.get("probe"):
+                rows[-1].setdefault("revisions", []).append(
+                    {k: rec.get(k) for k in ("prior", "posterior", "group",
+                                             "group_probability", "level",
+                                             "level_probability", "verdict")})
+                continue
+            rows.append({k: rec.get(k) for k in keys}
+                        | {"answer_group": None, "answer_level": None, "answer_note": None,
+                           "answered_s": None})
         elif rec.get("kind") == "answer" and rows:
             rows[-1].update({"answer_group": rec.get("group"), "answer_level": rec.get("level"),
                              "answer_note": rec.get("note"), "answered_s": rec.get("t_s")})

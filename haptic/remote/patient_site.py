@@ -101,16 +101,23 @@ class SiteConfig:
         return {"rate_hz": self.rate_hz, "lockstep": self.lockstep}
 
 
-def sim_patient(robot: str) -> tuple[ArmParams, tuple[float, float], str]:
-    """For a ``sim://`` robot with a virtual patient: its arm, its shoulder in the robot frame
-    and its description."""
-    cfg = SimRobotConfig.from_query(urllib.parse.urlsplit(robot).query)
+def sim_patient(robot: str) -> tuple[str, ArmParams, tuple[float, float], str]:
+    """For a ``sim://`` robot with a virtual patient: the URL with the handle where the relaxed
+    hand rests (unless the URL says where), the arm, its shoulder in the robot frame and its
+    description."""
+    parts = urllib.parse.urlsplit(robot)
+    cfg = SimRobotConfig.from_query(parts.query)
     if not cfg.patient:
         raise ParameterError(f"{mask_url(robot)}: a simulated patient's site needs "
                              "patient=… in the sim:// URL (a stored model id, file:PATH or a "
                              "severity such as elbow=severe)")
     src = resolve_patient(cfg.patient)
-    return src.params, (cfg.patient_x_m, cfg.patient_y_m), src.description
+    q = dict(urllib.parse.parse_qsl(parts.query, keep_blank_values=True))
+    hx, hy = Arm.from_params(src.params).rest_position()
+    q.setdefault("x0_m", f"{float(hx) + cfg.patient_x_m:.6f}")
+    q.setdefault("y0_m", f"{float(hy) + cfg.patient_y_m:.6f}")
+    return ("sim://?" + urllib.parse.urlencode(q), src.params,
+            (cfg.patient_x_m, cfg.patient_y_m), src.description)
 
 
 @dataclass(frozen=True)

@@ -54,6 +54,7 @@ LINK_BOUNDS: dict[str, Interval] = {
     "resume_s": Interval(0.0, 10.0, "s"),
     "ramp_s": Interval(0.01, 2.0, "s"),
     "lockstep_wait_s": Interval(0.01, 60.0, "s"),
+    "start_wait_s": Interval(0.01, 3600.0, "s"),
     "drift_time_s": Interval(0.01, 5.0, "s"),
     "extrapolate_s": Interval(0.0, 0.2, "s"),
     "servo_k_n_per_m": Interval(100.0, 50000.0, "N/m"),
@@ -83,6 +84,9 @@ class LinkConfig:
         Raised-cosine ramp of the force out (link lost) and in (engaged, resumed).
     lockstep_wait_s : float, s
         Lockstep: longest wall-clock wait for the peer's previous tick.
+    start_wait_s : float, s
+        Lockstep: longest wait for the peer's first STATE (its loop may start later: a station
+        to launch, a robot to arm).
     drift_time_s : float, s
         Patient's side: time constant of the pull of the robot's reference back to the
         clinician's position.
@@ -114,6 +118,7 @@ class LinkConfig:
     resume_s: float = 0.5
     ramp_s: float = 0.2
     lockstep_wait_s: float = 5.0
+    start_wait_s: float = 120.0
     drift_time_s: float = 0.2
     extrapolate_s: float = 0.02
     servo_k_n_per_m: float = 8000.0
@@ -302,7 +307,8 @@ class _Port:
     def _receive(self, t: float) -> None:
         ep = self.endpoint
         if ep.lockstep:
-            ep.wait_peer_tick(self.tick_n - 1, t, self.config.lockstep_wait_s)
+            ep.wait_peer_tick(self.tick_n - 1, t, self.config.lockstep_wait_s
+                              if ep.peer_tick >= 0 else self.config.start_wait_s)
         st = ep.receive(t)
         while ep.messages:
             d = ep.messages.popleft()
