@@ -1,5 +1,5 @@
 """``fieldbank field postural|stiffness``: a model's maps as CSV, JSON or a figure (SVG, PNG or
-PDF: :func:`fieldbank.fieldplot.map_figure`, the conventions of the report's field figures)."""
+PDF: :func:`fieldbank.figures.fields.map_figure`, the conventions of the report's field figures)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from fieldbank import fieldplot, modelsource
+from fieldbank import modelsource
 from fieldbank.cli.options import json_option
 from fieldbank.errors import FileRefused, ParameterError
 from fieldbank.evaluate.severity import (
@@ -19,6 +19,8 @@ from fieldbank.evaluate.severity import (
     summary,
     synthesize,
 )
+from fieldbank.figures import save
+from fieldbank.figures.fields import map_figure
 from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file, to_json, write_atomic
 from fieldbank.maps import ellipse, postural_map, stiffness_map, workspace_grid
 from fieldbank.model import Arm
@@ -132,7 +134,7 @@ def field(kind: str, params_file: Path | None, severity: tuple[str, ...], mass: 
     if fmt in ("svg", "png", "pdf"):
         if out is None:
             raise ParameterError("A plot needs --out FILE.svg, FILE.png or FILE.pdf.")
-        fieldplot.map_figure(arm, m).save(out, fmt)
+        save(map_figure(arm, m), out, fmt)
         click.echo(f"wrote {out}", err=True)
         return
     if fmt == "json":

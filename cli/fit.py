@@ -14,9 +14,10 @@ from typing import Any
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option
+from fieldbank.cli.options import db_option, emit_json, figure_path, json_option
+from fieldbank.figures import save
+from fieldbank.figures.fit import fit_figure
 from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM, ArmFitter
-from fieldbank.fitting.plot import plot_fit
 from fieldbank.fitting.records import FitOutcome, FitStore, fit_patient, model_summary
 from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
 from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
@@ -136,7 +137,8 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @click.option("--replicates", type=click.IntRange(min=2), default=DEFAULT_REPLICATES,
               show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
-              help="Write measured against fitted fields to this .png or .svg.")
+              callback=figure_path,
+              help="Write measured against fitted fields to this .svg, .png or .pdf.")
 @json_option
 @db_option
 @click.pass_context
@@ -157,8 +159,8 @@ def fit(ctx: click.Context, patient: str, session: str | None, algorithm: str, s
                       progress=lambda msg: click.echo(msg, err=True))
     if plot_path:
         f = out.fitter
-        path = plot_fit(f.maps_, f.predict(f.maps_), plot_path, f.r2_,
-                        title=f"patient {patient}: measured (black) and fitted (red)")
+        path = save(fit_figure(f.maps_, f.predict(f.maps_), f.r2_,
+                               f"patient {patient}: measured and fitted maps"), plot_path)
         click.echo(f"plot written to {path}", err=True)
     if as_json:
         report = dict(out.record.report)

@@ -4,7 +4,6 @@ when a command opens it)."""
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 from dataclasses import replace
@@ -15,7 +14,7 @@ import click
 from fieldbank import modelsource
 from fieldbank.cli.haptic import resolve_sources, socket_option
 from fieldbank.cli.options import db_option, emit, json_option, open_db, say, xy_metres
-from fieldbank.files import write_atomic
+from fieldbank.files import read_json_document, write_atomic
 from fieldbank.haptic import session
 from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
 from fieldbank.haptic.errors import HapticError
@@ -43,7 +42,7 @@ def protocol_named(text: str) -> TrainingProtocol:
         raise click.BadParameter(f"a training protocol is seed, short or a JSON file; got "
                                  f"{text!r}", param_hint="--training-protocol")
     try:
-        return TrainingProtocol.from_dict(json.loads(path.read_text(encoding="utf-8")))
+        return TrainingProtocol.from_dict(read_json_document(path))
     except ValueError as exc:
         raise click.BadParameter(f"{path}: {exc}", param_hint="--training-protocol") from None
 

@@ -55,7 +55,10 @@ COMMANDS: dict[str, LazyCommand] = {
 
 
 class FieldbankGroup(LazyGroup):
-    """Top-level group that reports library errors as clean messages with exit code 1."""
+    """Top-level group: the command line's one error edge. A library error
+    (:class:`~fieldbank.errors.FieldbankError`) becomes a message with exit status 1; every
+    message, a usage error's too, is shown without terminal escapes
+    (:func:`fieldbank.sanitize.printable`). Commands let library errors through to here."""
 
     def invoke(self, ctx: click.Context) -> object:
         try:
@@ -63,6 +66,11 @@ class FieldbankGroup(LazyGroup):
         except FieldbankError as exc:
             # messages quote file names and labels from outside: no terminal escapes
             raise click.ClickException(printable(str(exc), multiline=True)) from None
+        except click.ClickException as exc:
+            # usage errors quote what was typed, too. click types the message Final, but reads
+            # it only when the error is shown, after this
+            exc.message = printable(exc.message, multiline=True)  # type: ignore[misc]
+            raise
 
 
 @click.group(cls=FieldbankGroup, lazy=COMMANDS,

@@ -68,6 +68,17 @@ def xy_metres(text: str | None, name: str) -> tuple[float, float]:
     return (a, b)
 
 
+def figure_path(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+    """Callback of a ``--plot`` option: the figure's format (.svg, .png or .pdf) is checked
+    before any work is done; a wrong one is a library error, reported at the error edge."""
+    del ctx, param
+    if value is not None:
+        from fieldbank.figures import figure_format  # numpy: only when a figure is asked for
+
+        figure_format(value)
+    return value
+
+
 def option_group(*opts: Callable[[F], F]) -> Callable[[F], F]:
     """Several click options as one decorator, listed in ``--help`` in the order given."""
     def apply(f: F) -> F:

@@ -9,10 +9,11 @@ from typing import Any, TypeVar
 
 import click
 
-from fieldbank import modelsource, plotting
+from fieldbank import modelsource
 from fieldbank.cli.options import (
     db_option,
     emit,
+    figure_path,
     json_option,
     open_db,
     option_group,
@@ -41,8 +42,9 @@ from fieldbank.evaluate.design import (
     seed_probes,
     severity_candidates,
 )
-from fieldbank.evaluate.plot import classification_figure, probe_figure
 from fieldbank.evaluate.severity import LEVELS, group_name, level_name
+from fieldbank.figures import Scene, save
+from fieldbank.figures.probes import classification_figure, probe_figure
 from fieldbank.files import to_json, write_atomic
 from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
 from fieldbank.haptic.identify import designed_vs_seed
@@ -180,8 +182,8 @@ def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
                        workspace_m=box), offset
 
 
-def _save_plot(fig: Any, path: Path) -> None:
-    plotting.save(fig, path)
+def _save_plot(fig: Scene, path: Path) -> None:
+    save(fig, path)
     say(f"plot: {path}")
 
 
@@ -241,7 +243,8 @@ def probe() -> None:
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the probes (polylines in the robot frame with timing) as JSON.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Figure of the paths and force profiles (.png or .svg).")
+              callback=figure_path,
+              help="Figure of the paths and force profiles (.svg, .png or .pdf).")
 @db_option
 @json_option
 def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tuple[Path, ...],
@@ -328,7 +331,9 @@ def _classification_text(cl: Classification) -> str:
               help="In a session that rendered two models, the ticks of this one.")
 @click.option("--no-next", is_flag=True, help="Do not design the next probe.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Figure of the recorded and predicted forces and the posterior.")
+              callback=figure_path,
+              help="Figure of the recorded and predicted forces and the posterior (.svg, .png "
+                   "or .pdf).")
 @db_option
 @json_option
 def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimpaired: bool,
@@ -367,7 +372,8 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
 @noise_options
 @limit_options
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Figure of the paths and force profiles.")
+              callback=figure_path,
+              help="Figure of the paths and force profiles (.svg, .png or .pdf).")
 @db_option
 @json_option
 def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tuple[Path, ...],

@@ -15,9 +15,8 @@ from typing import Any
 import click
 
 from fieldbank import modelsource
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import db_option, emit_json, figure_path, json_option, open_db
 from fieldbank.cli.whatif_report import render_text
-from fieldbank.errors import FieldbankError
 from fieldbank.haptic.client import push_models
 from fieldbank.haptic.modelinfo import ModelInfo
 from fieldbank.interventions.defaults import DOSE_UNIT, value
@@ -61,9 +60,9 @@ from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
               help=f"Dose limit for --optimize, {DOSE_UNIT}.")
 @click.option("--groups", "opt_groups", default=None, metavar="G1,G2",
               help="Groups --optimize may inject (default all six).")
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False),
-              help="Write the figures (joint stretches, fields, grades) to this SVG, PNG or "
-                   "PDF.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), callback=figure_path,
+              help="Write the figures (joint stretches, fields, grades) to this .svg, .png or "
+                   ".pdf.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,
@@ -97,46 +96,43 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
 
     Results are model predictions, not treatment advice.
     """
-    try:
-        if sum(bool(x) for x in (patient, params_file, severity)) != 1:
-            raise click.UsageError(
-                "Give exactly one model: PATIENT, --params FILE or --severity TARGET=LEVEL.")
-        source = modelsource.resolve(params_file=params_file, severity=severity,
-                                     patient=patient, open_db=lambda: open_db(db_url))
-        plan = build_plan(plan_file=plan_file, botox=botox, weeks=weeks, lengthen=lengthen,
-                          tenotomy=tenotomy, cast=cast, rhizotomy=rhizotomy, baclofen=baclofen)
-        if plan is None and not optimize:
-            raise click.UsageError(
-                "No intervention given: use --botox, --lengthen, --tenotomy, --cast, "
-                "--rhizotomy, --baclofen, --plan or --optimize.")
-        search = None
-        if optimize:
-            if total_units is None:
-                raise click.UsageError("--optimize needs --total-units N.")
-            search = DoseSearch(
-                total_units, None if opt_groups is None else
-                tuple(g.strip() for g in opt_groups.split(",")),
-                value("botulinum.weeks_since") if weeks is None else weeks)
-        res = run_whatif(source, plan, search=search, timecourse=timecourse,
-                         plot_path=plot_path, out_dir=out_dir,
-                         save_to=(lambda: open_db(db_url)) if save else None,
-                         session_limit_units=session_limit,
-                         accept_poor_fit=accept_poor_fit,
-                         interval_samples=(DEFAULT_INTERVAL_SAMPLES if interval_samples is None
-                                           else interval_samples),
-                         given_on=given_on.date() if given_on else None)
-        doc: dict[str, Any] = res.to_dict()
-        if render:
-            ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
-                   (source.model_id, None))
-            plan_text = plan_label(res.plan)
-            info = {"A": ModelInfo.describe(source.description, ids[0], source.patient_code),
-                    "B": ModelInfo.describe(f"after: {plan_text}", ids[1], source.patient_code,
-                                            plan_text)}
-            doc["rendered"] = push_models(res.before, res.after, control_path, model_ids=ids,
-                                          model_info=info)
-    except FieldbankError as exc:
-        raise click.ClickException(str(exc)) from None
+    if sum(bool(x) for x in (patient, params_file, severity)) != 1:
+        raise click.UsageError(
+            "Give exactly one model: PATIENT, --params FILE or --severity TARGET=LEVEL.")
+    source = modelsource.resolve(params_file=params_file, severity=severity,
+                                 patient=patient, open_db=lambda: open_db(db_url))
+    plan = build_plan(plan_file=plan_file, botox=botox, weeks=weeks, lengthen=lengthen,
+                      tenotomy=tenotomy, cast=cast, rhizotomy=rhizotomy, baclofen=baclofen)
+    if plan is None and not optimize:
+        raise click.UsageError(
+            "No intervention given: use --botox, --lengthen, --tenotomy, --cast, "
+            "--rhizotomy, --baclofen, --plan or --optimize.")
+    search = None
+    if optimize:
+        if total_units is None:
+            raise click.UsageError("--optimize needs --total-units N.")
+        search = DoseSearch(
+            total_units, None if opt_groups is None else
+            tuple(g.strip() for g in opt_groups.split(",")),
+            value("botulinum.weeks_since") if weeks is None else weeks)
+    res = run_whatif(source, plan, search=search, timecourse=timecourse,
+                     plot_path=plot_path, out_dir=out_dir,
+                     save_to=(lambda: open_db(db_url)) if save else None,
+                     session_limit_units=session_limit,
+                     accept_poor_fit=accept_poor_fit,
+                     interval_samples=(DEFAULT_INTERVAL_SAMPLES if interval_samples is None
+                                       else interval_samples),
+                     given_on=given_on.date() if given_on else None)
+    doc: dict[str, Any] = res.to_dict()
+    if render:
+        ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
+               (source.model_id, None))
+        plan_text = plan_label(res.plan)
+        info = {"A": ModelInfo.describe(source.description, ids[0], source.patient_code),
+                "B": ModelInfo.describe(f"after: {plan_text}", ids[1], source.patient_code,
+                                        plan_text)}
+        doc["rendered"] = push_models(res.before, res.after, control_path, model_ids=ids,
+                                      model_info=info)
     if as_json:
         emit_json(doc)
         return

@@ -12,6 +12,11 @@ existing file unless told to, and never writes through a symbolic link.
 a regular file (a symlink is judged by its target), refused without opening it for reading
 when it is a FIFO, a device or a directory, and never more than a limit, so ``/dev/zero``, a
 named pipe with no writer or a file that grows as it is read cannot hang or exhaust memory.
+
+:func:`read_json_document` is the one reader of a JSON document (parameters, plans, probes,
+training protocols) from a file, :func:`parse_json_document` of one already in memory: UTF-8,
+strict JSON (``NaN`` and ``Infinity`` are refused: JSON has no such numbers), bounded nesting;
+a refusal is a :class:`~fieldbank.errors.ValidationError` located at the file.
 """
 
 from __future__ import annotations
@@ -20,14 +25,14 @@ import errno
 import json
 import math
 import os
+import secrets
 import stat
-import tempfile
 from collections.abc import Mapping
 from datetime import date, datetime
 from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import FileRefused
+from fieldbank.errors import FileRefused, Problem, ValidationError
 
 #: Largest JSON document (plan, parameters) read from a file, bytes.
 MAX_DOCUMENT_BYTES = 16 << 20
@@ -50,12 +55,6 @@ def fsync_dir(path: str | Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def write_atomic(path: str | Path, data: bytes | str) -> Path:
@@ -81,9 +80,8 @@ def _write_temp(p: Path, data: bytes | str) -> str:
     directories are created; nothing is left behind on failure."""
     p.parent.mkdir(parents=True, exist_ok=True)
     raw = data.encode("utf-8") if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.")
+    fd, tmp = _new_temp(p)
     try:
-        os.chmod(tmp, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as fh:
             fh.write(raw)
             fh.flush()
@@ -92,6 +90,20 @@ def _write_temp(p: Path, data: bytes | str) -> str:
         Path(tmp).unlink(missing_ok=True)
         raise
     return tmp
+
+
+def _new_temp(p: Path) -> tuple[int, str]:
+    """A new, empty temporary file beside ``p`` opened for writing, and its path. Created with
+    mode 0666 so the kernel applies the umask (and a directory's default ACL) itself, as for a
+    plain ``open``: reading the umask would mean setting it, for every thread at once."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC | os.O_NOFOLLOW
+    for _ in range(100):
+        tmp = os.path.join(p.parent, f".{p.name}.{secrets.token_hex(6)}")
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no free temporary name", str(p.parent))
 
 
 def _kind(mode: int) -> str:
@@ -152,6 +164,52 @@ def read_regular_file(path: str | Path, max_bytes: int, limit_hint: str = "") ->
         raise FileRefused(f"{p}: cannot read ({exc.strerror})") from None
     finally:
         os.close(fd)
+
+
+def parse_json_document(data: str | bytes, where: str) -> Any:
+    """One JSON document (bytes must be UTF-8), ``where`` naming it in messages.
+
+    Raises
+    ------
+    ValidationError
+        One problem located at ``where``: not UTF-8, not valid JSON, a ``NaN`` or
+        ``Infinity`` (no JSON number), or nested too deeply.
+    """
+    try:
+        text = data.decode("utf-8") if isinstance(data, bytes) else data
+    except UnicodeDecodeError as exc:
+        raise ValidationError([Problem(where, f"not UTF-8 text ({exc.reason} at byte "
+                                              f"{exc.start})")]) from None
+    try:
+        return json.loads(text, parse_constant=_refuse_constant)
+    except _NotANumber as exc:
+        raise ValidationError([Problem(where, f"not JSON: {exc}")]) from None
+    except json.JSONDecodeError as exc:
+        raise ValidationError([Problem(where, f"not valid JSON ({exc})")]) from None
+    except RecursionError:
+        raise ValidationError([Problem(where, "JSON nested too deeply")]) from None
+
+
+def read_json_document(path: str | Path, max_bytes: int = MAX_DOCUMENT_BYTES) -> Any:
+    """The JSON document in the regular file ``path`` (:func:`read_regular_file`, then
+    :func:`parse_json_document`).
+
+    Raises
+    ------
+    FileRefused
+        Not a regular file, larger than ``max_bytes``, unreadable.
+    ValidationError
+        Not UTF-8, not JSON, or nested too deeply; located at the file.
+    """
+    return parse_json_document(read_regular_file(path, max_bytes), os.fspath(path))
+
+
+class _NotANumber(ValueError):
+    pass
+
+
+def _refuse_constant(name: str) -> float:
+    raise _NotANumber(f"{name} is not a number JSON allows")
 
 
 def write_new(path: str | Path, data: bytes | str, force: bool = False) -> Path:

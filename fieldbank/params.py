@@ -30,8 +30,8 @@ from dataclasses import MISSING, asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import FileRefused, ParameterError
-from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file
+from fieldbank.errors import FileRefused, ParameterError, ValidationError
+from fieldbank.files import parse_json_document, read_json_document
 from fieldbank.validation import Interval, check_number, check_tuple
 
 GROUPS: tuple[str, ...] = ("sf", "se", "ef", "ee", "bf", "be")
@@ -344,24 +344,19 @@ class ArmParams:
     @classmethod
     def from_json(cls, text: str, where: str = "parameters") -> ArmParams:
         try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ParameterError(f"{where}: not valid JSON ({exc}).") from None
-        except RecursionError:
-            raise ParameterError(f"{where}: JSON nested too deeply to be a "
-                                 "parameter set.") from None
+            data = parse_json_document(text, where)
+        except ValidationError as exc:
+            raise ParameterError(f"{exc}.") from None
         return cls.from_dict(data, where)
 
     @classmethod
     def from_file(cls, path: str | Path) -> ArmParams:
         p = Path(path)
         try:
-            text = read_regular_file(p, MAX_DOCUMENT_BYTES).decode("utf-8")
-        except FileRefused as exc:
+            data = read_json_document(p)
+        except (FileRefused, ValidationError) as exc:
             raise ParameterError(f"{exc}.") from None
-        except UnicodeDecodeError as exc:
-            raise ParameterError(f"{p}: not UTF-8 text (byte {exc.start}).") from None
-        return cls.from_json(text, where=str(p))
+        return cls.from_dict(data, str(p))
 
     # --- conversions ---------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

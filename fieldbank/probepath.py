@@ -27,14 +27,13 @@ The module imports nothing heavy (no numpy): the live command line reads probes 
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from fieldbank.errors import ParameterError, Problem, ValidationError
-from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file
+from fieldbank.files import read_json_document
 from fieldbank.validation import Interval
 
 PROBES_FORMAT = "fieldbank-probes"
@@ -281,14 +280,7 @@ def read_probes(path: str | Path, at_most: int = MAX_PROBES_PER_FILE
         named by the file and the field.
     """
     p = Path(path)
-    raw = read_regular_file(p, MAX_DOCUMENT_BYTES)
-    try:
-        doc = json.loads(raw.decode("utf-8"), parse_constant=_refuse_constant)
-    except UnicodeDecodeError as exc:
-        raise ValidationError([Problem(str(p), f"not UTF-8 text ({exc.reason} at byte "
-                                               f"{exc.start})")]) from None
-    except ValueError as exc:
-        raise ValidationError([Problem(str(p), f"not JSON: {exc}")]) from None
+    doc = read_json_document(p)
     if not isinstance(doc, Mapping) or doc.get("format") != PROBES_FORMAT:
         got = doc.get("format") if isinstance(doc, Mapping) else type(doc).__name__
         raise ValidationError([Problem(f"{p}: format", f"must be {PROBES_FORMAT!r} (a file of "
@@ -327,10 +319,6 @@ def read_probes(path: str | Path, at_most: int = MAX_PROBES_PER_FILE
     if problems:
         raise ValidationError(problems, header=f"{p}: not a usable probes file")
     return tuple(out)
-
-
-def _refuse_constant(name: str) -> float:
-    raise ValueError(f"{name} is not a number JSON allows")
 
 
 __all__ = [

@@ -7,8 +7,10 @@ against its entry and raise the package's error with a message generated from th
     The 'beta[2] (ef)' parameter must be a finite number in [0, 1]; got 1.5 instead.
 
 so the allowed range is written once and every message says what was expected and what
-arrived. :func:`problems_against` collects every problem of a mapping instead of stopping at the
-first, for messages that list them all.
+arrived. :func:`check_fields` is what a configuration's ``__post_init__`` calls: every field
+named in its table checked at once, one error listing every problem
+(:func:`problems_against` collects them). An interval of whole numbers
+(``Interval.whole(500, 4000, "Hz")``) also refuses fractions and floats.
 
 :func:`bound_problem` is the short form for messages that list several problems of one object
 in a line (an intervention, a plan step): it names only the bound that was broken::
@@ -38,6 +40,13 @@ class Interval:
     unit: str = ""
     low_closed: bool = True
     high_closed: bool = True
+    #: only whole numbers (a Python int, never a bool or a float)
+    integer: bool = False
+
+    @classmethod
+    def whole(cls, low: int | None, high: int | None, unit: str = "") -> Interval:
+        """The closed interval of whole numbers from ``low`` to ``high``."""
+        return cls(low, high, unit, integer=True)
 
     def contains(self, value: float) -> bool:
         if not math.isfinite(value):
@@ -66,8 +75,12 @@ def number_problem(label: str, value: Any, interval: Interval,
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return (f"The '{label}' {what} must be a number in {interval.describe()}; "
                 f"got {value!r} ({type(value).__name__}) instead.")
+    if interval.integer and not isinstance(value, int):
+        return (f"The '{label}' {what} must be a whole number (an integer) in "
+                f"{interval.describe()}; got {value!r} instead.")
     if not interval.contains(float(value)):
-        return (f"The '{label}' {what} must be a finite number in {interval.describe()}; "
+        kind = "whole number (an integer)" if interval.integer else "finite number"
+        return (f"The '{label}' {what} must be a {kind} in {interval.describe()}; "
                 f"got {value!r} instead.")
     return None
 
@@ -96,6 +109,17 @@ def check_tuple(name: str, value: Any, length: int, interval: Interval, *,
     names = labels if labels is not None else [f"{name}[{i}]" for i in range(length)]
     return tuple(check_number(names[i], v, interval, what=what, error=error)
                  for i, v in enumerate(value))
+
+
+def check_fields(obj: object, bounds: Mapping[str, Interval], *, what: str = "parameter",
+                 names: Sequence[str] | None = None,
+                 error: ErrorFactory = ParameterError) -> None:
+    """Check every field of ``obj`` that ``bounds`` has an interval for (or only ``names``);
+    ``error`` with every problem's message, one per sentence, if any."""
+    todo = bounds if names is None else {n: bounds[n] for n in names}
+    problems = problems_against({n: getattr(obj, n) for n in todo}, todo, what)
+    if problems:
+        raise error(" ".join(problems))
 
 
 def problems_against(values: Mapping[str, Any], bounds: Mapping[str, Interval],

@@ -47,9 +47,10 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
 from fieldbank.haptic.errors import CommandError, HapticError
 from fieldbank.haptic.modelinfo import (
+    ModelIds,
     ModelInfo,
     ModelInfoPair,
-    check_model_id,
+    check_model_ids,
     model_info_pair,
 )
 from fieldbank.haptic.training import (
@@ -69,8 +70,6 @@ if TYPE_CHECKING:  # typing only
 Result = dict[str, Any]
 #: Compiled arms A (before) and B (after), built outside the loop.
 SimPair = tuple["ArmSim", "ArmSim"]
-#: Database ids of the rendered models, ``{"A": id, "B": id}`` (None: not stored).
-ModelIds = Mapping[str, "int | None"]
 
 
 class CommandTarget(Protocol):
@@ -123,15 +122,6 @@ def bool_field(req: Mapping[str, Any], key: str, default: bool, where: str) -> b
     if v not in (True, False):  # also 0 and 1
         raise CommandError(f'{where}: "{key}" must be true or false; got {v!r}')
     return bool(v)
-
-
-def check_model_ids(ids: object, where: str = "push") -> dict[str, int | None] | None:
-    """``{"A": id, "B": id}`` with positive integer ids or null; None stays None."""
-    if ids is None:
-        return None
-    if not (isinstance(ids, Mapping) and set(ids) <= {"A", "B"}):
-        raise CommandError(f'{where}: "model_ids" must be {{"A": id, "B": id}}')
-    return {k: check_model_id(v, k, where) for k, v in ids.items()}
 
 
 class RendererCommand:

@@ -87,6 +87,17 @@ class ModelInfo:
 
 #: What the renderer is told about models A and B.
 ModelInfoPair = Mapping[str, ModelInfo]
+#: Database ids of the rendered models, ``{"A": id, "B": id}`` (None: not stored).
+ModelIds = Mapping[str, "int | None"]
+
+
+def check_model_ids(ids: object, where: str = "push") -> dict[str, int | None] | None:
+    """``{"A": id, "B": id}`` with positive integer ids or null; None stays None."""
+    if ids is None:
+        return None
+    if not (isinstance(ids, Mapping) and set(ids) <= {"A", "B"}):
+        raise CommandError(f'{where}: "model_ids" must be {{"A": id, "B": id}}')
+    return {k: check_model_id(v, k, where) for k, v in ids.items()}
 
 
 def model_info_pair(info: object, where: str = "push") -> dict[str, ModelInfo] | None:

@@ -19,8 +19,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from fieldbank.haptic.commands import ModelIds, SimPair
-from fieldbank.haptic.modelinfo import ModelInfoPair, to_wire
+from fieldbank.haptic.commands import SimPair
+from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair, to_wire
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig

@@ -40,16 +40,16 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.errors import ParameterError, UnreachableError
+from fieldbank.errors import UnreachableError
 from fieldbank.haptic import commands, readouts
 from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.assemble import assemble_trace, close_blocks, utc_now
 from fieldbank.haptic.clock import Clock, RealClock, realtime
-from fieldbank.haptic.commands import ModelIds, RendererCommand, Request, Result, SimPair
+from fieldbank.haptic.commands import RendererCommand, Request, Result, SimPair
 from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.loopstats import LoopTimes, loop_stats
-from fieldbank.haptic.modelinfo import ModelInfoPair
+from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair
 from fieldbank.haptic.pair import Environment, ModelPair
 from fieldbank.haptic.protocol import FLAG_FAULT, FaultCode
 from fieldbank.haptic.recording import Trace, TraceBuffer
@@ -58,13 +58,13 @@ from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.training import TrainingSession
 from fieldbank.params import ArmParams
 from fieldbank.sim import CouplingConfig
-from fieldbank.validation import Interval, check_number, check_tuple
+from fieldbank.validation import Interval, check_fields, check_tuple
 
 log = logging.getLogger("fieldbank.haptic.renderer")
 
 #: Allowed range of each numeric setting of :class:`RendererConfig` (messages are generated).
 RENDERER_BOUNDS: dict[str, Interval] = {
-    "rate_hz": Interval(500, 4000, "Hz"),
+    "rate_hz": Interval.whole(500, 4000, "Hz"),
     "crossfade_s": Interval(0.0, None, "s"),
     "push_fade_s": Interval(0.0, None, "s"),
     "state_wait_s": Interval(0.0, None, "s"),
@@ -113,11 +113,7 @@ class RendererConfig:
     arm_on_start: bool = True
 
     def __post_init__(self) -> None:
-        for name, interval in RENDERER_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="renderer parameter")
-        if not isinstance(self.rate_hz, int):
-            raise ParameterError(f"The 'rate_hz' renderer parameter must be an integer number "
-                                 f"of Hz; got {self.rate_hz!r} instead.")
+        check_fields(self, RENDERER_BOUNDS, what="renderer parameter")
         check_tuple("shoulder_offset_m", self.shoulder_offset_m, 2, Interval(None, None, "m"),
                     what="renderer parameter")
 

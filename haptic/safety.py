@@ -33,7 +33,7 @@ from enum import IntEnum
 from fieldbank.errors import ParameterError
 from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.protocol import FaultCode
-from fieldbank.validation import Interval, check_number, check_tuple
+from fieldbank.validation import Interval, check_fields, check_tuple
 
 log = logging.getLogger("fieldbank.haptic.safety")
 
@@ -110,8 +110,7 @@ class SafetyConfig:
     rearm_ramp_s: float = 0.3                     # raised-cosine ramp-in after arming
 
     def __post_init__(self) -> None:
-        for name, interval in SAFETY_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="safety parameter")
+        check_fields(self, SAFETY_BOUNDS, what="safety parameter")
         x0, x1, y0, y1 = check_tuple("workspace_m", self.workspace_m, 4, WORKSPACE_BOUNDS,
                                      labels=WORKSPACE_LABELS, what="safety parameter")
         if not (x0 < x1 and y0 < y1):

@@ -58,7 +58,7 @@ from fieldbank.haptic.patient import (
     PatientPlacement,
     VirtualPatient,
 )
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: Allowed range of every numeric field of :class:`SimRobotConfig` (messages are generated).
 SIM_BOUNDS: dict[str, Interval] = {
@@ -126,8 +126,7 @@ class SimRobotConfig:
                 parse_path(self.motion_path)
             except ValueError as exc:
                 raise ParameterError(f"sim motion_path: {exc}") from None
-        for name, interval in SIM_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="sim parameter")
+        check_fields(self, SIM_BOUNDS, what="sim parameter")
 
     @classmethod
     def from_query(cls, query: str) -> SimRobotConfig:

@@ -50,7 +50,7 @@ from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.simrobot import SimDevice
 from fieldbank.haptic.training import TrainingProtocol
 from fieldbank.probepath import ProbePath
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: Allowed range of each field of :class:`DirectionRule` and :class:`TraineeMotion`.
 TRAINEE_BOUNDS: dict[str, Interval] = {
@@ -86,8 +86,8 @@ class DirectionRule:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        check_number("direction_noise_deg", self.direction_noise_deg,
-                     TRAINEE_BOUNDS["direction_noise_deg"], what="trainee parameter")
+        check_fields(self, TRAINEE_BOUNDS, what="trainee parameter",
+                     names=("direction_noise_deg",))
 
 
 @dataclass(frozen=True)
@@ -101,9 +101,9 @@ class TraineeMotion:
     explore_amplitude_m: float = 0.06
 
     def __post_init__(self) -> None:
-        for name in ("approach_s", "hold_s", "settle_s", "explore_s", "explore_amplitude_m"):
-            check_number(name, getattr(self, name), TRAINEE_BOUNDS[name],
-                         what="trainee parameter")
+        check_fields(self, TRAINEE_BOUNDS, what="trainee parameter",
+                     names=("approach_s", "hold_s", "settle_s", "explore_s",
+                            "explore_amplitude_m"))
 
 
 @dataclass

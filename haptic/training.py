@@ -42,7 +42,7 @@ from fieldbank.haptic.errors import CommandError
 from fieldbank.model import Arm
 from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.probepath import MAX_DRAWN_PROBES, ProbePath
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: What a trainee answers for each impaired group (the seed's three buttons).
 ANSWER_OF_GROUP: dict[str, str] = {"shoulder": "shoulder", "elbow": "elbow",
@@ -58,11 +58,11 @@ MAX_EXTRA_PROBES = MAX_DRAWN_PROBES
 
 #: Allowed range of each numeric field of :class:`TrainingProtocol` (messages are generated).
 TRAINING_BOUNDS: dict[str, Interval] = {
-    "familiarisation_rounds": Interval(0, 50),
+    "familiarisation_rounds": Interval.whole(0, 50),
     "familiarisation_s": Interval(1.0, 600.0, "s"),
-    "assessment_repetitions": Interval(0, 50),
+    "assessment_repetitions": Interval.whole(0, 50),
     "assessment_s": Interval(1.0, 600.0, "s"),
-    "seed": Interval(0, 2**63 - 1),
+    "seed": Interval.whole(0, 2**63 - 1),
 }
 
 
@@ -172,13 +172,7 @@ class TrainingProtocol:
         if self.instruction not in INSTRUCTIONS:
             raise ParameterError(f"The 'instruction' training parameter must be one of "
                                  f"{', '.join(INSTRUCTIONS)}; got {self.instruction!r} instead.")
-        for name, interval in TRAINING_BOUNDS.items():
-            v = getattr(self, name)
-            if name != "familiarisation_s" and name != "assessment_s" and (
-                    isinstance(v, bool) or not isinstance(v, int)):
-                raise ParameterError(f"The {name!r} training parameter must be an integer; "
-                                     f"got {v!r} instead.")
-            check_number(name, v, interval, what="training parameter")
+        check_fields(self, TRAINING_BOUNDS, what="training parameter")
         groups = tuple(group_name(g) for g in self.groups)
         levels = tuple(level_name(s) for s in self.severities)
         if not groups or len(set(groups)) != len(groups):

@@ -16,7 +16,7 @@ plan          Plan (ordered steps, JSON with located errors) and Derivation (lin
 spec          plans from the command line's short texts (``--botox ef=200U``, ``bf=1cm``)
 course        metrics week by week after an injection, on a compiled arm
 inverse       botulinum dose split closest to the unimpaired reference (nlopt), on a compiled arm
-plot          before / after / difference figure (through :mod:`fieldbank.plotting`)
+plot          ``whatif --plot``: the report's figures of one what-if on one page
 whatif        the what-if use case: search, compare, time course, figure, files, stored result
 guesses       what a what-if rests on: poor fits refused, guessed parameters, warnings, intervals
 validate      stored plans that were given, checked against the maps measured after them

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import FileRefused
-from fieldbank.files import MAX_DOCUMENT_BYTES, read_regular_file
+from fieldbank.errors import FileRefused, ValidationError
+from fieldbank.files import parse_json_document, read_json_document
 from fieldbank.interventions.catalogue import Botulinum, Intervention
 from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.errors import InterventionError
@@ -166,24 +166,19 @@ class Plan:
     @classmethod
     def from_json(cls, text: str, where: str = "plan") -> Plan:
         try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InterventionError(f"{where}: not valid JSON ({exc}).") from None
-        except RecursionError:
-            raise InterventionError(f"{where}: JSON nested too deeply to be a "
-                                    "plan.") from None
+            data = parse_json_document(text, where)
+        except ValidationError as exc:
+            raise InterventionError(f"{exc}.") from None
         return cls.from_dict(data, where)
 
     @classmethod
     def from_file(cls, path: str | Path) -> Plan:
         p = Path(path)
         try:
-            text = read_regular_file(p, MAX_DOCUMENT_BYTES).decode("utf-8")
-        except FileRefused as exc:
+            data = read_json_document(p)
+        except (FileRefused, ValidationError) as exc:
             raise InterventionError(f"{exc}.") from None
-        except UnicodeDecodeError as exc:
-            raise InterventionError(f"{p}: not UTF-8 text (byte {exc.start}).") from None
-        return cls.from_json(text, where=str(p))
+        return cls.from_dict(data, str(p))
 
 
 @dataclass(frozen=True)

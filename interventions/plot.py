@@ -1,10 +1,10 @@
 """``whatif --plot``: the report's figures of one what-if, on one page.
 
-The same figures as a report case (:func:`fieldbank.interventions.report.figures.case_figures`:
+The same figures as a report case (:func:`fieldbank.interventions.report.figures.case.case_figures`:
 the joint stretches, the moving field in the direction that lengthens the treated groups, the
 static field and stiffness when the plan changes them, the grades, the probing motions, the
-botulinum time course), stacked under a title, written as SVG (:mod:`fieldbank.svgplot`) or,
-for ``.png`` and ``.pdf``, drawn from the same description by matplotlib.
+botulinum time course), stacked under a title, saved by :func:`fieldbank.figures.save`
+(SVG, or PNG or PDF drawn from the same scene).
 """
 
 from __future__ import annotations
@@ -13,14 +13,16 @@ import textwrap
 from collections.abc import Mapping
 from pathlib import Path
 
-from fieldbank.errors import FieldbankError
 from fieldbank.evaluate.compare import Comparison
+from fieldbank.figures import figure_format, save
+from fieldbank.figures.scene import Scene
+from fieldbank.figures.style import FONT, FONT_TITLE, GREY
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
 from fieldbank.interventions.plan import Plan
-from fieldbank.interventions.report.figures import WIDTH, case_figures
+from fieldbank.interventions.report.figures.case import case_figures
+from fieldbank.interventions.report.figures.common import WIDTH
 from fieldbank.model import Arm, FloatArray
-from fieldbank.svgplot import FIGURE_FORMATS, FONT, FONT_TITLE, GREY, Scene
 
 #: Characters per line of a note in a figure page (12 px type over the page's width).
 NOTE_CHARS = 150
@@ -57,9 +59,5 @@ def plot_comparison(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
                     bands: Mapping[str, Mapping[str, tuple[FloatArray, FloatArray]]]
                     | None = None) -> Path:
     """Write :func:`comparison_page` as SVG, PNG or PDF (by the suffix); returns the path."""
-    out = Path(path)
-    fmt = out.suffix.lower().lstrip(".")
-    if fmt not in FIGURE_FORMATS:
-        raise FieldbankError(f"{out}: plots are written as .svg, .png or .pdf; got "
-                             f"{out.suffix!r}.")
-    return comparison_page(arm_b, arm_a, c, plan, title, bands).save(out, fmt)
+    figure_format(path)  # before the figures are built
+    return save(comparison_page(arm_b, arm_a, c, plan, title, bands), path)

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
+from fieldbank.evaluate.design import Stroke, equilibrium, severity_candidates
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.probe import probe_path
+from fieldbank.haptic.recording import write_trace_h5
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
@@ -79,3 +83,13 @@ def pty_session(
             yield rd, robot
         finally:
             link.close()
+
+
+def mild_shoulder_trace(path: Path) -> Path:
+    """A trace file of a mild shoulder probed once with a stroke from the equilibrium of the
+    mild and severe candidates (the classifier's usual test case)."""
+    cands = severity_candidates(levels=("mild", "severe"))
+    stroke = Stroke(tuple(equilibrium(cands)), -100.0, 0.1, 0.4, 0.2)
+    res = probe_path(synthesize({"shoulder": "mild"}), stroke.motion(), seed=1)
+    write_trace_h5(res.trace, path)
+    return path

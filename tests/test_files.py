@@ -9,7 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from fieldbank.files import json_finite, write_atomic
+from fieldbank.errors import ParameterError, ValidationError
+from fieldbank.files import json_finite, read_json_document, write_atomic
+from fieldbank.interventions.errors import InterventionError
+from fieldbank.interventions.plan import Plan
+from fieldbank.params import ArmParams
+from fieldbank.probepath import read_probes
 
 
 def test_write_atomic_replaces_whole_file_with_umask_mode(tmp_path: Path) -> None:
@@ -36,3 +41,43 @@ def test_write_atomic_failure_keeps_the_old_file(tmp_path: Path) -> None:
 def test_json_finite() -> None:
     doc = {"a": [1.0, math.nan, {"b": math.inf}], "c": (2, -math.inf), "d": "x"}
     assert json_finite(doc) == {"a": [1.0, None, {"b": None}], "c": [2, None], "d": "x"}
+
+
+def test_write_atomic_never_touches_the_process_umask(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """The mode comes from the kernel applying the umask at creation; reading the umask would
+    mean setting it, for every thread of the process at once."""
+    calls: list[int] = []
+    real = os.umask
+    monkeypatch.setattr(os, "umask", lambda m: calls.append(m) or real(m))
+    old = real(0o027)
+    try:
+        calls.clear()
+        write_atomic(tmp_path / "a.txt", "x")
+        assert calls == []
+        assert stat.S_IMODE((tmp_path / "a.txt").stat().st_mode) == 0o640
+    finally:
+        real(old)
+
+
+def test_one_json_document_reader_refuses_what_json_does_not_allow(tmp_path: Path) -> None:
+    ok = tmp_path / "ok.json"
+    ok.write_text('{"a": [1, 2.5, null]}', encoding="utf-8")
+    assert read_json_document(ok) == {"a": [1, 2.5, None]}
+    for name, raw, reason in [("nan.json", b'{"a": NaN}', "not JSON: NaN is not a number"),
+                              ("inf.json", b"[-Infinity]", "not JSON: -Infinity"),
+                              ("bad.json", b"{", "not valid JSON"),
+                              ("latin.json", b'"\xe9"', "not UTF-8 text"),
+                              ("deep.json", b"[" * 100_000 + b"]" * 100_000, "nested too deeply")]:
+        (tmp_path / name).write_bytes(raw)
+        with pytest.raises(ValidationError, match=reason) as err:
+            read_json_document(tmp_path / name)
+        assert err.value.problems[0].location == str(tmp_path / name)
+    # the same rules for every document: parameters, plans and probes files alike
+    (tmp_path / "p.json").write_bytes(b'{"schema": "x", "km_n_per_m": NaN}')
+    with pytest.raises(ParameterError, match=r"p\.json: not JSON: NaN"):
+        ArmParams.from_file(tmp_path / "p.json")
+    with pytest.raises(InterventionError, match=r"p\.json: not JSON: NaN"):
+        Plan.from_file(tmp_path / "p.json")
+    with pytest.raises(ValidationError, match=r"p\.json: not JSON: NaN"):
+        read_probes(tmp_path / "p.json")

@@ -141,13 +141,19 @@ def test_models_list_and_show(store: MemoryStore) -> None:
 
 
 def test_plot_png_and_bad_extension(tmp_path: Path) -> None:
+    from fieldbank.errors import ValidationError
+    from fieldbank.figures import save
+    from fieldbank.figures.fit import fit_figure
     from fieldbank.fitting import ArmFitter
-    from fieldbank.fitting.plot import plot_fit
 
     pat = synthetic_patient(impaired_params("shoulder", "mild", BASE), seed=5)
     f = ArmFitter().fit(pat.maps, BASE)
-    out = plot_fit(f.maps_, f.predict(f.maps_), tmp_path / "a.png", f.r2_)
+    fig = fit_figure(f.maps_, f.predict(f.maps_), f.r2_)
+    out = save(fig, tmp_path / "a.png")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    with pytest.raises(FitError, match=r"\.png, \.svg"):
-        plot_fit(f.maps_, f.predict(f.maps_), tmp_path / "a.pdf")
-    assert not (tmp_path / "a.pdf").exists()
+    assert save(fig, tmp_path / "a.pdf").read_bytes()[:5] == b"%PDF-"
+    with pytest.raises(ValidationError, match=r"\.svg, \.png or \.pdf"):
+        save(fig, tmp_path / "a.gif")
+    assert not (tmp_path / "a.gif").exists()
+    with pytest.raises(FitError, match="one fitted map per measured map"):
+        fit_figure(f.maps_, [])

@@ -442,10 +442,10 @@ def test_loop_runs_with_gc_off_and_warns_without_realtime(monkeypatch, caplog) -
 
 
 def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    from fieldbank.cli.whatif import whatif
+    from fieldbank.cli.main import cli
 
     rd, sock = served
-    r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
+    r = CliRunner().invoke(cli, ["whatif", "--severity", "elbow=severe", "--botox", "ef=200",
                                     "--render", "--socket", str(sock), "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["rendered"] == {"pushed": True}
@@ -461,7 +461,7 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     assert told["A"]["plan"] is None and told["B"]["label"].startswith("after: ")
     assert told["B"]["plan"] and "botulinum" in told["B"]["plan"].lower()
     # no renderer: a clean error, not a traceback
-    r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--botox", "ef=200",
+    r = CliRunner().invoke(cli, ["whatif", "--severity", "elbow=severe", "--botox", "ef=200",
                                     "--render", "--socket", str(tmp_path / "none.sock")])
     assert r.exit_code == 1 and "no renderer on" in r.output
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from fieldbank.cli.whatif import whatif
+from fieldbank.cli.main import cli
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.errors import InterventionError
@@ -26,7 +26,7 @@ SEVERE_ELBOW = synthesize({"elbow": "severe"})
 
 
 def run(*args: str) -> tuple[int, str, str]:
-    r = CliRunner().invoke(whatif, list(args))
+    r = CliRunner().invoke(cli, ["whatif", *args])
     return r.exit_code, r.stdout, r.stderr
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from click.testing import CliRunner
 
 import fieldbank.storage as storage
-from fieldbank.cli.whatif import whatif
+from fieldbank.cli.main import cli
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.interventions.plan import Plan, params_sha256
 
@@ -27,7 +27,7 @@ def test_patient_model_in_and_plan_with_lineage_out(tmp_path: Path) -> None:
         db.add_patient("P001", 75.0, 1.75, "right")
         db.add_model(synthesize({"elbow": "mild"}), "synthetic", "older", patient_code="P001")
         base = db.add_model(fitted, "fitted", "fit 1", patient_code="P001")
-    r = CliRunner().invoke(whatif, ["P001", "--db", url, "--botox", "ef=200U", "--save",
+    r = CliRunner().invoke(cli, ["whatif", "P001", "--db", url, "--botox", "ef=200U", "--save",
                                     "--json"])
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
@@ -48,7 +48,7 @@ def test_patient_model_in_and_plan_with_lineage_out(tmp_path: Path) -> None:
 
 def test_synthetic_model_is_stored_as_the_parent(tmp_path: Path) -> None:
     url = _db(tmp_path)
-    r = CliRunner().invoke(whatif, ["--severity", "elbow=severe", "--lengthen", "bf=1cm",
+    r = CliRunner().invoke(cli, ["whatif", "--severity", "elbow=severe", "--lengthen", "bf=1cm",
                                     "--db", url, "--save", "--json"])
     assert r.exit_code == 0, r.output
     ids = json.loads(r.stdout)["saved"]
@@ -63,7 +63,7 @@ def test_unknown_patient_and_patient_without_model(tmp_path: Path) -> None:
     url = _db(tmp_path)
     with storage.Database.open(url) as db:
         db.add_patient("P002", 70.0, 1.7, "left")
-    r = CliRunner().invoke(whatif, ["P404", "--db", url, "--botox", "ef=100"])
+    r = CliRunner().invoke(cli, ["whatif", "P404", "--db", url, "--botox", "ef=100"])
     assert r.exit_code == 1 and "P404" in r.stderr
-    r = CliRunner().invoke(whatif, ["P002", "--db", url, "--botox", "ef=100"])
+    r = CliRunner().invoke(cli, ["whatif", "P002", "--db", url, "--botox", "ef=100"])
     assert r.exit_code == 1 and "no fitted or synthetic model" in r.stderr

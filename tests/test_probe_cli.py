@@ -10,12 +10,13 @@ import pytest
 from click.testing import CliRunner
 
 from fieldbank.cli.main import COMMANDS, cli
-from fieldbank.evaluate.design import Stroke, equilibrium, severity_candidates
+from fieldbank.evaluate.design import equilibrium, severity_candidates
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
 from fieldbank.probepath import ProbePath
 from fieldbank.storage import Database
+from tests.haptic_util import mild_shoulder_trace
 
 
 def _run(*args: str):  # type: ignore[no-untyped-def]
@@ -76,12 +77,7 @@ def test_candidates_from_files_and_stored_models(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def trace_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cands = severity_candidates(levels=("mild", "severe"))
-    stroke = Stroke(tuple(equilibrium(cands)), -100.0, 0.1, 0.4, 0.2)
-    res = probe_path(synthesize({"shoulder": "mild"}), stroke.motion(), seed=1)
-    path = tmp_path_factory.mktemp("traces") / "probe.h5"
-    write_trace_h5(res.trace, path)
-    return path
+    return mild_shoulder_trace(tmp_path_factory.mktemp("traces") / "probe.h5")
 
 
 def test_classify_a_trace_file_with_a_plot(trace_file: Path, tmp_path: Path) -> None:

@@ -15,14 +15,17 @@ from typing import Any
 import numpy as np
 import pytest
 
-from fieldbank import fieldplot, svgplot
+from fieldbank import figures
 from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES, lengthening_direction
 from fieldbank.evaluate.severity import COMPONENTS, synthesize
+from fieldbank.figures import fields, style, svg
+from fieldbank.figures.panel import Panel
+from fieldbank.figures.scene import Scene
 from fieldbank.interventions import Botulinum, Lengthening, Plan
 from fieldbank.interventions.course import stretch_course, time_course
 from fieldbank.interventions.report.compute import ALL_COLUMNS, STRETCH_READOUTS
-from fieldbank.interventions.report.figures import case_figures
+from fieldbank.interventions.report.figures.case import case_figures
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.storage import Database
@@ -33,14 +36,14 @@ from tests.report_helpers import decode_path, run_cli, store_cohort, svg_paths
 @pytest.mark.parametrize(("lo", "hi", "n"), [(0.0, 8.6, 4), (-0.62, 0.71, 3), (0, 100, 4),
                                              (-0.3, 4.6, 5), (1e-4, 3.3e-4, 5), (-25, -3, 5)])
 def test_ticks_are_round_inside_and_few(lo: float, hi: float, n: int) -> None:
-    t = svgplot.nice_ticks(lo, hi, n)
+    t = style.nice_ticks(lo, hi, n)
     assert 2 <= len(t) <= n + 1
     assert all(lo - 1e-12 <= v <= hi + 1e-12 for v in t)
     steps = np.diff(t)
     assert np.allclose(steps, steps[0])
     mant = steps[0] / 10 ** math.floor(math.log10(steps[0]))
     assert round(mant, 6) in (1.0, 2.0, 2.5, 5.0)
-    labels = [svgplot.tick_label(v, t) for v in t]
+    labels = [style.tick_label(v, t) for v in t]
     assert len(set(labels)) == len(labels)  # enough decimals to tell them apart
     assert not any(lab.startswith("-") for lab in labels)  # a real minus sign
 
@@ -49,10 +52,10 @@ def test_paths_are_compact_and_stay_within_half_a_pixel() -> None:
     x = np.linspace(0, 400, 121)
     y = 150 - 120 * np.sin(x / 130.0) ** 2
     pts = np.column_stack([x, y])
-    s = svgplot.Scene(420, 200)
+    s = Scene(420, 200)
     s.line(pts, "#000000")
-    svg = s.to_svg()
-    (d,) = re.findall(r' d="([^"]*)"', svg)
+    text = svg.write(s)
+    (d,) = re.findall(r' d="([^"]*)"', text)
     (poly,) = decode_path(d)
     assert len(poly) < 60  # thinned: the curve is smooth
     # every original point lies within 0.5 px of the drawn polyline
@@ -65,31 +68,31 @@ def test_paths_are_compact_and_stay_within_half_a_pixel() -> None:
 
 
 def test_svg_is_well_formed_escaped_and_deterministic() -> None:
-    def draw() -> svgplot.Scene:
-        s = svgplot.Scene(300, 200, 'a "label" <x>')
-        p = svgplot.Panel.at(s, (50, 20, 200, 140), (0.0, 1.0), (0.0, 2.0))
+    def draw() -> Scene:
+        s = Scene(300, 200, 'a "label" <x>')
+        p = Panel.at(s, (50, 20, 200, 140), (0.0, 1.0), (0.0, 2.0))
         p.frame("t < & >", "x (m)", "y (N)")
-        p.line([0, 1], [0, 3], svgplot.AFTER, data={"curve": "fast after"})
+        p.line([0, 1], [0, 3], style.AFTER, data={"curve": "fast after"})
         s.data["figure"] = "test"
         return s
 
-    text = draw().to_svg(standalone=True)
+    text = svg.write(draw(), standalone=True)
     root = ET.fromstring(text.split("?>", 1)[1])
     assert root.get("data-figure") == "test"
     assert "t &lt; &amp; &gt;" in text
-    assert text == draw().to_svg(standalone=True)
+    assert text == svg.write(draw(), standalone=True)
     # clipped to the panel: the line to y = 3 is drawn, the clip is defined and used
     assert 'clip-path="url(#fc0)"' in text and '<clipPath id="fc0">' in text
-    png1, png2 = draw().render("png", 1.0), draw().render("png", 1.0)
+    png1, png2 = figures.render(draw(), "png", 1.0), figures.render(draw(), "png", 1.0)
     assert png1 == png2 and png1[:8] == b"\x89PNG\r\n\x1a\n"
     assert int.from_bytes(png1[16:20], "big") == 300  # the scene's size, scale 1
-    assert draw().render("pdf")[:5] == b"%PDF-"
-    with pytest.raises(ValueError, match="svg, png or pdf"):
-        draw().render("gif")
+    assert figures.render(draw(), "pdf")[:5] == b"%PDF-"
+    with pytest.raises(ValueError, match=r"\.svg, \.png or \.pdf"):
+        figures.render(draw(), "gif")
 
 
 def test_diverging_map_is_centred_on_zero() -> None:
-    c = svgplot.diverging([-2.0, 0.0, 2.0, 1e-3], 2.0)
+    c = style.diverging([-2.0, 0.0, 2.0, 1e-3], 2.0)
     assert c[1] == "#f7f7f7" and c[3] == "#f7f7f7"  # white at zero
     r, _, b = (int(c[0][i:i + 2], 16) for i in (1, 3, 5))
     assert b > r  # negative blue
@@ -98,20 +101,20 @@ def test_diverging_map_is_centred_on_zero() -> None:
 
 
 def test_arrows_are_cut_and_the_key_names_the_cut() -> None:
-    s = svgplot.Scene(400, 300)
+    s = Scene(400, 300)
     grid = np.array([[x, y] for x in np.linspace(0, 0.4, 5) for y in np.linspace(0, 0.3, 4)])
     f = np.tile([1.0, 0.0], (len(grid), 1))
     f[0] = [50.0, 0.0]  # one needle
-    panel = fieldplot.spatial_panel(s, (40, 20, 300, 220), grid, "t")
+    panel = fields.spatial_panel(s, (40, 20, 300, 220), grid, "t")
     spacing = 0.1
-    scale = fieldplot.arrow_scale_px(panel, f, spacing)
-    cut = fieldplot.arrows(panel, grid, f, scale, svgplot.MODEL,
-                           fieldplot.ARROW_CLIP * spacing * panel.px_per_x)
+    scale = fields.arrow_scale_px(panel, f, spacing)
+    cut = fields.arrows(panel, grid, f, scale, style.MODEL,
+                           fields.ARROW_CLIP * spacing * panel.px_per_x)
     assert cut == 1
     # the other arrows are long enough to read: the 90th percentile spans 80% of a step
     assert 0.79 < 1.0 / scale / (spacing * panel.px_per_x) < 0.81
-    fieldplot.arrow_key(s, 40, 280, 1.0, scale, svgplot.MODEL, cut, 2.0)
-    assert "= 1 N; 1 cut at 2 N (thick)" in s.to_svg()
+    fields.arrow_key(s, 40, 280, 1.0, scale, style.MODEL, cut, 2.0)
+    assert "= 1 N; 1 cut at 2 N (thick)" in svg.write(s)
 
 
 def test_a_row_without_change_says_so() -> None:
@@ -120,11 +123,11 @@ def test_a_row_without_change_says_so() -> None:
 
     g = standard_grid(arm, 9)
     f = arm.endpoint_force(g)
-    s = svgplot.Scene(1080, fieldplot.row_height(g, arm.rest_position()))
-    info = fieldplot.field_row(s, 0, g, f, f, "static", rest_m=arm.rest_position())
+    s = Scene(1080, fields.row_height(g, arm.rest_position()))
+    info = fields.field_row(s, 0, g, f, f, "static", rest_m=arm.rest_position())
     assert info.diff_max_n == 0.0
-    assert "no change" in s.to_svg()
-    assert 'data-field="change"' not in s.to_svg()
+    assert "no change" in svg.write(s)
+    assert 'data-field="change"' not in svg.write(s)
 
 
 # --- the read-outs behind the figures -------------------------------------------------------
@@ -282,7 +285,7 @@ def test_the_page_summary_contents_and_sections(cohort: dict[str, Any]) -> None:
 
 def test_no_figure_uses_tiny_type(cohort: dict[str, Any]) -> None:
     sizes = [float(v) for v in re.findall(r'font-size="([0-9.]+)"', cohort["html"])]
-    assert sizes and min(sizes) >= svgplot.FONT_SMALL
+    assert sizes and min(sizes) >= style.FONT_SMALL
 
 
 def test_figures_stay_within_the_size_budget(cohort: dict[str, Any]) -> None:
@@ -300,7 +303,7 @@ def test_probes_unchanged_by_the_plan_are_said_not_drawn() -> None:
         after = Arm.from_params(plan.apply(before.params))
         c = compare(before, after, Conditions.standard(before))
         diff = max(float(np.max(np.abs(a.force_n - b.force_n))) for _, b, a in c.probe_rows())
-        assert (diff > fieldplot.NO_CHANGE) is drawn
+        assert (diff > fields.NO_CHANGE) is drawn
         figs = {f.key: f for f in case_figures(before, after, c, plan)}
         assert (figs["probes"].scene is not None) is drawn
         if not drawn:

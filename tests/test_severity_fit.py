@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from fieldbank import storage
 from fieldbank.cli.fit import fit
 from fieldbank.cli.ingest import ingest
-from fieldbank.cli.whatif import whatif
+from fieldbank.cli.main import cli
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.fitting.synthetic import synthetic_patient
 from fieldbank.maps import FieldMap
@@ -65,7 +65,7 @@ def test_reflex_only_elbow_is_graded_dynamic_after_ingest_and_fit(tmp_path: Path
     line = next(x for x in res.stdout.splitlines() if x.strip().startswith("elbow flexors"))
     assert line.split()[2:] == ["unimpaired", level]
     # a what-if on the fitted patient carries the grades (and would flag guesses)
-    res = runner.invoke(whatif, ["SPAS", "--db", url, "--botox", "ef=150U", "--json"])
+    res = runner.invoke(cli, ["whatif", "SPAS", "--db", url, "--botox", "ef=150U", "--json"])
     assert res.exit_code == 0, res.output
     before = json.loads(res.stdout)["comparison"]["severity"]["before"]
     assert before["ef"]["dynamic"]["level"] == level
@@ -80,10 +80,10 @@ def test_postural_only_fit_flags_the_reflex_grades(tmp_path: Path) -> None:
     ef = report["severity"]["ef"]
     assert ef["passive"]["level"] == "moderate" and not ef["passive"]["unidentified"]
     assert set(ef["dynamic"]["unidentified"]) == {"alpha_ef", "beta_ef"}
-    res = runner.invoke(whatif, ["STAT", "--db", url, "--botox", "ef=150U", "--json"])
+    res = runner.invoke(cli, ["whatif", "STAT", "--db", url, "--botox", "ef=150U", "--json"])
     assert res.exit_code == 0, res.output
     before = json.loads(res.stdout)["comparison"]["severity"]["before"]
     assert set(before["ef"]["dynamic"]["unidentified"]) == {"alpha_ef", "beta_ef"}
-    res = runner.invoke(whatif, ["STAT", "--db", url, "--botox", "ef=150U"])
+    res = runner.invoke(cli, ["whatif", "STAT", "--db", url, "--botox", "ef=150U"])
     line = next(x for x in res.stdout.splitlines() if x.strip().startswith("elbow flexors"))
     assert "*" in line and "alpha_ef" in res.stdout

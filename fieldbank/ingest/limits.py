@@ -29,24 +29,22 @@ from collections.abc import Iterable
 from dataclasses import dataclass, fields, replace
 
 from fieldbank.errors import ParameterError
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 ENV_LIMITS = "FIELDBANK_INGEST_LIMITS"
 MIB = 1 << 20
 
 #: Allowed range of every limit (messages are generated from it).
 LIMIT_BOUNDS: dict[str, Interval] = {
-    "max_file_bytes": Interval(1, None, "bytes"),
-    "max_decompressed_bytes": Interval(1, None, "bytes"),
+    "max_file_bytes": Interval.whole(1, None, "bytes"),
+    "max_decompressed_bytes": Interval.whole(1, None, "bytes"),
     "max_compression_ratio": Interval(1, None, ""),
-    "max_rows": Interval(1, None, "rows"),
-    "max_maps": Interval(1, None, "maps"),
-    "max_problems": Interval(1, None, "problems"),
+    "max_rows": Interval.whole(1, None, "rows"),
+    "max_maps": Interval.whole(1, None, "maps"),
+    "max_problems": Interval.whole(1, None, "problems"),
     "max_force_n": Interval(0, None, "N", low_closed=False),
     "max_stiffness_n_per_m": Interval(0, None, "N/m", low_closed=False),
 }
-_INTEGERS = ("max_file_bytes", "max_decompressed_bytes", "max_rows", "max_maps",
-             "max_problems")
 
 
 @dataclass(frozen=True)
@@ -85,11 +83,7 @@ class IngestLimits:
     max_stiffness_n_per_m: float = 100_000.0
 
     def __post_init__(self) -> None:
-        for name, interval in LIMIT_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="ingest limit")
-            if name in _INTEGERS and not isinstance(getattr(self, name), int):
-                raise ParameterError(f"The '{name}' ingest limit must be a whole number; got "
-                                     f"{getattr(self, name)!r} instead.")
+        check_fields(self, LIMIT_BOUNDS, what="ingest limit")
 
     @classmethod
     def from_items(cls, items: Iterable[str], base: IngestLimits | None = None,
@@ -109,7 +103,7 @@ class IngestLimits:
             except ValueError:
                 raise ParameterError(f"{where} {item!r}: {text.strip()!r} is not a number.") \
                     from None
-            if name in _INTEGERS and math.isfinite(value) and value == int(value):
+            if LIMIT_BOUNDS[name].integer and math.isfinite(value) and value == int(value):
                 changes[name] = int(value)
             else:
                 changes[name] = value

@@ -28,8 +28,9 @@ from sqlalchemy.orm import Session
 
 from fieldbank.arraystore import ArrayStore
 from fieldbank.errors import ParameterError, StorageError
+from fieldbank.redact import mask_url
 from fieldbank.storage.arrays import ArrayAccess
-from fieldbank.storage.config import db_failure, is_read_only, mask_url
+from fieldbank.storage.config import db_failure, is_read_only
 from fieldbank.storage.orm import AuditRow, PatientRow, SessionRow
 
 

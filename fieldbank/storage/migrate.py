@@ -33,7 +33,8 @@ from sqlalchemy import Connection, Engine, text
 from sqlalchemy import exc as sa_exc
 
 from fieldbank.errors import StorageError
-from fieldbank.storage.config import db_failure, mask_url
+from fieldbank.redact import mask_url
+from fieldbank.storage.config import db_failure
 
 #: Arbitrary constant key of the PostgreSQL advisory lock held while migrating.
 PG_LOCK_KEY = 0x6669656C64  # "field"

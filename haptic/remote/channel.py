@@ -43,7 +43,7 @@ from typing import Any, Protocol
 
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.remote.wire import Authenticator, Datagram, Kind, State
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: Allowed range of each field of :class:`Impairment`.
 IMPAIRMENT_BOUNDS: dict[str, Interval] = {
@@ -79,8 +79,7 @@ class Impairment:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name, interval in IMPAIRMENT_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="link impairment")
+        check_fields(self, IMPAIRMENT_BOUNDS, what="link impairment")
 
     @property
     def active(self) -> bool:

@@ -46,7 +46,7 @@ from fieldbank.haptic.remote.channel import Endpoint
 from fieldbank.haptic.remote.passivity import DEFAULT_RESERVE_J, ForcePort, VelocityPort
 from fieldbank.haptic.remote.tap import TapWriter
 from fieldbank.haptic.remote.wire import FLAG_ARMED, FLAG_FAULT, FLAG_LINK_LOST, Kind, State
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: Allowed range of every numeric field of :class:`LinkConfig`.
 LINK_BOUNDS: dict[str, Interval] = {
@@ -131,8 +131,7 @@ class LinkConfig:
     passivity: str = "tdpa"
 
     def __post_init__(self) -> None:
-        for name, interval in LINK_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="remote link setting")
+        check_fields(self, LINK_BOUNDS, what="remote link setting")
         if self.passivity not in PASSIVITY_MODES:
             raise ValueError(f"passivity must be one of {', '.join(PASSIVITY_MODES)}; got "
                              f"{self.passivity!r}")

@@ -25,10 +25,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fieldbank.figures import svg
 from fieldbank.files import write_atomic
 from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
-from fieldbank.interventions.report.figures import (
+from fieldbank.interventions.report.figures.cohort import (
     CohortPoint,
     cohort_change_figure,
     validation_figure,
@@ -145,7 +146,7 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
                     "stretch (position-dependent: contracture) of the stretch each treated "
                     "group is graded on, after against before; one dot per case and group, "
                     "bar: median.",
-                    cohort_change_figure(points).to_svg("cohort1")))
+                    svg.write(cohort_change_figure(points), "cohort1")))
     checks = [c for r in results for c in r.checks]
     if checks:
         n = len({c.case for c in checks})
@@ -155,8 +156,8 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
                     "the RMS of the predicted change (on the dashed identity line the change "
                     "came as predicted), and the measured change along the predicted one "
                     "(realised fraction, ±1 SE) against the check's tolerance.",
-                    validation_figure(checks, "Predicted against measured change, across "
-                                      "patients").to_svg("cohort2")))
+                    svg.write(validation_figure(checks, "Predicted against measured change, "
+                                                "across patients"), "cohort2")))
     return out
 
 

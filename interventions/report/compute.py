@@ -15,16 +15,13 @@ from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Comparison, Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES
 from fieldbank.evaluate.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
+from fieldbank.figures import svg
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.course import stretch_course
 from fieldbank.interventions.plan import dose_warnings
-from fieldbank.interventions.report.figures import (
-    CheckPoint,
-    case_figures,
-    check_points,
-    treated_groups,
-)
+from fieldbank.interventions.report.figures.case import case_figures, treated_groups
+from fieldbank.interventions.report.figures.cohort import CheckPoint, check_points
 from fieldbank.interventions.report.select import CaseSpec
 from fieldbank.interventions.report.trust import basis_of, case_trust
 from fieldbank.params import GROUPS
@@ -206,6 +203,6 @@ def compute_case(spec: CaseSpec) -> CaseResult:
     # clip-path ids must be unique in the page: plan id and figure number
     figs = tuple(
         Figure(f.key, f.caption,
-               "" if f.scene is None else f.scene.to_svg(f"p{spec.plan_id}f{k}"))
+               "" if f.scene is None else svg.write(f.scene, f"p{spec.plan_id}f{k}"))
         for k, f in enumerate(case_figures(arm_b, arm_a, c, plan, course, bands, checks)))
     return CaseResult(spec, json_finite(row), json_finite(detail), figs, checks)

@@ -31,7 +31,7 @@ from typing import Any
 from fieldbank.evaluate.probing import STRETCHES
 from fieldbank.evaluate.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES
 from fieldbank.interventions.report.compute import COLUMNS, STRETCH_READOUTS, CaseResult
-from fieldbank.interventions.report.figures import pct
+from fieldbank.interventions.report.figures.common import pct
 from fieldbank.params import GROUPS
 
 CSS = """

@@ -10,12 +10,11 @@ the workspace box and, for every candidate, the range of motion with a margin.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import PROBE_SAMPLES
-from fieldbank.validation import Interval, check_number, check_tuple
+from fieldbank.validation import Interval, check_fields, check_tuple
 
 #: Weber fraction of force magnitude: 7 % for matched forces (Jones 1989), 5-15 % for actively
 #: felt forces (Pang, Tan & Durlach 1991); the upper end of 7-10 %.
@@ -102,11 +101,6 @@ LIMIT_BOUNDS: dict[str, Interval] = {
 }
 
 
-def _check(obj: object, bounds: Mapping[str, Interval], what: str) -> None:
-    for name, interval in bounds.items():
-        check_number(name, getattr(obj, name), interval, what=what)
-
-
 @dataclass(frozen=True)
 class Perception:
     """What a hand tells apart; ranges in :data:`PERCEPTION_BOUNDS`.
@@ -130,7 +124,7 @@ class Perception:
     floor_n: float = FELT_FLOOR_N
 
     def __post_init__(self) -> None:
-        _check(self, PERCEPTION_BOUNDS, "perception parameter")
+        check_fields(self, PERCEPTION_BOUNDS, what="perception parameter")
 
     @classmethod
     def free_exploration(cls) -> Perception:
@@ -168,7 +162,7 @@ class NoiseModel:
     wander_m: float = WANDER_M
 
     def __post_init__(self) -> None:
-        _check(self, NOISE_BOUNDS, "noise parameter")
+        check_fields(self, NOISE_BOUNDS, what="noise parameter")
 
     def to_dict(self) -> dict[str, float]:
         return {"force_sd_n": self.force_sd_n, "correlation_s": self.correlation_s,
@@ -209,7 +203,7 @@ class ProbeLimits:
     max_radius_m: float = 0.10
 
     def __post_init__(self) -> None:
-        _check(self, LIMIT_BOUNDS, "probe limit")
+        check_fields(self, LIMIT_BOUNDS, what="probe limit")
         if self.workspace_m is not None:
             x0, x1, y0, y1 = check_tuple("workspace_m", self.workspace_m, 4,
                                          Interval(None, None, "m"), what="probe limit")

@@ -1,4 +1,4 @@
-"""Field figures on :mod:`fieldbank.svgplot` panels: force arrows, stiffness ellipses and
+"""Field figures on :mod:`fieldbank.figures.panel` panels: force arrows, stiffness ellipses and
 scalar maps over the workspace, with their keys and markers, the before / after / difference
 row, and the one-map figure of ``fieldbank field --out``.
 
@@ -8,19 +8,19 @@ The conventions every field figure shares (the report's, ``whatif --plot``'s and
 * panels in the shoulder frame, x to the patient's right and y forward, metres, one metre as
   long on both axes; before and after panels share their limits, arrow scale and colour scale;
 * arrows: the force the arm exerts on the handle; the 90th percentile magnitude spans 80% of
-  the grid spacing (:func:`fieldbank.plotting.arrow_scale`); arrows longer than
+  the grid spacing (:func:`arrow_scale`); arrows longer than
   :data:`ARROW_CLIP` spacings are cut there and drawn thicker; every arrow set has a key (a
   reference arrow of a round value, in N);
 * ellipses: the symmetric part of K, full axes ∝ |eigenvalues| (dashed where one is negative),
   the 90th percentile larger axis spans 90% of the spacing
-  (:func:`fieldbank.plotting.ellipse_scale`); axes longer than :data:`ELLIPSE_CLIP` spacings
+  (:func:`ellipse_scale`); axes longer than :data:`ELLIPSE_CLIP` spacings
   are cut and drawn thicker (so one near-singular posture does not hide the rest); every set
   has a key (a circle of a round stiffness, in N/m);
 * scalar maps as one coloured cell per grid point (no interpolation): the passive potential U
   on a light sequential map, every difference (ΔU, Δ|F|) on a diverging map centred on zero;
   each with its colour bar and unit;
 * markers: ● the shoulder, ◎ the rest hand position - the same in every figure, named in the
-  legend; colours :data:`fieldbank.svgplot.BEFORE` / ``AFTER`` / ``CHANGE`` / ``MODEL``.
+  legend; colours :data:`fieldbank.figures.style.BEFORE` / ``AFTER`` / ``CHANGE`` / ``MODEL``.
 """
 
 from __future__ import annotations
@@ -32,24 +32,29 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from fieldbank import plotting
-from fieldbank.maps import FieldMap, ellipse
-from fieldbank.model import Arm, FloatArray
-from fieldbank.svgplot import (
+from fieldbank.figures.panel import Panel, colour_bar
+from fieldbank.figures.scene import Scene, marker_at
+from fieldbank.figures.style import (
     AFTER,
     BEFORE,
     CHANGE,
     FONT_SMALL,
     MODEL,
     TEXT,
-    Panel,
-    Scene,
-    colour_bar,
     diverging,
     fmt_value,
-    marker_at,
     sequential,
 )
+from fieldbank.maps import FieldMap, ellipse
+from fieldbank.model import Arm, FloatArray
+
+#: Fraction of the grid spacing the reference (percentile) arrow spans.
+ARROW_FILL = 0.8
+#: Fraction of the grid spacing the reference (percentile) ellipse axis spans.
+ELLIPSE_FILL = 0.9
+#: Percentile of magnitudes that sets a scale (outliers may overlap their neighbours).
+SCALE_PERCENTILE = 90.0
+
 
 #: Longest arrow drawn, in grid spacings; longer ones are cut and drawn thicker.
 ARROW_CLIP = 1.6
@@ -65,6 +70,34 @@ NO_CHANGE = 1e-9
 #: field row, px; the row is 1080 px wide.
 BIG_WIDTH_PX = 560.0
 SMALL_WIDTH_PX = 250.0
+
+
+# --- scales -------------------------------------------------------------------------------
+def grid_spacing(positions_m: ArrayLike) -> float:
+    """Median distance from each position to its nearest neighbour, m (0.05 for one point)."""
+    pos = np.asarray(positions_m, dtype=float)
+    if pos.shape[0] < 2:
+        return 0.05
+    d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))
+    d[d == 0] = np.inf
+    return float(np.median(d.min(axis=1)))
+
+
+def arrow_scale(force_n: ArrayLike, spacing_m: float, percentile: float = SCALE_PERCENTILE
+                ) -> float:
+    """N per m of arrow: the ``percentile`` magnitude spans :data:`ARROW_FILL` · spacing."""
+    f = np.asarray(force_n, dtype=float).reshape(-1, 2)
+    top = float(np.percentile(np.hypot(f[:, 0], f[:, 1]), percentile)) if len(f) else 0.0
+    return max(top, 1e-9) / (ARROW_FILL * spacing_m)
+
+
+def ellipse_scale(stiffness_n_per_m: ArrayLike, spacing_m: float,
+                  percentile: float = SCALE_PERCENTILE) -> float:
+    """N/m per m of ellipse axis: the ``percentile`` larger axis spans ELLIPSE_FILL · spacing."""
+    e = ellipse(stiffness_n_per_m)
+    axes_n = np.maximum(np.abs(e.major_n_per_m), np.abs(e.minor_n_per_m))
+    top = float(np.percentile(axes_n, percentile)) if axes_n.size else 0.0
+    return max(top, 1e-9) / (ELLIPSE_FILL * spacing_m)
 
 
 def round_value(v: float) -> float:
@@ -84,7 +117,7 @@ def spacing_xy(grid_m: ArrayLike) -> tuple[float, float]:
         d = np.diff(np.unique(np.round(g[:, k], 9)))
         d = d[d > 1e-9]
         out.append(float(d.min()) if d.size else 0.0)
-    s = plotting.grid_spacing(g)
+    s = grid_spacing(g)
     if not all(out) or min(out) < 0.3 * s:  # scattered positions, not a lattice
         return s, s
     return out[0], out[1]
@@ -100,9 +133,9 @@ class ArrowSet:
 
 
 def arrow_scale_px(panel: Panel, force_n: ArrayLike, spacing_m: float,
-                   percentile: float = plotting.SCALE_PERCENTILE) -> float:
-    """N per px of arrow on ``panel`` (the shared rule of :func:`plotting.arrow_scale`)."""
-    return plotting.arrow_scale(force_n, spacing_m, percentile) / panel.px_per_x
+                   percentile: float = SCALE_PERCENTILE) -> float:
+    """N per px of arrow on ``panel`` (:func:`arrow_scale`)."""
+    return arrow_scale(force_n, spacing_m, percentile) / panel.px_per_x
 
 
 def arrows(panel: Panel, positions_m: ArrayLike, force_n: ArrayLike, n_per_px: float,
@@ -153,9 +186,9 @@ def arrow_key(scene: Scene, x: float, y: float, value_n: float, n_per_px: float,
 
 def ellipse_scale_px(panel: Panel, stiffness_n_per_m: ArrayLike, spacing_m: float,
                      percentile: float = ELLIPSE_PERCENTILE) -> float:
-    """N/m per px of ellipse axis on ``panel`` (the rule of :func:`plotting.ellipse_scale`,
+    """N/m per px of ellipse axis on ``panel`` (the rule of :func:`ellipse_scale`,
     at :data:`ELLIPSE_PERCENTILE`)."""
-    return plotting.ellipse_scale(stiffness_n_per_m, spacing_m, percentile) / panel.px_per_x
+    return ellipse_scale(stiffness_n_per_m, spacing_m, percentile) / panel.px_per_x
 
 
 def ellipses(panel: Panel, positions_m: ArrayLike, stiffness_n_per_m: ArrayLike,
@@ -301,7 +334,7 @@ def field_row(scene: Scene, top: float, grid_m: ArrayLike, before_n: ArrayLike,
     fa = np.asarray(after_n, dtype=float).reshape(-1, 2)
     d = fa - fb
     step = spacing_xy(g)
-    spacing = plotting.grid_spacing(g)
+    spacing = grid_spacing(g)
     lay = RowLayout.of(g, rest_m, top)
     extra = _extra(rest_m)
     big = spatial_panel(scene, lay.big, g, f"after − before: {title}", extra, AFTER)
@@ -364,7 +397,7 @@ def ellipse_row(scene: Scene, top: float, grid_m: ArrayLike, k_before: ArrayLike
     g = np.asarray(grid_m, dtype=float).reshape(-1, 2)
     kb = np.asarray(k_before, dtype=float).reshape(-1, 2, 2)
     ka = np.asarray(k_after, dtype=float).reshape(-1, 2, 2)
-    spacing = plotting.grid_spacing(g)
+    spacing = grid_spacing(g)
     lay = RowLayout.of(g, rest_m, top)
     extra = _extra(rest_m)
     big = spatial_panel(scene, lay.big, g, f"before and after: {title}", extra, AFTER)
@@ -409,12 +442,13 @@ def map_figure(arm: Arm, m: FieldMap, title: str = "") -> Scene:
     size = 460.0
     height = spatial_height(pos, size, extra)
     scene = Scene(size + 170, height + 140, title or f"{m.kind} map")
+    scene.data.update({"figure": "map", "kind": m.kind, "positions": str(len(pos))})
     panel_title = title or ("postural field: force of the arm on the handle"
                             if m.kind == "postural" else
                             "stiffness ellipses at v = "
                             f"({m.velocity_m_per_s[0]:g}, {m.velocity_m_per_s[1]:g}) m/s")
     panel = spatial_panel(scene, (70, 40, size, height), pos, panel_title, extra)
-    spacing = plotting.grid_spacing(pos)
+    spacing = grid_spacing(pos)
     key_y = 40 + height + 52
     if m.kind == "postural":
         u = arm.potential(pos)
