@@ -14,7 +14,8 @@ robot starts from where the patient's hand is, never with a jump.
 
 Each port keeps its own safety: a **watchdog** (no STATE from the peer for ``watchdog_s`` → the
 link is lost: the force ramps to zero over ``ramp_s``, raised cosine, and the patient's robot
-stops following; when STATEs have flowed again for ``resume_s`` it ramps back in), the
+stops following; when STATEs have flowed again for ``resume_s`` it ramps back in; the first
+link-up engages as soon as STATEs flow), the
 **passivity** controller of :mod:`haptic.remote.passivity` (an energy tank per port, topped up
 by what the other port hands over), and — in the site that owns the robot — the robot's own limits
 (:mod:`haptic.safety`). Every tick is one row of a :class:`LinkLog` (energy per tick included).
@@ -248,23 +249,26 @@ class LowPass:
 class _Watchdog:
     """Link lost when nothing was heard for ``watchdog_s``; back when heard for ``resume_s``."""
 
-    __slots__ = ("ok", "resume_s", "since", "timeout_s")
+    __slots__ = ("lost_once", "ok", "resume_s", "since", "timeout_s")
 
     def __init__(self, cfg: LinkConfig) -> None:
         self.timeout_s = cfg.watchdog_s
         self.resume_s = cfg.resume_s
         self.ok = False
+        self.lost_once = False     # the first link-up needs no wait; coming back after a loss does
         self.since = math.inf      # when STATEs started flowing again
 
     def update(self, now: float, last_heard: float) -> bool:
         fresh = now - last_heard <= self.timeout_s
         if not fresh:
+            if self.ok:
+                self.lost_once = True
             self.ok = False
             self.since = math.inf
         elif not self.ok:
             if self.since == math.inf:
                 self.since = now
-            if now - self.since >= self.resume_s or self.resume_s == 0.0:
+            if not self.lost_once or now - self.since >= self.resume_s:
                 self.ok = True
         return self.ok
 

@@ -27,13 +27,15 @@ from typing import Any
 
 import numpy as np
 
+from fieldbank.errors import ParameterError
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import LEAD_IN_S, format_path
+from fieldbank.haptic.pair import Environment
 from fieldbank.haptic.patient import PatientPlacement, VirtualPatient
 from fieldbank.haptic.recording import Trace
 from fieldbank.haptic.remote.channel import Endpoint, Impairment, MemoryTransport
-from fieldbank.haptic.remote.environment import remote_environment
+from fieldbank.haptic.remote.environment import Follower, RemoteArm, remote_environment
 from fieldbank.haptic.remote.patient_site import WATCHDOG_MS, PatientSite, SiteConfig
 from fieldbank.haptic.remote.ports import ClinicianPort
 from fieldbank.haptic.remote.wire import Authenticator, Role, new_key
@@ -43,6 +45,7 @@ from fieldbank.haptic.simrobot import SimDevice
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.probepath import ProbePath
+from fieldbank.sim import ArmSim, CouplingConfig
 
 #: Sensor noise of the simulated patient's robot (BRIEF §16: 0.1–0.5 N, ≪ 1 mm).
 PATIENT_FORCE_NOISE_N = 0.2
@@ -246,6 +249,93 @@ class Pair:
         self.link.close()
         return LinkRun(self.port.log.arrays(), self.patient.port.log.arrays(), trace,
                        self.port.summary(), self.patient.port.summary())
+
+
+class LinkChain:
+    """One simulated link kept for a whole session: the clinician's port, and the patient's
+    site in this process (a simulated patient's robot), whose virtual patient is swapped for
+    each model felt through it (:class:`LinkedArm`)."""
+
+    def __init__(self, params: ArmParams, dt_s: float, config: SiteConfig, seed: int = 0
+                 ) -> None:
+        ce, pe = linked_endpoints(replace(config.impairment, seed=config.impairment.seed + seed),
+                                  dt_s)
+        self.dt_s = dt_s
+        self.port = ClinicianPort(ce, config.link, dt_s)
+        self.plink = patient_robot(params, round(1.0 / dt_s), seed=seed)
+        self.site = PatientSite(self.plink, pe, config, (0.0, 0.0))
+        self.site.arm()
+        self.current: ArmParams = params
+
+    @property
+    def device(self) -> SimDevice:
+        dev = self.plink.port.device  # type: ignore[attr-defined]
+        assert isinstance(dev, SimDevice)
+        return dev
+
+    def feel(self, params: ArmParams) -> None:
+        """From now on the patient is ``params``, relaxed where its hand holds the handle (an
+        arm it cannot reach there starts at rest)."""
+        if params is self.current:
+            return
+        dev = self.device
+        vp = VirtualPatient(params, PatientPlacement(0.0, 0.0), dev.config.substep_s,
+                            "simulated patient")
+        try:
+            vp.grasp(dev.x, dev.y)
+        except ParameterError:
+            hx, hy = Arm.from_params(params).rest_position()
+            vp.grasp(float(hx), float(hy))
+        dev.patient = vp
+        self.current = params
+
+    def close(self) -> None:
+        self.plink.close()
+
+
+class LinkedArm(RemoteArm):
+    """A model felt through a :class:`LinkChain`: ticking it ticks both ends of the link; its
+    first tick makes the model the chain's patient. The renderer's output gain and limits are
+    outside the link's books here (the two-process clinician's site books what its robot was
+    given)."""
+
+    def __init__(self, params: ArmParams, chain: LinkChain) -> None:
+        super().__init__(chain.port, Arm.from_params(params.with_unimpaired_muscles()),
+                         chain.dt_s)
+        self.params = params
+        self.chain = chain
+
+    def _tick(self, x: float, y: float, vx: float, vy: float) -> tuple[float, float]:
+        chain = self.chain
+        if chain.current is not self.params:
+            chain.feel(self.params)
+        f = super()._tick(x, y, vx, vy)
+        chain.site.tick()
+        return f
+
+
+def linked_environment(config: SiteConfig | None = None) -> tuple[Environment, list[LinkChain]]:
+    """The renderer's environment for simulations through a link, and its links (close them
+    when done): model A is felt through one link, model B through a second (made when B first
+    differs from A; while they are the same, B follows A)."""
+    cfg = config or SiteConfig(lockstep=True)
+    chains: list[LinkChain] = []
+    calls = [0]
+
+    def make(params: ArmParams, dt_s: float, coupling: CouplingConfig | None) -> ArmSim:
+        del coupling
+        slot = calls[0] % 2
+        calls[0] += 1
+        if slot == 1 and make.last_a is params:  # type: ignore[attr-defined]
+            return Follower(make.last_arm)  # type: ignore[attr-defined]
+        while len(chains) <= slot:
+            chains.append(LinkChain(params, dt_s, cfg, seed=len(chains)))
+        arm = LinkedArm(params, chains[slot])
+        if slot == 0:
+            make.last_a, make.last_arm = params, arm  # type: ignore[attr-defined]
+        return arm
+
+    return make, chains
 
 
 def push_patient(pair: Pair, at_s: float, force_n: tuple[float, float]) -> None:
