@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.figure:
         scene = accuracy_vs_delay(
             rows, direct, "The simulated trainee through the link: accuracy against delay",
-            noticed_ms=[(15, "damper delay noticed"), (36, "spring"), (72, "inertia")])
+            noticed_ms=[(15, "damper 15 ms"), (36, "spring 36 ms"), (72, "inertia 72 ms")])
         print(f"figure: {save(scene, a.figure)}")
     if a.json:
         print(json.dumps({"direct": direct, "rows": rows}, default=float))

@@ -106,8 +106,8 @@ class DirectionRule:
     """
 
     direction_noise_deg: float = 0.0
-    magnitude_noise: float = 0.0
     seed: int = 0
+    magnitude_noise: float = 0.0
 
     def __post_init__(self) -> None:
         check_fields(self, TRAINEE_BOUNDS, what="trainee parameter",

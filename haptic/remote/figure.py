@@ -31,7 +31,7 @@ def accuracy_vs_delay(rows: Sequence[Mapping[str, Any]], direct: Mapping[str, An
     Each row: ``delay_ms``, ``group_accuracy``, ``group_ci``, ``severity_accuracy``,
     ``severity_ci`` (the intervals as (low, high)), ``n``.
     """
-    scene = Scene(760, 430, title)
+    scene = Scene(760, 450, title)
     xs = [_x(r["delay_ms"]) for r in rows]
     panel = Panel.at(scene, (70, 46, 600, 310), (min(xs) - 0.15, max(xs) + 0.15), (0.0, 1.05))
     ticks = [r["delay_ms"] for r in rows]
@@ -40,10 +40,10 @@ def accuracy_vs_delay(rows: Sequence[Mapping[str, Any]], direct: Mapping[str, An
                 yticks=[0, 0.25, 1 / 3, 0.5, 0.75, 1.0],
                 ytick_labels=["0", "0.25", "chance", "0.5", "0.75", "1"])
     panel.hline(1 / 3, GREY, 1.0, dash=(3, 3))
-    for ms, label in noticed_ms:
+    for k, (ms, label) in enumerate(noticed_ms):   # staggered: marks may stand close together
         panel.vline(_x(ms), GREY, 1.0, dash=(2, 4))
-        scene.text(float(panel.tx(_x(ms))) + 3, panel.y + 12, label, 10, "start", "middle",
-                   GREY)
+        scene.text(float(panel.tx(_x(ms))) + 3, panel.y + 12 + 13 * k, label, 10, "start",
+                   "middle", GREY)
     series = [("group", "impaired group", SERIES[0]), ("severity", "severity", SERIES[1])]
     legend = []
     for key, label, colour in series:
@@ -58,9 +58,11 @@ def accuracy_vs_delay(rows: Sequence[Mapping[str, Any]], direct: Mapping[str, An
             panel.hline(direct[f"{key}_accuracy"], colour, 1.0, dash=(6, 4))
             legend.append((f"{label}, no link", {"stroke": colour, "width": 1.0,
                                                  "dash": (6, 4)}))
-    scene.legend(panel.x + 8, panel.y + panel.h + 44, legend)
+    below = scene.legend(panel.x + 8, panel.y + panel.h + 44, legend,
+                         max_width=panel.w - 8)
     n = rows[0].get("n") if rows else None
     if n:
-        scene.text(panel.x + panel.w, panel.y + panel.h + 44,
-                   f"{n} assessment trials per delay", 10, "end", "middle", GREY)
+        scene.text(panel.x + 8, below + 12, f"{n} assessment trials per delay; dotted: the "
+                   "delay people notice in each kind of environment (Rank et al. 2010)", 10,
+                   "start", "middle", GREY)
     return scene
