@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from fieldbank.files import to_json
 from fieldbank.haptic.pair import Ramp
 from fieldbank.haptic.remote.channel import Endpoint
 from fieldbank.haptic.remote.passivity import DEFAULT_RESERVE_J, ForcePort, VelocityPort
@@ -169,9 +170,7 @@ class LinkLog:
     def to_hdf5(self, attrs: dict[str, Any]) -> bytes:
         """The log as an HDF5 image: one dataset per column with its ``unit``; ``attrs`` (JSON)
         on the file."""
-        import h5py
-
-        from fieldbank.files import to_json
+        import h5py  # heavy: loaded only when a session's log is written
 
         bio = io.BytesIO()
         with h5py.File(bio, "w") as f:
