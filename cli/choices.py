@@ -56,3 +56,6 @@ MEASURE_HOLD_S = 0.6
 MEASURE_STRETCH_SPEED_M_PER_S = 1.0
 # the robot's force limit while measuring (SafetyConfig's default)
 MEASURE_FORCE_LIMIT_N = 40.0
+
+# fieldbank.haptic.remote.ports: the passivity controller of a remote link
+PASSIVITY_MODES: tuple[str, ...] = ("tdpa", "off")

@@ -55,6 +55,9 @@ COMMANDS: dict[str, LazyCommand] = {
                "The seed's training protocol: run it live, simulate it, report its results."),
     "sessions": C("fieldbank.cli.haptic_sessions", "sessions",
                   "Recorded haptic sessions: when, which models, which patient, the answers."),
+    "remote": C("fieldbank.cli.haptic_remote", "remote",
+                "Remote assessment: the clinician's robot and the patient's, joined by a "
+                "delayed link."),
 }
 
 socket_option = click.option(

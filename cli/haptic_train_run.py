@@ -24,7 +24,16 @@ from fieldbank.files import write_atomic
 @click.option("--repetitions", type=click.IntRange(0, 50), default=None)
 @click.option("--noise-deg", type=click.FloatRange(0, 180), default=0.0, show_default=True,
               help="Error of each perceived force direction, degrees (sd).")
+@click.option("--size-noise", type=click.FloatRange(0, 2), default=0.0, show_default=True,
+              help="Error of each perceived force size (sd of its log): the severity judgement.")
 @click.option("--seed", type=click.IntRange(0, 2**31), default=0, show_default=True)
+@click.option("--link-delay-ms", type=click.FloatRange(0, 2000), default=None,
+              help="Feel every arm through a simulated remote link with this one-way delay "
+                   "(docs/remote.md).")
+@click.option("--link-loss", type=click.FloatRange(0, 0.5), default=0.0, show_default=True,
+              help="The simulated link's loss probability (with --link-delay-ms).")
+@click.option("--link-jitter-ms", type=click.FloatRange(0, 500), default=0.0,
+              show_default=True, help="The simulated link's jitter (with --link-delay-ms).")
 @click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
               callback=output_file,
               help="Write the results as a small HTML page.")
@@ -33,11 +42,16 @@ from fieldbank.files import write_atomic
 @json_option
 def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, short: bool,
              familiarisation_rounds: int | None, repetitions: int | None, noise_deg: float,
-             seed: int, html_out: Path | None, db_url: str | None, no_db: bool,
+             size_noise: float, seed: int, link_delay_ms: float | None, link_loss: float,
+             link_jitter_ms: float, html_out: Path | None, db_url: str | None, no_db: bool,
              as_json: bool) -> None:
     """Run the protocol with a simulated trainee on the simulated robot."""
     from fieldbank.haptic import trainee
     from fieldbank.haptic.dbsink import DatabaseTraceSink
+    from fieldbank.haptic.remote.channel import Impairment
+    from fieldbank.haptic.remote.patient_site import SiteConfig
+    from fieldbank.haptic.remote.simulate import linked_environment
+    from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.haptic.session import trace_name_now
     from fieldbank.haptic.training import TrainingProtocol
     from fieldbank.haptic.trainingresults import accuracy_text, results_html, results_page
@@ -54,8 +68,25 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
     if repetitions is not None:
         kw["assessment_repetitions"] = repetitions
     protocol = TrainingProtocol.from_dict(kw)
-    res = trainee.simulate(protocol, trainee.DirectionRule(noise_deg, seed), say=say)
-    out: dict[str, Any] = {"simulated_s": res.simulated_s, **res.result}
+    rule = trainee.DirectionRule(noise_deg, seed, size_noise)
+    if link_delay_ms is None:
+        if link_loss or link_jitter_ms:
+            raise click.UsageError("--link-loss and --link-jitter-ms need --link-delay-ms")
+        res = trainee.simulate(protocol, rule, say=say)
+    else:
+        env, chains = linked_environment(SiteConfig(lockstep=True, impairment=Impairment(
+            link_delay_ms / 1000, link_jitter_ms / 1000, link_loss, seed)))
+        try:
+            res = trainee.simulate(protocol, rule, say=say, environment=env,
+                                   safety=SafetyConfig(passivity=False))
+        finally:
+            for c in chains:
+                c.close()
+    out: dict[str, Any] = {"simulated_s": res.simulated_s, **res.result,
+                           "severity_judgements": res.severities}
+    if link_delay_ms is not None:
+        out["link"] = {"delay_ms": link_delay_ms, "loss": link_loss,
+                       "jitter_ms": link_jitter_ms}
     if not no_db:
         with open_db(db_url) as db:
             out["database"] = DatabaseTraceSink(db).write_trace(res.trace,
@@ -66,7 +97,13 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
             note="Simulated trainee: answers by the direction of the peak force along each "
                  "probe, nearest to what it felt in familiarisation.")]))
     lines = [f"simulated {res.simulated_s:.0f} s of training ({protocol.n_trials} trials, "
-             f"{protocol.instruction})", *accuracy_text(res.summary)]
+             f"{protocol.instruction})"
+             + (f" through a link of {link_delay_ms:g} ms one-way" if link_delay_ms is not None
+                else ""), *accuracy_text(res.summary)]
+    if res.severities:
+        right = sum(1 for r in res.severities if r["answered_severity"] == r["severity"])
+        lines.append(f"severity judged right in {right} of {len(res.severities)} assessment "
+                     "trials (the trainee's own judgement; the protocol asks the group)")
     if "database" in out:
         lines.append(f"database: {out['database']}")
     if html_out is not None:

@@ -258,6 +258,16 @@ class ArmPair(tuple[ArmSim, ArmSim]):
             self.params = self.state = None
         return self
 
+    @classmethod
+    def of(cls, a: ArmSim, b: ArmSim) -> ArmPair:
+        """A pair of arms already built (or of what stands in for them, such as the remote
+        link: anything with ArmSim's ``tick``, ``state``, ``reset``), ticked one after the other
+        and blended like the reference path."""
+        self = super().__new__(cls, (a, b))
+        self.out = np.zeros(6)
+        self.params = self.state = None
+        return self
+
     @property
     def compiled(self) -> bool:
         return self.params is not None

@@ -16,6 +16,7 @@ trace's metadata when the pair is swapped in.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 from fieldbank.armkernel import ArmPair
@@ -62,6 +63,14 @@ def build_sim(params: ArmParams, dt_s: float, coupling: CouplingConfig | None = 
     return ArmSim(Arm.from_params(params), dt_s=dt_s, coupling=coupling)
 
 
+#: What the loop ticks in place of a compiled arm: built from a model, the loop's period and
+#: the coupling, it answers ``tick(x, y, vx, vy) -> (fx, fy)``, keeps a ``state`` (q1, q2,
+#: qd1, qd2) and can be ``reset``/``reset_at_hand`` like :class:`fieldbank.sim.ArmSim` (the
+#: remote link, :mod:`haptic.remote`, puts a distant patient there). It may raise
+#: :class:`~haptic.errors.CommandError` to refuse a model (a push).
+Environment = Callable[[ArmParams, float, CouplingConfig | None], ArmSim]
+
+
 class ModelPair:
     """Arms A and B, the blend between them and the gain around a swap.
 
@@ -76,14 +85,18 @@ class ModelPair:
     compiled : bool
         Tick both arms and the blend in one compiled call (:class:`fieldbank.armkernel.ArmPair`);
         False: the plain-Python reference tick of each arm.
+    environment : callable, optional
+        Builds what is ticked for each model instead of a compiled arm (:data:`Environment`:
+        the remote link); ticked one after the other like the reference path.
     """
 
     def __init__(self, before: ArmParams, after: ArmParams, dt_s: float, crossfade_s: float,
                  push_fade_s: float, coupling: CouplingConfig | None = None,
-                 compiled: bool = True) -> None:
+                 compiled: bool = True, environment: Environment | None = None) -> None:
         self.dt_s = dt_s
         self.coupling = coupling
         self.compiled = compiled
+        self.environment = environment
         self.crossfade_ticks = round(crossfade_s / dt_s)
         self.push_fade_ticks = round(push_fade_s / dt_s)
         self.params = (before, after)
@@ -99,8 +112,12 @@ class ModelPair:
 
     def compile(self, before: ArmParams, after: ArmParams) -> SimPair:
         """Both models compiled for this loop's period (slow: call outside the loop)."""
-        return ArmPair(Arm.from_params(before), Arm.from_params(after), self.dt_s,
-                       self.coupling, self.compiled)
+        make = self.environment
+        if make is None:
+            return ArmPair(Arm.from_params(before), Arm.from_params(after), self.dt_s,
+                           self.coupling, self.compiled)
+        return ArmPair.of(make(before, self.dt_s, self.coupling),
+                          make(after, self.dt_s, self.coupling))
 
     def crossfade(self, weight: float) -> None:
         """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""

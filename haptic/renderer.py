@@ -49,7 +49,7 @@ from fieldbank.haptic.errors import CommandError, HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.loopstats import LoopTimes, loop_stats
 from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair
-from fieldbank.haptic.pair import ModelPair
+from fieldbank.haptic.pair import Environment, ModelPair
 from fieldbank.haptic.protocol import FLAG_FAULT, FaultCode
 from fieldbank.haptic.recording import Trace, TraceBuffer
 from fieldbank.haptic.rendererconfig import RENDERER_BOUNDS as RENDERER_BOUNDS
@@ -77,11 +77,15 @@ class Renderer:
         :class:`~haptic.clock.RealClock` by default; :class:`~haptic.clock.VirtualClock` to run
         faster than real time.
     coupling : CouplingConfig, optional
+    environment : callable, optional
+        What is ticked in place of each compiled arm (:data:`haptic.pair.Environment`; the
+        remote link puts a distant patient there).
     """
 
     def __init__(self, link: RobotLink, before: ArmParams, after: ArmParams,
                  config: RendererConfig | None = None, safety: SafetyConfig | None = None,
-                 clock: Clock | None = None, coupling: CouplingConfig | None = None) -> None:
+                 clock: Clock | None = None, coupling: CouplingConfig | None = None,
+                 environment: Environment | None = None) -> None:
         self.link = link
         self.config = config or RendererConfig()
         self.dt_s = 1.0 / self.config.rate_hz
@@ -90,7 +94,8 @@ class Renderer:
         self.clock: Clock = clock or RealClock(self.config.spin_us)
         self.coupling = coupling
         self.pair = ModelPair(before, after, self.dt_s, self.config.crossfade_s,
-                              self.config.push_fade_s, coupling, self.config.compiled_tick)
+                              self.config.push_fade_s, coupling, self.config.compiled_tick,
+                              environment)
         self.commands: queue.SimpleQueue[Request] = queue.SimpleQueue()
         self.events: list[dict[str, Any]] = []
         self.abx: AbxSession | None = None

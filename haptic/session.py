@@ -38,6 +38,7 @@ from fieldbank.haptic.dbsink import DatabaseTraceSink, HapticStore
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.modelinfo import ModelInfoPair, model_info_pair, to_wire
+from fieldbank.haptic.pair import Environment
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.protocol import DeviceInfo
 from fieldbank.haptic.recording import Hdf5TraceSink, Trace
@@ -179,7 +180,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
           switches: Sequence[ScheduledSwitch] = (),
           trace_dir: str | Path | None = None, trace_name: str | None = None,
           db: HapticStore | StoreOpener | None = None, say: Say = _quiet,
-          watchdog_ms: int = WATCHDOG_MS) -> SessionResult:
+          watchdog_ms: int = WATCHDOG_MS, environment: Environment | None = None,
+          on_renderer: Callable[[Renderer], None] | None = None) -> SessionResult:
     """Render ``before`` (A) and ``after`` (B) on ``robot``; store the trace.
 
     Parameters
@@ -227,6 +229,11 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         Receives one line of progress per step.
     watchdog_ms : int, ms
         The device watchdog asked for in the handshake (the device may keep a shorter one).
+    environment : callable, optional
+        What the loop ticks in place of the compiled arms (:data:`haptic.pair.Environment`:
+        the remote link puts a distant patient there).
+    on_renderer : callable(Renderer), optional
+        Called with the renderer once it is built, before the robot is armed.
 
     Returns
     -------
@@ -254,7 +261,9 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         say(f"robot {device.device_id!r}: protocol {device.protocol_version}, up to "
             f"{device.max_rate_hz} Hz, device force limit {device.force_limit_n:g} N, "
             f"watchdog {device.watchdog_ms} ms")
-        rd = Renderer(link, before, after, cfg, safety=safety)
+        rd = Renderer(link, before, after, cfg, safety=safety, environment=environment)
+        if on_renderer is not None:
+            on_renderer(rd)
         # the trace, its file, the database record and every printout keep the URL masked
         rd.metadata["robot"] = mask_url(given)
         if any(i is not None for i in model_ids):

@@ -30,6 +30,19 @@ nearest (sum of the angles between them), with the perceived directions blurred 
 Gaussian error of ``direction_noise_deg`` (assumption: 0 by default; set it to model a hand's
 direction discrimination). Low severities push less hard, so their extra force is small and
 the blur matters most there, as the seed's trainees found.
+
+Instructed, it also judges the **severity** (the seed's protocol asks only the group; the
+trainee's severity judgement is kept beside its answers): the size of the extra force along the
+probes against the size it felt for the answered group in familiarisation (the severe arm),
+the level whose expected share of it is nearest on a log scale — on the severity scale the
+extra force grows as the level's ratio to unimpaired less one (:data:`SEVERITY_SHARE`: very
+mild 0.16, mild 0.32, moderate 0.58 of severe). Perceived sizes are blurred by a seeded
+log-normal error of ``magnitude_noise`` (a fraction; assumption, 0 by default: the force JND is
+≈ 10 %).
+
+The renderer can tick something else than the compiled arms (``environment``: a simulated
+remote link, :func:`haptic.remote.simulate.linked_environment`), so the same protocol runs
+through a delayed link.
 """
 
 from __future__ import annotations
@@ -40,13 +53,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from fieldbank.evaluate.severity import LEVEL_RATIO
 from fieldbank.haptic import commands as C
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import explore
+from fieldbank.haptic.pair import Environment
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import Trace
 from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import SimDevice
 from fieldbank.haptic.training import TrainingProtocol
 from fieldbank.probepath import ProbePath
@@ -55,6 +71,7 @@ from fieldbank.validation import Interval, check_fields
 #: Allowed range of each field of :class:`DirectionRule` and :class:`TraineeMotion`.
 TRAINEE_BOUNDS: dict[str, Interval] = {
     "direction_noise_deg": Interval(0.0, 180.0, "°"),
+    "magnitude_noise": Interval(0.0, 2.0, "1"),
     "approach_s": Interval(0.05, 10.0, "s"),
     "hold_s": Interval(0.0, 10.0, "s"),
     "settle_s": Interval(0.0, 10.0, "s"),
@@ -63,6 +80,10 @@ TRAINEE_BOUNDS: dict[str, Interval] = {
 }
 #: Groups a trainee can answer, and the answer of each (the seed's buttons).
 GROUP_ANSWER = {"shoulder": "shoulder", "elbow": "elbow", "biarticular": "both"}
+ANSWER_GROUP = {v: k for k, v in GROUP_ANSWER.items()}
+#: The extra force of each level as a share of the severe arm's, on the severity scale.
+SEVERITY_SHARE = {lvl: (LEVEL_RATIO[lvl] - 1.0) / (LEVEL_RATIO["severe"] - 1.0)
+                  for lvl in ("very mild", "mild", "moderate", "severe")}
 Say = Callable[[str], None]
 
 
@@ -78,16 +99,19 @@ class DirectionRule:
     ----------
     direction_noise_deg : float, °
         Standard deviation of the error in each perceived direction (assumption).
+    magnitude_noise : float
+        Standard deviation of the log of each perceived force size (assumption).
     seed : int
-        Seeds that error.
+        Seeds those errors.
     """
 
     direction_noise_deg: float = 0.0
     seed: int = 0
+    magnitude_noise: float = 0.0
 
     def __post_init__(self) -> None:
         check_fields(self, TRAINEE_BOUNDS, what="trainee parameter",
-                     names=("direction_noise_deg",))
+                     names=("direction_noise_deg", "magnitude_noise"))
 
 
 @dataclass(frozen=True)
@@ -112,6 +136,7 @@ class DirectionTrainee:
 
     rule: DirectionRule = field(default_factory=DirectionRule)
     templates: dict[str, list[list[tuple[float, float]]]] = field(default_factory=dict)
+    sizes: dict[str, list[float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self._rng = random.Random(self.rule.seed)
@@ -138,6 +163,25 @@ class DirectionTrainee:
             out.append(math.atan2(sy, sx))
         return out
 
+    def feel_size(self, size_n: float) -> float:
+        """A force size (N) as felt: with the rule's seeded log-normal error."""
+        sd = self.rule.magnitude_noise
+        return size_n * (math.exp(self._rng.gauss(0.0, sd)) if sd > 0 else 1.0)
+
+    def learn_size(self, group: str | None, size_n: float) -> None:
+        """Keep a familiarisation trial's extra-force size under its (legend's) group."""
+        if group is not None:
+            self.sizes.setdefault(group, []).append(self.feel_size(size_n))
+
+    def severity(self, answer: str, size_n: float) -> str | None:
+        """The level whose share of the answered group's familiarisation size is nearest (log
+        scale); None when that group was never felt."""
+        ref = self.sizes.get(ANSWER_GROUP.get(answer, answer))
+        if not ref:
+            return None
+        felt = max(self.feel_size(size_n), 1e-9) / max(sum(ref) / len(ref), 1e-9)
+        return min(SEVERITY_SHARE, key=lambda lvl: abs(math.log(felt / SEVERITY_SHARE[lvl])))
+
     def answer(self, directions: Sequence[float]) -> str:
         """'shoulder', 'elbow' or 'both': the group whose template is nearest."""
         if not self.templates:
@@ -160,6 +204,7 @@ class SimulationResult:
     trace: Trace
     result: dict[str, Any]
     simulated_s: float
+    severities: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -231,16 +276,29 @@ class _Driver:
         return direction, (sx / max(count, 1), sy / max(count, 1))
 
 
-def _extra_directions(means: Sequence[tuple[float, float]],
-                      normal: Sequence[Sequence[tuple[float, float]]]) -> list[float]:
-    """Per probe, the direction (rad) of the mean force minus the unimpaired arm's mean force
-    along the same probe (averaged over its familiarisation trials; none felt yet: zero)."""
+def _extras(means: Sequence[tuple[float, float]],
+            normal: Sequence[Sequence[tuple[float, float]]]) -> list[tuple[float, float]]:
+    """Per probe, the mean force minus the unimpaired arm's mean force along the same probe
+    (averaged over its familiarisation trials; none felt yet: zero), N."""
     out = []
     for k, (fx, fy) in enumerate(means):
         nx = sum(t[k][0] for t in normal) / len(normal) if normal else 0.0
         ny = sum(t[k][1] for t in normal) / len(normal) if normal else 0.0
-        out.append(math.atan2(fy - ny, fx - nx))
+        out.append((fx - nx, fy - ny))
     return out
+
+
+def _extra_directions(means: Sequence[tuple[float, float]],
+                      normal: Sequence[Sequence[tuple[float, float]]]) -> list[float]:
+    """Per probe, the direction (rad) of the extra force (:func:`_extras`)."""
+    return [math.atan2(ey, ex) for ex, ey in _extras(means, normal)]
+
+
+def _extra_size(means: Sequence[tuple[float, float]],
+                normal: Sequence[Sequence[tuple[float, float]]]) -> float:
+    """The size of the extra force over the probes (root mean square of each probe's), N."""
+    e = _extras(means, normal)
+    return math.sqrt(sum(ex * ex + ey * ey for ex, ey in e) / max(1, len(e)))
 
 
 def _robot(state: tuple[float, float, float, float], ox: float,
@@ -251,7 +309,8 @@ def _robot(state: tuple[float, float, float, float], ox: float,
 
 def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
              motion: TraineeMotion | None = None, rate_hz: int = 1000,
-             say: Say = _quiet) -> SimulationResult:
+             say: Say = _quiet, environment: Environment | None = None,
+             safety: SafetyConfig | None = None) -> SimulationResult:
     """Run ``protocol`` with a simulated trainee on the simulated robot (lockstep, faster than
     real time).
 
@@ -266,6 +325,11 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
         The loop's rate.
     say : callable(str), optional
         One line per trial.
+    environment : callable, optional
+        What the renderer ticks in place of the compiled arms (a simulated remote link).
+    safety : SafetyConfig, optional
+        The renderer's limits (a link brings its own passivity controller: turn the handle
+        port's off).
 
     Returns
     -------
@@ -281,7 +345,7 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
         rd = Renderer(link, base, base,
                       RendererConfig(rate_hz=rate_hz, state_wait_s=0.05,
                                      realtime_priority=False),
-                      clock=VirtualClock())
+                      safety=safety, clock=VirtualClock(), environment=environment)
         rd.metadata.update({"robot": url, "simulated_trainee": {
             "rule": "nearest familiarisation template of force directions (instructed: the "
                     "mean force beyond the unimpaired arm's along each probe; free "
@@ -294,6 +358,7 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
         normal: list[list[tuple[float, float]]] = []  # unimpaired arm's mean force per probe
         felt: list[tuple[str | None, list[tuple[float, float]]]] = []
         learned = False
+        severities: list[dict[str, Any]] = []
         offset = rd.config.shoulder_offset_m
         rd.start()
         try:
@@ -338,8 +403,16 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
                         # unimpaired arm, whatever order the arms came in
                         for group, ms in felt:
                             trainee.learn(group, _extra_directions(ms, normal))
+                            trainee.learn_size(group, _extra_size(ms, normal))
                         learned = True
-                    reply = drive.run(C.TrainAnswer(trainee.answer(directions)))
+                    said = trainee.answer(directions)
+                    if protocol.instruction == "instructed":
+                        severities.append({
+                            "trial": trial.index, "group": trial.group, "severity": trial.severity,
+                            "answer": said, "answered_severity":
+                                trainee.severity(said, _extra_size(means, normal)),
+                            "extra_force_n": round(_extra_size(means, normal), 4)})
+                    reply = drive.run(C.TrainAnswer(said))
                     rec = tr.records[-1]
                     say(f"trial {trial.index + 1}/{len(tr.trials)}: answered {rec['answer']} "
                         f"({'right' if rec['correct'] else 'wrong'})")
@@ -352,4 +425,4 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
     results = trace.metadata.get("training") or []
     if not results:
         raise ValueError("the simulated training session recorded no result")
-    return SimulationResult(trace, results[-1], rd.t_s)
+    return SimulationResult(trace, results[-1], rd.t_s, severities)

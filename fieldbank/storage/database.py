@@ -5,11 +5,12 @@
 :class:`~fieldbank.storage.core.DatabaseCore` (engine, array store, actor, transactions, audit,
 patient and session rows)::
 
-    Database(MapStore, Lineage, Traces, Jobs)  this module: open/close, patients, sessions, audit,
+    Database(MapStore, Lineage, Traces, Jobs, RemoteLinks)   this module: open/close,
     ├── MapStore(DatabaseCore)                 mapstore.py: ingest, maps, source files
     ├── Lineage(DatabaseCore)                  lineage.py: models, fits, plans
     ├── Traces(DatabaseCore)                   traces.py: haptic sessions, traces
-    └── Jobs(DatabaseCore)                     jobs.py: batch runs and jobs, fit documents
+    ├── Jobs(DatabaseCore)                     jobs.py: batch runs and jobs, fit documents
+    └── RemoteLinks(DatabaseCore)              remote.py: remote links, assessments
 
 Why mixins rather than objects the facade holds: the aggregates share one engine, one store and
 one actor, and several writes span two of them in ONE transaction (an ingest creates the
@@ -55,6 +56,7 @@ from fieldbank.storage.lineage import Lineage
 from fieldbank.storage.mapstore import MapStore
 from fieldbank.storage.orm import AuditRow, MapRow, PatientRow, SessionRow
 from fieldbank.storage.records import AuditEntry, CheckReport, PatientInfo, SessionInfo
+from fieldbank.storage.remote import RemoteLinks
 from fieldbank.storage.traces import Traces
 
 SIDES = ("left", "right")
@@ -85,7 +87,7 @@ def _patient_info(r: PatientRow) -> PatientInfo:
                        to_utc(r.created_at))
 
 
-class Database(MapStore, Lineage, Traces, Jobs):
+class Database(MapStore, Lineage, Traces, Jobs, RemoteLinks):
     """The field database and its array store. Create with :meth:`open`."""
 
     # --- opening ----------------------------------------------------------------------------

@@ -12,7 +12,9 @@ Tables::
               │        └─ fit_intervals  (derived: intervals of a plan over the fit's samples)
               ├─ plans (base/result → models)
               └─ haptic_sessions ─┬─ traces ── arrays
-                                  └─ haptic_trials  (A/B/X and training answers)
+                                  ├─ haptic_trials  (A/B/X and training answers)
+                                  ├─ haptic_remote_links  (a remote session's link)
+                                  └─ haptic_assessments  (posterior per probe, answer beside)
     job_runs ── jobs  (batch work over workers: what ran, what failed, what is left)
     audit_log  (append-only: UPDATE and DELETE are refused by triggers)
 
@@ -340,6 +342,51 @@ class HapticTrialRow(Base):
     detail_json: Mapped[str] = mapped_column(Text)
     # the trial's window held a fault or no force: kept, left out of every accuracy
     flagged: Mapped[bool] = mapped_column(Boolean, server_default="0")
+
+
+class RemoteLinkRow(Base):
+    """The link of a remote session: which site, the peer, the key's fingerprint (never the
+    key), the settings and what was measured (round trip, loss, passivity controller)."""
+
+    __tablename__ = "haptic_remote_links"
+    __table_args__ = (
+        UniqueConstraint("haptic_session_id"),
+        CheckConstraint("role IN ('clinician', 'patient')", name="role"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    haptic_session_id: Mapped[int] = mapped_column(ForeignKey("haptic_sessions.id"))
+    role: Mapped[str] = mapped_column(String(16))
+    peer: Mapped[str] = mapped_column(String(255))
+    key_fingerprint: Mapped[str] = mapped_column(String(32))
+    settings_json: Mapped[str] = mapped_column(Text)
+    summary_json: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+
+
+class AssessmentRow(Base):
+    """The classifier's posterior after one probe of a session, the clinician's answer beside
+    it. ``started_s``/``ended_s``/``answered_s`` are session times (s)."""
+
+    __tablename__ = "haptic_assessments"
+    __table_args__ = (UniqueConstraint("haptic_session_id", "probe"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    haptic_session_id: Mapped[int] = mapped_column(ForeignKey("haptic_sessions.id"), index=True)
+    probe: Mapped[int] = mapped_column(Integer)
+    started_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    ended_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    prior_json: Mapped[str] = mapped_column(Text)
+    posterior_json: Mapped[str] = mapped_column(Text)
+    impaired_group: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    group_probability: Mapped[float | None] = mapped_column(Float, nullable=True)
+    level: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    level_probability: Mapped[float | None] = mapped_column(Float, nullable=True)
+    explains: Mapped[bool | None] = mapped_column(Boolean, nullable=True)
+    verdict: Mapped[str] = mapped_column(Text)
+    detail_json: Mapped[str] = mapped_column(Text)
+    answer_group: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    answer_level: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    answer_note: Mapped[str | None] = mapped_column(Text, nullable=True)
+    answered_s: Mapped[float | None] = mapped_column(Float, nullable=True)
 
 
 class TraceRow(Base):

@@ -217,6 +217,59 @@ class HapticTrialRecord:
 
 
 @dataclass(frozen=True)
+class RemoteLinkRecord:
+    """The link of a remote haptic session (the key itself is never stored)."""
+
+    id: int
+    haptic_session_id: int
+    role: str
+    peer: str
+    key_fingerprint: str
+    settings: dict[str, Any]
+    summary: dict[str, Any]
+    created_at: datetime
+
+
+@dataclass(frozen=True)
+class AssessmentRecord:
+    """The posterior over the candidates after one probe, and the clinician's answer.
+
+    ``posterior`` maps each candidate ("elbow severe", "unimpaired") to its probability;
+    ``detail`` keeps the group and level posteriors, the next probe drawn and the link's state
+    when the probe ended. Times are session times, s.
+    """
+
+    id: int
+    haptic_session_id: int
+    probe: int
+    started_s: float | None
+    ended_s: float | None
+    prior: dict[str, float]
+    posterior: dict[str, float]
+    group: str | None
+    group_probability: float | None
+    level: str | None
+    level_probability: float | None
+    explains: bool | None
+    verdict: str
+    detail: dict[str, Any]
+    answer_group: str | None
+    answer_level: str | None
+    answer_note: str | None
+    answered_s: float | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"id": self.id, "haptic_session_id": self.haptic_session_id,
+                "probe": self.probe, "started_s": self.started_s, "ended_s": self.ended_s,
+                "prior": self.prior, "posterior": self.posterior, "group": self.group,
+                "group_probability": self.group_probability, "level": self.level,
+                "level_probability": self.level_probability, "explains": self.explains,
+                "verdict": self.verdict, **self.detail,
+                "answer": {"group": self.answer_group, "level": self.answer_level,
+                           "note": self.answer_note, "answered_s": self.answered_s}}
+
+
+@dataclass(frozen=True)
 class TraceRecord:
     """A recorded trace of a haptic session; its array is in the array store."""
 

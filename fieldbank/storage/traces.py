@@ -42,6 +42,16 @@ from fieldbank.storage.records import HapticSessionRecord, HapticTrialRecord, Tr
 
 #: Longest stated reason for a session filed under another patient than its models'.
 MAX_PATIENT_NOTE_CHARS = 500
+#: Longest robot URL its column holds (String(255)); a longer one - a simulated robot following
+#: a long scripted path - is shortened there, and kept whole in the session's statistics
+#: (``metadata.robot``, written by the trace sink).
+MAX_ROBOT_URL_CHARS = 255
+
+
+def _column_url(url: str) -> str:
+    if len(url) <= MAX_ROBOT_URL_CHARS:
+        return url
+    return f"{url[:190]}… ({len(url)} characters; whole in the session's metadata)"
 _TRIAL_FIELDS = ("kind", "block", "trial", "phase", "condition", "answer", "correct",
                  "started_s", "answered_s", "response_time_s", "flagged")
 
@@ -107,7 +117,7 @@ class Traces(DatabaseCore):
         patient_note : str, optional
             Why the session's patient is not its models' patient (required then).
         """
-        safe_url = mask_url(robot_url)
+        safe_url = _column_url(mask_url(robot_url))
         with self._write() as s:
             code = self._session_patient(s, (model_a_id, model_b_id), patient_code,
                                          patient_note)

@@ -31,6 +31,9 @@ class StationConfig:
         The training protocol 'Start training' begins (``TrainingProtocol.to_dict``).
     view : str
         'opposite' (the patient faces the clinician, as in the seed) or 'behind'.
+    remote : dict
+        A remote assessment (:mod:`haptic.remote.station`): the link's tap, the assessment
+        log, the candidates; empty for an ordinary session.
     """
 
     snapshot_path: str
@@ -41,6 +44,7 @@ class StationConfig:
     frame_hz: float = 60.0
     training: dict[str, Any] = field(default_factory=dict)
     view: str = "opposite"
+    remote: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> StationConfig:

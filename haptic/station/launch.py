@@ -45,6 +45,9 @@ class StationOptions:
     training : dict
         The training protocol the page's 'Start training' begins
         (``TrainingProtocol.to_dict()``; empty: the seed's).
+    remote : dict
+        A remote assessment's station (:mod:`haptic.remote.station`): the link's tap, the
+        assessment log, the candidates (empty: an ordinary session).
     """
 
     host: str = "127.0.0.1"
@@ -52,6 +55,7 @@ class StationOptions:
     allow_remote: bool = False
     view: str = "opposite"
     training: dict[str, Any] = field(default_factory=dict)
+    remote: dict[str, Any] = field(default_factory=dict)
 
 
 def _loopback(host: str) -> bool:
@@ -80,11 +84,14 @@ class StationProcess:
         The training protocol the page starts (``TrainingProtocol.to_dict``).
     view : str
         'opposite' (patient faces the clinician, the seed's picture) or 'behind'.
+    remote : dict, optional
+        A remote assessment's station settings (:class:`StationOptions`).
     """
 
     def __init__(self, snapshot_path: str, socket_path: str, host: str = "127.0.0.1",
                  port: int = 0, allow_remote: bool = False,
-                 training: dict[str, Any] | None = None, view: str = "opposite") -> None:
+                 training: dict[str, Any] | None = None, view: str = "opposite",
+                 remote: dict[str, Any] | None = None) -> None:
         if not _loopback(host) and not allow_remote:
             raise HapticError(f"the station binds to 127.0.0.1 unless told otherwise; "
                               f"{host!r} is reachable from other machines (pass "
@@ -92,7 +99,8 @@ class StationProcess:
         if view not in ("opposite", "behind"):
             raise HapticError(f"station view is 'opposite' or 'behind'; got {view!r}")
         self.config = StationConfig(str(snapshot_path), str(socket_path), new_token(), host,
-                                    int(port), training=dict(training or {}), view=view)
+                                    int(port), training=dict(training or {}), view=view,
+                                    remote=dict(remote or {}))
         self._proc: subprocess.Popen[bytes] | None = None
         self.host = host
         self.port = 0
@@ -147,7 +155,7 @@ class StationProcess:
     def for_session(cls, snapshot_path: str, socket_path: str,
                     options: StationOptions) -> StationProcess:
         return cls(snapshot_path, socket_path, options.host, options.port, options.allow_remote,
-                   options.training, options.view)
+                   options.training, options.view, options.remote)
 
 
 def _readline(f: IO[bytes], timeout_s: float) -> bytes:

@@ -22,6 +22,13 @@ In (JSON): ``{"id": n, "cmd": "switch", "to": "A"|"B"}``, ``{"cmd": "abx", "acti
 ``{"cmd": "page_stats", "fps": …}``. Nothing else is forwarded: the page cannot push models or
 stop the session.
 
+A remote assessment's station (``StationConfig.remote``) also sends ``{"type": "link", …}``
+(delay, loss, the passivity controller, warnings) and ``{"type": "posterior", …}`` after each
+probe, and answers ``{"cmd": "prior", "groups", "levels", "unimpaired"}`` and
+``{"cmd": "assess_answer", "group", "level", "note"}`` itself
+(:mod:`haptic.remote.desk`); its frames carry no muscle forces (the arm is drawn from its
+geometry only).
+
 Blinding: while the snapshot says an A/B/X block or a training assessment runs, frames carry no
 blend and no muscle forces, and the info names no model (the renderer hides them too).
 """
@@ -45,6 +52,7 @@ from fieldbank.errors import FieldbankError
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES
 from fieldbank.haptic.client import ControlClient
 from fieldbank.haptic.errors import HapticError
+from fieldbank.haptic.remote.desk import Desk
 from fieldbank.haptic.safety import FaultCode, Mode
 from fieldbank.haptic.snapshot import SnapshotReader
 from fieldbank.haptic.station.config import StationConfig
@@ -66,6 +74,11 @@ MAX_PAGE_MESSAGE = 4096
 MAX_PAGES = 8
 #: How often the info is fetched even when nothing changed, s.
 INFO_REFRESH_S = 2.0
+#: Commands a remote assessment's page sends to the station itself (not to the renderer).
+DESK_COMMANDS = ("prior", "assess_answer")
+#: How often a remote station reads the link's tap, s, and sends the link's figures.
+DESK_POLL_S = 0.1
+LINK_EVERY_S = 0.25
 
 
 def _fault_names(mask: int) -> list[str]:
@@ -153,6 +166,9 @@ class Station:
         self.pages: dict[int, dict[str, Any]] = {}
         self._page_ids = 0
         self.frames_made = 0
+        #: a remote assessment's panels (haptic.remote.desk), and their newest messages
+        self.desk: Desk | None = Desk(config.remote) if config.remote else None
+        self.extra: dict[str, str] = {}
 
     # --- the renderer, through its control socket -------------------------------------------
     async def request(self, cmd: str, **args: Any) -> Any:
@@ -188,7 +204,7 @@ class Station:
         geo = self.geometry
         elbow, hand = geo.points(key, *q) if geo else ([0.0, 0.0], [0.0, 0.0])
         muscles = None
-        if not blinded and geo is not None:
+        if not blinded and geo is not None and self.desk is None:
             qk = (s[f"{key.lower()}_q1_rad"], s[f"{key.lower()}_q2_rad"])
             muscles = geo.muscles(key, qk, qd) or None
         mode = int(s["mode"])
@@ -226,15 +242,84 @@ class Station:
                 self.frames_made += 1
             await asyncio.sleep(max(0.0, period - (loop.time() - t0)))
 
+    async def produce_desk(self) -> None:
+        """A remote station: read the link's tap, send its figures; classify each probe that
+        ended (in a worker thread: the page keeps drawing meanwhile)."""
+        desk = self.desk
+        assert desk is not None
+        loop = asyncio.get_running_loop()
+        link_at = 0.0
+        while True:
+            try:
+                ended = desk.poll()
+            except (HapticError, ValueError, IndexError) as exc:
+                log.warning("link tap: %s", exc)
+                ended = []
+            if ended:
+                await self.reclassify()
+            now = loop.time()
+            if desk.link and now - link_at >= LINK_EVERY_S:
+                link_at = now
+                self.extra["link"] = json.dumps(desk.link_message())
+            await asyncio.sleep(DESK_POLL_S)
+
+    async def reclassify(self) -> None:
+        """The posterior of every probe so far, to the page and the assessment log."""
+        desk = self.desk
+        if desk is None or not desk.probes:
+            return
+        loop = asyncio.get_running_loop()
+        try:
+            cl = await loop.run_in_executor(None, desk.classify)
+        except (FieldbankError, ValueError) as exc:
+            log.warning("classification failed: %s", exc)
+            self.extra["posterior"] = json.dumps({"type": "posterior", "error": str(exc)})
+            return
+        if cl is not None:
+            self.extra["posterior"] = json.dumps(desk.posterior_message(cl))
+
+    async def desk_command(self, cmd: str, args: Mapping[str, Any]) -> Any:
+        """``prior`` and ``assess_answer``, answered by the station itself."""
+        desk = self.desk
+        if desk is None:
+            raise FieldbankError("this station serves no remote assessment")
+        if cmd == "prior":
+            def names(key: str) -> list[str]:
+                v = args.get(key)
+                if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+                    raise FieldbankError(f'prior: "{key}" must be a list of names')
+                return v
+            try:
+                desk.set_prior(names("groups"), names("levels"), bool(args.get("unimpaired")))
+            except ValueError as exc:
+                raise FieldbankError(f"prior: {exc}") from None
+            await self.reclassify()
+            return {"weights": desk.weights}
+        group, level, note = args.get("group"), args.get("level"), args.get("note", "")
+        for k, v in (("group", group), ("level", level)):
+            if v is not None and not isinstance(v, str):
+                raise FieldbankError(f'assess_answer: "{k}" must be a name or null')
+        if not isinstance(note, str):
+            raise FieldbankError('assess_answer: "note" must be text')
+        try:
+            return desk.answer(group, level, note)
+        except ValueError as exc:
+            raise FieldbankError(f"assess_answer: {exc}") from None
+
     # --- one page -------------------------------------------------------------------------------
     async def pump(self, ws: web.WebSocketResponse) -> None:
         """Send the newest frame (when there is a new one) and any new info to one page."""
         period = 1.0 / self.config.frame_hz
         sent_frame = sent_info = ""
+        sent_extra: dict[str, str] = {}
         while not ws.closed:
             if self.info_json and self.info_json != sent_info:
                 sent_info = self.info_json
                 await ws.send_str(sent_info)
+            for kind, text in list(self.extra.items()):
+                if sent_extra.get(kind) is not text:
+                    sent_extra[kind] = text
+                    await ws.send_str(text)
             if self.frame_json and self.frame_json is not sent_frame:
                 sent_frame = self.frame_json
                 await ws.send_str(sent_frame)
@@ -245,6 +330,11 @@ class Station:
         cmd = msg.get("cmd")
         rid = msg.get("id")
         reply: dict[str, Any] = {"type": "reply", "id": rid if isinstance(rid, int) else None}
+        if isinstance(cmd, str) and cmd in DESK_COMMANDS:
+            try:
+                return {**reply, "ok": True, "result": await self.desk_command(cmd, msg)}
+            except FieldbankError as exc:
+                return {**reply, "ok": False, "error": str(exc)}
         if not isinstance(cmd, str) or cmd not in PAGE_COMMANDS:
             return {**reply, "ok": False, "error": f"the station does not send {cmd!r}"}
         actions = PAGE_COMMANDS[cmd]
@@ -289,14 +379,17 @@ def make_app(station: Station) -> web.Application:
     template = (resources.files("fieldbank.haptic.station") / "page.html").read_text("utf-8")
     script = (resources.files("fieldbank.haptic.station") / "station.js").read_text("utf-8")
     style = (resources.files("fieldbank.haptic.station") / "station.css").read_text("utf-8")
+    if station.desk is not None:  # a remote assessment's panels, in files of their own
+        script += (resources.files("fieldbank.haptic.station") / "remote.js").read_text("utf-8")
+        style += (resources.files("fieldbank.haptic.station") / "remote.css").read_text("utf-8")
 
     # what the page knows from the start: the view, what 'Start training' runs, the muscles
     proto = TrainingProtocol.from_dict(cfg.training or {})
-    page_config = json.dumps({
+    page_base = {
         "view": cfg.view,
         "training": {"name": proto.title, "n_trials": proto.n_trials},
         "muscles": [{"code": k, "name": v} for k, v in MUSCLE_GROUP_NAMES.items()],
-    }).replace("<", "\\u003c")
+    }
 
     @web.middleware
     async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
@@ -316,7 +409,11 @@ def make_app(station: Station) -> web.Application:
         nonce = secrets.token_urlsafe(16)
         body = (template.replace("{{nonce}}", nonce).replace("{{style}}", style)
                 .replace("{{script}}", script)
-                .replace("{{config}}", page_config))
+                .replace("{{config}}", json.dumps({
+                    **page_base, "remote": station.desk is not None,
+                    "assess": {} if station.desk is None else {
+                        "groups": station.desk.groups, "levels": station.desk.levels},
+                }).replace("<", "\\u003c")))
         resp = web.Response(text=body, content_type="text/html")
         resp.headers["Content-Security-Policy"] = (
             f"default-src 'none'; script-src 'nonce-{nonce}'; style-src 'nonce-{nonce}'; "
@@ -373,9 +470,13 @@ def make_app(station: Station) -> web.Application:
 
     async def start_producer(app: web.Application) -> None:
         app["producer"] = asyncio.create_task(station.produce())
+        if station.desk is not None:
+            app["desk"] = asyncio.create_task(station.produce_desk())
 
     async def stop_producer(app: web.Application) -> None:
         app["producer"].cancel()
+        if "desk" in app:
+            app["desk"].cancel()
 
     app.on_startup.append(start_producer)
     app.on_cleanup.append(stop_producer)

@@ -41,6 +41,8 @@ function connect() {
       pending.delete(msg.id);
       if (!msg.ok) setMessage(msg.error, true);
       if (done) done(msg);
+    } else if (window.fbExtra) {
+      window.fbExtra.onMessage(msg);  // panels of their own (remote.js)
     }
   };
   ws.onclose = () => {
@@ -59,6 +61,8 @@ function send(cmd, args = {}) {
     ws.send(JSON.stringify({ id, cmd, ...args }));
   });
 }
+
+window.fbSend = send;
 
 function setMessage(text, error = false) {
   $("message").textContent = text || "";
@@ -261,6 +265,7 @@ function draw() {
   drawWorkspace();
   drawBody();
   drawPaths();
+  if (window.fbExtra) window.fbExtra.draw(ctx, P, view);
   drawArm(f);
   drawForce(f);
   const [px, py] = drawHandle(f);
@@ -290,7 +295,9 @@ function updateBadges(f) {
   setState(f.mode, `${words[f.mode] || f.mode}${faults}`);
   const r = $("rendering");
   const tr = info && info.training;
-  if (tr && !tr.done && !f.blinded) {
+  if (window.fbExtra && window.fbExtra.badge(f)) {
+    // the panel's own badge (remote.js)
+  } else if (tr && !tr.done && !f.blinded) {
     r.textContent = tr.phase ? `Training · ${tr.phase}` : "Training"; r.className = "badge";
     $("btn-a").classList.remove("active"); $("btn-b").classList.remove("active");
   } else if (f.blinded) {

@@ -1,0 +1,173 @@
+"""Passivity of the delayed link: an observer, an energy tank and a controller at each port.
+
+The link between the sites is a two-port network: at the clinician's port it takes the
+handle's velocity and returns a force (impedance causality); at the patient's port it takes a
+force (the patient's, measured) and returns a velocity (the motion the patient's robot is told
+to make: admittance causality). With delay, loss and jitter such a network can create energy,
+and a link that creates energy can make the clinician's robot, the patient's arm or both
+oscillate. Time-domain passivity keeps it passive at any delay:
+
+* **observer** (Hannaford & Ryu 2002; for teleoperation Ryu, Kwon & Hannaford 2004, IEEE Trans.
+  Robot. Autom. 20(2):365–373), per port and tick: the power P = F·v leaving the link there is
+  split into what leaves (P > 0: E_out += P Δt) and what enters (P < 0: E_in −= P Δt);
+* **energy tanks** (the passivity layer of Franken, Stramigioli, Misra, Secchi & Macchelli
+  2011, IEEE Trans. Robot. 27(4):741–756): each port holds what entered through it plus what the
+  other port handed over, minus what it let out and what it handed over,
+
+      H = E_in + E_received − E_out − E_sent  ≥ 0,
+
+  and hands everything above a reserve R to the other side (``E_sent`` is cumulative and
+  travels in every STATE, so a lost datagram only delays a hand-over). The link's stored energy
+  is H_clinician + H_patient + what is in flight (sent, not yet received) — every term ≥ 0 — and
+  equals all that entered minus all that left: the link never creates energy, whatever the
+  delay, its jitter or the datagrams lost. The clinician's port keeps a reserve (1 mJ): it
+  answers the small give of a hand holding still against a force at once, instead of waiting
+  a round trip for the patient's side to hand energy back (a budget that always waits makes
+  every hold chatter); the patient's port keeps none and hands back at once what the patient
+  returns. The reserve costs the patient's side a lag of R / F when it starts a stretch
+  against a force F (0.3 mm at 1 mJ and 3 N);
+* **controller**: when a tick would empty the tank, it dissipates exactly the excess:
+
+      clinician port (force out):     F' = F − α v,  α = (E_out + F·v Δt − budget) / (‖v‖² Δt)
+      patient port (velocity out):    v' = v − β F,  β = (E_out + F·v Δt − budget) / (‖F‖² Δt)
+
+  (budget = E_in + E_received − E_sent). F' − F (v' − v) is the smallest change that brings the
+  tick's output back within the tank; it removes at most the whole of the force along v (of the
+  velocity along F): the tick's output is then zero, never negative, so the controller never
+  pushes against the motion; an excess an earlier tick left (a site's own force limits changed
+  what was sent) is dissipated on the ticks that follow.
+
+The observer books what was actually sent (after the site's own force limits). The cost of
+passivity is transparency: what the tank withholds is felt at the clinician's hand as the force
+dropping while the hand gives way, and at the patient's side as the robot lagging the
+clinician's motion (a position drift, pulled back as the tank allows,
+:mod:`haptic.remote.ports`).
+"""
+
+from __future__ import annotations
+
+import math
+
+#: Energy a port keeps before handing the rest to the other side, J (assumption; module
+#: docstring).
+DEFAULT_RESERVE_J = 1e-3
+
+
+class PortEnergy:
+    """One port's energy accounts since the session began, J."""
+
+    __slots__ = ("e_in", "e_out", "received", "reserve", "sent")
+
+    def __init__(self, reserve_j: float = DEFAULT_RESERVE_J) -> None:
+        self.e_in = 0.0
+        self.e_out = 0.0
+        self.sent = 0.0          # handed to the other port (cumulative)
+        self.received = 0.0      # handed over by the other port, as last received
+        self.reserve = reserve_j
+
+    def book(self, power_out_w: float, dt_s: float) -> None:
+        """Account for one tick at ``power_out_w`` leaving the link (negative: entering), then
+        hand everything above the reserve to the other port."""
+        if power_out_w > 0.0:
+            self.e_out += power_out_w * dt_s
+        else:
+            self.e_in -= power_out_w * dt_s
+        surplus = self.tank - self.reserve
+        if surplus > 0.0:
+            self.sent += surplus
+
+    def receive(self, peer_sent_j: float) -> None:
+        """The other port's cumulative hand-over, as newly received (never goes back)."""
+        if peer_sent_j > self.received:
+            self.received = peer_sent_j
+
+    @property
+    def budget(self) -> float:
+        """What this port may have let out in all, J."""
+        return self.e_in + self.received - self.sent
+
+    @property
+    def tank(self) -> float:
+        """Energy held here now, J (≥ 0 while the controller runs)."""
+        return self.budget - self.e_out
+
+
+class ForcePort:
+    """Passivity controller of the clinician's port (force out, velocity in).
+
+    ``dissipated_j`` sums what the controller withheld; ``active_ticks`` counts the ticks it
+    acted on.
+    """
+
+    __slots__ = ("active_ticks", "dissipated_j", "dt", "energy", "last_alpha")
+
+    def __init__(self, dt_s: float, reserve_j: float = DEFAULT_RESERVE_J) -> None:
+        self.dt = dt_s
+        self.energy = PortEnergy(reserve_j)
+        self.active_ticks = 0
+        self.dissipated_j = 0.0
+        self.last_alpha = 0.0
+
+    def correct(self, fx: float, fy: float, vx: float, vy: float) -> tuple[float, float]:
+        """The force to display instead of (fx, fy) so that this port stays within its tank."""
+        p = fx * vx + fy * vy
+        self.last_alpha = 0.0
+        if p <= 0.0:
+            return fx, fy
+        e = self.energy
+        excess = e.e_out + p * self.dt - e.budget
+        if excess <= 0.0:
+            return fx, fy
+        # take off part c of the force's component along v (c·û = α v): computed with the unit
+        # vector, so it stays bounded by |f| however small (even subnormal) v is
+        n = math.hypot(vx, vy)  # > 0 since p > 0
+        ux, uy = vx / n, vy / n
+        along = fx * ux + fy * uy
+        h = n * self.dt
+        c = along if h == 0.0 else min(excess / h, along)
+        self.last_alpha = c / n
+        self.active_ticks += 1
+        self.dissipated_j += c * h
+        return fx - c * ux, fy - c * uy
+
+    def book(self, fx: float, fy: float, vx: float, vy: float) -> None:
+        """Observe the force actually displayed at velocity (vx, vy) for one tick."""
+        self.energy.book(fx * vx + fy * vy, self.dt)
+
+
+class VelocityPort:
+    """Passivity controller of the patient's port (velocity out, force in)."""
+
+    __slots__ = ("active_ticks", "dissipated_j", "dt", "energy", "last_beta")
+
+    def __init__(self, dt_s: float, reserve_j: float = DEFAULT_RESERVE_J) -> None:
+        self.dt = dt_s
+        self.energy = PortEnergy(reserve_j)
+        self.active_ticks = 0
+        self.dissipated_j = 0.0
+        self.last_beta = 0.0
+
+    def correct(self, vx: float, vy: float, fx: float, fy: float) -> tuple[float, float]:
+        """The velocity to command instead of (vx, vy) against the port force (fx, fy) (the
+        force the link exerts on the patient's side) within this port's tank."""
+        p = fx * vx + fy * vy
+        self.last_beta = 0.0
+        if p <= 0.0:
+            return vx, vy
+        e = self.energy
+        excess = e.e_out + p * self.dt - e.budget
+        if excess <= 0.0:
+            return vx, vy
+        n = math.hypot(fx, fy)  # > 0 since p > 0 (as the force port, with the roles swapped)
+        ux, uy = fx / n, fy / n
+        along = vx * ux + vy * uy
+        h = n * self.dt
+        c = along if h == 0.0 else min(excess / h, along)
+        self.last_beta = c / n
+        self.active_ticks += 1
+        self.dissipated_j += c * h
+        return vx - c * ux, vy - c * uy
+
+    def book(self, vx: float, vy: float, fx: float, fy: float) -> None:
+        """Observe the velocity commanded against the port force for one tick."""
+        self.energy.book(fx * vx + fy * vy, self.dt)
