@@ -30,6 +30,7 @@ import logging
 import os
 import statistics
 import sys
+import tempfile
 import time
 import uuid
 from collections.abc import Iterator
@@ -124,7 +125,7 @@ def measure(workers: int, server_url: str, patients: int) -> Figures:
                     label, step = COHORT_PLANS[k % len(COHORT_PLANS)]
                     save_plan(db, modelsource.stored(db, int(m.id)), Plan.of(step(), label=label),
                               accept_poor_fit=True)
-            out = Path(f"/tmp/{uuid.uuid4().hex}")
+            out = Path(tempfile.mkdtemp(prefix="fieldbank-bench-cluster-")) / "report"
             t = time.perf_counter()
             rep = build_report(db, Selection(), out, scheduler=cluster.scheduler_address,
                                accept_poor_fit=True)
