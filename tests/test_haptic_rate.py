@@ -17,6 +17,7 @@ from fieldbank.storage import Database
 
 def test_serve_renders_at_4_khz_and_records_it(tmp_path: Path) -> None:
     db_url = f"sqlite:///{tmp_path / 'fb.sqlite'}"
+    Database.open(db_url).close()  # serve records into a database, never creates one
     run = CliRunner()
     r = run.invoke(cli, ["haptic", "serve", "--robot", "sim://?mode=lockstep&motion=circle",
                          "--rate", "4000", "--duration-s", "0.5", "--before-severity",

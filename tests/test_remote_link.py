@@ -18,7 +18,7 @@ from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.motions import pull
 from fieldbank.haptic.remote.channel import Endpoint, Impairment, MemoryTransport, UdpTransport
-from fieldbank.haptic.remote.passivity import ForcePort, PortEnergy, VelocityPort
+from fieldbank.haptic.remote.passivity import STILL, ForcePort, PortEnergy, VelocityPort
 from fieldbank.haptic.remote.patient_site import SiteConfig
 from fieldbank.haptic.remote.ports import LinkConfig
 from fieldbank.haptic.remote.simulate import (
@@ -198,21 +198,25 @@ def test_two_tanks_never_create_energy_whatever_the_forces_and_the_delay(
         sent_p.append(p.energy.sent)
         out = c.energy.e_out + p.energy.e_out
         inn = c.energy.e_in + p.energy.e_in
+        # what a standstill lets through unchecked (passivity.STILL), at most, so far
+        still = (k + 1) * 30.0 * STILL * dt * 2
         assert out <= inn + 1e-9
-        assert c.energy.tank >= -1e-12 and p.energy.tank >= -1e-12
+        assert c.energy.tank >= -1e-12 - still and p.energy.tank >= -1e-12 - still
 
 
-@pytest.mark.parametrize("v", [-2.0323005617858153e-10, 4.358713800558159e-161, 5e-324])
-def test_a_vanishing_velocity_lets_no_energy_out_of_an_empty_tank(v: float) -> None:
-    """Counterexamples once found by the property test above: a velocity so small that |v|²
-    underflowed let the force through unchanged (the tank went below zero) or divided by zero."""
-    c, p = ForcePort(1e-3, 0.0), VelocityPort(1e-3, 0.0)
-    fx, fy = c.correct(0.0, -5.0 if v < 0 else 1.0, 0.0, v)
+def test_a_standstill_lets_through_no_more_than_its_bound() -> None:
+    """A velocity below passivity.STILL (a counterexample the property test above once found:
+    |v| = 2·10⁻¹⁰ m/s against 5 N, an empty tank) leaves the force as it is; the energy that
+    passes is within the stated bound, and the tank stays within it."""
+    dt = 1e-3
+    c = ForcePort(dt, 0.0)
+    v = -2.0323005617858153e-10
+    fx, fy = c.correct(0.0, -5.0, 0.0, v)
+    assert (fx, fy) == (0.0, -5.0)
     c.book(fx, fy, 0.0, v)
-    assert math.isfinite(fy) and abs(fy) <= 5.0 and c.energy.tank >= -1e-12
-    vx, vy = p.correct(0.0, v, 0.0, -5.0 if v < 0 else 1.0)
-    p.book(vx, vy, 0.0, -5.0 if v < 0 else 1.0)
-    assert math.isfinite(vy) and abs(vy) <= abs(v) and p.energy.tank >= -1e-12
+    assert -5.0 * STILL * dt <= c.energy.tank < 0.0
+    fx, fy = c.correct(0.0, 5.0, 0.0, 1e-3)  # moving again, the force along the motion:
+    assert abs(fy) <= 1e-12                   # nothing goes out while the tank is short
 
 
 def test_the_tank_hands_over_everything_above_its_reserve() -> None:

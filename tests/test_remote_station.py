@@ -145,10 +145,11 @@ def test_after_two_probes_the_page_names_the_elbow_and_the_session_keeps_the_pos
         assert second.answer_note == "catch at mid-range on the fast stretch"
         assert math.isclose(sum(second.posterior.values()), 1.0, abs_tol=1e-6)
         assert stored[0].answer_group is None            # no answer was given after probe 1
-        # the prior without the elbow, kept with the probe that was the latest when it was
-        # applied (the scripted probing may have gone on past the second probe by then)
-        revisions = [r for a in stored for r in a.detail.get("revisions", [])]
-        assert revisions, [a.detail for a in stored]
-        revised = revisions[-1]
-        assert revised["group"] != "elbow" and revised["prior"]["elbow severe"] == 0.0
+        # the prior without the elbow is kept: as a revision of the probe that was the latest
+        # when it was applied, or as the prior of a probe that ended after it (the scripted
+        # probing goes on meanwhile; on a busy machine a third probe may end first)
+        posteriors = [(a.prior, a.group) for a in stored] + [
+            (r["prior"], r["group"]) for a in stored for r in a.detail.get("revisions", [])]
+        revised = [group for prior, group in posteriors if prior["elbow severe"] == 0.0]
+        assert revised and all(group != "elbow" for group in revised), posteriors
         assert db.get_remote_link(sid) is not None

@@ -50,6 +50,7 @@ class Station:
                                              x0_m=float(x0), y0_m=float(y0))).start_process()
         self.sock = tmp / "run" / "h.sock"
         self.db_url = f"sqlite:///{tmp / 'fb.sqlite'}"
+        Database.open(self.db_url).close()  # serve records into a database, never creates one
         cmd = [sys.executable, "-m", "fieldbank.cli", "haptic", "serve",
                "--robot", self.robot.port, "--station",
                "--before-severity", "elbow=severe", "--after-severity", "elbow=mild",

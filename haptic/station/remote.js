@@ -65,7 +65,7 @@
 
   function fmtP(p) { return p >= 0.995 ? "> 0.99" : p.toFixed(2); }
   function pIs(p) { return p >= 0.995 ? "p > 0.99" : `p = ${p.toFixed(2)}`; }
-  const LEVEL_SHORT = { "very mild": "v. mild", unimpaired: "none" };
+  const LEVEL_SHORT = { "very mild": "v. mild", moderate: "mod.", unimpaired: "none" };
   const GROUP_SHORT = { shoulder: "Shoulder", elbow: "Elbow", biarticular: "Both" };
   const history = [];
 
