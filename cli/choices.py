@@ -59,3 +59,7 @@ MEASURE_FORCE_LIMIT_N = 40.0
 
 # fieldbank.haptic.remote.ports: the passivity controller of a remote link
 PASSIVITY_MODES: tuple[str, ...] = ("tdpa", "off")
+
+# fieldbank.interventions.realised: the verdict's numbers (validate's options)
+VALIDATE_CHANGE_TOLERANCE = 0.2
+VALIDATE_MAX_CHANGE_SE = 0.25

@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import math
 import textwrap
+from typing import TYPE_CHECKING
 
 import click
 
+from fieldbank.cli.choices import VALIDATE_CHANGE_TOLERANCE, VALIDATE_MAX_CHANGE_SE
 from fieldbank.cli.options import (
     db_option,
     emit_json,
@@ -27,25 +29,10 @@ from fieldbank.cli.options import (
     say,
     scheduler_option,
 )
-from fieldbank.engine import progress_bar, resolve_scheduler
-from fieldbank.fitting.crossval import (
-    EXPLANATION,
-    NOT_GENERALISED,
-    CrossValidation,
-    cross_validate,
-    latest_fitted_model,
-)
-from fieldbank.fitting.dbstore import DatabaseFitStore
-from fieldbank.interventions.validate import (
-    CHANGE_TOLERANCE,
-    CONTRADICTED,
-    MAX_CHANGE_SE,
-    PlanValidation,
-    SessionCheck,
-    ValidationReport,
-    validate_plans,
-)
-from fieldbank.interventions.validate_batch import validate_on_cluster
+
+if TYPE_CHECKING:  # typing only: the checks load when the command runs ('--help' at once)
+    from fieldbank.fitting.crossval import CrossValidation
+    from fieldbank.interventions.validate import PlanValidation, SessionCheck, ValidationReport
 
 #: Text output is wrapped to this width.
 WIDTH = 100
@@ -81,6 +68,8 @@ _SHORT = {"prediction confirmed": "confirmed", "partial effect": "partial",
 
 def overall(rep: ValidationReport) -> str:
     """The one overall line: the verdict, the plans contradicted, the count of the others."""
+    from fieldbank.interventions.validate import CONTRADICTED
+
     bad = [f"plan {p.plan_id} ({p.patient or 'no patient'}) {_SHORT[p.verdict]}"
            for p in rep.contradicted]
     rest = [f"{n} {_SHORT.get(v, v)}" for v, n in rep.counts.items()
@@ -104,6 +93,8 @@ def _plan_lines(p: PlanValidation) -> list[str]:
 
 
 def _session_lines(s: SessionCheck) -> list[str]:
+    from fieldbank.interventions.validate import CONTRADICTED
+
     timing = "botulinum re-timed" if s.retimed else "as stored"
     verdict = s.verdict.upper() if s.verdict in CONTRADICTED else s.verdict
     lines = _wrap(f"{s.session} ({s.session_date}, {s.weeks_after:.1f} weeks after, {timing}): "
@@ -137,6 +128,8 @@ def _session_lines(s: SessionCheck) -> list[str]:
 
 def loo_text(cv: CrossValidation) -> str:
     """Leave-one-map-out as text: what it tests, per map the figures and why, one verdict."""
+    from fieldbank.fitting.crossval import EXPLANATION
+
     lines = [f"Leave-one-map-out of model {cv.model_id} (patient {cv.patient})"]
     lines += _wrap(EXPLANATION, "  ")
     lines.append(f"    {'map':>5} {'kind':<10} {'moving':<6} {'R²':>7} {'RMS error':>12} "
@@ -164,10 +157,10 @@ def loo_text(cv: CrossValidation) -> str:
 @click.option("--model", "model_id", type=int, default=None,
               help="With --loo: the fitted model to cross-validate.")
 @click.option("--change-tolerance", type=click.FloatRange(0.0, 10.0, min_open=True),
-              default=CHANGE_TOLERANCE, show_default=True,
+              default=VALIDATE_CHANGE_TOLERANCE, show_default=True,
               help="'As predicted' means within this fraction of the predicted change.")
 @click.option("--max-change-se", type=click.FloatRange(0.0, 10.0, min_open=True),
-              default=MAX_CHANGE_SE, show_default=True,
+              default=VALIDATE_MAX_CHANGE_SE, show_default=True,
               help="The realised fraction decides a verdict only when its SE is at most this.")
 @scheduler_option
 @db_option
@@ -182,6 +175,13 @@ def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int,
     --loo when the fit does not generalise to a map the others should predict; with
     --scheduler, also when a task failed (its plans were not checked).
     """
+    # the checks and their numerics: when the command runs
+    from fieldbank.engine import progress_bar, resolve_scheduler
+    from fieldbank.fitting.crossval import NOT_GENERALISED, cross_validate, latest_fitted_model
+    from fieldbank.fitting.dbstore import DatabaseFitStore
+    from fieldbank.interventions.validate import validate_plans
+    from fieldbank.interventions.validate_batch import validate_on_cluster
+
     if loo:
         if plan_ids:
             raise click.UsageError("--loo cross-validates a fit; it takes no --plan.")

@@ -27,7 +27,7 @@ HEAVY_FOR_HELP = ("numpy", "scipy", "nlopt", "sqlalchemy", "alembic", "h5py", "m
 #: Nothing of these may load for a command that reads a database at head.
 HEAVY_FOR_READS = ("scipy", "nlopt", "alembic", "h5py", "matplotlib", "serial")
 #: Commands whose module this check does not cover yet (their --help still loads numerics).
-NOT_COVERED = {("validate",)}
+NOT_COVERED: set[tuple[str, ...]] = set()
 
 _WALK = """
 import json, sys
@@ -139,6 +139,7 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.interventions.defaults import DOSE_UNIT, value
     from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
+    from fieldbank.interventions.realised import CHANGE_TOLERANCE, MAX_CHANGE_SE
     from fieldbank.measure.protocol import PARTS, ProtocolConfig
     from fieldbank.model import MODEL_VERSION
     from fieldbank.storage.orm import JOB_KINDS
@@ -170,6 +171,8 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     pc = ProtocolConfig()
     assert ch.MEASURE_PARTS == PARTS
     assert ch.JOB_KINDS == JOB_KINDS
+    assert (ch.VALIDATE_CHANGE_TOLERANCE, ch.VALIDATE_MAX_CHANGE_SE) == (
+        CHANGE_TOLERANCE, MAX_CHANGE_SE)
     assert ch.PASSIVITY_MODES == PASSIVITY_MODES
     assert ch.MODEL_VERSION == MODEL_VERSION
     assert (ch.MEASURE_SPACING_MM, ch.MEASURE_DISPLACEMENT_MM) == pytest.approx(
