@@ -539,19 +539,23 @@ def check_plan(inputs: PlanInputs, *, tolerance: float = CHANGE_TOLERANCE,
     return dataclasses.replace(head, sessions=sessions)
 
 
-def validate_plans(db: Database, patients: Sequence[str] = (), plan_ids: Sequence[int] = (),
-                   *, tolerance: float = CHANGE_TOLERANCE,
-                   max_se: float = MAX_CHANGE_SE) -> ValidationReport:
-    """Check stored plans (all, a patient's, or the given ids) against later maps.
+def check_rule_numbers(tolerance: float, max_se: float) -> None:
+    """InterventionError unless the verdict's tolerance and maximal SE are in (0, 10)."""
+    if not 0 < tolerance < 10 or not 0 < max_se < 10:
+        raise InterventionError(f"validate: tolerance and maximal SE must be in (0, 10); got "
+                                f"{tolerance!r} and {max_se!r}.")
+
+
+def plans_to_check(db: Database, patients: Sequence[str] = (),
+                   plan_ids: Sequence[int] = ()) -> list[PlanRecord]:
+    """The stored plans a check considers: ``plan_ids`` if given, else every plan of
+    ``patients``, else every plan; in that order.
 
     Raises
     ------
     InterventionError
         Nothing to consider: no stored plans (for these patients).
     """
-    if not 0 < tolerance < 10 or not 0 < max_se < 10:
-        raise InterventionError(f"validate: tolerance and maximal SE must be in (0, 10); got "
-                                f"{tolerance!r} and {max_se!r}.")
     for code in patients:
         db.get_patient(code)  # an unknown patient: the storage layer's clear error
     if plan_ids:
@@ -565,6 +569,21 @@ def validate_plans(db: Database, patients: Sequence[str] = (), plan_ids: Sequenc
         raise InterventionError(f"validate: {who} has no stored plans; store one with "
                                 "'fieldbank whatif PATIENT --botox ef=150U --save --given-on "
                                 "DATE'.")
+    return records
+
+
+def validate_plans(db: Database, patients: Sequence[str] = (), plan_ids: Sequence[int] = (),
+                   *, tolerance: float = CHANGE_TOLERANCE,
+                   max_se: float = MAX_CHANGE_SE) -> ValidationReport:
+    """Check stored plans (all, a patient's, or the given ids) against later maps.
+
+    Raises
+    ------
+    InterventionError
+        Nothing to consider: no stored plans (for these patients).
+    """
+    check_rule_numbers(tolerance, max_se)
+    records = plans_to_check(db, patients, plan_ids)
     checks = tuple(check_plan(read_plan_inputs(db, r), tolerance=tolerance, max_se=max_se)
                    for r in records)
     return ValidationReport(checks, tolerance, max_se)

@@ -18,12 +18,13 @@ from typing import Any
 import cattrs
 
 from fieldbank.engine import Done, Progress, Task, run_batch
-from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.validate import (
     CHANGE_TOLERANCE,
     MAX_CHANGE_SE,
     PlanValidation,
     ValidationReport,
+    check_rule_numbers,
+    plans_to_check,
     validate_plans,
 )
 from fieldbank.storage import Database
@@ -35,19 +36,7 @@ def validate_tasks(db: Database, patients: Sequence[str] = (),
                    plan_ids: Sequence[int] = ()) -> tuple[list[Task], list[int]]:
     """One task per patient of the plans :func:`validate_plans` would check, and those plans'
     ids in the order it would check them."""
-    for code in patients:
-        db.get_patient(code)  # an unknown patient: the storage layer's clear error
-    if plan_ids:
-        records = [db.get_plan(int(i)) for i in plan_ids]
-    elif patients:
-        records = [p for code in patients for p in db.list_plans(code)]
-    else:
-        records = db.list_plans()
-    if not records:
-        who = f"patients {', '.join(patients)}" if patients else "the database"
-        raise InterventionError(f"validate: {who} has no stored plans; store one with "
-                                "'fieldbank whatif PATIENT --botox ef=150U --save --given-on "
-                                "DATE'.")
+    records = plans_to_check(db, patients, plan_ids)
     by_patient: dict[str | None, list[int]] = {}
     for r in records:
         by_patient.setdefault(r.patient_code, []).append(r.id)
@@ -72,9 +61,7 @@ def validate_on_cluster(db: Database, scheduler: str, patients: Sequence[str] = 
                         ) -> tuple[ValidationReport, tuple[str, ...]]:
     """The report :func:`validate_plans` gives, computed on the cluster; with it, one line per
     task that failed (patient and why; those patients' plans are missing from the report)."""
-    if not 0 < tolerance < 10 or not 0 < max_se < 10:
-        raise InterventionError(f"validate: tolerance and maximal SE must be in (0, 10); got "
-                                f"{tolerance!r} and {max_se!r}.")
+    check_rule_numbers(tolerance, max_se)
     tasks, order = validate_tasks(db, patients, plan_ids)
     res = run_batch(db, "validate", tasks, validate_patient,
                     {"tolerance": tolerance, "max_se": max_se}, scheduler=scheduler,
