@@ -96,78 +96,70 @@ class PortEnergy:
         return self.budget - self.e_out
 
 
-class ForcePort:
-    """Passivity controller of the clinician's port (force out, velocity in).
+class _Port:
+    """One port's energy tank and the controller that keeps it passive: what goes out (a force
+    displayed, a velocity commanded) is corrected against its conjugate (the velocity, the
+    force) so that the energy let out never exceeds what the tank holds.
 
     ``dissipated_j`` sums what the controller withheld; ``active_ticks`` counts the ticks it
-    acted on.
+    acted on; ``last_gain`` is the last tick's correction (0: none).
     """
 
-    __slots__ = ("active_ticks", "dissipated_j", "dt", "energy", "last_alpha")
+    __slots__ = ("active_ticks", "dissipated_j", "dt", "energy", "last_gain")
 
     def __init__(self, dt_s: float, reserve_j: float = DEFAULT_RESERVE_J) -> None:
         self.dt = dt_s
         self.energy = PortEnergy(reserve_j)
         self.active_ticks = 0
         self.dissipated_j = 0.0
-        self.last_alpha = 0.0
+        self.last_gain = 0.0
 
-    def correct(self, fx: float, fy: float, vx: float, vy: float) -> tuple[float, float]:
-        """The force to display instead of (fx, fy) so that this port stays within its tank."""
-        p = fx * vx + fy * vy
-        self.last_alpha = 0.0
+    def correct(self, ox: float, oy: float, cx: float, cy: float) -> tuple[float, float]:
+        """What to put out instead of (ox, oy), against its conjugate (cx, cy), so that this
+        port stays within its tank: the part along the conjugate that the tank cannot pay for
+        is taken off (nothing below :data:`STILL`)."""
+        p = ox * cx + oy * cy
+        self.last_gain = 0.0
         if p <= 0.0:
-            return fx, fy
+            return ox, oy
         e = self.energy
         excess = e.e_out + p * self.dt - e.budget
         if excess <= 0.0:
-            return fx, fy
-        v2 = vx * vx + vy * vy
-        if v2 <= STILL * STILL:
-            return fx, fy
-        a = min(excess / (v2 * self.dt), p / v2)
-        self.last_alpha = a
+            return ox, oy
+        c2 = cx * cx + cy * cy
+        if c2 <= STILL * STILL:
+            return ox, oy
+        g = min(excess / (c2 * self.dt), p / c2)
+        self.last_gain = g
         self.active_ticks += 1
-        self.dissipated_j += a * v2 * self.dt
-        return fx - a * vx, fy - a * vy
+        self.dissipated_j += g * c2 * self.dt
+        return ox - g * cx, oy - g * cy
 
-    def book(self, fx: float, fy: float, vx: float, vy: float) -> None:
-        """Observe the force actually displayed at velocity (vx, vy) for one tick."""
-        self.energy.book(fx * vx + fy * vy, self.dt)
+    def book(self, ox: float, oy: float, cx: float, cy: float) -> None:
+        """Observe what was actually put out against its conjugate for one tick."""
+        self.energy.book(ox * cx + oy * cy, self.dt)
 
 
-class VelocityPort:
-    """Passivity controller of the patient's port (velocity out, force in)."""
+class ForcePort(_Port):
+    """Passivity controller of the clinician's port (force out, velocity in):
+    ``correct(fx, fy, vx, vy)`` gives the force to display; ``last_alpha`` (N·s/m) the damping
+    it added on the last tick."""
 
-    __slots__ = ("active_ticks", "dissipated_j", "dt", "energy", "last_beta")
+    __slots__ = ()
 
-    def __init__(self, dt_s: float, reserve_j: float = DEFAULT_RESERVE_J) -> None:
-        self.dt = dt_s
-        self.energy = PortEnergy(reserve_j)
-        self.active_ticks = 0
-        self.dissipated_j = 0.0
-        self.last_beta = 0.0
+    @property
+    def last_alpha(self) -> float:
+        return self.last_gain
 
-    def correct(self, vx: float, vy: float, fx: float, fy: float) -> tuple[float, float]:
-        """The velocity to command instead of (vx, vy) against the port force (fx, fy) (the
-        force the link exerts on the patient's side) within this port's tank."""
-        p = fx * vx + fy * vy
-        self.last_beta = 0.0
-        if p <= 0.0:
-            return vx, vy
-        e = self.energy
-        excess = e.e_out + p * self.dt - e.budget
-        if excess <= 0.0:
-            return vx, vy
-        f2 = fx * fx + fy * fy
-        if f2 <= STILL * STILL:
-            return vx, vy
-        b = min(excess / (f2 * self.dt), p / f2)
-        self.last_beta = b
-        self.active_ticks += 1
-        self.dissipated_j += b * f2 * self.dt
-        return vx - b * fx, vy - b * fy
 
-    def book(self, vx: float, vy: float, fx: float, fy: float) -> None:
-        """Observe the velocity commanded against the port force for one tick."""
-        self.energy.book(fx * vx + fy * vy, self.dt)
+class VelocityPort(_Port):
+    """Passivity controller of the patient's port (velocity out, force in):
+    ``correct(vx, vy, fx, fy)`` gives the velocity to command against the port force (the force
+    the link exerts on the patient's side); ``last_beta`` (m/(N·s)) the admittance it added on
+    the last tick."""
+
+    __slots__ = ()
+
+    @property
+    def last_beta(self) -> float:
+        return self.last_gain
