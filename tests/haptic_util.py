@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 import contextlib
+import os
+import subprocess
+import sys
+import threading
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from fieldbank.evaluate.design import Stroke, equilibrium, severity_candidates
 from fieldbank.evaluate.severity import synthesize
+from fieldbank.haptic.client import ControlClient
 from fieldbank.haptic.clock import VirtualClock
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
@@ -17,6 +24,7 @@ from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.storage import Database
 
 
 class MemoryPort:
@@ -93,3 +101,48 @@ def mild_shoulder_trace(path: Path) -> Path:
     res = probe_path(synthesize({"shoulder": "mild"}), stroke.motion(), seed=1)
     write_trace_h5(res.trace, path)
     return path
+
+
+class ServeProcess:
+    """``fieldbank haptic serve --station`` on ``robot`` in its own process, as a clinician
+    starts it (elbow severe before, mild after): the database made first (serve records into
+    one, never creates one), the station's address read from its stderr, and the loop running
+    before the constructor returns; ``args`` go on its command line."""
+
+    def __init__(self, tmp: Path, robot: str, *args: str) -> None:
+        self.sock = tmp / "run" / "h.sock"
+        self.db_url = f"sqlite:///{tmp / 'fb.sqlite'}"
+        Database.open(self.db_url).close()
+        self.trace_dir = tmp / "traces"
+        cmd = [sys.executable, "-m", "fieldbank.cli", "haptic", "serve",
+               "--robot", robot, "--station",
+               "--before-severity", "elbow=severe", "--after-severity", "elbow=mild",
+               "--duration-s", "240", "--socket", str(self.sock), "--db", self.db_url,
+               "--trace-dir", str(self.trace_dir), "--json", *args]
+        env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, env=env)
+        self.lines: list[str] = []
+        self.url: str | None = None
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        deadline = time.time() + 60
+        while self.url is None and time.time() < deadline and self.proc.poll() is None:
+            time.sleep(0.05)
+        if self.url is None:
+            self.proc.kill()
+            raise AssertionError("serve printed no station address:\n" + "\n".join(self.lines))
+        self.client = ControlClient(self.sock)
+        while time.time() < deadline:  # the loop is running once status says so
+            try:
+                if self.client.request("status")["running"]:
+                    break
+            except HapticError:
+                time.sleep(0.05)
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.lines.append(line.rstrip())
+            if line.startswith("station: "):
+                self.url = line.split(" ", 1)[1].strip()

@@ -10,11 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import re
-import subprocess
-import sys
-import threading
 import time
 import urllib.error
 import urllib.request
@@ -35,9 +31,8 @@ from fieldbank.haptic.snapshot import FIELDS, SnapshotReader, SnapshotWriter
 from fieldbank.haptic.station.launch import StationProcess
 from fieldbank.storage import Database
 from tests.browser_util import chromium
-from tests.haptic_util import severe_shoulder
+from tests.haptic_util import ServeProcess, severe_shoulder
 
-ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage"]
 
@@ -233,46 +228,11 @@ def test_the_station_binds_locally_unless_told(tmp_path: Path) -> None:
 
 
 # --- the page in a real browser ---------------------------------------------------------------
-class Serve:
-    """``fieldbank haptic serve --station`` in its own process, as a clinician starts it."""
+class Serve(ServeProcess):
+    """``fieldbank haptic serve --station`` on the simulated robot in its own process."""
 
     def __init__(self, tmp: Path, *args: str) -> None:
-        self.sock = tmp / "run" / "h.sock"
-        self.db_url = f"sqlite:///{tmp / 'fb.sqlite'}"
-        Database.open(self.db_url).close()  # serve records into a database, never creates one
-        self.trace_dir = tmp / "traces"
-        cmd = [sys.executable, "-m", "fieldbank.cli", "haptic", "serve",
-               "--robot", "sim://?mode=realtime&motion=explore", "--station",
-               "--before-severity", "elbow=severe", "--after-severity", "elbow=mild",
-               "--duration-s", "240", "--socket", str(self.sock), "--db", self.db_url,
-               "--trace-dir", str(self.trace_dir), "--json", *args]
-        env = {**os.environ, "PYTHONPATH": str(ROOT)}
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     text=True, env=env)
-        self.lines: list[str] = []
-        self.url: str | None = None
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-        deadline = time.time() + 60
-        while self.url is None and time.time() < deadline and self.proc.poll() is None:
-            time.sleep(0.05)
-        if self.url is None:
-            self.proc.kill()
-            raise AssertionError("serve printed no station address:\n" + "\n".join(self.lines))
-        client = ControlClient(self.sock)
-        while time.time() < deadline:  # the loop is running once status says so
-            try:
-                if client.request("status")["running"]:
-                    break
-            except HapticError:
-                time.sleep(0.05)
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            self.lines.append(line.rstrip())
-            if line.startswith("station: "):
-                self.url = line.split(" ", 1)[1].strip()
+        super().__init__(tmp, "sim://?mode=realtime&motion=explore", *args)
 
     def stop(self) -> dict[str, object]:
         if self.proc.poll() is None:

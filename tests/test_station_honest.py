@@ -13,9 +13,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,21 +20,20 @@ from pathlib import Path
 import pytest
 
 from fieldbank.evaluate.severity import synthesize
-from fieldbank.haptic.client import ControlClient
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.storage import Database
 from tests.browser_util import chromium
+from tests.haptic_util import ServeProcess
 
-ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage"]
 #: Where the screenshots of the station in fault go, when set (they are looked at by people).
 SHOTS = os.environ.get("FIELDBANK_STATION_SHOTS")
 
 
-class Station:
+class Station(ServeProcess):
     """``fieldbank haptic serve --station`` on the simulated robot in its own process."""
 
     def __init__(self, tmp: Path) -> None:
@@ -48,39 +44,11 @@ class Station:
         x0, y0 = Arm.from_params(synthesize({"elbow": "severe"})).rest_position()
         self.robot = PtyRobot(SimRobotConfig(mode="realtime", motion="explore",
                                              x0_m=float(x0), y0_m=float(y0))).start_process()
-        self.sock = tmp / "run" / "h.sock"
-        self.db_url = f"sqlite:///{tmp / 'fb.sqlite'}"
-        Database.open(self.db_url).close()  # serve records into a database, never creates one
-        cmd = [sys.executable, "-m", "fieldbank.cli", "haptic", "serve",
-               "--robot", self.robot.port, "--station",
-               "--before-severity", "elbow=severe", "--after-severity", "elbow=mild",
-               "--duration-s", "240", "--socket", str(self.sock), "--db", self.db_url,
-               "--trace-dir", str(tmp / "traces"), "--training-protocol", str(proto), "--json"]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
-        self.lines: list[str] = []
-        self.url: str | None = None
-        threading.Thread(target=self._read, daemon=True).start()
-        deadline = time.time() + 60
-        while self.url is None and time.time() < deadline and self.proc.poll() is None:
-            time.sleep(0.05)
-        if self.url is None:
-            self.stop()
-            raise AssertionError("serve printed no station address:\n" + "\n".join(self.lines))
-        self.client = ControlClient(self.sock)
-        while time.time() < deadline:
-            try:
-                if self.client.request("status")["running"]:
-                    break
-            except HapticError:
-                time.sleep(0.05)
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            self.lines.append(line.rstrip())
-            if line.startswith("station: "):
-                self.url = line.split(" ", 1)[1].strip()
+        try:
+            super().__init__(tmp, self.robot.port, "--training-protocol", str(proto))
+        except BaseException:
+            self.robot.close()
+            raise
 
     def armed(self, timeout_s: float = 10.0) -> None:
         """Armed (re-armed after any fault the busy machine caused before the test's own)."""
