@@ -17,11 +17,24 @@ For each condition (quiet, loaded):
 2. **round trip** - ``--rtt-n`` FORCE→STATE exchanges with the device process in lockstep
    (it answers each FORCE at once), the host waiting as the renderer does (bounded spin, then
    select), against the baseline: a bare echo process (no protocol, no physics) on a pty of
-   the same kind, at the same priority and on the same core as the device. Target: round-trip
-   p99 ≤ 2× the echo's p99.
+   the same kind, at the same priority and on the same core as the device. The two are
+   interleaved in blocks of 200 exchanges, so a busy spell of the machine lands on both.
+   Target: round-trip p99 ≤ 2× the echo's p99.
+3. **the platform alone** - ``--probe-s`` of a loop that only sleeps to 1 kHz deadlines at the
+   host loop's priority on its core, and the CPU time the hypervisor took from the machine
+   (``steal`` in ``/proc/stat``) during the session and the probe: stalls no code of ours can
+   remove, printed beside the session's faults and overruns.
+
+With ``--tty-workers fifo`` (root) the kernel threads that carry a pty's bytes (unbound
+workers, ``kworker/u…``: a tty hands received bytes to its line discipline in one) run at
+SCHED_FIFO 50 for the whole run and get their policy back after; workers the kernel starts
+meanwhile are raised within 0.2 s. At normal priority a busy process can keep them off a core
+for up to a scheduler tick (4 ms at HZ=250): with one busy process per core the bare pty
+echo's worst round trip was 4.9-5.2 ms with them at normal priority, 0.36-0.41 ms raised.
 
     python benchmarks/bench_soak.py [--minutes 10] [--rate 1000] [--rtt-n 20000]
-                                    [--load both|on|off]
+                                    [--load both|on|off] [--probe-s 60]
+                                    [--tty-workers normal|fifo]
 """
 
 from __future__ import annotations
@@ -45,7 +58,7 @@ from timing import load_line
 
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic import protocol as P
-from fieldbank.haptic.clock import cpu_plan, realtime
+from fieldbank.haptic.clock import RealClock, cpu_plan, realtime
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
@@ -68,6 +81,56 @@ while True:
         break
     os.write(fd, data)
 """
+
+
+class TtyWorkers:
+    """The kernel's unbound workers raised to SCHED_FIFO while this lives (see the module's
+    docstring); each one's policy is given back at :meth:`stop`."""
+
+    PRIORITY = 50
+
+    def __init__(self) -> None:
+        self.old: dict[int, tuple[int, int]] = {}
+        self._stop = threading.Event()
+        self.raise_all()
+        self._th = threading.Thread(target=self._watch, daemon=True)
+        self._th.start()
+
+    @staticmethod
+    def pids() -> list[int]:
+        out = []
+        for d in os.listdir("/proc"):
+            if d.isdigit():
+                try:
+                    with open(f"/proc/{d}/comm", encoding="ascii") as f:
+                        if f.read().startswith("kworker/u"):
+                            out.append(int(d))
+                except OSError:
+                    pass
+        return out
+
+    def raise_all(self) -> None:
+        for pid in self.pids():
+            if pid in self.old:
+                continue
+            try:
+                self.old[pid] = (os.sched_getscheduler(pid), os.sched_getparam(pid).sched_priority)
+                os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(self.PRIORITY))
+            except OSError:
+                pass
+
+    def _watch(self) -> None:
+        while not self._stop.wait(0.2):
+            self.raise_all()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._th.join(2)
+        for pid, (policy, prio) in self.old.items():
+            try:
+                os.sched_setscheduler(pid, policy, os.sched_param(prio))
+            except OSError:
+                pass  # the worker has gone
 
 
 def start_load() -> list[subprocess.Popen[bytes]]:
@@ -127,68 +190,122 @@ def session(minutes: float, rate_hz: int) -> dict[str, Any]:
             else None, "cpu_s": cpu_s, "wall_s": wall_s, "ticks": st.get("ticks")}
 
 
-def round_trip(n: int, spin_us: float) -> np.ndarray:
-    """FORCE→STATE round trips, µs, with the device process in lockstep."""
-    robot = PtyRobot(SimRobotConfig(mode="lockstep")).start_process()
-    link = RobotLink.open(robot.port)
-    out = np.empty(n)
-    pc = time.perf_counter_ns
-    try:
-        link.handshake(1000, 20, timeout_s=5.0)
-        link.arm()
-        with realtime():
-            for i in range(n):
-                t0 = pc()
-                seq = link.send_force(0.0, 0.0)
-                give_up = t0 + 100_000_000
-                while True:
-                    got = link.wait_state(0.1, spin_us * 1e-6)
-                    if (got and link.echo_seq == seq) or pc() > give_up:
-                        break
-                out[i] = pc() - t0
-    finally:
-        link.close()
-        robot.close()
-    return out / 1e3
+class LockstepPeer:
+    """The device process in lockstep: each FORCE answered at once with a STATE."""
+
+    name = "FORCE→STATE"
+
+    def __init__(self, spin_us: float) -> None:
+        self.spin_s = spin_us * 1e-6
+        self.robot = PtyRobot(SimRobotConfig(mode="lockstep")).start_process()
+        self.link = RobotLink.open(self.robot.port)
+        self.link.handshake(1000, 20, timeout_s=5.0)
+        self.link.arm()
+
+    def exchange(self) -> int:
+        """One round trip, ns: FORCE out, the STATE that echoes its sequence number in."""
+        link, pc = self.link, time.perf_counter_ns
+        t0 = pc()
+        seq = link.send_force(0.0, 0.0)
+        give_up = t0 + 100_000_000
+        while True:
+            got = link.wait_state(0.1, self.spin_s)
+            if (got and link.echo_seq == seq) or pc() > give_up:
+                return pc() - t0
+
+    def close(self) -> None:
+        self.link.close()
+        self.robot.close()
 
 
-def raw_echo(n: int, spin_us: float) -> np.ndarray:
-    """Baseline round trips, µs: the same frame through a bare echo process on a pty, the
-    host waiting the same way."""
-    m, s = os.openpty()
-    tty.setraw(m)
-    tty.setraw(s)
-    cpu = cpu_plan()[1]
-    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-    proc = subprocess.Popen([sys.executable, "-c", ECHO, str(m), "-" if cpu is None else str(cpu)],
-                            pass_fds=(m,), stdout=subprocess.PIPE,
-                            env={**os.environ, "PYTHONPATH": root})
-    assert proc.stdout is not None
-    proc.stdout.readline()
-    frame = P.encode_frame(P.MsgType.FORCE, 1, P.FORCE_FMT.pack(0.0, 0.0))
-    out = np.empty(n)
-    pc = time.perf_counter_ns
+class EchoPeer:
+    """The baseline: the same FORCE frame through a bare echo process (no protocol, no
+    physics) on a pty of the same kind, at the device's priority and on its core; the host
+    waits the same way (spin, then select)."""
+
+    name = "raw pty echo"
+
+    def __init__(self, spin_us: float) -> None:
+        self.spin_ns = spin_us * 1e3
+        self.m, self.s = os.openpty()
+        tty.setraw(self.m)
+        tty.setraw(self.s)
+        cpu = cpu_plan()[1]
+        root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", ECHO, str(self.m), "-" if cpu is None else str(cpu)],
+            pass_fds=(self.m,), stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": root})
+        assert self.proc.stdout is not None
+        self.proc.stdout.readline()
+        self.frame = P.encode_frame(P.MsgType.FORCE, 1, P.FORCE_FMT.pack(0.0, 0.0))
+
+    def exchange(self) -> int:
+        s, frame, pc = self.s, self.frame, time.perf_counter_ns
+        t0 = pc()
+        os.write(s, frame)
+        got = 0
+        spin_end = t0 + self.spin_ns
+        while got < len(frame):
+            r, _, _ = select.select([s], [], [], 0 if pc() < spin_end else 0.1)
+            if r:
+                got += len(os.read(s, 4096))
+        return pc() - t0
+
+    def close(self) -> None:
+        self.proc.kill()
+        self.proc.wait()
+        os.close(self.m)
+        os.close(self.s)
+
+
+def round_trips(n: int, spin_us: float, block: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` round trips, µs, of each: the device process in lockstep and the bare echo,
+    interleaved in blocks of ``block`` so both meet the same neighbours (a busy spell of the
+    machine lands on both, not on whichever happened to run then)."""
+    peers = (LockstepPeer(spin_us), EchoPeer(spin_us))
+    out = (np.empty(n), np.empty(n))
     try:
         with realtime():
-            for i in range(n):
-                t0 = pc()
-                os.write(s, frame)
-                got = 0
-                spin_end = t0 + spin_us * 1e3
-                while got < len(frame):
-                    if pc() < spin_end:
-                        r, _, _ = select.select([s], [], [], 0)
-                    else:
-                        r, _, _ = select.select([s], [], [], 0.1)
-                    if r:
-                        got += len(os.read(s, 4096))
-                out[i] = pc() - t0
+            for start in range(0, n, block):
+                stop = min(n, start + block)
+                for peer, o in zip(peers, out, strict=True):
+                    for i in range(start, stop):
+                        o[i] = peer.exchange()
     finally:
-        proc.kill()
-        proc.wait()
-        os.close(m)
-        os.close(s)
-    return out / 1e3
+        for peer in peers:
+            peer.close()
+    return out[0] / 1e3, out[1] / 1e3
+
+
+def steal_ms() -> float:
+    """CPU time the hypervisor took from this (virtual) machine so far, ms (``/proc/stat``;
+    0 on bare metal)."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            fields = f.readline().split()
+        return int(fields[8]) * 1e3 / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return 0.0
+
+
+def empty_loop(seconds: float) -> dict[str, float]:
+    """The platform's own stalls: a loop that only sleeps to 1 kHz deadlines, at the host
+    loop's priority on its core (``realtime()``); how late it wakes, µs. What it sees no
+    code of ours can remove."""
+    c = RealClock(200.0)
+    n = max(1, int(seconds * 1000))
+    late = np.empty(n)
+    s0 = steal_ms()
+    with realtime():
+        deadline = c.now_ns()
+        for i in range(n):
+            deadline += 1_000_000
+            c.sleep_until(deadline)
+            late[i] = c.now_ns() - deadline
+    late /= 1e3
+    return {"p99": float(np.percentile(late, 99)), "max": float(late.max()),
+            "over_1ms": int((late > 1000).sum()), "over_5ms": int((late > 5000).sum()),
+            "steal_ms": steal_ms() - s0}
 
 
 def pct(x: np.ndarray) -> tuple[float, float, float]:
@@ -198,7 +315,9 @@ def pct(x: np.ndarray) -> tuple[float, float, float]:
 
 def phase(name: str, a: argparse.Namespace) -> dict[str, Any]:
     print(f"\n== {name} ({load_line()})", flush=True)
+    st0 = steal_ms()
     s = session(a.minutes, a.rate)
+    s["steal_ms"] = steal_ms() - st0
     pe = s["period_error_us"] or {}
     tt = s["tick_total_us"] or {}
     print(f"session {a.minutes:g} min at {a.rate} Hz, device in its own process "
@@ -211,13 +330,19 @@ def phase(name: str, a: argparse.Namespace) -> dict[str, Any]:
           f"{s['skipped_ticks']}; tick p99 {tt.get('p99', 0):.1f} µs")
     print(f"  loop process CPU {s['cpu_s']:.1f} s over {s['wall_s']:.1f} s wall "
           f"({100 * s['cpu_s'] / max(s['wall_s'], 1e-9):.0f}%: the spin before each deadline)")
-    rtt = round_trip(a.rtt_n, a.spin_us)
-    echo = raw_echo(a.rtt_n, a.spin_us)
+    print(f"  CPU time the hypervisor took from this machine meanwhile (steal): "
+          f"{s['steal_ms']:.0f} ms")
+    e = empty_loop(a.probe_s)
+    print(f"the platform alone ({a.probe_s:g} s of an empty loop at the loop's priority and core, "
+          f"1 kHz deadlines): wakes > 1 ms late {e['over_1ms']}, > 5 ms late {e['over_5ms']}, "
+          f"p99 {e['p99']:.1f} µs, max {e['max']:.0f} µs; steal {e['steal_ms']:.0f} ms")
+    s["empty_loop"] = e
+    rtt, echo = round_trips(a.rtt_n, a.spin_us)
     r50, r99, rmax = pct(rtt)
     e50, e99, emax = pct(echo)
     ratio = r99 / e99
-    print(f"round trip ({a.rtt_n} exchanges, lockstep device process, spin ≤ {a.spin_us:g} µs "
-          f"then select):")
+    print(f"round trip ({a.rtt_n} exchanges each, lockstep device process and bare echo "
+          f"interleaved in blocks of 200, spin ≤ {a.spin_us:g} µs then select):")
     print(f"  FORCE→STATE  p50 {r50:7.1f} µs  p99 {r99:7.1f} µs  max {rmax:8.1f} µs")
     print(f"  raw pty echo p50 {e50:7.1f} µs  p99 {e99:7.1f} µs  max {emax:8.1f} µs")
     print(f"  ratio p99 / echo p99 {ratio:.2f}× (target ≤ 2×: "
@@ -233,9 +358,29 @@ def main() -> int:
     ap.add_argument("--rtt-n", type=int, default=20000)
     ap.add_argument("--spin-us", type=float, default=200.0)
     ap.add_argument("--load", choices=["both", "on", "off"], default="both")
+    ap.add_argument("--probe-s", type=float, default=60.0,
+                    help="seconds of the empty loop that shows the platform's own stalls")
+    ap.add_argument("--tty-workers", choices=["normal", "fifo"], default="normal",
+                    help="the priority of the kernel's tty workers during the run (fifo: root)")
     ap.add_argument("--json", help="also write the figures to this file")
     a = ap.parse_args()
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = {"tty_workers": a.tty_workers}
+    workers = TtyWorkers() if a.tty_workers == "fifo" else None
+    if workers is not None:
+        print(f"kernel tty workers (kworker/u…): SCHED_FIFO {TtyWorkers.PRIORITY} for this run "
+              f"({len(workers.old)} raised now)")
+    try:
+        run_phases(a, out)
+    finally:
+        if workers is not None:
+            workers.stop()
+    if a.json:
+        with open(a.json, "w", encoding="utf-8") as f:
+            json.dump(out, f, indent=1, default=str)
+    return 0
+
+
+def run_phases(a: argparse.Namespace, out: dict[str, Any]) -> None:
     if a.load in ("both", "off"):
         out["quiet"] = phase("without background load", a)
     if a.load in ("both", "on"):
@@ -245,10 +390,6 @@ def main() -> int:
                                   "per core", a)
         finally:
             stop_load(load)
-    if a.json:
-        with open(a.json, "w", encoding="utf-8") as f:
-            json.dump(out, f, indent=1, default=str)
-    return 0
 
 
 if __name__ == "__main__":

@@ -261,7 +261,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
 @click.option("--start", help="Start of the motion X,Y in m (robot frame).")
 def sim_robot(motion: str, mode: str, start: str | None) -> None:
     """Run the simulated robot on a pty and print the port to give to 'serve --robot'."""
-    from fieldbank.haptic.clock import cpu_plan, enter_device_realtime
+    from fieldbank.haptic.clock import collector_off, cpu_plan, enter_device_realtime
     from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig, serve_fd
     from fieldbank.model import Arm
 
@@ -275,7 +275,8 @@ def sim_robot(motion: str, mode: str, start: str | None) -> None:
     grant = enter_device_realtime(cpu_plan()[1])
     click.echo(f"device: {grant.text()}", err=True)
     try:
-        serve_fd(robot.device, robot.master_fd)
+        with collector_off():
+            serve_fd(robot.device, robot.master_fd)
     except KeyboardInterrupt:
         pass
     except OSError as exc:

@@ -7,7 +7,8 @@ than a tick's slack); :class:`VirtualClock` jumps to the deadline at once, so te
 minute of a lockstep simulation in a fraction of that.
 
 :func:`realtime` prepares the process for a loop and restores it after: a full garbage
-collection and ``gc.freeze()`` first (a collection can take longer than the device watchdog,
+collection and ``gc.freeze()`` first (:func:`collector_off`, which a simulated device's process
+uses too) (a collection can take longer than the device watchdog,
 and nothing may stand between the ARM frame and the first FORCE), the collector disabled,
 ``SCHED_FIFO`` requested for the loop's thread, the thread pinned to a core of its own where the
 machine has two or more (:func:`cpu_plan`: the host loop on one, a simulated device process on
@@ -83,6 +84,30 @@ def keep_up_with_the_loop() -> None:
         _thread_state.priority = want
     except OSError:
         _thread_state.priority = want  # refused: the loop's own grant already says so
+
+
+@contextlib.contextmanager
+def collector_off() -> Iterator[None]:
+    """Keep the garbage collector out of a loop: a full collection, then everything that
+    exists is frozen (never scanned again) and automatic collection is off; restored on
+    leaving.
+
+    Why: in a process that has imported numpy a full collection takes ≈ 15 ms and a young one
+    0.1-0.6 ms (measured on a 2-core workstation), longer than a device watchdog or the host's
+    STATE timeout allows. The loops that run inside (the haptic tick, the simulated device)
+    build no reference cycles, so nothing accumulates while it is off
+    (``tests/test_haptic_realtime.py`` counts them).
+    """
+    gc.collect()
+    gc.freeze()
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
+        gc.unfreeze()
 
 
 @dataclass(frozen=True)
@@ -334,10 +359,8 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
     """
     logs = logging_off_the_loop()
     logs.__enter__()  # its writer thread is one of the sharers raised below
-    gc.collect()
-    gc.freeze()
-    gc_was_enabled = gc.isenabled()
-    gc.disable()
+    collector = collector_off()
+    collector.__enter__()
     notes: list[str] = []
     old_sched, prio, note = _enter_fifo() if priority else (None, None, None)
     if note:
@@ -358,9 +381,7 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
         _loop_priority = None
         _lower_sharers(raised)
         sys.setswitchinterval(old_switch)
-        if gc_was_enabled:
-            gc.enable()
-        gc.unfreeze()
+        collector.__exit__(None, None, None)
         _leave_fifo(old_sched)
         _unpin(old_mask)
         logs.__exit__(None, None, None)

@@ -7,15 +7,19 @@ spin only a bounded time before they sleep; where the OS refuses, everything run
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 
 import pytest
 
+from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic import clock
 from fieldbank.haptic.clock import RealClock, cpu_plan, realtime
 from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.renderer import Renderer
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
+from tests.haptic_util import pty_session
 
 ROOT = os.geteuid() == 0 if hasattr(os, "geteuid") else False
 TWO_CORES = len(os.sched_getaffinity(0)) >= 2 if hasattr(os, "sched_getaffinity") else False
@@ -146,3 +150,33 @@ def test_threads_alive_when_the_loop_starts_are_raised_and_lowered_again() -> No
     th.join(5)
     if ROOT and g.fifo:
         assert inside == os.SCHED_FIFO and after == os.SCHED_OTHER
+
+
+def test_collector_off_freezes_disables_and_restores() -> None:
+    assert gc.isenabled()
+    with clock.collector_off():
+        assert not gc.isenabled() and gc.get_freeze_count() > 0
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+
+
+@pytest.mark.parametrize("motion, sim", [("explore", {}),
+                                         ("hold", {"patient": "elbow=severe"})])
+def test_the_loops_build_no_reference_cycles(monkeypatch: pytest.MonkeyPatch, motion: str,
+                                             sim: dict[str, object]) -> None:
+    """The renderer's loop and the simulated device run with the collector off (a collection
+    takes longer than a watchdog): that is safe only while neither builds reference cycles,
+    which nothing would ever free. Both run here in one process (device thread, lockstep) for
+    3 s of ticks; the cycles made meanwhile are counted by a collection after the loop."""
+    made: list[int] = []
+    loop = Renderer._loop
+
+    def counted(self: Renderer, n_ticks: int | None) -> None:
+        gc.collect()  # what start() left behind: once per session, not per tick
+        loop(self, n_ticks)
+        made.append(gc.collect())
+
+    monkeypatch.setattr(Renderer, "_loop", counted)
+    with pty_session(synthesize({"elbow": "severe"}), motion=motion, **sim) as (rd, _):
+        trace = rd.run(3.0)
+    assert trace.stats["ticks"] == 3000 and not trace.faults
+    assert made == [0]
