@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fieldbank.cli.options import emit_json, json_option
+from fieldbank.cli.options import GLOBAL_FLAGS, emit_json, json_option
 from fieldbank.config import config_file, search_path, settings
 from fieldbank.sanitize import printable
 
@@ -16,13 +16,17 @@ def config() -> None:
 
 @config.command("show")
 @json_option
-def show(as_json: bool) -> None:
+@click.pass_context
+def show(ctx: click.Context, as_json: bool) -> None:
     """Print every setting in force and where it came from (flag > variable > file > default).
 
     The file is FIELDBANK_CONFIG, else fieldbank.toml in the current directory, else in the
     user configuration directory; the first found is read.
     """
-    rows = settings()
+    given = {name: ctx.meta.get(GLOBAL_FLAGS[flag]) for name, flag in
+             (("db", "--db"), ("robot", "--robot"), ("scheduler", "--scheduler"),
+              ("haptic_socket", "--socket"))}
+    rows = settings(given)
     path = config_file()
     if as_json:
         emit_json({"file": None if path is None else str(path),

@@ -27,6 +27,7 @@ from fieldbank.cli.choices import (
     UNCERTAINTY_METHODS,
 )
 from fieldbank.cli.options import (
+    MODEL_ID,
     db_option,
     emit_json,
     figure_path,
@@ -310,14 +311,13 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
 
 
 @models.command("show")
-@click.argument("model_id")
+@click.argument("model_id", type=MODEL_ID)
 @json_option
 @db_option
 @click.pass_context
-def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | None) -> None:
+def models_show(ctx: click.Context, model_id: int, as_json: bool, db_url: str | None) -> None:
     """Show a model's parameters, lineage, plans and the fit that produced it."""
-    key: int | str = int(model_id) if model_id.isdigit() else model_id
-    detail = _store(ctx, db_url).get_model(key)
+    detail = _store(ctx, db_url).get_model(model_id)
     if as_json:
         emit_json(detail.to_json_dict())
         return

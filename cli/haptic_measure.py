@@ -8,7 +8,17 @@ from pathlib import Path
 import click
 
 from fieldbank.cli import choices as ch
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db, say, xy_metres
+from fieldbank.cli.options import (
+    DATE,
+    SESSION_LABEL,
+    db_option,
+    emit_json,
+    from_top,
+    json_option,
+    open_db,
+    say,
+    xy_metres,
+)
 from fieldbank.sanitize import printable
 
 
@@ -22,11 +32,12 @@ def _grid(text: str) -> tuple[int, int]:
 
 @click.command("measure")
 @db_option
-@click.option("--robot", "url", required=True,
+@click.option("--robot", "url", required=True, default=from_top("--robot"),
               help="Robot port: /dev/ttyUSB0, a pty, socket://…, or sim://?patient=SPEC "
                    "(a virtual patient: model id, file:PATH or a severity).")
 @click.option("--patient", "patient_code", required=True, help="Patient code (stored).")
-@click.option("--session", "session_label", required=True, help="Session label.")
+@click.option("--session", "session_label", type=SESSION_LABEL, required=True,
+              help="Session label.")
 @click.option("--date", "session_date", type=DATE,
               help="Date of the session.")
 @click.option("--protocol", "parts", multiple=True, type=click.Choice(ch.MEASURE_PARTS),

@@ -19,6 +19,7 @@ from fieldbank.cli.choices import PASSIVITY_MODES
 from fieldbank.cli.options import (
     db_option,
     emit,
+    from_top,
     json_option,
     open_db,
     option_group,
@@ -112,7 +113,7 @@ def key_cmd(out: Path) -> None:
 
 
 @remote.command("patient")
-@click.option("--robot", required=True,
+@click.option("--robot", required=True, default=from_top("--robot"),
               help="The patient's robot: a port, or sim://?patient=SPEC (a simulated patient: "
                    "a stored model id, file:PATH or a severity such as elbow=severe).")
 @click.option("--bind", default=f"127.0.0.1:{DEFAULT_PORT}", show_default=True,
@@ -160,7 +161,7 @@ def patient(robot: str, bind: str, shoulder: str | None, drawing_file: Path | No
 
 
 @remote.command("clinician")
-@click.option("--robot", required=True,
+@click.option("--robot", required=True, default=from_top("--robot"),
               help="The clinician's robot: a port, or sim://?… (simulated).")
 @click.option("--peer", required=True, help="The patient's site, HOST:PORT.")
 @click.option("--bind", help="Local HOST:PORT (default: any free port).")

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.cli.options import SESSION_ID, db_option, emit, json_option, open_db
 
 if TYPE_CHECKING:  # typing only: the storage and training modules load when a command runs
     from fieldbank.storage import Database, HapticSessionRecord, HapticTrialRecord
@@ -81,7 +81,7 @@ def _trial_line(t: HapticTrialRecord) -> str:
 
 
 @sessions.command("show")
-@click.argument("session_id", type=int)
+@click.argument("session_id", type=SESSION_ID)
 @db_option
 @json_option
 def show(session_id: int, db_url: str | None, as_json: bool) -> None:

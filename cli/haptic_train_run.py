@@ -9,7 +9,15 @@ from typing import Any
 import click
 
 from fieldbank.cli.haptic_train import probe_choice, probes_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say
+from fieldbank.cli.options import (
+    SESSION_ID,
+    db_option,
+    emit,
+    json_option,
+    open_db,
+    output_file,
+    say,
+)
 from fieldbank.files import write_atomic
 
 # The loop, the trainee and the database load inside the commands: '--help' starts at once.
@@ -112,7 +120,7 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
 
 
 @click.command("results")
-@click.argument("sessions", nargs=-1, type=int)
+@click.argument("sessions", nargs=-1, type=SESSION_ID)
 @click.option("--patient", help="Only sessions of this patient.")
 @click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
               callback=output_file,

@@ -8,7 +8,15 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db, xy_metres
+from fieldbank.cli.options import (
+    DATE,
+    SESSION_LABEL,
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+    xy_metres,
+)
 from fieldbank.sanitize import printable
 
 if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to show a bar
@@ -22,7 +30,7 @@ PROGRESS_MIN_FILES = 20
 @db_option
 @click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--patient", "patient_code", required=True, help="Patient code.")
-@click.option("--session", "session_label", required=True,
+@click.option("--session", "session_label", type=SESSION_LABEL, required=True,
               help="Session label, e.g. pre-BoNT (created if new).")
 @click.option("--date", "session_date", type=DATE,
               help="Date of the session.")

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import click
 
 from fieldbank.cli.choices import JOB_KINDS
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import RUN_ID, db_option, emit_json, json_option, open_db
 from fieldbank.sanitize import printable
 
 if TYPE_CHECKING:  # typing only: the storage layer loads when the command runs
@@ -43,7 +43,7 @@ def _status(r: JobRunRecord) -> str:
 
 
 @click.command("jobs")
-@click.argument("run_id", type=int, required=False)
+@click.argument("run_id", type=RUN_ID, required=False)
 @click.option("--kind", type=click.Choice(JOB_KINDS), default=None, help="Only runs of this kind.")
 @click.option("--limit", type=click.IntRange(min=1), default=20, show_default=True,
               help="How many of the latest runs to list.")

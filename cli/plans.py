@@ -7,7 +7,16 @@ from datetime import date
 
 import click
 
-from fieldbank.cli.options import DATE, db_option, emit, emit_json, json_option, open_db, say
+from fieldbank.cli.options import (
+    GIVEN_DATE,
+    PLAN_ID,
+    db_option,
+    emit,
+    emit_json,
+    json_option,
+    open_db,
+    say,
+)
 from fieldbank.sanitize import printable
 
 #: Widest line of the text output.
@@ -52,7 +61,7 @@ def list_cmd(patient: str | None, kind: str | None, given: bool | None, db_url: 
 
 
 @plans.command("show")
-@click.argument("plan_id", metavar="ID", type=int)
+@click.argument("plan_id", metavar="ID", type=PLAN_ID)
 @db_option
 @json_option
 def show(plan_id: int, db_url: str | None, as_json: bool) -> None:
@@ -88,8 +97,8 @@ def show(plan_id: int, db_url: str | None, as_json: bool) -> None:
 
 
 @plans.command("give")
-@click.argument("plan_id", metavar="ID", type=int)
-@click.option("--on", "on", type=DATE, required=True,
+@click.argument("plan_id", metavar="ID", type=PLAN_ID)
+@click.option("--on", "on", type=GIVEN_DATE, required=True,
               help="The day the plan was carried out, YYYY-MM-DD.")
 @db_option
 @json_option

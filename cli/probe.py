@@ -17,6 +17,8 @@ from fieldbank.cli.choices import (
     PROBE_TARGETS,
 )
 from fieldbank.cli.options import (
+    MODEL_ID,
+    SESSION_ID,
     db_option,
     emit,
     figure_path,
@@ -72,7 +74,7 @@ def candidate_options(f: F) -> F:
         click.option("--candidate-params", "param_files", multiple=True,
                      type=click.Path(exists=True, dir_okay=False, path_type=Path),
                      help="A candidate from a parameter file (named by the file). Repeatable."),
-        click.option("--candidate-model", "model_ids", multiple=True, type=int,
+        click.option("--candidate-model", "model_ids", multiple=True, type=MODEL_ID,
                      help="A candidate from a stored model id. Repeatable."),
         click.option("--mass", type=float, help="Body mass of the synthetic arms, kg."),
         click.option("--height", type=float, help="Height of the synthetic arms, m."),
@@ -296,10 +298,7 @@ def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | N
     out = []
     for ref in refs:
         if ref.startswith(SESSION_PREFIX):
-            try:
-                sid = int(ref[len(SESSION_PREFIX):])
-            except ValueError:
-                raise click.BadParameter(f"expected {SESSION_PREFIX}ID; got {ref!r}") from None
+            sid = SESSION_ID.convert(ref[len(SESSION_PREFIX):], None, None)
             with open_db(db_url) as db:
                 trace = read_trace_db(db, sid)
             out.append(observation_from_trace(trace, ref, ref, model))

@@ -15,6 +15,7 @@ import click
 
 from fieldbank.cli.options import (
     DATE,
+    PLAN_ID,
     db_option,
     emit_json,
     json_option,
@@ -35,7 +36,7 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
               help="One patient's stored plans (repeatable).")
 @click.option("--patients", "patients", multiple=True, metavar="CODE,...",
               help="Several patients, comma-separated.")
-@click.option("--plan", "plan_ids", multiple=True, type=int, metavar="ID",
+@click.option("--plan", "plan_ids", multiple=True, type=PLAN_ID, metavar="ID",
               help="One stored plan by id (repeatable).")
 @click.option("--session", "sessions", multiple=True, metavar="LABEL",
               help="Plans whose model was fitted to maps of this session (repeatable).")

@@ -22,6 +22,8 @@ import click
 
 from fieldbank.cli.choices import VALIDATE_CHANGE_TOLERANCE, VALIDATE_MAX_CHANGE_SE
 from fieldbank.cli.options import (
+    MODEL_ID,
+    PLAN_ID,
     db_option,
     emit_json,
     json_option,
@@ -149,12 +151,12 @@ def loo_text(cv: CrossValidation) -> str:
 
 @click.command("validate")
 @click.argument("patients", nargs=-1)
-@click.option("--plan", "plan_ids", multiple=True, type=int, metavar="ID",
+@click.option("--plan", "plan_ids", multiple=True, type=PLAN_ID, metavar="ID",
               help="Only this stored plan (repeatable).")
 @click.option("--loo", is_flag=True,
               help="Instead: does the fit generalise? Leave each map out of the patient's "
                    "latest fit (or --model's) and predict it from the others.")
-@click.option("--model", "model_id", type=int, default=None,
+@click.option("--model", "model_id", type=MODEL_ID, default=None,
               help="With --loo: the fitted model to cross-validate.")
 @click.option("--change-tolerance", type=click.FloatRange(0.0, 10.0, min_open=True),
               default=VALIDATE_CHANGE_TOLERANCE, show_default=True,

@@ -21,7 +21,15 @@ from fieldbank.cli.choices import (
     DOSE_UNIT,
     WHATIF_INTERVAL_SAMPLES,
 )
-from fieldbank.cli.options import DATE, db_option, emit_json, figure_path, json_option, open_db
+from fieldbank.cli.options import (
+    GIVEN_DATE,
+    db_option,
+    emit_json,
+    figure_path,
+    from_top,
+    json_option,
+    open_db,
+)
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.haptic.client import push_models
 
@@ -72,7 +80,7 @@ from fieldbank.haptic.client import push_models
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,
               help="Store the after model and the plan, with lineage, in the database.")
-@click.option("--given-on", type=DATE, default=None,
+@click.option("--given-on", type=GIVEN_DATE, default=None,
               help="With --save: the plan was carried out on this day ('fieldbank validate' "
                    "checks it against maps measured later).")
 @click.option("--accept-poor-fit", is_flag=True,
@@ -86,7 +94,7 @@ from fieldbank.haptic.client import push_models
                    "B = after) to feel them side by side. For a patient's stored model the "
                    "plan and its after model are stored (as with --save), so the session "
                    "refers to them.")
-@click.option("--socket", "control_path", default=None, metavar="SOCKET",
+@click.option("--socket", "control_path", default=from_top("--socket"), metavar="SOCKET",
               help="Control socket of the renderer for --render (default: the one "
                    "'fieldbank haptic serve' uses).")
 @json_option

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fieldbank.errors import ParameterError
+from fieldbank.errors import ParameterError, StorageError
 from fieldbank.files import write_new
 from fieldbank.haptic.errors import HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
@@ -292,7 +292,16 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
     and :class:`MeasurementAborted` is raised; no map is stored.
     """
     cfg = config or MeasureConfig()
+    if not session_label.strip():  # before the robot moves, not after
+        raise ParameterError("A session label must not be empty.")
     patient = db.get_patient(patient_code)
+    known = {s.label: s for s in db.list_sessions(patient_code)}
+    was = known.get(session_label)
+    if was is not None and None not in (session_date, was.session_date) \
+            and was.session_date != session_date:
+        raise StorageError(f"Session {session_label!r} of patient {patient_code!r} is dated "
+                          f"{was.session_date}; got {session_date}. Give its date or "
+                          "another session label.")
     arm = Arm.from_params(patient.arm_params())
     the_plan = plan(protocol, arm)
     check_plan_fits(the_plan, cfg)

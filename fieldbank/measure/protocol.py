@@ -40,7 +40,7 @@ import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_number, check_tuple
 
 PARTS = ("postural", "stiffness", "stretch")
 
@@ -60,6 +60,8 @@ PROTOCOL_BOUNDS: dict[str, Interval] = {
     "ramp_s": Interval(0.05, 1.0, "s"),
     "pass_margin_m": Interval(0.0, 0.05, "m"),
 }
+#: Where the grid's centre may be, each coordinate (shoulder frame): within an arm's reach.
+CENTRE_BOUNDS = Interval(-1.0, 1.0, "m")
 
 
 @dataclass(frozen=True)
@@ -93,6 +95,8 @@ class ProtocolConfig:
             raise ParameterError(f"grid must be 1–15 by 1–15 postures; got {nx}×{ny}")
         for name, interval in PROTOCOL_BOUNDS.items():
             check_number(name, getattr(self, name), interval, what="protocol setting")
+        check_tuple("centre_m", self.centre_m, 2, CENTRE_BOUNDS, labels=("centre x", "centre y"),
+                    what="protocol setting")
         if self.transient_s >= min(self.hold_s, self.postural_hold_s):
             raise ParameterError(f"transient_s ({self.transient_s:g} s) must be shorter than "
                                  "the holds it is cut from")
