@@ -11,6 +11,7 @@ field database.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -202,6 +203,7 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
     from fieldbank.figures.fit import fit_figure
     from fieldbank.fitting import ArmFitter
     from fieldbank.fitting.records import fit_patient
+    from fieldbank.modelsource import default_changes, patient_defaults
 
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
     if batch:
@@ -216,10 +218,14 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
                    "uncertainty": uncertainty, "replicates": replicates}
         address = resolve_scheduler(scheduler)  # a bad address is refused before any work
         with open_db(db_url) as db:
+            before = patient_defaults(db, patients or [p.code for p in db.list_patients()])
             res = fit_all(db, options, patients=patients, older_than=older_than,
                           scheduler=address, jobs=jobs or default_jobs(),
                           progress=progress_bar("fit"), say=say)
+            changes = default_changes(db, before)
         _batch_output(res, as_json)
+        for line in changes:  # a later fit changes what a patient's code stands for: said
+            say(textwrap.fill(line, 100, subsequent_indent="  "))
         if res.failed:
             ctx.exit(1)
         return
@@ -235,8 +241,11 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
                        max_evals=max_evals, progress=progress, uncertainty=uncertainty,
                        replicates=replicates)
     store = _store(ctx, db_url)
+    db = getattr(store, "db", None)  # a database store: say when the patient's model changes
+    before = patient_defaults(db, [patient]) if db is not None else None
     out = fit_patient(store, patient, session, fitter,
                       progress=lambda msg: click.echo(msg, err=True))
+    changes = default_changes(db, before) if db is not None and before is not None else []
     if not out.saved.created:
         click.echo(f"fit {out.saved.fit_id} (model {out.saved.model_id}) holds the same maps "
                    "with the same options under this model version: it is the fit shown, and "
@@ -261,6 +270,8 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
         click.echo("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons) + "). It is "
                    "stored, but what-ifs and reports refuse it unless given --accept-poor-fit.",
                    err=True)
+    for line in changes:
+        say(textwrap.fill(line, 100, subsequent_indent="  "))
 
 
 def _batch_output(res: BatchResult, as_json: bool) -> None:

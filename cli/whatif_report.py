@@ -202,6 +202,9 @@ def render_text(res: WhatIf, detail: bool = False) -> str:
     c = res.comparison
     out: list[str] = []
     out += _wrap(f"Model: {res.source.description}", indent="", first="")
+    if res.source.fitted_on is not None:
+        for line in res.source.fitted_on.lines():
+            out += _wrap(line)
     out.append("Plan:")
     for line in res.plan.describe():
         out += _wrap(line)
