@@ -53,6 +53,8 @@ def _session_doc(db: Database, s: HapticSessionRecord) -> dict[str, Any]:
 def list_cmd(patient: str | None, db_url: str | None, as_json: bool) -> None:
     """List recorded haptic sessions."""
     with open_db(db_url) as db:
+        if patient is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient)
         docs = [_session_doc(db, s) for s in db.list_haptic_sessions(patient)]
     lines = [f"{'id':>4}  {'started (UTC)':19s}  {'length':>8s}  {'patient':10s}  "
              f"{'model A':>7s}  {'model B':>7s}  {'trials':>6s}  robot"]

@@ -137,6 +137,8 @@ def results(sessions: tuple[int, ...], patient: str | None, html_out: Path | Non
     from fieldbank.haptic.trainingresults import accuracy_text, results_html, results_page
 
     with open_db(db_url) as db:
+        if patient is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient)
         chosen = {s.id for s in db.list_haptic_sessions(patient)}
         if sessions:
             missing = sorted(set(sessions) - chosen)

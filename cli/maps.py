@@ -29,6 +29,8 @@ def list_(db_url: str | None, patient_code: str | None, session_label: str | Non
           as_json: bool) -> None:
     """List maps matching every filter given."""
     with open_db(db_url) as db:
+        if patient_code is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient_code)
         rows = db.list_maps(patient_code, session_label, kind, since, until)
     if as_json:
         emit_json([dataclasses.asdict(m) for m in rows])

@@ -191,6 +191,8 @@ def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int,
             raise click.UsageError("--loo needs one PATIENT (its latest fit) or --model ID.")
         with open_db(db_url) as db:
             store = DatabaseFitStore(db)
+            if patients:  # an unknown patient: the one "not found" message
+                db.get_patient(patients[0])
             mid = model_id if model_id is not None else latest_fitted_model(store, patients[0])
             cv = cross_validate(store, mid, progress=lambda msg: click.echo(msg, err=True))
         if as_json:

@@ -255,7 +255,7 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
     given = robot
     if robot.startswith("sim://"):
         robot = sim_url(before, SIM_MOTION, cfg.shoulder_offset_m, robot)
-    link = RobotLink.open(robot)
+    link = RobotLink.open(robot, shown=given)
     try:
         device = link.handshake(cfg.rate_hz, watchdog_ms)
         say(f"robot {device.device_id!r}: protocol {device.protocol_version}, up to "

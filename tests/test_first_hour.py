@@ -280,12 +280,14 @@ def test_a_password_with_query_characters_is_not_a_query() -> None:
     assert u.password == "p?a&s#s" and u.host == "db.example"
 
 
-def test_a_robot_device_path_is_not_echoed_whole(tmp_path: Path) -> None:
-    port = str(tmp_path / "usb-ACME_Robot_TOKEN-4f9c2e-if00")
+def test_a_robot_device_path_is_shown_whole_and_a_url_password_never(tmp_path: Path) -> None:
+    port = str(tmp_path / "ttyUSB9")
     r = run("haptic", "serve", "--robot", port, "--before-severity", "elbow=severe", "--no-db",
             "--duration-s", "0.1")
-    assert r.exit_code == 1 and "cannot open robot port" in r.stderr
-    assert "TOKEN-4f9c2e" not in r.output and f"{tmp_path}/…" in r.stderr
+    assert r.exit_code == 1 and f"cannot open robot port '{port}'" in r.stderr
+    r = run("haptic", "serve", "--robot", "socket://ana:s3cret@127.0.0.1:9", "--before-severity",
+            "elbow=severe", "--no-db", "--duration-s", "0.1")
+    assert r.exit_code == 1 and "s3cret" not in r.output and "ana:***@127.0.0.1" in r.stderr
 
 
 def test_a_sim_url_is_shown_as_given(tmp_path: Path) -> None:
