@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import stat
 from datetime import date
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,6 +25,21 @@ if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to sho
 
 #: Show a progress bar from this many files on (on a terminal).
 PROGRESS_MIN_FILES = 20
+#: A file this small is read to see whether it holds only blank lines.
+_BLANK_CHECK_BYTES = 4096
+
+
+def _is_empty(path: Path) -> bool:
+    """A regular file of no bytes, or only white space (anything else - missing, a device,
+    a link's target - is the reader's to refuse)."""
+    try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            return False
+        return st.st_size == 0 or (st.st_size <= _BLANK_CHECK_BYTES
+                                   and not path.read_bytes().strip())
+    except OSError:
+        return False
 
 
 @click.command("ingest")
@@ -67,6 +83,12 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
     """
     from fieldbank.ingest import IngestLimits, ReadOptions, ingest_paths  # readers: when it runs
 
+    empty = [f for f in files if _is_empty(Path(f))]
+    if empty:  # before the database opens; a file of nothing is empty, not of unknown format
+        raise click.ClickException(
+            "Nothing was stored: " + ", ".join(printable(f) for f in empty)
+            + (" is" if len(empty) == 1 else " are") + " empty (no bytes, or only blank "
+            "lines): nothing to read. Was it exported completely?")
     limits = IngestLimits.from_environment(limit_items)
     options = ReadOptions.from_flags(kind, frame, sign, velocity, columns,
                                      xy_metres(shoulder, "--shoulder") if shoulder else None)
