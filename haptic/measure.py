@@ -45,7 +45,7 @@ from fieldbank.errors import ParameterError, StorageError
 from fieldbank.files import write_new
 from fieldbank.haptic.errors import HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode
+from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode, device_report
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 from fieldbank.home import data_home
 from fieldbank.ingest import IngestReport, ingest_data
@@ -197,8 +197,7 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
             code, msg = FaultCode.SEQ_GAP, f"sequence gap of {gap} frames"
         now_seen = (link.device_faults, link.fault_flag_frames, link.watchdog_flag_frames)
         if not code and (now_seen != seen or link.flags & (FLAG_FAULT | FLAG_WATCHDOG)):
-            code, msg = FaultCode.DEVICE, (f"the robot reported a fault (code "
-                                           f"{link.last_device_fault}, flags {link.flags})")
+            code, msg = FaultCode.DEVICE, device_report(link.last_device_fault, link.flags)
         if not code and safety.limiter.nan_seen:
             code, msg = FaultCode.NAN, "non-finite servo force"
         rows[n] = (t - t_off, link.x - ox, link.y - oy, link.vx, link.vy, link.sensor_fx,

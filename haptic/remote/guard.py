@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.protocol import FaultCode
+from fieldbank.haptic.protocol import FaultCode, device_report
 from fieldbank.haptic.safety import Safety
 
 
@@ -47,6 +47,5 @@ class RobotGuard:
         seen = (link.device_faults, link.fault_flag_frames, link.watchdog_flag_frames)
         if seen != self._seen:
             self._seen = seen
-            return FaultCode.DEVICE, (f"the robot reported a fault (code {link.last_device_fault}"
-                                      f", flags {link.flags})")
+            return FaultCode.DEVICE, device_report(link.last_device_fault, link.flags)
         return safety.check_handle(link.x, link.y, link.vx, link.vy)

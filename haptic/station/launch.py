@@ -16,6 +16,7 @@ import ipaddress
 import json
 import os
 import select
+import signal
 import subprocess
 import sys
 import time
@@ -25,8 +26,9 @@ from typing import IO, Any
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.station.config import StationConfig, new_token
 
-#: Longest wait for the station process to listen, s.
-START_TIMEOUT_S = 20.0
+#: Longest wait for the station process to listen, s: starting Python and the page's web
+#: server takes about a second on an idle machine, and twenty or more on a busy one.
+START_TIMEOUT_S = 120.0
 
 
 @dataclass(frozen=True)
@@ -123,9 +125,9 @@ class StationProcess:
         proc.stdin.flush()  # the pipe stays open: the station ends when it closes
         line = _readline(proc.stdout, timeout_s)
         if not line.startswith(b"LISTENING "):
+            ended = proc.poll()
             self.stop()
-            raise HapticError(f"the station process did not start (exit code "
-                              f"{proc.poll()}); its messages are above")
+            raise HapticError(_why_not_started(ended, line, timeout_s))
         _, host, port = line.decode().split()
         self.host, self.port = host, int(port)
         self.config = replace(self.config, port=self.port)
@@ -156,6 +158,28 @@ class StationProcess:
                     options: StationOptions) -> StationProcess:
         return cls(snapshot_path, socket_path, options.host, options.port, options.allow_remote,
                    options.training, options.view, options.remote)
+
+
+def _why_not_started(ended: int | None, line: bytes, timeout_s: float) -> str:
+    """What happened to a station process that never said it was listening, in words."""
+    if ended is None:
+        return (f"the station process did not start listening within {timeout_s:g} s (it was "
+                "still starting: the machine may be very busy) and was stopped; the session "
+                "did not start. Try again, or run without --station.")
+    if ended < 0:
+        try:
+            name = signal.Signals(-ended).name
+        except ValueError:
+            name = f"signal {-ended}"
+        why = f"was ended by {name}" + (" (the system may have run out of memory)"
+                                        if -ended == signal.SIGKILL else "")
+    else:
+        why = f"ended with exit status {ended}"
+    said = line.decode(errors="replace").strip()
+    return (f"the station process {why} before it listened"
+            + (f"; it said: {said!r}" if said else "")
+            + (". Any error it printed is on the lines above" if ended > 0 else "")
+            + ". The session did not start.")
 
 
 def _readline(f: IO[bytes], timeout_s: float) -> bytes:
