@@ -82,24 +82,31 @@ def _stretch_lines(c: Comparison) -> list[str]:
 
 
 def _grade_cell(b: ComponentGrade, a: ComponentGrade, scores: bool) -> str:
-    cell = f"{b.text()} → {a.text()}"
-    return cell + (f" ({b.score:.1f} → {a.score:.1f})" if scores else "")
+    """'mild → very mild', with scores '(2.1 → 1.0)'; a grade and score the plan leaves as
+    they were once, '= unimpaired (0.0)', so the table keeps within its width."""
+    if not scores:
+        return f"{b.text()} → {a.text()}"
+    if b.text() == a.text() and f"{b.score:.1f}" == f"{a.score:.1f}":
+        return f"= {b.text()} ({b.score:.1f})"
+    return f"{b.text()} → {a.text()} ({b.score:.1f} → {a.score:.1f})"
 
 
 def _severity_lines(c: Comparison, detail: bool) -> list[str]:
     """Per muscle group: passive and dynamic grade before → after (scores with --detail)."""
-    wide = 34 if detail else 26
-    out = [f"{'Severity per muscle group':<28}{'contracture (passive)':<{wide}}"
-           "spasticity (dynamic)"]
-    for g, sb, sa in c.severity_rows():
-        out.append(f"{f'{g} {GROUP_NAMES.get(g, sb.name)}':<28}"
-                   f"{_grade_cell(sb.passive, sa.passive, detail):<{wide}}"
-                   f"{_grade_cell(sb.dynamic, sa.dynamic, detail)}")
+    rows = [(f"{g} {GROUP_NAMES.get(g, sb.name)}", _grade_cell(sb.passive, sa.passive, detail),
+             _grade_cell(sb.dynamic, sa.dynamic, detail)) for g, sb, sa in c.severity_rows()]
+    head = ("Severity per muscle group", "contracture (passive)", "spasticity (dynamic)")
+    # columns as wide as their widest cell, two spaces apart: never one cell run into the next
+    name_w = max(len(r[0]) for r in (head, *rows)) + 2
+    wide = max(len(r[1]) for r in (head, *rows)) + 2
+    out = [f"{head[0]:<{name_w}}{head[1]:<{wide}}{head[2]}"]
+    out += [f"{name:<{name_w}}{passive:<{wide}}{dynamic}" for name, passive, dynamic in rows]
     flagged = sorted({n for _, sb, _ in c.severity_rows() for k in ("passive", "dynamic")
                       for n in sb.component(k).unidentified})
     graded = "; ".join(f"{g} on {sb.stretch}" for g, sb, _ in c.severity_rows()) if detail \
         else ""
-    out += _wrap("before → after; + beyond severe; * rests on a parameter the fit did not "
+    out += _wrap("before → after" + ("; = unchanged" if detail else "")
+                 + "; + beyond severe; * rests on a parameter the fit did not "
                  "identify" + (f" ({', '.join(flagged)})" if flagged else "")
                  + ("; score 0 unimpaired … 4 severe; graded on: " + graded if detail else ""))
     return out
@@ -234,4 +241,7 @@ def render_text(res: WhatIf, detail: bool = False) -> str:
         out += ["", *_wrap("More: --detail (field change, probing motions, 95% intervals, "
                            f"weeks after an injection), --json (everything). Terms: {GLOSSARY}.",
                            indent="", first="")]
-    return "\n".join(line if len(line) <= WIDTH else line[:WIDTH - 1] + "…" for line in out)
+    # a line a table could not keep within the width is wrapped, never cut: nothing hidden
+    return "\n".join(w for line in out for w in (
+        [line] if len(line) <= WIDTH else _wrap(line.strip(), indent=" " * (
+            len(line) - len(line.lstrip()) + 2), first=line[:len(line) - len(line.lstrip())])))

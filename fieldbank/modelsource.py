@@ -158,19 +158,21 @@ class _Fitted:
     """A patient's fitted model with its latest fit and the sessions of that fit's maps."""
 
     model: StoredModel
-    fit: FitRecord
+    fit: FitRecord | None
     sessions: tuple[str, ...]
     measured_on: date | None
 
 
 def _fitted_models(db: Database, patient_code: str) -> list[_Fitted]:
-    """Every fitted model of the patient that has a fit, oldest first."""
+    """Every fitted model of the patient, oldest first, with its latest fit's sessions (none
+    for a model stored as fitted without a fit record)."""
     maps = {m.id: (m.session_label, m.session_date) for m in db.list_maps(patient_code)}
     fits: dict[int, FitRecord] = {f.model_id: f for f in db.list_fits(patient_code)}
     out = []
     for m in db.list_models(patient_code, origin="fitted"):
         fit = fits.get(int(m.id))
         if fit is None:
+            out.append(_Fitted(m, None, (), None))
             continue
         seen = [maps[i] for i in fit.map_ids if i in maps]
         sessions = tuple(dict.fromkeys(label for label, _ in seen)) or (
@@ -185,7 +187,7 @@ def _fitted_on(db: Database, patient_code: str, fitted_id: int,
     """What the fitted model ``fitted_id`` stands on (None when it has no fit)."""
     cands = _fitted_models(db, patient_code) if candidates is None else candidates
     me = next((c for c in cands if c.model.id == fitted_id), None)
-    if me is None:
+    if me is None or me.fit is None:
         return None
     under = tuple(GivenPlan(int(p.id), p.label, p.given_on)
                   for p in db.list_plans(patient_code)
@@ -193,7 +195,7 @@ def _fitted_on(db: Database, patient_code: str, fitted_id: int,
                   and p.given_on < me.measured_on)
     latest: dict[str, int] = {}
     for c in cands:
-        if c.model.id != fitted_id and c.sessions != me.sessions:
+        if c.model.id != fitted_id and c.sessions and c.sessions != me.sessions:
             latest[", ".join(c.sessions)] = int(c.model.id)
     return FittedOn(int(me.fit.id), me.sessions, me.measured_on, under,
                     tuple(latest.items()))
