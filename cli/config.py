@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from fieldbank.cli.options import GLOBAL_FLAGS, emit_json, json_option
+from fieldbank.cli.table import table
 from fieldbank.config import config_file, search_path, settings
 from fieldbank.sanitize import printable
 
@@ -33,12 +34,9 @@ def show(ctx: click.Context, as_json: bool) -> None:
                    "searched": [str(p) for p in search_path()],
                    "settings": [s.to_dict() for s in rows]})
         return
-    width = max(len(s.name) for s in rows)
-    shown = [printable(s.shown) for s in rows]
-    vwidth = min(48, max(len(v) for v in shown))
-    click.echo(f"{'setting':<{width}}  {'value':<{vwidth}}  from")
-    for s, v in zip(rows, shown, strict=True):
-        click.echo(f"{s.name:<{width}}  {v:<{vwidth}}  {printable(s.source)}")
+    click.echo("\n".join(table(("setting", "value", "from"),
+                               [(s.name, printable(s.shown), printable(s.source))
+                                for s in rows])))
     where = (f"configuration file: {path}" if path is not None else
              "configuration file: none (looked for " + ", ".join(map(str, search_path())) + ")")
     click.echo(where, err=True)

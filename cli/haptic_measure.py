@@ -19,6 +19,8 @@ from fieldbank.cli.options import (
     say,
     xy_metres,
 )
+from fieldbank.cli.progress import robot_time
+from fieldbank.cli.table import wrap
 from fieldbank.sanitize import printable
 
 
@@ -86,16 +88,16 @@ def measure(db_url: str | None, url: str, patient_code: str, session_label: str,
                               hold_s=hold_s, stretch_speed_m_per_s=stretch_speed)
     cfg = MeasureConfig(shoulder_offset_m=xy_metres(shoulder, "--shoulder"),
                         safety=SafetyConfig(force_limit_n=force_limit_n, passivity=False))
-    with open_db(db_url) as db:
+    with open_db(db_url) as db, robot_time("measuring") as progress:
         res = measure_session(db, url, patient_code, session_label, protocol, cfg, raw_out,
-                              session_date, force)
+                              session_date, force, progress)
     if as_json:
         emit_json({"robot_time_s": res.robot_time_s, "raw_file": res.raw_file,
                    "raw_sha256": res.raw_sha256, "trials": res.trials,
                    "trials_dropped": list(res.trials_dropped), **res.report.to_json_dict()})
     maps = sum(o.n_maps for o in res.report.outcomes)
     for note in res.notes:
-        say(f"note: {note}")
-    say(f"measured {patient_code} / {printable(session_label)}: {res.trials} trials in "
-        f"{res.robot_time_s / 60:.1f} min of robot time; {maps} map(s) stored; raw recording "
-        f"{printable(res.raw_file)}")
+        say(wrap(f"note: {note}"))
+    say(wrap(f"measured {patient_code} / {printable(session_label)}: {res.trials} trials in "
+             f"{res.robot_time_s / 60:.1f} min of robot time; {maps} map(s) stored; raw "
+             f"recording {printable(res.raw_file)}"))

@@ -35,6 +35,7 @@ import hashlib
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, date, datetime
 from pathlib import Path
@@ -104,9 +105,15 @@ def _approach(start: tuple[float, float], to: tuple[float, float], speed: float)
     return Segment("move", 0.0, max(0.5, 1.875 * d / speed), start, to)
 
 
+#: Robot time done, s, and the whole, s (the approach included): called twice a robot second.
+Progress = Callable[[float, float], None]
+
+
 def run_protocol(url: str, plan: Plan, config: MeasureConfig | None = None,
-                 clock: object = time.perf_counter) -> tuple[Recording, np.ndarray]:
+                 clock: object = time.perf_counter,
+                 progress: Progress | None = None) -> tuple[Recording, np.ndarray]:
     """Drive the robot at ``url`` through ``plan``; the recording and the commanded forces.
+    ``progress`` hears how much robot time is done, twice a robot second.
 
     Raises :class:`MeasurementAborted` (with the samples so far) on a safety fault,
     :class:`HapticError` when the robot cannot be used (no handshake, no force sensor).
@@ -114,7 +121,7 @@ def run_protocol(url: str, plan: Plan, config: MeasureConfig | None = None,
     cfg = config or MeasureConfig()
     link = RobotLink.open(url)
     try:
-        return _run(link, url, plan, cfg, clock)
+        return _run(link, url, plan, cfg, clock, progress)
     finally:
         try:
             link.send_force(0.0, 0.0)
@@ -125,7 +132,7 @@ def run_protocol(url: str, plan: Plan, config: MeasureConfig | None = None,
 
 
 def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
-         clock: object) -> tuple[Recording, np.ndarray]:
+         clock: object, progress: Progress | None = None) -> tuple[Recording, np.ndarray]:
     dt = 1.0 / cfg.rate_hz
     link.handshake(cfg.rate_hz, round(cfg.safety.state_timeout_ms) or 20)
     link.sensor_on()
@@ -163,8 +170,11 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
     n = 0
     realtime = not url.startswith("sim://") or "realtime" in url
     t_wall0 = clock()  # type: ignore[operator]
+    every = max(1, cfg.rate_hz // 2)
     for k in range(n_ticks):
         t = k * dt
+        if progress is not None and k % every == 0:
+            progress(t, total)
         if t < t_off:
             rx, ry, rvx, rvy = approach.reference(t)
         else:
@@ -280,7 +290,7 @@ class MeasureResult:
 def measure_session(db: Database, url: str, patient_code: str, session_label: str,
                     protocol: ProtocolConfig, config: MeasureConfig | None = None,
                     raw_out: str | Path | None = None, session_date: date | None = None,
-                    force: bool = False) -> MeasureResult:
+                    force: bool = False, progress: Progress | None = None) -> MeasureResult:
     """Measure a patient on the robot and store the maps (raw recording kept).
 
     The raw recording is written as NWB (:mod:`fieldbank.measure.nwbraw`) to ``raw_out``
@@ -314,7 +324,7 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
     if out.exists() and not force:  # before the robot moves, not after
         raise HapticError(f"{out}: exists; give another --raw file or --force")
     try:
-        rec, commanded = run_protocol(url, the_plan, cfg)
+        rec, commanded = run_protocol(url, the_plan, cfg, progress=progress)
     except MeasurementAborted as exc:
         if exc.recording is not None:
             _write_raw(out, write_recording(exc.recording, info, exc.commanded,

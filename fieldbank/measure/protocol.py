@@ -308,6 +308,7 @@ def _stretch(b: _Builder, postures: FloatArray, nx: int, ny: int, arm: Arm | Non
     left out of that stroke (from the far end), and said in the plan's notes."""
     c = b.c
     lead = min(0.05, 0.25 * c.ramp_s)
+    left_out: list[str] = []
     for col in range(nx):
         ys = sorted(float(y) for y in postures[col::nx, 1])
         x_col = float(postures[col, 0])
@@ -321,9 +322,8 @@ def _stretch(b: _Builder, postures: FloatArray, nx: int, ny: int, arm: Arm | Non
                 rows -= 1
             word = "away from the body" if direction > 0 else "toward the body"
             if rows < len(ys):
-                b.notes.append(f"column {col}, {word}: {len(ys) - rows} far posture(s) left "
-                               "out of the stretch (the stroke would leave the patient's "
-                               "reach)")
+                left_out.append(f"column {col} {'away' if direction > 0 else 'toward'} "
+                                f"{len(ys) - rows}")
             if rows == 0:
                 continue
             for off in (0.0, -c.stretch_offset_m, c.stretch_offset_m):
@@ -334,3 +334,7 @@ def _stretch(b: _Builder, postures: FloatArray, nx: int, ny: int, arm: Arm | Non
                 b.stroke(start, end, (c.ramp_s + lead, c.ramp_s + t_plateau),
                          f"column {col} {word} at {c.stretch_speed_m_per_s:g} m/s, "
                          f"offset {off * 1000:+.0f} mm")
+    if left_out:  # one note, not one per stroke
+        b.notes.append("far postures left out of the stretch, where the stroke would leave the "
+                       "patient's reach (postures per column, stroking away from the body or "
+                       "toward it): " + ", ".join(left_out))

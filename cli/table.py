@@ -1,0 +1,59 @@
+"""Plain-text tables and messages within the terminal width every command keeps: 100 columns.
+
+:func:`table` sizes each column to its widest cell (two spaces between columns, so no cell runs
+into the next) and wraps the last column - a label, a file name, a status - under itself;
+:func:`wrap` does the same for a message. Nothing is cut: a cell too long for its line is
+wrapped, never shortened. ``tests/test_readme.py`` runs every list and show command on the
+database the README's tours leave and measures.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Sequence
+
+#: The widest line a command prints.
+WIDTH = 100
+#: The last column keeps at least this many columns, however wide the others.
+MIN_LAST = 24
+
+
+def table(header: Sequence[str], rows: Sequence[Sequence[str]], align: str = "",
+          width: int = WIDTH) -> list[str]:
+    """``header`` and ``rows`` as lines: ``align`` per column '<' or '>' (default '<'), the
+    last column wrapped within ``width``."""
+    n = len(header)
+    cells = [list(header), *([str(c) for c in r] for r in rows)]
+    widths = [max(len(r[k]) for r in cells) for k in range(n - 1)]
+    ways = (align + "<" * n)[:n]
+    lead = sum(widths) + 2 * (n - 1)
+    room = max(MIN_LAST, width - lead)
+    out = []
+    for r in cells:
+        head = "  ".join(f"{c:{ways[k]}{widths[k]}}" for k, c in enumerate(r[:-1]))
+        head = head + "  " if n > 1 else head
+        last = textwrap.wrap(r[-1], room, break_on_hyphens=False) or [""]
+        out.append((head + last[0]).rstrip())
+        out += [" " * len(head) + more for more in last[1:]]
+    return out
+
+
+def fit_lines(lines: Sequence[str], width: int = WIDTH) -> list[str]:
+    """Every line within ``width``: a longer one wrapped, its continuation lines indented
+    two columns deeper than it (a table row that fits stays as it is)."""
+    out = []
+    for line in lines:
+        if len(line) <= width:
+            out.append(line)
+            continue
+        lead = line[:len(line) - len(line.lstrip())]
+        out += textwrap.wrap(line.strip(), width, initial_indent=lead,
+                             subsequent_indent=lead + "    ", break_on_hyphens=False,
+                             break_long_words=False)
+    return out
+
+
+def wrap(text: str, width: int = WIDTH, indent: str = "  ") -> str:
+    """A message wrapped within ``width``, its continuation lines indented."""
+    return "\n".join(textwrap.wrap(text, width, subsequent_indent=indent,
+                                   break_on_hyphens=False, break_long_words=False) or [""])
