@@ -29,6 +29,7 @@ from fieldbank.cli.options import (
     say,
     xy_metres,
 )
+from fieldbank.cli.progress import counted
 from fieldbank.errors import ParameterError
 from fieldbank.files import to_json, write_atomic
 from fieldbank.params import JOINT_GROUPS, ArmParams
@@ -472,10 +473,12 @@ def trials_cmd(groups: str, levels: str, reps: int, draws: int, max_probes: int,
         raise ParameterError("Give impaired groups and levels from very mild to severe.")
     noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
                                     speed_sd, force_jnd, direction_jnd_deg, free_exploration)
-    rep, res = designed_vs_seed(
-        severity_candidates(gs, ls), groups=gs, levels=ls, repetitions=reps, noise_draws=draws,
-        noise=noise, perception=perception, criterion=criterion, max_probes=max_probes,
-        seed=rng_seed, progress=lambda k, n: say(f"trial {k}/{n}") if k % 60 == 0 else None)
+    say("designing the probes, then the trials (a bar counts them on a terminal)")
+    with counted("trials", "trial") as bar:
+        rep, res = designed_vs_seed(
+            severity_candidates(gs, ls), groups=gs, levels=ls, repetitions=reps,
+            noise_draws=draws, noise=noise, perception=perception, criterion=criterion,
+            max_probes=max_probes, seed=rng_seed, progress=bar)
     doc = {"designed": rep.design.to_dict(), "seed_probes": rep.seed.to_dict(),
            "trials": res.to_dict()}
     head = ("designed: " + "; ".join(p.describe() for p in rep.design.paths)
