@@ -179,10 +179,26 @@ def _interval_lines(g: Guesses) -> list[str]:
                 first="")
     out.append(f"{'read-out':<37}{'before':>21}{'after':>21}{'change':>21}")
     for i in g.intervals:
-        out.append(f"{(i.metric + ', ' + i.unit)[:37]:<37}"
+        name = f"{i.metric}, {i.unit}" + (" *" if i.rests_on_guess else "")
+        if i.rests_on_guess and i.identified is not None:
+            # what the maps identified on the row; the guess's interval apart, below, marked
+            bl, bh, al, ah, cl, ch = i.identified
+            out.append(f"{name[:37]:<37}{_iv(i.before, bl, bh):>21}{_iv(i.after, al, ah):>21}"
+                       f"{_iv(i.change, cl, ch, True):>21}")
+            out.append(f"{'  * with the guesses drawn':<37}"
+                       f"{_iv(i.before, i.before_low, i.before_high):>21}"
+                       f"{_iv(i.after, i.after_low, i.after_high):>21}"
+                       f"{_iv(i.change, i.change_low, i.change_high, True):>21}")
+            continue
+        out.append(f"{name[:37]:<37}"
                    f"{_iv(i.before, i.before_low, i.before_high):>21}"
                    f"{_iv(i.after, i.after_low, i.after_high):>21}"
                    f"{_iv(i.change, i.change_low, i.change_high, True):>21}")
+    if any(i.rests_on_guess for i in g.intervals):
+        out += _wrap("* rests on a guess: the row gives the interval of what the maps "
+                     "identified (the guessed parameters at their held value), the line under "
+                     "it the interval with them drawn from their prior range.", indent="",
+                     first="")
     return out
 
 
