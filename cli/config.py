@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from fieldbank.cli.options import GLOBAL_FLAGS, emit_json, json_option
-from fieldbank.cli.table import table
+from fieldbank.cli.table import table, wrap
 from fieldbank.config import config_file, search_path, settings
 from fieldbank.sanitize import printable
 
@@ -39,4 +39,4 @@ def show(ctx: click.Context, as_json: bool) -> None:
                                 for s in rows])))
     where = (f"configuration file: {path}" if path is not None else
              "configuration file: none (looked for " + ", ".join(map(str, search_path())) + ")")
-    click.echo(where, err=True)
+    click.echo(wrap(where), err=True)

@@ -141,5 +141,5 @@ def gc(db_url: str | None, as_json: bool) -> None:
     for line in report.in_use:
         click.echo(f"kept: {line}")
     n = len(report.rows) + len(report.files) + len(report.temporaries)
-    click.echo(f"{database.url_masked}: removed {n} orphan(s), moved {len(report.moved)} "
-               "array(s) into the database", err=True)
+    click.echo(wrap(f"{database.url_masked}: removed {n} orphan(s), moved {len(report.moved)} "
+                    "array(s) into the database"), err=True)

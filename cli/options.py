@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from fieldbank.cli.table import fit_lines
 from fieldbank.files import to_json
 
 if TYPE_CHECKING:  # typing only; the storage layer loads when a command opens the database
@@ -181,13 +182,15 @@ def emit_json(data: Any) -> None:
 
 
 def emit(data: Any, as_json: bool, human: str) -> None:
-    """``data`` as JSON with ``--json``, else the human text."""
-    click.echo(to_json(data) if as_json else human)
+    """``data`` as JSON with ``--json``, else the human text (every line within 100 columns:
+    :func:`fieldbank.cli.table.fit_lines`)."""
+    click.echo(to_json(data) if as_json else "\n".join(fit_lines(human.splitlines())))
 
 
 def say(msg: str) -> None:
-    """A message for the person at the terminal: on stderr, so stdout stays the output."""
-    click.echo(msg, err=True)
+    """A message for the person at the terminal: on stderr, so stdout stays the output; every
+    line within 100 columns."""
+    click.echo("\n".join(fit_lines(msg.splitlines())), err=True)
 
 
 def output_file(ctx: click.Context, param: click.Parameter, value: Any) -> Any:

@@ -93,5 +93,5 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     if as_json:
         emit_json({"cases": out.n_cases, "jobs": out.jobs_used, "html": str(out.html),
                    "csv": str(out.csv), "json": str(out.json)})
-    click.echo(f"report of {out.n_cases} case(s) written to {out.html} "
-               f"(metrics: {out.csv.name}, {out.json.name})", err=True)
+    say(f"report of {out.n_cases} case(s) written to {out.html} "
+        f"(metrics: {out.csv.name}, {out.json.name})")

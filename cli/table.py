@@ -15,7 +15,9 @@ from collections.abc import Sequence
 #: The widest line a command prints.
 WIDTH = 100
 #: The last column keeps at least this many columns, however wide the others.
-MIN_LAST = 24
+MIN_LAST = 16
+#: Where a word longer than its column (a URL, a path) may be broken.
+_BREAKS = "&?/,;="
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]], align: str = "",
@@ -32,9 +34,24 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]], align: str = "",
     for r in cells:
         head = "  ".join(f"{c:{ways[k]}{widths[k]}}" for k, c in enumerate(r[:-1]))
         head = head + "  " if n > 1 else head
-        last = textwrap.wrap(r[-1], room, break_on_hyphens=False) or [""]
+        last = _wrap_cell(r[-1], room)
         out.append((head + last[0]).rstrip())
         out += [" " * len(head) + more for more in last[1:]]
+    return out
+
+
+def _wrap_cell(text: str, room: int) -> list[str]:
+    """``text`` in lines of at most ``room``: at spaces, and a longer word (a URL, a path)
+    after one of its separators (``&``, ``?``, ``/`` …) rather than anywhere."""
+    out = []
+    for piece in textwrap.wrap(text, room, break_on_hyphens=False,
+                               break_long_words=False) or [""]:
+        while len(piece) > room:
+            cut = max(piece.rfind(c, 1, room) for c in _BREAKS)
+            cut = cut if cut > 0 else room - 1
+            out.append(piece[:cut + 1])
+            piece = piece[cut + 1:]
+        out.append(piece)
     return out
 
 
