@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from fieldbank.cli.options import SESSION_ID, db_option, emit, json_option, open_db
-from fieldbank.cli.table import table
+from fieldbank.cli.table import fit_lines, table
 
 if TYPE_CHECKING:  # typing only: the storage and training modules load when a command runs
     from fieldbank.storage import Database, HapticSessionRecord, HapticTrialRecord
@@ -78,12 +78,22 @@ def _trial_cells(t: HapticTrialRecord) -> tuple[str, ...]:
     rt = "" if t.response_time_s is None else f"{t.response_time_s:.1f} s"
     window = ("" if t.started_s is None else
               f"t = {t.started_s:.2f}–{(t.answered_s or t.detail.get('ended_s') or 0):.2f} s")
-    flag = ""
-    if t.flagged:
-        flag = "  FLAGGED, not counted: " + "; ".join(t.detail.get("flags") or ["fault"])
     condition = " ".join(_WORDS.get(w, w) for w in t.condition.split())
     return (str(t.block), str(t.trial + 1), t.phase, condition,
-            _WORDS.get(t.answer or "-", t.answer or "-"), right, rt, window + flag)
+            _WORDS.get(t.answer or "-", t.answer or "-"), right, rt, window)
+
+
+def _trial_lines(trials: list[HapticTrialRecord]) -> list[str]:
+    """The trials as a table, a flagged trial's reason on the line under it."""
+    rows = table(("bl", "#", "phase", "condition", "answer", "", "resp.", "trace window"),
+                 [_trial_cells(t) for t in trials], ">><<<<><", width=98)
+    out = ["  " + rows[0]]
+    for t, row in zip(trials, rows[1:], strict=True):  # one line per trial: no cell wraps
+        out.append("  " + row)
+        if t.flagged:
+            out += fit_lines(["      FLAGGED, not counted: "
+                              + "; ".join(t.detail.get("flags") or ["fault"])])
+    return out
 
 
 @sessions.command("show")
@@ -130,9 +140,7 @@ def show(session_id: int, db_url: str | None, as_json: bool) -> None:
     lines.append(f"  traces    {doc['trace']} (each trial's window below)")
     for kind in sorted({t.kind for t in trials}):  # one table per kind of trial
         lines.append(f"  {kind} trials:")
-        lines += ["  " + line for line in table(
-            ("bl", "#", "phase", "condition", "answer", "", "resp.", "trace window"),
-            [_trial_cells(t) for t in trials if t.kind == kind], ">><<<<><", width=98)]
+        lines += _trial_lines([t for t in trials if t.kind == kind])
     if not trials:
         lines.append("  no trials")
     if abx:

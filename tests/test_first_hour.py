@@ -78,7 +78,15 @@ def test_config_show_prints_each_value_and_its_source_without_secrets(clean_env:
     r = run("config", "show", env={"FIELDBANK_HOME": str(clean_env / "h")})
     assert r.exit_code == 0
     assert "s3cret" not in r.output
-    lines = {ln.split()[0]: ln for ln in r.stdout.splitlines()[1:]}
+    lines: dict[str, str] = {}  # a row and the lines its last column wrapped onto
+    last = ""
+    for ln in r.stdout.splitlines()[1:]:
+        if ln.startswith(" "):
+            lines[last] += " " + ln.strip()
+        else:
+            last = ln.split()[0]
+            lines[last] = ln
+    assert max(len(ln) for ln in r.stdout.splitlines()) <= 100
     assert "ana:***@db.example" in lines["db"] and "fieldbank.toml" in lines["db"]
     assert "variable FIELDBANK_HOME" in lines["home"]
     assert "max_rows=5" in lines["ingest.limits"]

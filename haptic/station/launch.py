@@ -123,9 +123,12 @@ class StationProcess:
         assert proc.stdin is not None and proc.stdout is not None
         proc.stdin.write((json.dumps(self.config.to_dict()) + "\n").encode())
         proc.stdin.flush()  # the pipe stays open: the station ends when it closes
-        line = _readline(proc.stdout, timeout_s)
+        line, closed = _readline(proc.stdout, timeout_s)
         if not line.startswith(b"LISTENING "):
-            ended = proc.poll()
+            try:  # its output closed: it has ended (or is ending) - its status, not a guess
+                ended = proc.wait(timeout=10.0) if closed else proc.poll()
+            except subprocess.TimeoutExpired:
+                ended = None
             self.stop()
             raise HapticError(_why_not_started(ended, line, timeout_s))
         _, host, port = line.decode().split()
@@ -182,7 +185,9 @@ def _why_not_started(ended: int | None, line: bytes, timeout_s: float) -> str:
             + ". The session did not start.")
 
 
-def _readline(f: IO[bytes], timeout_s: float) -> bytes:
+def _readline(f: IO[bytes], timeout_s: float) -> tuple[bytes, bool]:
+    """The first line ``f`` gives within ``timeout_s`` and whether ``f`` closed (its writer
+    ended) before it."""
     deadline = time.monotonic() + timeout_s
     buf = b""
     fd = f.fileno()
@@ -192,6 +197,6 @@ def _readline(f: IO[bytes], timeout_s: float) -> bytes:
             break
         chunk = os.read(fd, 256)
         if not chunk:
-            break
+            return buf.strip(), True
         buf += chunk
-    return buf.strip()
+    return buf.strip(), False

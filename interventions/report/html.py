@@ -338,8 +338,10 @@ def _trust(detail: Mapping[str, Any]) -> list[str]:
             out.append(f'<p class="legend">Prediction not checked: '
                        f'{escape(str(v["not_checked"]).rstrip("."))}.</p>')
         else:
-            out.append(f'<p class="checked">Checked against maps measured after the plan: '
-                       f'{verdict_badge(str(v.get("verdict")))}</p><ul class="steps">')
+            verdict = str(v.get("verdict"))
+            cls = "warn" if verdict in (FAILED, PARTIAL) else "checked"
+            out.append(f'<p class="{cls}">Checked against maps measured after the plan: '
+                       f"{verdict_badge(verdict)}</p><ul class=\"steps\">")
             for sess in v.get("sessions") or []:
                 why = "; ".join(str(x) for x in sess.get("reasons") or [])
                 out.append(f"<li>{escape(str(sess.get('session')))} "

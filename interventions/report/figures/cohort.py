@@ -160,7 +160,8 @@ def validation_figure(points: Sequence[CheckPoint], title: str,
             if sel:
                 panel.markers([p.predicted_rms for p in sel], [p.measured_rms for p in sel],
                               marker, colour, 5.0,
-                              {"standing": standing, "unit": unit, "maps": str(len(sel))})
+                              {"standing": standing, "verdict": sel[0].verdict, "unit": unit,
+                               "maps": str(len(sel))})
     x0 = len(units) * block + label_w + 20
     pw = WIDTH - x0 - 20
     if frac:
