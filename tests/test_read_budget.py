@@ -167,7 +167,7 @@ def test_a_dataset_is_read_a_slab_at_a_time_with_a_running_total(tmp_path: Path)
 
 def test_a_member_holding_more_than_it_declares_is_stopped() -> None:
     b = ReadBudget(1 << 30, 1000)
-    with pytest.raises(BudgetExceeded, match="more than the 10 bytes its header declares"):
+    with pytest.raises(BudgetExceeded, match=r"more than the 10 bytes its header declares"):
         b.inflate(io.BytesIO(b"x" * 11), 10, "a.zip:raw/t.c3d")
     assert b.inflate(io.BytesIO(b"x" * 10), 10, "a.zip:raw/t.c3d") == b"x" * 10
     assert issubclass(BudgetExceeded, MapError)

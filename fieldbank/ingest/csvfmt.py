@@ -263,15 +263,36 @@ def decode_text(data: bytes) -> tuple[str | None, str, str]:
         first = exc.start
     from charset_normalizer import from_bytes
 
-    best = from_bytes(data[:DETECT_BYTES]).best()
-    if best is not None and best.encoding not in ("utf_8", "ascii") and \
-            best.chaos <= MAX_CHAOS:
+    sample = data[:DETECT_BYTES]
+    readings: dict[str, str] = {}
+    for match in from_bytes(sample):
+        if match.encoding in ("utf_8", "ascii") or match.chaos > MAX_CHAOS:
+            continue
         try:
-            return data.decode(best.encoding), best.encoding, ""
+            readings[match.encoding] = data.decode(match.encoding)
         except (UnicodeDecodeError, LookupError):
-            pass
-    return None, "", (f"not UTF-8 text (byte {first}) and its encoding cannot be told apart; "
-                      "save it as UTF-8 (in a spreadsheet: CSV UTF-8)")
+            continue
+    texts = set(readings.values())
+    if len(texts) == 1:
+        enc = next(iter(readings))
+        return readings[enc], enc, ""
+    why = f"not UTF-8 text (byte {first})"
+    if len(texts) > 1:   # plausible encodings that read it differently: name what they read
+        a, b = list(readings)[:2]
+        wa, wb = _first_difference(readings[a], readings[b])
+        why += (f", and its encoding cannot be told apart ({a} reads {wa!r}, {b} reads "
+                f"{wb!r})")
+    else:
+        why += ", and its encoding cannot be told"
+    return None, "", why + "; save it as UTF-8 (in a spreadsheet: CSV UTF-8)"
+
+
+def _first_difference(a: str, b: str) -> tuple[str, str]:
+    """The first word two readings of a file disagree on."""
+    for wa, wb in zip(a.split(), b.split(), strict=False):
+        if wa != wb:
+            return wa[:40], wb[:40]
+    return a[:40], b[:40]
 
 
 def _delimiter_name(d: str) -> str:
