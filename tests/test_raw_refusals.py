@@ -64,7 +64,7 @@ def _holds(n_post: int = 3, per: int = 150, rate: float = 100.0) -> np.ndarray:
             f = -np.array([[300.0, 0], [0, 150.0]]) @ np.array(d) + 2.0
             xs.append(x)
             fs.append(np.tile(f, (per, 1)) + rng.normal(0, 0.05, (per, 2)))
-        xs.append(np.linspace(base, base + np.array([0.05, 0.0]), per))       # move to the next posture
+        xs.append(np.linspace(base, base + np.array([0.05, 0.0]), per))  # to the next posture
         fs.append(np.full((per, 2), 2.0) + rng.normal(0, 0.05, (per, 2)))
     return np.hstack([np.vstack(xs), np.vstack(fs)]).T           # (4, n)
 
@@ -185,7 +185,7 @@ def test_mat_and_hdf5_take_the_metadata_flags_or_refuse_them(tmp_path: object) -
     p = tmp_path / "m.mat"  # type: ignore[operator]
     write_mat5(p, m)
     raw = p.read_bytes()
-    inc, probs = read_file("m.mat", raw, None, options=ReadOptions.from_flags(kind="stiffness"))
+    _, probs = read_file("m.mat", raw, None, options=ReadOptions.from_flags(kind="stiffness"))
     assert "the file says kind: 'postural', the command line says 'stiffness'" in \
         _reasons(probs)
     _, probs = read_file("m.mat", raw, None,

@@ -157,7 +157,7 @@ def test_a_dataset_is_read_a_slab_at_a_time_with_a_running_total(tmp_path: Path)
         arr = b.read_dataset(f["x"], "d.h5:/x")
         assert arr.shape == (rows, 2) and arr[-1, 1] == 2 * rows - 1
         assert b.used == 48_000_000
-        with pytest.raises(BudgetExceeded, match="d.h5:/x.*more than the 40,000,000"):
+        with pytest.raises(BudgetExceeded, match=r"d\.h5:/x.*more than the 40,000,000"):
             ReadBudget(40_000_000, 1, 1e9).read_dataset(f["x"], "d.h5:/x")
         small = ReadBudget(60_000_000, path.stat().st_size, 1e9)
         small.read_dataset(f["x"], "d.h5:/x")
