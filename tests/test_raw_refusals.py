@@ -246,3 +246,11 @@ def test_an_nwb_export_of_two_sessions_goes_back_into_both(n: int, tmp_path: obj
         ingest_paths(db, [out], "P1", "imported")
         assert sorted(r.session_label for r in db.list_maps("P1")) == ["post", "pre"]
         assert len({r.session_label for r in db.list_maps("P1")}) == n
+
+
+def test_c3d_labels_lose_their_nul_and_space_padding() -> None:
+    from fieldbank.measure.c3dfile import clean_label
+
+    assert clean_label(b"F1x12\x00\x00\x00") == "F1x12"
+    assert clean_label(b"  FX1   ") == "FX1"
+    assert clean_label(b"Fz\x00junk") == "Fz"
