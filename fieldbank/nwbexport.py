@@ -253,7 +253,7 @@ def read_nwb_maps(name: str, data: bytes, budget: ReadBudget | None = None
             where = f"{name}:/processing/maps/{tname}"
             tab = mod.data_interfaces[tname]
             for col in getattr(tab, "columns", ()):
-                d = getattr(col, "data", None)
+                d: Any = getattr(col, "data", None)
                 if hasattr(d, "shape") and hasattr(d, "dtype"):
                     bud.charge(int(np.prod(d.shape, dtype=np.float64)) * d.dtype.itemsize,
                                f"{where}/{col.name}")

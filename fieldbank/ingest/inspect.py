@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.errors import FileRefused, MapError
+from fieldbank.errors import FileRefused, MapError, Problem
 from fieldbank.files import read_regular_file
 from fieldbank.ingest.batch import FORMAT_NAMES, detect_format, read_file
 from fieldbank.ingest.limits import IngestLimits
@@ -97,7 +97,7 @@ def _verdict(ins: Inspection, name: str, data: bytes, lim: IngestLimits,
     try:
         inc, probs = read_file(name, data, None, "", lim, options)
     except Exception as exc:  # inspect describes; it never stops at the verdict
-        probs, inc = [f"ingest would stop: {type(exc).__name__}"], None
+        probs, inc = [Problem(name, f"ingest would stop: {type(exc).__name__}")], None
     if inc is not None:
         rows = [f"{m.kind}{'' if m.speed_m_per_s == 0 else f' at {m.speed_m_per_s:g} m/s'}: "
                 f"{m.n} postures" for m in inc.maps]

@@ -243,11 +243,23 @@ def read_c3d(data: bytes, budget_bytes: int = 1 << 30) -> C3DFile:
         q = p(key)
         return q.first(default) if q is not None and q.type != -1 else default
 
-    n_points = int(p("POINT:USED").unsigned()[0]) if p("POINT:USED") is not None and \
-        p("POINT:USED").type != -1 and p("POINT:USED").numbers().size else head_word(2)
-    used = p("ANALOG:USED")
-    if used is not None and used.type != -1 and used.numbers().size:
-        n_analog = int(used.unsigned()[0])
+    def texts(key: str) -> list[str]:
+        q = p(key)
+        return q.strings() if q is not None else []
+
+    def count(key: str) -> int | None:
+        """A count parameter read unsigned (counts above 32767), None when absent."""
+        q = p(key)
+        if q is None or q.type == -1 or not q.numbers().size:
+            return None
+        return int(q.unsigned()[0])
+
+    n_points = count("POINT:USED")
+    if n_points is None:
+        n_points = head_word(2)
+    used = count("ANALOG:USED")
+    if used is not None:
+        n_analog = used
     else:   # no ANALOG:USED (Peak's FP1): the header's words per frame over the samples
         n_analog = head_word(3) // head_word(10) if head_word(10) else 0
         if n_analog:
@@ -260,8 +272,7 @@ def read_c3d(data: bytes, budget_bytes: int = 1 << 30) -> C3DFile:
     is_float = scale < 0
     word = 4 if is_float else 2
     first = head_word(4)
-    data_block = int(p("POINT:DATA_START").unsigned()[0]) if p("POINT:DATA_START") is not None \
-        and p("POINT:DATA_START").type != -1 and p("POINT:DATA_START").numbers().size else 0
+    data_block = count("POINT:DATA_START") or 0
     if data_block <= 0:
         data_block = head_word(9)
     start = (data_block - 1) * BLOCK
@@ -340,11 +351,11 @@ def read_c3d(data: bytes, budget_bytes: int = 1 << 30) -> C3DFile:
         resid = pts[:, :, 3]
         xyz = pts[:, :, :3] * abs(scale)
     xyz = np.where((resid < 0)[:, :, None], np.nan, xyz)
-    analog = np.zeros((n_analog, 0))
+    analog: np.ndarray = np.zeros((n_analog, 0))
     if n_analog and n_frames:
-        a = block[:, 4 * n_points:].reshape(n_frames, per_frame, n_analog)
-        a = a.reshape(n_frames * per_frame, n_analog).T.astype(float)
-        fmt = " ".join(p("ANALOG:FORMAT").strings()) if p("ANALOG:FORMAT") is not None else ""
+        a: np.ndarray = block[:, 4 * n_points:].reshape(n_frames * per_frame, n_analog
+                                                        ).T.astype(float)
+        fmt = " ".join(texts("ANALOG:FORMAT"))
         if not is_float and "UNSIGNED" in fmt.upper():
             a = np.where(a < 0, a + 65536.0, a)
         off = _per_channel(p("ANALOG:OFFSET"), n_analog, 0.0,
@@ -354,26 +365,19 @@ def read_c3d(data: bytes, budget_bytes: int = 1 << 30) -> C3DFile:
         analog = (a - off[:, None]) * (gen * sc)[:, None]
     if analog_rate <= 0 and per_frame > 0:
         analog_rate = point_rate * per_frame
-    labels = _names(p("ANALOG:LABELS"), n_analog, "A")
-    for more in ("LABEL2", "LABEL3"):      # labels beyond 255 continue in LABEL2, …
-        q = p(f"ANALOG:{more}")
-        if q is not None and len(labels) < n_analog:
-            labels = (labels + q.strings())[:n_analog]
-    plabels = _names(p("POINT:LABELS"), n_points, "P")
-    for more in ("LABELS2", "LABELS3"):
-        q = p(f"POINT:{more}")
-        if q is not None:
-            plabels = (plabels[:len(plabels)] + q.strings())[:n_points]
-    plabels += [f"P{k + 1}" for k in range(len(plabels), n_points)]
-    units = p("ANALOG:UNITS").strings() if p("ANALOG:UNITS") is not None else []
-    punit = " ".join(p("POINT:UNITS").strings()) if p("POINT:UNITS") is not None else ""
+    # labels beyond 255 continue in LABELS2, LABELS3 (ANALOG writes LABEL2 as often)
+    labels = _names(texts("ANALOG:LABELS") + texts("ANALOG:LABELS2") + texts("ANALOG:LABEL2")
+                    + texts("ANALOG:LABELS3"), n_analog, "A")
+    plabels = _names(texts("POINT:LABELS") + texts("POINT:LABELS2") + texts("POINT:LABELS3"),
+                     n_points, "P")
+    units = texts("ANALOG:UNITS") + texts("ANALOG:UNITS2")
+    punit = " ".join(texts("POINT:UNITS"))
     return C3DFile(PROCESSORS[processor], "float" if is_float else "integer", float(point_rate),
-                   float(analog_rate), first, plabels[:n_points], punit, xyz, labels,
+                   float(analog_rate), first, plabels, punit, xyz, labels,
                    (units + [""] * n_analog)[:n_analog], analog, groups, notes)
 
 
-def _names(q: Param | None, n: int, prefix: str) -> list[str]:
-    names = q.strings() if q is not None else []
+def _names(names: list[str], n: int, prefix: str) -> list[str]:
     names = names[:n] + [f"{prefix}{k + 1}" for k in range(len(names), n)]
     return [s or f"{prefix}{k + 1}" for k, s in enumerate(names)]
 

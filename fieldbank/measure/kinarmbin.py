@@ -141,7 +141,7 @@ def parse_events(buf: bytes, where: str) -> list[tuple[str, float]]:
         return []
     _version, n = struct.unpack_from("<II", buf, 0)
     off = 8
-    out = []
+    out: list[tuple[str, float]] = []
     for _ in range(min(n, 100_000)):
         got = _utf16(buf, off)
         if got is None:

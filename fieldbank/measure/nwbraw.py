@@ -243,7 +243,7 @@ def read_recording(name: str, data: bytes, channels: Mapping[str, str] | None = 
         spans: list[tuple[float, float]] = []
         if table is not None and len(table) > 0:
             for col in table.columns:
-                d = getattr(col, "data", None)
+                d: Any = getattr(col, "data", None)
                 if hasattr(d, "shape") and hasattr(d, "dtype"):
                     bud.charge(int(np.prod(d.shape, dtype=np.float64)) * d.dtype.itemsize,
                                f"{name}:/intervals/trials/{col.name}")
