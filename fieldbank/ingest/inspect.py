@@ -29,9 +29,15 @@ import numpy as np
 from fieldbank.errors import FileRefused, MapError, Problem
 from fieldbank.files import read_regular_file
 from fieldbank.ingest.batch import FORMAT_NAMES, detect_format, read_file
-from fieldbank.ingest.limits import IngestLimits
+from fieldbank.ingest.csvfmt import decode_text
+from fieldbank.ingest.limits import IngestLimits, LimitExceeded
+from fieldbank.ingest.matfmt import inflate_mat5
 from fieldbank.ingest.options import ReadOptions
 from fieldbank.measure.budget import ReadBudget
+from fieldbank.measure.c3dfile import describe_param, read_c3d
+from fieldbank.measure.kinarm import exam_kind, exam_members
+from fieldbank.measure.kinarmbin import read_exam
+from fieldbank.measure.nwbseries import all_series
 
 
 @dataclass
@@ -112,8 +118,6 @@ def _verdict(ins: Inspection, name: str, data: bytes, lim: IngestLimits,
 
 
 def _c3d(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
-    from fieldbank.measure.c3dfile import describe_param, read_c3d
-
     f = read_c3d(data, budget.limit)
     dur = f.frames / f.point_rate_hz if f.point_rate_hz > 0 else 0.0
     ins.sections["file"] = [f"processor {f.processor}, {f.storage} storage",
@@ -150,8 +154,6 @@ def _nwb(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
     import h5py
     from pynwb import NWBHDF5IO
 
-    from fieldbank.measure.nwbseries import all_series
-
     with h5py.File(io.BytesIO(data), "r") as h5:
         version = h5.attrs.get("nwb_version", "")
         version = version.decode() if isinstance(version, bytes) else str(version)
@@ -182,9 +184,6 @@ def _nwb(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
 
 
 def _kinarm(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
-    from fieldbank.measure.kinarm import exam_kind, exam_members
-    from fieldbank.measure.kinarmbin import read_exam
-
     if exam_kind(data) == "binary":
         exam = read_exam(ins.file, data, budget)
         ins.sections["exam"] = [f".kinarm (binary channels), robot {exam.robot}, arm "
@@ -213,9 +212,6 @@ def _kinarm(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
 
 def _mat5(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
     import scipy.io
-
-    from fieldbank.ingest.limits import LimitExceeded
-    from fieldbank.ingest.matfmt import inflate_mat5
 
     try:
         image, _ = inflate_mat5(ins.file, data, IngestLimits(
@@ -254,8 +250,6 @@ def _h5(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
 
 
 def _csv(ins: Inspection, data: bytes, budget: ReadBudget) -> None:
-    from fieldbank.ingest.csvfmt import decode_text
-
     text, encoding, why = decode_text(data)
     if text is None:
         raise MapError(why)
