@@ -251,11 +251,12 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
                        max_evals=max_evals, progress=progress, uncertainty=uncertainty,
                        replicates=replicates)
     store = _store(ctx, db_url)
-    db = getattr(store, "db", None)  # a database store: say when the patient's model changes
-    before = patient_defaults(db, [patient]) if db is not None else None
+    held = getattr(store, "db", None)  # a database store: say when the patient's model changes
+    defaults = patient_defaults(held, [patient]) if held is not None else None
     out = fit_patient(store, patient, session, fitter,
                       progress=lambda msg: click.echo(msg, err=True))
-    changes = default_changes(db, before) if db is not None and before is not None else []
+    changes = (default_changes(held, defaults) if held is not None and defaults is not None
+               else [])
     if not out.saved.created:
         click.echo(wrap(f"fit {out.saved.fit_id} (model {out.saved.model_id}) holds the same "
                         "maps with the same options under this model version: it is the fit "

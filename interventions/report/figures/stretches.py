@@ -176,15 +176,17 @@ def stretch_figure(pairs: Sequence[StretchPair], treated: Sequence[str] = ()) ->
     scene.legend(left, scene.height - legend_h + 14, entries, max_width=WIDTH - left - 10)
     return scene
 
-def _layered(i: int, n: int) -> dict[str, object]:
-    """Line style of the ``i``-th of ``n`` curves of a panel whose curves may coincide (two
-    groups given the same dose): the first wide and light under the next, narrower and dashed,
-    so each stays visible where they lie on one another; a lone curve plain."""
+def _layered(i: int, n: int) -> tuple[float, float, tuple[float, ...] | None]:
+    """(width, opacity, dash) of the ``i``-th of ``n`` curves of a panel whose curves may
+    coincide (two groups given the same dose): the first wide and light under the next,
+    narrower and dashed, so each stays visible where they lie on one another; a lone curve
+    plain."""
     if n == 1:
-        return {"width": 2.0, "opacity": 1.0, "dash": None}
+        return 2.0, 1.0, None
     widths = (5.0, 2.6, 1.6, 1.2)
-    return {"width": widths[min(i, len(widths) - 1)], "opacity": 0.45 if i == 0 else 1.0,
-            "dash": None if i == 0 else ((6.0, 3.0), (2.0, 2.0), (8.0, 2.0, 2.0, 2.0))[(i - 1) % 3]}
+    dashes: tuple[tuple[float, ...], ...] = ((6.0, 3.0), (2.0, 2.0), (8.0, 2.0, 2.0, 2.0))
+    return (widths[min(i, len(widths) - 1)], 0.45 if i == 0 else 1.0,
+            None if i == 0 else dashes[(i - 1) % 3])
 
 
 def timecourse_figure(weeks: FloatArray, plan_week: float, effect: Mapping[str, FloatArray],
@@ -204,9 +206,10 @@ def timecourse_figure(weeks: FloatArray, plan_week: float, effect: Mapping[str, 
     entries: list[tuple[str, dict[str, object]]] = []
     for i, (g, e) in enumerate(effect.items()):
         colour = SERIES[(i + 2) % len(SERIES)]
-        style = _layered(i, len(effect))
-        p1.line(w, 100.0 * np.asarray(e), colour, data={"group": g}, **style)
-        entries.append((f"effect {g}", {"stroke": colour, **style}))
+        width, opacity, dash = _layered(i, len(effect))
+        p1.line(w, 100.0 * np.asarray(e), colour, width, dash, opacity, data={"group": g})
+        entries.append((f"effect {g}", {"stroke": colour, "width": width, "dash": dash,
+                                        "opacity": opacity}))
     p1.vline(plan_week, TEXT, 1.0, (3, 3))
     series = {n: np.asarray(fast_peak_n_m[n]) for n in stretches}
     _, hi = limits(*series.values(), include_zero=True, floor_span=MIN_TORQUE_SPAN_N_M)
@@ -216,9 +219,10 @@ def timecourse_figure(weeks: FloatArray, plan_week: float, effect: Mapping[str, 
                FONT_TITLE, bold=True)
     for i, (n, y) in enumerate(series.items()):
         colour = SERIES[(i + 4) % len(SERIES)]
-        style = _layered(i, len(series))
-        p2.line(w, y, colour, data={"stretch": n}, **style)
-        entries.append((n, {"stroke": colour, **style}))
+        width, opacity, dash = _layered(i, len(series))
+        p2.line(w, y, colour, width, dash, opacity, data={"stretch": n})
+        entries.append((n, {"stroke": colour, "width": width, "dash": dash,
+                            "opacity": opacity}))
     p2.vline(plan_week, TEXT, 1.0, (3, 3))
     entries.append((f"the plan's week ({plan_week:g})", {"stroke": TEXT, "dash": (3, 3)}))
     scene.legend(left, ph + 120, entries, max_width=WIDTH - left)
