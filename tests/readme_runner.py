@@ -48,10 +48,10 @@ from __future__ import annotations
 import ipaddress
 import os
 import re
-import shlex
 import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -247,7 +247,6 @@ class Runner:
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 start_new_session=True)
         lines: list[str] = []
-        import threading
 
         def read() -> None:
             assert proc.stdout is not None
@@ -347,7 +346,3 @@ def _children_cpu() -> float:
     t = os.times()
     return t.children_user + t.children_system
 
-
-def quote(cmd: str) -> str:
-    """``cmd`` as one shell word (for messages)."""
-    return shlex.quote(cmd)
