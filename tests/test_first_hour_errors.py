@@ -7,6 +7,7 @@ them, and a station that did not start saying why."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from datetime import date, timedelta
@@ -241,3 +242,40 @@ def test_a_station_that_does_not_start_says_what_happened(tmp_path: Path,
     with pytest.raises(HapticError, match="ended with exit status 1 before it listened") as exc:
         StationProcess(str(tmp_path / "snap"), str(tmp_path / "sock")).start()
     assert "messages are above" not in str(exc.value)
+
+
+# --- output: no glued text, progress in robot time ------------------------------------------------
+def test_the_severity_table_keeps_its_columns_apart_with_scores() -> None:
+    r = run("whatif", "--severity", "elbow=severe", "--botox", "ef=200U", "--timecourse",
+            "--interval-samples", "0")
+    assert r.exit_code == 0, r.output
+    lines = r.stdout.splitlines()
+    start = next(k for k, ln in enumerate(lines) if ln.startswith("Severity per muscle group"))
+    rows = lines[start + 1:start + 7]
+    assert [row.split()[0] for row in rows] == ["sf", "se", "ef", "ee", "bf", "be"]
+    for row in rows:
+        cells = [c for c in row.split("  ") if c.strip()]
+        assert len(cells) == 3, row  # name, contracture, spasticity: two spaces apart at least
+        assert re.search(r"[)*][A-Za-z]", row) is None, row  # no cell run into the next
+    assert max(len(ln) for ln in lines) <= 100
+
+
+def test_a_measurement_reports_its_robot_time_as_it_goes(tmp_path: Path) -> None:
+    from fieldbank.cli.progress import robot_time_text
+    from fieldbank.evaluate.severity import synthesize
+    from fieldbank.haptic.measure import run_protocol
+    from fieldbank.measure.protocol import ProtocolConfig, plan
+    from fieldbank.model import Arm
+
+    the_plan = plan(ProtocolConfig(parts=("postural",), grid=(2, 1)),
+                    Arm.from_params(synthesize({"elbow": "severe"})))
+    heard: list[tuple[float, float]] = []
+    run_protocol("sim://?patient=elbow=severe", the_plan,
+                 progress=lambda done, total: heard.append((done, total)))
+    done = [d for d, _ in heard]
+    total = heard[0][1]
+    assert len(heard) > 2 and done == sorted(done) and done[0] == 0.0
+    assert all(t == total for _, t in heard) and total >= the_plan.duration_s
+    assert total - done[-1] <= 0.5 + 1e-9  # heard twice a robot second, to the end
+    assert robot_time_text(126.0, 450.0) == "2.1 of 7.5 min of robot time, 5.4 min left"
+    assert robot_time_text(3.0, 10.0) == "3.0 of 10.0 s of robot time, 7.0 s left"
