@@ -79,9 +79,9 @@ def jobs(run_id: int | None, kind: str | None, limit: int, states: tuple[str, ..
         return
     c = run.counts
     click.echo(wrap(f"run {run.id}: {run.kind} on {printable(run.engine)}, started "
-                    f"{_when(run.started_at)} by {printable(run.actor)}, {_status(run)}; "
-                    f"{c['done']} done, {c['skipped']} skipped, {c['failed']} failed, "
-                    f"{run.left} left"))
+                    f"{_when(run.started_at)} by {printable(run.actor)}, {_status(run)}"))
+    click.echo(f"  {c['done']} done, {c['skipped']} skipped, {c['failed']} failed, "
+               f"{run.left} left")
     click.echo("\n".join("  " + line for line in table(
         ("task", "state", "tries", "finished", "worker / error"),
         [(printable(j.key), j.state, str(j.attempts), _when(j.finished_at),

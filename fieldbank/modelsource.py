@@ -295,7 +295,10 @@ def default_changes(db: Database, before: dict[str, int | None]) -> list[str]:
     (:func:`patient_defaults` taken before a fit): which, what it stands on, how to choose."""
     lines = []
     for code, old in before.items():
-        new = latest_of_patient(db, code)
+        try:
+            new = latest_of_patient(db, code)
+        except StorageError:  # still no model (every fit of the patient failed)
+            continue
         if new.model_id == old or new.fitted_on is None:
             continue
         prev = _fitted_on(db, code, old) if old is not None else None
