@@ -213,6 +213,7 @@ def clinician(robot: str, peer: str, bind: str | None, shoulder_offset: str | No
         wait_s=wait_s, say=say)
     out = res.session.summary() | {"link": res.link_summary["link"],
                                    "account": res.link_summary["account"],
+                                   "link_events": res.link_summary["events"],
                                    "link_file": res.link_file,
                                    "passivity_active_ticks":
                                        res.link_summary["passivity_active_ticks"],

@@ -64,9 +64,12 @@ def _ramp_after_silence(log: dict[str, np.ndarray], force: np.ndarray, after_s: 
     return last, lost, zero
 
 
-@pytest.mark.parametrize("stopped", ["patient", "clinician"])
-def test_a_stopped_site_and_the_other_ramps_its_force_to_zero_within_the_documented_time(
-        stopped: str, tmp_path: Path) -> None:
+def _session(stopped: str, tmp_path: Path) -> tuple[subprocess.Popen[str], subprocess.Popen[str],
+                                                   dict, dict, str, str, float]:
+    """One real-time session, the ``stopped`` site stopped for 1 s two seconds after both
+    engaged: the processes, their summaries and terminals, and the time of the stop on the
+    other site's clock (s, approximate: from its "engaged at" line)."""
+    tmp_path.mkdir(parents=True)
     key = write_key(tmp_path / "session.key", new_key())
     port = _free_udp_port()
     link = ["--key", str(key), "--json"]
@@ -97,13 +100,34 @@ def test_a_stopped_site_and_the_other_ramps_its_force_to_zero_within_the_documen
                 proc.send_signal(signal.SIGCONT)
                 proc.kill()
                 proc.wait()
-    c_sum, p_sum = json.loads(c_out), json.loads(p_out)
-    c_err, p_err = c_lines.text(), p_lines.text()
-    watcher, watcher_err, summary = ((clinician, c_err, c_sum) if stopped == "patient"
-                                     else (patient, p_err, p_sum))
+    return (patient, clinician, json.loads(p_out), json.loads(c_out), p_lines.text(),
+            c_lines.text(), 2.0)
+
+
+@pytest.mark.parametrize("stopped", ["patient", "clinician"])
+def test_a_stopped_site_and_the_other_ramps_its_force_to_zero_within_the_documented_time(
+        stopped: str, tmp_path: Path) -> None:
+    """SIGSTOP one site for 1 s while the other renders a held stretch. A session in which
+    the watching site's own robot faulted before the stop (a stall of this shared machine past
+    the 20 ms device watchdog) shows nothing of the link and is run again, at most three
+    times."""
+    for attempt in range(3):
+        patient, clinician, p_sum, c_sum, p_err, c_err, _ = _session(stopped,
+                                                                      tmp_path / str(attempt))
+        watcher_err, summary = (c_err, c_sum) if stopped == "patient" else (p_err, p_sum)
+        events = summary["link_events"] if stopped == "patient" else summary["events"]
+        faults = [e for e in events if e["event"] == "fault"]
+        lost = [e for e in events if e["event"] == "link_lost"]
+        if not faults or (lost and faults[0]["t_s"] > lost[0]["t_s"]):
+            break
+        print(f"attempt {attempt}: the {stopped} site's peer faulted before the stop: "
+              f"{faults[0]}")
+    else:
+        pytest.fail("in three sessions the watching site's robot faulted before the stop")
     # said as it happened, and in the account; a session that lost its link is not complete
     assert "link lost at t = " in watcher_err, watcher_err
-    assert any("link lost at t = " in ln for ln in summary["account"]["lines"])
+    assert any("link lost at t = " in ln for ln in summary["account"]["lines"]), \
+        summary["account"]["lines"]
     assert clinician.returncode == 1 and patient.returncode == 1
     if stopped == "patient":
         log = _log(c_sum["link_file"])
