@@ -52,7 +52,8 @@ def _address(text: str, name: str) -> tuple[str, int]:
 link_options = option_group(
     click.option("--key", "key_file", required=True,
                  type=click.Path(dir_okay=False, path_type=Path),
-                 help="The session key both sites share ('fieldbank haptic remote key')."),
+                 help="The key both sites share ('fieldbank haptic remote key'); each "
+                      "session's own keys are drawn from it and both sites' fresh values."),
     click.option("--rate-hz", type=click.IntRange(*REMOTE_RATE_HZ), default=1000,
                  show_default=True, help="Loop and link rate (both sites the same: the "
                                          "handshake refuses a difference)."),

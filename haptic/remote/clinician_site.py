@@ -3,25 +3,31 @@
 ``fieldbank haptic remote clinician --robot URL --peer HOST:PORT --key FILE`` runs
 :func:`serve_clinician`:
 
-1. says HELLO to the patient's site (authenticated with the session key, repeated until a
-   WELCOME or a refusal arrives): rate, clock mode, this machine's time; the WELCOME brings the
-   patient's arm geometry (to draw it, never its muscles) and where the patient's hand rests;
+1. shakes hands with the patient's site (:mod:`haptic.remote.handshake`: the same HELLO,
+   sealed under the key, repeated until a WELCOME or a refusal arrives; rate, clock mode, this
+   machine's time). The WELCOME, sealed under the session's keys, brings the patient's arm
+   geometry (to draw it, never its muscles) and where the patient's hand rests; a WELCOME at
+   another rate or clock mode is refused (BYE) before either site engages;
 2. runs an ordinary rendering session (:func:`haptic.session.serve`: the clinician's robot, its
    safety layer, the control channel, the station, the trace file and the database record)
    whose virtual arms are the link (:mod:`haptic.remote.environment`): the handle goes to the
-   patient's site, the patient's force comes back through the passivity controller;
+   patient's site, the patient's force comes back through the passivity controller. The
+   CONFIRM that proves this site holds the key goes with the loop's first tick, so the
+   patient's site arms its robot and starts its loop when this one starts;
 3. with a station, serves the remote panels (:mod:`haptic.remote.station`): the link's figures
    and the supervised assessment, which reads the patient's side from the link's tap
    (:mod:`haptic.remote.tap`) and logs the posterior after each probe and the clinician's
    answers to a file beside the trace;
-4. at the end says BYE, writes the link's log (every tick: both ports' energies, the passivity
-   controller, the round trip, the patient's side as received) as ``<trace>.link.h5``, and with a
-   database records the link (:meth:`Database.add_remote_link`), its per-tick columns as traces
-   of the session (``link.<column>``) and every posterior with the answer beside it
+4. at its planned end ramps the force out and says BYE; then says what happened (the account of
+   :mod:`haptic.remote.account`), writes the link's log (every tick: both ports' energies, the
+   passivity controller, the round trip, the patient's side as received) as
+   ``<trace>.link.h5``, and with a database records the link
+   (:meth:`Database.add_remote_link`), its per-tick columns as traces of the session
+   (``link.<column>``) and every posterior with the answer beside it
    (:meth:`Database.add_assessments`).
 
 A lost link ramps the clinician's force to zero (the port's watchdog); the patient's BYE, or
-its silence in lockstep, ends the session.
+its silence in lockstep, ramps it out and ends the session.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ fresh nonce before the patient's site accepts anything else.
                       recording — the session is engaged and the clinician's address pinned
     STATE … both ways under k_cp and k_pc; BYE under the same keys ends it
 
-Keys (HKDF with SHA-256, RFC 5869; X25519, RFC 7748; ChaCha20-Poly1305, RFC 8439; all from the
+Keys (HKDF with SHA-256, RFC 5869; X25519, RFC 7748; AES-256-GCM, NIST SP 800-38D; all from the
 ``cryptography`` package)::
 
     kh_c ‖ kh_p = HKDF(ikm = K, salt = Nc, info = "fieldbank-remote-2 hello")
@@ -50,7 +50,7 @@ from typing import Any
 from cryptography.exceptions import InvalidTag
 from cryptography.hazmat.primitives import hashes
 from cryptography.hazmat.primitives.asymmetric.x25519 import X25519PrivateKey, X25519PublicKey
-from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
+from cryptography.hazmat.primitives.ciphers.aead import AESGCM
 from cryptography.hazmat.primitives.kdf.hkdf import HKDF
 
 from fieldbank.haptic.errors import HapticError
@@ -130,7 +130,7 @@ class Initiator:
         prefix = head + self.nonce + public
         kh_c, self._kh_p = _hkdf(key, self.nonce, _HELLO_INFO)
         #: the HELLO, sealed once: a repeat sends these same bytes
-        self.hello = prefix + ChaCha20Poly1305(kh_c).encrypt(
+        self.hello = prefix + AESGCM(kh_c).encrypt(
             _ZERO_NONCE, json_body(Kind.HELLO, message), prefix)
         self.refused: dict[str, int] = {}
 
@@ -150,7 +150,7 @@ class Initiator:
         if kind == Kind.REFUSE:
             head = data[:HEADER.size]
             try:
-                plain = ChaCha20Poly1305(self._kh_p).decrypt(_ZERO_NONCE, data[HEADER.size:],
+                plain = AESGCM(self._kh_p).decrypt(_ZERO_NONCE, data[HEADER.size:],
                                                             head)
             except InvalidTag:
                 self._refuse("aead")
@@ -232,7 +232,7 @@ class Responder:
         nonce_c = data[HEADER.size:HEADER.size + NONCE_BYTES]
         kh_c, kh_p = _hkdf(self._key, nonce_c, _HELLO_INFO)
         try:
-            plain = ChaCha20Poly1305(kh_c).decrypt(_ZERO_NONCE, data[split:], data[:split])
+            plain = AESGCM(kh_c).decrypt(_ZERO_NONCE, data[split:], data[:split])
         except InvalidTag:
             self._refuse("aead")
             return None
@@ -246,7 +246,7 @@ class Responder:
     def refusal(hello: Hello, reason: str) -> bytes:
         """A REFUSE of ``hello`` saying why (only its sender can open it)."""
         head = HEADER.pack(MAGIC, int(Kind.REFUSE), int(Role.PATIENT), hello.session, 0)
-        return head + ChaCha20Poly1305(hello.refuse_key).encrypt(
+        return head + AESGCM(hello.refuse_key).encrypt(
             _ZERO_NONCE, json_body(Kind.REFUSE, {"reason": reason}), head)
 
     def welcome(self, hello: Hello, address: Address, message: Mapping[str, Any]) -> bytes:

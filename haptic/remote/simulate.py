@@ -3,8 +3,8 @@
 :func:`run_link` joins the clinician's site (the renderer with the link as its environment, the
 simulated clinician's robot following a script) and the patient's site (a simulated patient's
 robot with the arm as its virtual patient) through an in-memory transport, with the same
-authentication, impairment, ports, passivity controllers and safety layers as two processes
-over UDP, on virtual clocks advancing together. The benchmark (``benchmarks/bench_remote.py``)
+handshake, sealed datagrams, impairment, ports, passivity controllers and safety layers as
+two processes over UDP, on virtual clocks advancing together. The benchmark (``benchmarks/bench_remote.py``)
 and the simulated trainee through a link use it; the two-process version is
 :mod:`haptic.remote.clinician_site` and :mod:`haptic.remote.patient_site`.
 

@@ -1,5 +1,5 @@
 """The remote link's datagrams: fixed layout, sequence numbers, every byte after the handshake
-encrypted and authenticated (ChaCha20-Poly1305), the replay window; the session key file.
+encrypted and authenticated (AES-256-GCM), the replay window; the session key file.
 
 Every datagram is one UDP payload, all little-endian::
 
@@ -53,12 +53,12 @@ from pathlib import Path
 from typing import Any
 
 from cryptography.exceptions import InvalidTag
-from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
+from cryptography.hazmat.primitives.ciphers.aead import AESGCM
 
 from fieldbank.haptic.errors import HapticError
 
 MAGIC = b"FBR2"
-#: Bytes of the AEAD tag (Poly1305).
+#: Bytes of the AEAD tag (GCM's full 128 bits).
 TAG_BYTES = 16
 #: Bytes of a session key (the shared key file) and of each derived key.
 KEY_BYTES = 32
@@ -231,8 +231,8 @@ class SessionCipher:
             raise HapticError(f"a session's keys are {KEY_BYTES} bytes each")
         self.role = role
         self.session = session
-        self._send = ChaCha20Poly1305(send_key)
-        self._receive = ChaCha20Poly1305(receive_key)
+        self._send = AESGCM(send_key)
+        self._receive = AESGCM(receive_key)
         self.seq = 0
         self.newest = -1          # newest peer seq accepted
         self._seen = 0            # bitmap: bit k = seq (newest - k) was accepted
