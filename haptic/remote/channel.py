@@ -229,7 +229,7 @@ class MemoryTransport:
         self.send(data)
 
     def receive(self, limit: int = MAX_PER_DRAIN) -> list[tuple[bytes, Address]]:
-        out = []
+        out: list[tuple[bytes, Address]] = []
         while self.inbox and len(out) < limit:
             out.append((self.inbox.popleft(), "memory"))
         return out

@@ -283,7 +283,7 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
             q.setdefault("x0_m", f"{rest[0] + shoulder_offset_m[0]:.6f}")
             q.setdefault("y0_m", f"{rest[1] + shoulder_offset_m[1]:.6f}")
             robot = "sim://?" + urllib.parse.urlencode(q)
-        port: ClinicianPort = ClinicianPort.for_site(endpoint, cfg, shoulder_offset_m)
+        port = ClinicianPort.for_site(endpoint, cfg, shoulder_offset_m)
         port.greeting = Initiator.confirm(cipher)
         name = trace_name or ("remote-" + time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()))
         log_dir = Path(trace_dir) if trace_dir is not None else None

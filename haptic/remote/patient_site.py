@@ -120,12 +120,12 @@ class PatientSite:
         self.shoulder = shoulder_m
         self.safety = Safety(config.safety, self.dt)
         self.guard = RobotGuard(link, self.safety, self.dt)
-        self.port: PatientPort = PatientPort.for_site(endpoint, config, shoulder_m)
+        #: how late the present tick woke, s (the loop keeping time, for engaging)
+        self.late_s = 0.0
+        self.port = PatientPort.for_site(endpoint, config, shoulder_m)
         self.port.robot_ok = lambda: self.safety.mode == Mode.ARMED
         self.port.latched = lambda: self.safety.latched
         self.port.late_s = lambda: self.late_s
-        #: how late the present tick woke, s (the loop keeping time, for engaging)
-        self.late_s = 0.0
         self.armed = False
         self._awaiting = False
         self._down = False
@@ -355,12 +355,12 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
         # for the clinician, so the loop starts the moment the clinician's does; pinned to
         # the core the clinician's loop would not take were both sites on one machine
         with realtime(not cfg.lockstep, cpu=cpu_plan()[1]) as grant:
-            cipher, first, peer, rest = _handshake(transport, key, cfg, welcome, wait_s, say)
+            cipher, first, peer, after = _handshake(transport, key, cfg, welcome, wait_s, say)
             transport.set_peer(peer)  # pinned for the session: nothing from elsewhere is read
             endpoint = Endpoint(transport, cipher, cfg.impairment, cfg.lockstep, dt, peer=peer)
             site = PatientSite(link, endpoint, cfg, shoulder_m)
             endpoint.deliver(first, 0.0)
-            endpoint.backlog = rest
+            endpoint.backlog = after
             say(f"clinician confirmed from {peer[0]}:{peer[1]}; session "
                 f"{cipher.session:016x}")
             started = time.time()

@@ -90,10 +90,11 @@ class ClinicianPort(LinkPort):
     role = "clinician"
     peer_name = "the patient's site"
     displays_peer_force = True
+    columns = CLINICIAN_COLUMNS
 
     def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float,
                  plausibility: Plausibility | None = None) -> None:
-        super().__init__(endpoint, config, dt_s, CLINICIAN_COLUMNS, plausibility)
+        super().__init__(endpoint, config, dt_s, plausibility)
         self.pc = ForcePort(dt_s, config.reserve_j)
         self.commanded: Callable[[], tuple[float, float]] | None = None
         self.offset = (0.0, 0.0)
@@ -177,10 +178,11 @@ class PatientPort(LinkPort):
 
     role = "patient"
     peer_name = "the clinician's site"
+    columns = PATIENT_COLUMNS
 
     def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float,
                  plausibility: Plausibility | None = None) -> None:
-        super().__init__(endpoint, config, dt_s, PATIENT_COLUMNS, plausibility)
+        super().__init__(endpoint, config, dt_s, plausibility)
         self.pc = VelocityPort(dt_s, config.patient_reserve_j)
         self.engaged = False
         self.cmd = (math.nan, math.nan)

@@ -4,9 +4,10 @@
 simulated clinician's robot following a script) and the patient's site (a simulated patient's
 robot with the arm as its virtual patient) through an in-memory transport, with the same
 handshake, sealed datagrams, impairment, ports, passivity controllers and safety layers as
-two processes over UDP, on virtual clocks advancing together. The benchmark (``benchmarks/bench_remote.py``)
-and the simulated trainee through a link use it; the two-process version is
-:mod:`haptic.remote.clinician_site` and :mod:`haptic.remote.patient_site`.
+two processes over UDP, on virtual clocks advancing together. The benchmark
+(``benchmarks/bench_remote.py``) and the simulated trainee through a link use it; the
+two-process version is :mod:`haptic.remote.clinician_site` and
+:mod:`haptic.remote.patient_site`.
 
 :func:`stretch_script` is the scripted probing: slow and fast stretches of the arm along a
 direction from its resting hand, each held and released. :func:`transparency` reads a run: the
@@ -241,7 +242,7 @@ class Pair:
                                    force_noise_n=force_noise_n)
         self.patient = PatientSite(self.plink, pe, config, (0.0, 0.0))
         self.patient.arm()
-        self.port: ClinicianPort = ClinicianPort.for_site(ce, config, (0.0, 0.0))
+        self.port = ClinicianPort.for_site(ce, config, (0.0, 0.0))
         drawing = patient.with_unimpaired_muscles()
         self.link = clinician_link
         rd = Renderer(clinician_link, drawing, drawing,
@@ -280,7 +281,7 @@ class LinkChain:
                                   dt_s)
         self.dt_s = dt_s
         config = replace(config, rate_hz=round(1.0 / dt_s))
-        self.port: ClinicianPort = ClinicianPort.for_site(ce, config, (0.0, 0.0))
+        self.port = ClinicianPort.for_site(ce, config, (0.0, 0.0))
         self.plink = patient_robot(params, config.rate_hz, seed=seed)
         self.site = PatientSite(self.plink, pe, config, (0.0, 0.0))
         self.site.arm()

@@ -32,7 +32,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Self
 
 from fieldbank.haptic.pair import Ramp
 from fieldbank.haptic.protocol import FaultCode
@@ -101,9 +101,10 @@ class LinkPort:
     peer_name = "the peer"
     #: whether this end displays the peer's force (then its change per tick is checked too)
     displays_peer_force = False
+    #: the columns of this end's log
+    columns: tuple[tuple[str, str], ...] = ()
 
     def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float,
-                 columns: tuple[tuple[str, str], ...],
                  plausibility: Plausibility | None = None) -> None:
         self.endpoint = endpoint
         self.config = config
@@ -113,7 +114,7 @@ class LinkPort:
         self.readiness = _Readiness(max(1, round(config.ready_s / dt_s)), dt_s)
         self.ramp = Ramp(0.0)
         self._ramp_ticks = max(1, round(config.ramp_s / dt_s))
-        self.log = LinkLog(columns)
+        self.log = LinkLog(self.columns)
         self.check = None if plausibility is None else PlausibilityCheck(plausibility)
         self.peer: State | None = None
         self.peer_flags = 0
@@ -143,7 +144,7 @@ class LinkPort:
 
     @classmethod
     def for_site(cls, endpoint: Endpoint, config: SiteConfig,
-                 offset_m: tuple[float, float]) -> Any:
+                 offset_m: tuple[float, float]) -> Self:
         """The port of a site whose robot has the limits ``config.safety`` and whose robot
         frame is the patient's shoulder frame shifted by ``offset_m``: it accepts of its peer
         only what that robot could display (:mod:`haptic.remote.plausible`)."""

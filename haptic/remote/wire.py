@@ -255,9 +255,11 @@ class SessionCipher:
         plain = INNER.pack(flags & 0xFF, t_us, echo_us, hold_us) + body
         return head + self._send.encrypt(_NONCE.pack(int(self.role), self.seq), plain, head)
 
-    def seal_state(self, st: State, **kw: int) -> bytes:
+    def seal_state(self, st: State, *, flags: int = 0, t_us: int = 0, echo_us: int = -1,
+                   hold_us: int = 0) -> bytes:
         return self.seal(Kind.STATE, STATE.pack(st.tick, st.x, st.y, st.vx, st.vy, st.fx, st.fy,
-                                                st.e_in, st.e_out, st.e_sent), **kw)
+                                                st.e_in, st.e_out, st.e_sent),
+                         flags=flags, t_us=t_us, echo_us=echo_us, hold_us=hold_us)
 
     def seal_json(self, kind: Kind, message: Mapping[str, Any], **kw: Any) -> bytes:
         return self.seal(kind, json_body(kind, message), **kw)
