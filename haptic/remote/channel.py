@@ -306,6 +306,7 @@ class Endpoint:
         self._echo_at_s = 0.0
         self._newest_seq = -1
         self.messages: deque[Datagram] = deque()  # CONFIRM / BYE, in arrival order
+        self._held: list[tuple[float, int, Datagram]] = []  # lockstep: messages not yet due
         self.peer_silent = False        # lockstep: the peer stopped answering the barrier
         self.peer_gone = False          # the peer's final BYE arrived: it ticks no more
         self._told: dict[str, tuple[float, int]] = {}  # reason: (when logged, count then)
@@ -358,10 +359,14 @@ class Endpoint:
         handshake): a STATE goes through the impairment to the release queue, the others to
         :attr:`messages`."""
         imp = self.impairment
-        if d.kind != Kind.STATE:
-            self.messages.append(d)  # the watchdog listens for STATEs only
+        if d.kind != Kind.STATE:  # (the watchdog listens for STATEs only)
             if d.kind == Kind.BYE and (d.message or {}).get("final", True) is not False:
                 self.peer_gone = True
+            if self.lockstep:  # released at its virtual time, as a STATE is: repeatable
+                self._order += 1
+                heapq.heappush(self._held, (d.t_us * 1e-6 + self.tick_s, self._order, d))
+            else:
+                self.messages.append(d)
             return
         assert d.state is not None
         c = self.counters
@@ -379,8 +384,12 @@ class Endpoint:
         heapq.heappush(self._queue, (sent + delay, self._order, d))
 
     def receive(self, now_s: float) -> State | None:
-        """Drain the transport; the newest STATE released by ``now_s`` (None: nothing new)."""
+        """Drain the transport; the newest STATE released by ``now_s`` (None: nothing new);
+        the messages due by then go to :attr:`messages`."""
         self._drain(now_s)
+        held = self._held
+        while held and held[0][0] <= now_s + 1e-12:
+            self.messages.append(heapq.heappop(held)[2])
         q = self._queue
         newest: Datagram | None = None
         c = self.counters
@@ -447,22 +456,6 @@ class Endpoint:
                 time.sleep(min(left, 5e-4))
             else:
                 self.transport.wait_readable(min(left, 0.05))
-
-    def wait_message(self, kinds: tuple[Kind, ...], timeout_s: float,
-                     now: Any = None) -> Datagram | None:
-        """The first HELLO / WELCOME / BYE of ``kinds`` to arrive within ``timeout_s`` (wall
-        time)."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            self._drain(0.0 if now is None else now())
-            while self.messages:
-                d = self.messages.popleft()
-                if d.kind in kinds:
-                    return d
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return None
-            self.transport.wait_readable(min(left, 0.05))
 
     def stats(self) -> dict[str, Any]:
         """The link's figures so far (JSON-able)."""
