@@ -121,7 +121,7 @@ def serve(robot: str | None, rate_hz: int, duration_s: float | None, before_file
     database (unless --no-db). With --station, the clinician's station page is served.
     """
     from fieldbank.haptic import session
-    from fieldbank.haptic.renderer import RendererConfig
+    from fieldbank.haptic.rendererconfig import RendererConfig
     from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.haptic.station.launch import StationOptions
 

@@ -17,14 +17,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeAlias
 
 from fieldbank.armkernel import ArmPair
-from fieldbank.haptic.commands import SimPair
+from fieldbank.errors import UnreachableError
+from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair, to_wire
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig
+
+#: Compiled arms A (before) and B (after), built outside the loop.
+SimPair: TypeAlias = ArmPair
 
 
 class Ramp:
@@ -119,6 +123,18 @@ class ModelPair:
         return ArmPair.of(make(before, self.dt_s, self.coupling),
                           make(after, self.dt_s, self.coupling))
 
+    def reset_at(self, hx: float, hy: float) -> None:
+        """Both arms at rest with the hand at (hx, hy), m, shoulder frame (at their rest
+        posture where that is not a number or out of reach)."""
+        for sim in self.sims:
+            try:
+                if math.isfinite(hx) and math.isfinite(hy):
+                    sim.reset_at_hand(hx, hy)
+                else:
+                    sim.reset()
+            except (UnreachableError, ValueError):
+                sim.reset()
+
     def crossfade(self, weight: float) -> None:
         """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""
         self.blend.go(weight, self.crossfade_ticks)
@@ -133,6 +149,13 @@ class ModelPair:
         """Hold compiled models for :meth:`swap` (``session``: they become the session's
         models; False: a training arm, rendered but not the session's)."""
         self.pending = (sims, params, model_ids, model_info, session)
+
+    def current(self) -> tuple[SimPair, tuple[ArmParams, ArmParams]]:
+        """The pair rendered now, to be put back later (refused while pushed models wait to be
+        swapped in: they would be lost)."""
+        if self.pending is not None:
+            raise CommandError("pushed models are being swapped in")
+        return self.sims, self.params
 
     @property
     def swapping(self) -> bool:

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fieldbank.haptic.commands import Push, RendererCommand, Switch
+from fieldbank.haptic.commandbase import RendererCommand
+from fieldbank.haptic.commands import Push, Switch
 from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.dbsink import DatabaseTraceSink, HapticStore
 from fieldbank.haptic.errors import HapticError
@@ -42,7 +43,8 @@ from fieldbank.haptic.pair import Environment
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.protocol import DeviceInfo
 from fieldbank.haptic.recording import Hdf5TraceSink, Trace
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.station.launch import StationOptions, StationProcess

@@ -8,7 +8,7 @@ import pytest
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design import NoiseModel, Perception, ProbeLimits
-from fieldbank.haptic.renderer import RendererConfig
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import SimRobotConfig
 from fieldbank.haptic.trainee import TraineeMotion
