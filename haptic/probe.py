@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.observation import Observation
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.haptic.clock import VirtualClock
@@ -112,7 +113,7 @@ def probe(params: ArmParams, motion: str = "pull", robot: str | None = None,
     polyline ``path_text`` of :func:`haptic.motions.format_path`, robot frame), its hand
     wandering by ``wander_m``."""
     if motion not in MOTIONS:
-        raise ValueError(f"unknown motion {motion!r}; known: {', '.join(MOTIONS)}")
+        raise ParameterError(f"unknown motion {motion!r}; known: {', '.join(MOTIONS)}")
     url = robot or "sim://"
     simulated = url.startswith("sim://")
     if simulated:

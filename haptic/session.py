@@ -52,7 +52,7 @@ from fieldbank.haptic.station.launch import StationOptions, StationProcess
 from fieldbank.home import data_home
 from fieldbank.params import ArmParams
 from fieldbank.redact import mask_url
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: One line of progress for the user.
 Say = Callable[[str], None]
@@ -79,6 +79,10 @@ def trace_name_now() -> str:
     return "haptic-" + _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
 
 
+#: Allowed range of a scheduled switch's time.
+SWITCH_BOUNDS: dict[str, Interval] = {"at_s": Interval(0.0, None, "s")}
+
+
 @dataclass(frozen=True)
 class ScheduledSwitch:
     """Crossfade to ``to`` ('A'/'before' or 'B'/'after') ``at_s`` seconds after rendering
@@ -88,7 +92,7 @@ class ScheduledSwitch:
     to: str
 
     def __post_init__(self) -> None:
-        check_number("at_s", self.at_s, Interval(0.0, None, "s"), what="switch time")
+        check_fields(self, SWITCH_BOUNDS, what="switch time")
         Switch(self.to)
 
 

@@ -58,6 +58,7 @@ from fieldbank.haptic import commands as C
 from fieldbank.haptic.activities.training import Training
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.commandbase import RendererCommand
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import explore
 from fieldbank.haptic.pair import Environment
@@ -188,7 +189,7 @@ class DirectionTrainee:
     def answer(self, directions: Sequence[float]) -> str:
         """'shoulder', 'elbow' or 'both': the group whose template is nearest."""
         if not self.templates:
-            raise ValueError("the trainee has felt no familiarisation trial to answer from")
+            raise HapticError("the trainee has felt no familiarisation trial to answer from")
         felt = self.perceive(directions)
 
         def distance(group: str) -> float:
@@ -429,5 +430,5 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
         link.close()
     results = trace.metadata.get("training") or []
     if not results:
-        raise ValueError("the simulated training session recorded no result")
+        raise HapticError("the simulated training session recorded no result")
     return SimulationResult(trace, results[-1], rd.t_s, severities)
