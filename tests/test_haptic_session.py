@@ -440,6 +440,15 @@ def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-unt
     assert res["done"] and res["result"]["answered"] == 2
     r = run.invoke(haptic, ["abx", "answer", "B", *s])
     assert isinstance(r.exception, HapticError)
+    # a block stopped early keeps its answers and scores them; then none runs
+    assert run.invoke(haptic, ["abx", "start", "--trials", "4", *s]).exit_code == 0
+    assert run.invoke(haptic, ["abx", "answer", "A", *s]).exit_code == 0
+    r = run.invoke(haptic, ["abx", "stop", *s])
+    assert r.exit_code == 0 and "block stopped after 1 of 4 trials" in r.output
+    assert json.loads(run.invoke(haptic, ["status", *s, "--json"]).stdout)["abx_trial"] is None
+    r = run.invoke(haptic, ["abx", "stop", *s])
+    assert isinstance(r.exception, HapticError) and "no A/B/X block running" in str(r.exception)
+    assert [b["answered"] for b in rd.activities.results["abx"]] == [2, 1]
     assert run.invoke(haptic, ["disarm", *s]).exit_code == 0
     assert rd.safety.mode == Mode.DISARMED
     r = run.invoke(haptic, ["switch", "A", *s])

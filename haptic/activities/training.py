@@ -89,7 +89,7 @@ class Training(Activity):
         """The next trial's arm compiled and its probes drawn (the caller's thread)."""
         tr = self.session
         nxt = tr.next_trial
-        if nxt is None:
+        if nxt is None or tr.done:  # nothing left to present: the protocol's final state
             return NextTrial(-1)
         host.safety.require_armed("next trial")
         if tr.awaiting_answer:
