@@ -82,6 +82,7 @@ class SafetyMonitor:
         self._fault_flags_seen = 0
         self._fault_flags_before_read = 0
         self._watchdog_flags_seen = 0
+        self._crc_judged = 0
 
     @property
     def mode(self) -> Mode:
@@ -132,15 +133,20 @@ class SafetyMonitor:
         st = self.state
         safety = self.safety
         self.stale = 0 if new else self.stale + 1
+        gap = st.max_gap  # the largest gap since the last tick (taken: the port starts anew)
+        if gap:
+            st.max_gap = 0
+        # the leaky bucket changes only with new errors or while it holds some
+        crc = st.crc_errors != self._crc_judged or safety.crc_bucket > 0.0
+        if crc:
+            self._crc_judged = st.crc_errors
+            crc = safety.check_crc(st.crc_errors)
         if safety.mode != Mode.ARMED:
-            st.take_gap()
-            safety.check_crc(st.crc_errors)
             return
-        if safety.check_crc(st.crc_errors):
+        if crc:
             self.trip(FaultCode.CRC, f"{st.crc_errors} CRC errors (leaky bucket "
                                      f"{safety.crc_bucket:.1f} > "
                                      f"{safety.config.crc_error_limit})")
-        gap = st.take_gap()
         if gap > safety.config.max_seq_gap:
             self.trip(FaultCode.SEQ_GAP, f"{gap} frames lost in one gap")
         if self.stale > self.timeout_ticks:

@@ -150,6 +150,25 @@ class ModelPair:
         models; False: a training arm, rendered but not the session's)."""
         self.pending = (sims, params, model_ids, model_info, session)
 
+    def tick(self, x: float, y: float, vx: float, vy: float) -> tuple[float, float, bool]:
+        """One tick of both arms with the handle at (x, y) m moving at (vx, vy) m/s, shoulder
+        frame, after this tick's blend and gain steps (the compiled call blends as it ticks):
+        the force on the handle F = g · ((1 − w) F_A + w F_B), N, and False when an arm
+        diverged (its force not a number; the force is then 0). A state that is not a number
+        leaves the arms as they are and gives 0."""
+        w = self.blend.step()
+        g = self.gain.step()
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(vx)
+                and math.isfinite(vy)):
+            return 0.0, 0.0, True
+        try:
+            mx, my, fa_x, fa_y, fb_x, fb_y = self.sims.tick(x, y, vx, vy, w, g)
+        except (ArithmeticError, ValueError):  # overflow inside a diverging arm
+            return 0.0, 0.0, False
+        if math.isfinite(fa_x + fa_y) and math.isfinite(fb_x + fb_y):
+            return mx, my, True
+        return 0.0, 0.0, False
+
     def current(self) -> tuple[SimPair, tuple[ArmParams, ArmParams]]:
         """The pair rendered now, to be put back later (refused while pushed models wait to be
         swapped in: they would be lost)."""

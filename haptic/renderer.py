@@ -1,39 +1,26 @@
 """The real-time haptic loop: two virtual arms behind one handle, rendered safely.
 
-Each tick (default 1 kHz, 500 Hz–4 kHz), as :meth:`Renderer.tick` reads top to bottom:
-
-1. **read state** - the safety monitor (:mod:`haptic.monitor`) polls the robot's port
-   (:class:`~haptic.port.RobotPort`; a lock-step robot's reply to the last force is waited
-   for); the commands queued since the last tick are applied (an operator's re-arm among them);
-   then, while armed, the monitor judges the tick's evidence (timeout, CRC, sequence gap, the
-   robot's fault reports and flags, NaN, workspace, speed): a fault zeroes this tick's force;
-2. **models** - both virtual arms (A = before, B = after) tick with the handle state (robot
-   frame minus ``shoulder_offset_m``) in one compiled call that blends their forces,
-   F = g · ((1 − w) F_A + w F_B), w and g on raised-cosine ramps (:class:`haptic.pair.ModelPair`);
-   a pushed pair is swapped in once the gain has faded out;
-3. **safety** - passivity controller, rate limit, saturation; zero unless armed (the monitor);
-4. **force out** - the force sent to the robot;
-5. **record** - the running activity's tick hook (:mod:`haptic.activities`: the trial window),
-   the trace row, and the tick's state for a display in another process
-   (:mod:`haptic.snapshot`: a seqlock in shared memory, never waited on).
+:meth:`Renderer.tick` reads top to bottom as each tick runs (default 1 kHz, 500 Hz–4 kHz):
+read state → models → safety → force out → record. The renderer keeps the loop alone; what it
+ticks is behind seams: the robot (:class:`~haptic.port.RobotPort`), every fault check and the
+counters they keep (:class:`~haptic.monitor.SafetyMonitor`), arms A (before) and B (after) with
+their raised-cosine blend and fades (:class:`~haptic.pair.ModelPair`), the A/B/X blocks and
+training protocols the commands address (:mod:`haptic.activities`), a display's snapshot in
+shared memory (:mod:`haptic.snapshot`). ``docs/haptics.md`` describes every step.
 
 Timing (:mod:`haptic.clock`): absolute deadlines on a :class:`~haptic.clock.Clock`; the loop
 runs inside :func:`~haptic.clock.realtime` (garbage collector frozen and off, SCHED_FIFO, short
-thread switch interval). The wake time and cost of every tick are kept (:mod:`haptic.loopstats`:
-period error, overruns, per-phase cost). A :class:`~haptic.clock.VirtualClock` replaces the
-wall clock in tests so a minute of rendering takes a fraction of that.
-
-Commands (:mod:`haptic.commands`) come from other threads through :meth:`Renderer.submit` and are
-applied at the start of a tick, so the loop's state has one owner; A/B/X blocks and training
-protocols are activities the commands address (:mod:`haptic.activities`), the renderer only
-hosts them. What it tells other processes is :mod:`haptic.readouts`; the session's trace is
-put together by :mod:`haptic.assemble`.
+thread switch interval); every tick's wake time and per-phase cost are kept
+(:mod:`haptic.loopstats`). A :class:`~haptic.clock.VirtualClock` runs it faster than real time
+in tests. Commands (:mod:`haptic.commands`) come from other threads through
+:meth:`Renderer.submit` and are applied at the start of a tick, so the loop's state has one
+owner; what the renderer tells other processes is :mod:`haptic.readouts`, and the session's
+trace is put together by :mod:`haptic.assemble`.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import queue
 import time
 from typing import Any
@@ -67,20 +54,10 @@ _MODEL_BIT = 1 << (FaultCode.MODEL - 1)
 class Renderer:
     """Renders model A (before) and B (after) through ``port``.
 
-    Parameters
-    ----------
-    port : RobotPort
-        A connected robot (handshake done): a :class:`~haptic.link.RobotLink` or an adapter's.
-    before, after : ArmParams
-    config : RendererConfig, optional
-    safety : SafetyConfig, optional
-    clock : Clock, optional
-        :class:`~haptic.clock.RealClock` by default; :class:`~haptic.clock.VirtualClock` to run
-        faster than real time.
-    coupling : CouplingConfig, optional
-    environment : callable, optional
-        What is ticked in place of each compiled arm (:data:`haptic.pair.Environment`; the
-        remote link puts a distant patient there).
+    ``port``: a connected robot (handshake done), a :class:`~haptic.link.RobotLink` or an
+    adapter's; ``clock``: :class:`~haptic.clock.RealClock` by default, a
+    :class:`~haptic.clock.VirtualClock` runs faster than real time; ``environment``: what is
+    ticked in place of each compiled arm (:data:`haptic.pair.Environment`: the remote link).
     """
 
     def __init__(self, port: RobotPort, before: ArmParams, after: ArmParams,
@@ -105,9 +82,7 @@ class Renderer:
         self.snapshot: SnapshotWriter | None = None
         self.metadata: dict[str, Any] = {}
         self.running = self._stop = self._awaiting = False
-        self.t_s = 0.0
-        self.ticks = 0
-        self.fx = self.fy = 0.0
+        self.t_s, self.ticks, self.fx, self.fy = 0.0, 0, 0.0, 0.0
         self.trace: Trace | None = None
         self._buf: TraceBuffer | None = None
         self.times = LoopTimes()
@@ -137,23 +112,13 @@ class Renderer:
         x, y, vx, vy = st.x - ox, st.y - oy, st.vx, st.vy
         pair = self.pair
         arms = pair.sims
-        w = pair.blend.step()
-        g = pair.gain.step()
-        mx = my = 0.0
-        if math.isfinite(x) and math.isfinite(y) and math.isfinite(vx) and math.isfinite(vy):
-            try:
-                mx, my, fa_x, fa_y, fb_x, fb_y = arms.tick(x, y, vx, vy, w, g)
-                ok = math.isfinite(fa_x + fa_y) and math.isfinite(fb_x + fb_y)
-            except (ArithmeticError, ValueError):  # overflow inside a diverging arm
-                ok = False
-            if not ok:
-                m.diverged()
-                self._reset_arms()
-                mx = my = 0.0
-        if pair.pending is not None and g == 0.0 and not pair.gain.moving:
-            self._swap()
-            if m.safety.mode == Mode.ARMED:
-                pair.fade(1.0)
+        mx, my, ok = pair.tick(x, y, vx, vy)
+        w, g = pair.blend.value, pair.gain.value
+        if not ok:
+            m.diverged()
+            self._reset_arms()
+        if pair.pending is not None and pair.gain.value == 0.0 and not pair.gain.moving:
+            self._swap()  # pushed models, once the gain has faded out
         c3 = pc()
         # safety: passivity, rate limit, saturation; zero unless armed
         fx, fy = m.output(mx, my, vx, vy)
@@ -343,6 +308,8 @@ class Renderer:
     def _swap(self) -> None:
         self.pair.swap(self.metadata)
         self._reset_arms()
+        if self.running and self.safety.mode == Mode.ARMED:
+            self.pair.fade(1.0)
 
     def _reset_arms(self) -> None:
         st = self.monitor.state
