@@ -46,6 +46,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
 from fieldbank.haptic.activities.abx import MAX_ABX_TRIALS, AbxBlock
+from fieldbank.haptic.activities.base import Activity
 from fieldbank.haptic.activities.training import NextTrial, Training
 from fieldbank.haptic.commandbase import CommandTarget, RendererCommand, Result, int_field
 from fieldbank.haptic.errors import CommandError, HapticError
@@ -227,6 +228,12 @@ def _training(target: CommandTarget) -> Training:
     return act
 
 
+def _stepped(target: CommandTarget, act: Activity, out: Result) -> Result:
+    """``out``, once the activity's finished result is kept (if this step finished it)."""
+    target.activities.after_step(act)
+    return out
+
+
 @dataclass(frozen=True)
 class AbxStart(RendererCommand):
     """Start a block of ``n_trials`` blinded A/B/X trials (:class:`haptic.activities.abx.AbxBlock`):
@@ -289,9 +296,7 @@ class AbxAnswer(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         act = _abx(target)
-        out = act.answer(target, self.answer)
-        target.activities.after_step(act)
-        return out
+        return _stepped(target, act, act.answer(target, self.answer))
 
 
 @dataclass(frozen=True)
@@ -302,9 +307,7 @@ class AbxStop(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         act = _abx(target)
-        out = act.stop(target)
-        target.activities.after_step(act)
-        return out
+        return _stepped(target, act, act.stop(target))
 
 
 @dataclass(frozen=True)
@@ -340,9 +343,7 @@ class TrainNext(RendererCommand):
         act = _training(target)
         if self.activity is not act or self.trial is None:
             raise CommandError("train next: the training protocol changed; ask again")
-        out = act.next(target, self.trial)
-        target.activities.after_step(act)
-        return out
+        return _stepped(target, act, act.next(target, self.trial))
 
 
 @dataclass(frozen=True)
@@ -363,9 +364,7 @@ class TrainAnswer(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         act = _training(target)
-        out = act.answer(target, self.answer)
-        target.activities.after_step(act)
-        return out
+        return _stepped(target, act, act.answer(target, self.answer))
 
 
 @dataclass(frozen=True)
@@ -376,9 +375,7 @@ class TrainStop(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         act = _training(target)
-        out = act.stop(target)
-        target.activities.after_step(act)
-        return out
+        return _stepped(target, act, act.stop(target))
 
 
 #: Every command by its name.
