@@ -117,7 +117,7 @@ class Renderer:
         if not ok:
             m.diverged()
             self._reset_arms()
-        if pair.pending is not None and pair.gain.value == 0.0 and not pair.gain.moving:
+        if pair.pending is not None and g == 0.0 and not pair.gain.moving:
             self._swap()  # pushed models, once the gain has faded out
         c3 = pc()
         # safety: passivity, rate limit, saturation; zero unless armed
