@@ -277,18 +277,17 @@ def make_app(db: Database, providers: Sequence[RouteProvider], *,
     ]
     for p in ws.providers:
         routes.extend(p.routes())
-    doc = openapi_document(routes)
 
     async def openapi(call: Call) -> Any:
         return doc
 
     routes.append(Route("GET", "/api/openapi.json", openapi, None,
                         "This document", tags=("accounts",)))
+    doc = openapi_document(routes)
     app = web.Application(middlewares=[edge], client_max_size=8 * 1024 * 1024)
     app.router.add_get("/", shell)
     app.router.add_get("/static/{owner}/{name}", static)
     for r in routes:
         app.router.add_route(r.method, r.path, ws.guarded(r))
-    app["workspace"] = ws
     return app
 
