@@ -136,13 +136,14 @@
         el("button", { id: "optimise", type: "button", disabled: !may("plan") }, "Find the split")));
     page(`Plan for patient ${code}`,
       el("p", { class: "lead" }, el("a", { href: `#/patients/${enc(code)}` }, `← patient ${code}`)),
-      el("div", { class: "composer" }, el("div", {}, form, opt),
-        el("div", {}, el("section", { class: "summary", "aria-labelledby": "sum-h", id: "summary",
-          "aria-live": "polite" }, el("h2", { id: "sum-h" }, "What the plan changes"), out.lines, status),
-        actions, saved, noRole,
-        section("Warnings", out.warnings), section("Grades", out.grades),
-        section("Joint stretches", out.stretches), section("Intervals", out.intervals),
-        section("Figures", out.figure))));
+      el("div", { class: "composer" }, el("div", { class: "c-form" }, form, opt),
+        el("div", { class: "c-summary" }, el("section", { class: "summary", "aria-labelledby": "sum-h",
+          id: "summary", "aria-live": "polite" }, el("h2", { id: "sum-h" }, "What the plan changes"),
+        out.lines, status), actions, saved, noRole),
+        el("div", { class: "c-rest" },
+          section("Warnings", out.warnings), section("Grades", out.grades),
+          section("Joint stretches", out.stretches), section("Intervals", out.intervals),
+          section("Figures", out.figure))));
     const key = `compose:${code}`;
     const restore = JSON.parse(sessionStorage.getItem(key) || "{}");
     for (const [id, v] of Object.entries(restore)) {
@@ -223,9 +224,9 @@
   app.views.compose = compose;
 
   // --- the plans of a patient's page -------------------------------------------------------
-  app.patientSections.push(async (main, d) => {
+  app.patientSections.push(async (where, d) => {
     const box = section("Plans", el("p", {}, "Loading…"));
-    main.append(box);
+    where.append(box);
     let r;
     try { r = await api("GET", `/api/patients/${enc(d.patient.code)}/plans`); }
     catch (e) { box.replaceChildren(el("h2", {}, "Plans"), el("p", { class: "error" }, e.message)); return; }

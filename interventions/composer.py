@@ -121,6 +121,17 @@ def catalogue() -> dict[str, Any]:
     }
 
 
+def latest_model_id(db: Database, patient: str) -> int | None:
+    """The model ``whatif PATIENT`` stands on (:func:`fieldbank.modelsource.latest_of_patient`:
+    the latest fitted, else the latest synthetic), or None (that function says why)."""
+    models = db.list_models(patient)
+    for origin in ("fitted", "synthetic"):
+        ids = [m.id for m in models if m.origin == origin]
+        if ids:
+            return max(ids)
+    return None
+
+
 @dataclass(eq=False)
 class _Prepared:
     source: ModelSource
@@ -145,20 +156,25 @@ class Composer:
     def prepared(self, db: Database, patient: str, model_id: int | None = None) -> _Prepared:
         """The patient's latest fitted model (as ``whatif PATIENT``) or model ``model_id``,
         prepared; a model fitted since is picked up (the key is the model's id)."""
-        if model_id is None:
-            source = modelsource.latest_of_patient(db, patient)
-        else:
-            source = modelsource.stored(db, model_id)
-            if source.patient_code != patient:
-                raise InterventionError(f"model {model_id} is not a model of patient "
-                                        f"{patient}.")
-        key = (patient, source.model_id)
+        # a stored model never changes, nor does the fit behind it: a model is resolved
+        # (its fit read) once; which model "latest" means is asked each time
+        wanted = model_id if model_id is not None else latest_model_id(db, patient)
+        key = (patient, model_id, wanted)
         with self._lock:
             got = self._models.get(key)
-            if got is None or got.source != source:
-                got = _Prepared(source, ArmCache(Arm.from_params(source.params),
-                                                 limit=MAX_ARMS), threading.Lock())
-                self._models[key] = got
+        if got is None:
+            if model_id is None:
+                source = modelsource.latest_of_patient(db, patient)
+            else:
+                source = modelsource.stored(db, model_id)
+                if source.patient_code != patient:
+                    raise InterventionError(f"model {model_id} is not a model of patient "
+                                            f"{patient}.")
+            got = _Prepared(source, ArmCache(Arm.from_params(source.params), limit=MAX_ARMS),
+                            threading.Lock())
+            key = (patient, model_id, source.model_id)
+        with self._lock:
+            got = self._models.setdefault(key, got)
             self._models.move_to_end(key)
             while len(self._models) > MAX_MODELS:
                 self._models.popitem(last=False)

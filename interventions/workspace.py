@@ -72,6 +72,14 @@ def patient_plans(db: Database, code: str) -> list[dict[str, Any]]:
     return out
 
 
+def plans_key(db: Database, code: str) -> tuple[Any, ...]:
+    """Everything :func:`patient_plans` depends on that can change: the plans and the days
+    they were given, the patient's maps and models (a fit stores a model). Stored records
+    are otherwise never changed, so the same key means the same answer."""
+    return (tuple((p.id, p.spec.get("given_on")) for p in db.list_plans(code)),
+            tuple(m.id for m in db.list_maps(code)), tuple(m.id for m in db.list_models(code)))
+
+
 class ComposerRoutes:
     """The composer's routes; ``robot``: where "Feel it" pushes (None: no robot here)."""
 
@@ -80,6 +88,8 @@ class ComposerRoutes:
     def __init__(self, composer: Composer | None = None, robot: RobotSeam | None = None) -> None:
         self.composer = composer or Composer()
         self.robot = robot
+        #: a patient's plans with their checks, by patient: (plans_key, answer)
+        self._plans: dict[str, tuple[tuple[Any, ...], list[dict[str, Any]]]] = {}
 
     def assets(self) -> Sequence[Asset]:
         return (Asset("fieldbank.interventions", "composer.js", "script"),)
@@ -154,8 +164,9 @@ class ComposerRoutes:
                     "--rhizotomy, --baclofen, --plan or --optimize.")
             res = self.composer.whatif(call.db, patient, plan, model_id=model_id,
                                        session_limit_units=limit, accept_poor_fit=accept)
-            call.record_read(patient, f"what-if on model {res.source.model_id}: "
-                                      f"{plan_label(res.plan)}")
+            call.record_read(patient, f"what-ifs on model {res.source.model_id} (first: "
+                                      f"{plan_label(res.plan)})",
+                             once=f"what-if {res.source.model_id}")
             return whatif_document(res)
 
         return await call.run(work)
@@ -217,7 +228,15 @@ class ComposerRoutes:
         code = call.match("code")
 
         def work() -> dict[str, Any]:
-            out = patient_plans(call.db, code)
+            call.db.get_patient(code)  # an unknown patient: the usual error
+            key = plans_key(call.db, code)
+            known = self._plans.get(code)
+            out = known[1] if known is not None and known[0] == key else None
+            if out is None:  # validation is the slow part: done again only when data changed
+                out = patient_plans(call.db, code)
+                if len(self._plans) > 256:
+                    self._plans.clear()
+                self._plans[code] = (key, out)
             call.record_read(code, "plans and their checks")
             return {"plans": out}
 

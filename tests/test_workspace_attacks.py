@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from fieldbank.storage import Database
-from tests.workspace_util import PASSWORDS, ROOT, Client, Workspace, build_db
+from tests.workspace_util import PASSWORDS, ROOT, Workspace, build_db
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +79,7 @@ def test_a_change_without_the_csrf_token_or_from_another_site_is_refused(
     status, doc, _, _ = c.request("POST", "/api/plans", body)
     assert status == 200, doc
     with Database.open(url) as db:
-        e = [e for e in db.audit_entries(20, actor="alice") if e.entity == "plan"][0]
+        e = next(e for e in db.audit_entries(20, actor="alice") if e.entity == "plan")
         assert e.action == "add" and e.entity_id == str(doc["plan_id"])
         assert e.detail["request"] == {"via": "session", "from": "127.0.0.1"}
 
@@ -179,7 +179,7 @@ def test_a_viewer_reads_but_cannot_write_and_a_revoked_token_stops_at_once(
                                                           "botox": "ef=90U"}, headers=auth)
     assert status == 200, doc  # no cookie, so no CSRF token needed
     with Database.open(url) as db:
-        e = [e for e in db.audit_entries(10, actor="alice") if e.entity == "plan"][0]
+        e = next(e for e in db.audit_entries(10, actor="alice") if e.entity == "plan")
         assert e.detail["request"]["via"] == f"token {rec.id}"
         db.revoke_token(rec.id)
     status, doc, _, _ = api.request("GET", "/api/patients", headers=auth)
@@ -212,7 +212,7 @@ def test_reads_of_a_patient_are_in_the_audit_log_and_fieldbank_audit_shows_them(
     # refuses it to anyone who tries
     assert not [p for p in _api_routes(ws) if p[1].startswith("/api/audit")
                 and p[0] != "GET"]
-    with Database.open(url) as db, pytest.raises(Exception, match="(?i)append-only|audit"):
+    with Database.open(url) as db, pytest.raises(Exception, match=r"(?i)append-only|audit"):
         db.raw_sql("DELETE FROM audit_log")
 
 

@@ -181,6 +181,16 @@ def test_screenshots_at_both_sizes(served: tuple[Workspace, str], browser: Any) 
         _wait(page, "window.fbComposer.last && window.fbComposer.last.plan_label.includes('200')",
               120)
         _shot(page, f"composer-{w}x{h}.png")
+        # the summary is in view beside (or above) the doses, and nothing spills sideways
+        box = page.locator("#summary").bounding_box()
+        assert box is not None and box["y"] < h and box["x"] + box["width"] <= w + 1
+        assert page.evaluate("document.documentElement.scrollWidth") <= w + 1
+        running = page.evaluate("fetch('/api/robot').then(r => r.json()).then(d => d.running)")
+        if not running:  # this test run alone: the robot with the stored plan 1 (models 1, 2)
+            assert page.evaluate("""() => fetch('/api/robot/push', {method: 'POST',
+                headers: {'Content-Type': 'application/json', 'X-CSRF-Token': window.fbApp.csrf},
+                body: JSON.stringify({a_model_id: 1, b_model_id: 2})}).then(r => r.status)""") \
+                == 200
         page.goto(ws.url.rstrip("/") + "/robot")
         _wait(page, "window.fb && window.fb.drawn > 5", 120)
         _shot(page, f"robot-{w}x{h}.png")

@@ -212,6 +212,7 @@
     catch (e) { page(`Patient ${code}`, el("p", { class: "error", role: "alert" }, e.message)); return; }
     const p = d.patient;
     const latest = d.sessions.length ? d.sessions[d.sessions.length - 1].label : null;
+    const extra = el("div", { id: "patient-extra" });  // the other parts' sections: plans
     main.replaceChildren(el("h1", {}, `Patient ${p.code}`),
       el("p", { class: "lead" }, `${p.side} arm measured · ${fmt(p.body_mass_kg, 1)} kg · `
         + `${fmt(p.height_m)} m` + (p.notes ? ` · ${p.notes}` : "")),
@@ -219,18 +220,19 @@
         "Compose a plan")),
       section("Sessions", d.sessions.length ? table(["session", "date", "maps"],
         d.sessions.map((s) => [s.label, s.date || "—", s.maps])) : el("p", {}, "No session yet.")),
+      section("Fits", d.fits.length ? d.fits.map(fitBlock)
+        : el("p", {}, "Not fitted yet ('fieldbank fit')")),
+      extra,
+      section("Models", table(["model", "origin", "label", "made from"], d.models.map((m) =>
+        [m.id, m.origin, m.label, m.parent_id === null ? "—" : `model ${m.parent_id}`]))),
       section("Maps", d.maps.length ? table(["map", "session", "kind", "hand speed, m/s",
         "points", "unit", "source"], d.maps.map((m) => [m.id, m.session, m.kind,
         m.velocity_m_per_s.map((v) => fmt(v)).join(", "), m.points, m.unit, m.source]))
         : el("p", {}, "No maps yet."),
       d.maps.length ? el("details", { open: true },
         el("summary", {}, `Figures of session ${latest}`),
-        mapFigures(d.maps.filter((m) => m.session === latest))) : null),
-      section("Fits", d.fits.length ? d.fits.map(fitBlock)
-        : el("p", {}, "Not fitted yet ('fieldbank fit')")),
-      section("Models", table(["model", "origin", "label", "made from"], d.models.map((m) =>
-        [m.id, m.origin, m.label, m.parent_id === null ? "—" : `model ${m.parent_id}`]))));
-    for (const add of fbApp.patientSections) add(main, d);
+        mapFigures(d.maps.filter((m) => m.session === latest))) : null));
+    for (const add of fbApp.patientSections) add(extra, d);
     if (may("manage")) main.append(ingestForm(p.code, () => patientView(code)));
   }
 

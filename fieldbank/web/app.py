@@ -77,6 +77,7 @@ class Workspace:
         self.sessions = SessionStore()
         self.names = LoginThrottle()
         self.addresses = LoginThrottle(free=FREE_FAILURES_PER_ADDRESS)
+        self.reads: dict[tuple[str, ...], float] = {}  # repeated reads recorded once a while
         self.assets: dict[tuple[str, str], tuple[bytes, str, str]] = {}
         for owner, list_ in [("core", CORE_ASSETS)] + [(p.name, p.assets())
                                                        for p in self.providers]:
@@ -136,7 +137,7 @@ class Workspace:
                                         "page and try again")
             db = self.db if caller is None else self.db.acting_as(
                 caller.name, via=caller.via, **{"from": caller.peer})
-            out = await route.handler(Call(request, caller, db))
+            out = await route.handler(Call(request, caller, db, self.reads))
             return out if isinstance(out, web.StreamResponse) else _json(200, out)
 
         return handle

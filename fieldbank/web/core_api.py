@@ -79,18 +79,28 @@ def patient_page(db: Database, code: str) -> dict[str, Any]:
             "models": [model_dict(m) for m in db.list_models(code)]}
 
 
-def map_svg(db: Database, map_id: int) -> tuple[str, str]:
+def map_svg(db: Database, map_id: int,
+            cache: dict[tuple[int, int | None], str] | None = None) -> tuple[str, str]:
     """The map's figure (SVG) drawn over the patient's latest fitted model (else the
-    patient's unimpaired arm); (svg, patient code)."""
+    patient's unimpaired arm); (svg, patient code). ``cache``: figures already drawn, by map
+    and model (both never change once stored)."""
     sm = db.get_stored_map(map_id)
-    fm = db.get_map(map_id)
     fitted = [m for m in db.list_models(sm.patient_code) if m.origin == "fitted"]
-    params = (max(fitted, key=lambda m: m.id).params if fitted
+    latest = max(fitted, key=lambda m: m.id) if fitted else None
+    key = (map_id, None if latest is None else latest.id)
+    if cache is not None and key in cache:
+        return cache[key], sm.patient_code
+    fm = db.get_map(map_id)
+    params = (latest.params if latest is not None
               else db.get_patient(sm.patient_code).arm_params())
     title = (f"{sm.kind} map {sm.id}, session {sm.session_label}"
              + (f" ({sm.session_date.isoformat()})" if sm.session_date else ""))
-    scene = map_figure(Arm.from_params(params), fm, title)
-    return render(scene, "svg").decode("utf-8"), sm.patient_code
+    svg = render(map_figure(Arm.from_params(params), fm, title), "svg").decode("utf-8")
+    if cache is not None:
+        if len(cache) > 256:
+            cache.clear()
+        cache[key] = svg
+    return svg, sm.patient_code
 
 
 def audit_dict(e: Any) -> dict[str, Any]:
@@ -112,6 +122,9 @@ class CoreRoutes:
     """The core's routes (a :class:`~fieldbank.web.routes.RouteProvider`)."""
 
     name = "core"
+
+    def __init__(self) -> None:
+        self._figures: dict[tuple[int, int | None], str] = {}
 
     def assets(self) -> Sequence[Asset]:
         return ()
@@ -192,7 +205,7 @@ class CoreRoutes:
         map_id = call.match_int("id")
 
         def work() -> str:
-            svg, code = map_svg(call.db, map_id)
+            svg, code = map_svg(call.db, map_id, self._figures)
             call.record_read(code, f"map {map_id} figure")
             return svg
 

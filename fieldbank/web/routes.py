@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
@@ -39,6 +40,8 @@ PERMISSIONS = {
 }
 #: Largest JSON body the API reads, bytes.
 MAX_BODY = 256 * 1024
+#: A read that repeats (``Call.record_read(once=…)``) is recorded once in this long, s.
+READ_EVERY_S = 600.0
 
 
 class ApiError(FieldbankError):
@@ -78,10 +81,12 @@ class Call:
         the way it came and its address).
     """
 
-    def __init__(self, request: web.Request, caller: Caller | None, db: Database) -> None:
+    def __init__(self, request: web.Request, caller: Caller | None, db: Database,
+                 reads: dict[tuple[str, ...], float] | None = None) -> None:
         self.request = request
         self.caller = caller
         self.db = db
+        self._reads = reads if reads is not None else {}
 
     @property
     def user(self) -> Caller:
@@ -120,8 +125,18 @@ class Call:
         """``fn()`` in a worker thread (database and numerical work never block the loop)."""
         return await asyncio.get_running_loop().run_in_executor(None, fn)
 
-    def record_read(self, patient_code: str, what: str) -> None:
-        """Record that the caller read ``what`` of the patient (audit log)."""
+    def record_read(self, patient_code: str, what: str, once: str | None = None) -> None:
+        """Record that the caller read ``what`` of the patient (audit log). ``once``: what
+        repeats (a what-if as each dose changes) is recorded once per :data:`READ_EVERY_S`
+        for the caller, the patient and this key."""
+        if once is not None:
+            key = (self.caller.name if self.caller else "", patient_code, once)
+            now = time.monotonic()
+            if now - self._reads.get(key, -READ_EVERY_S) < READ_EVERY_S:
+                return
+            self._reads[key] = now
+            if len(self._reads) > 10_000:
+                self._reads.clear()
         self.db.record_read(patient_code, what)
 
 
