@@ -78,8 +78,8 @@ def plan_from_fields(doc: Mapping[str, Any]) -> Plan | None:
         if any(doc.get(k) for k in TEXT_FIELDS):
             raise InterventionError("give the plan once: a plan document or the intervention "
                                     "fields, not both.")
-        plan = Plan.from_dict(doc["plan"], where="plan")
-        return plan if weeks is None else plan.at_week(float(weeks))
+        given = Plan.from_dict(doc["plan"], where="plan")
+        return given if weeks is None else given.at_week(float(weeks))
     label = doc.get("label")
     if label is not None and not isinstance(label, str):
         raise InterventionError("label must be text.")
@@ -150,7 +150,7 @@ class Composer:
 
     def __init__(self, interval_samples: int = DEFAULT_INTERVAL_SAMPLES) -> None:
         self.interval_samples = interval_samples
-        self._models: OrderedDict[tuple[str, int | None], _Prepared] = OrderedDict()
+        self._models: OrderedDict[tuple[str, int | None, int | None], _Prepared] = OrderedDict()
         self._lock = threading.Lock()
 
     def prepared(self, db: Database, patient: str, model_id: int | None = None) -> _Prepared:

@@ -66,7 +66,7 @@ class ArmCache:
         """``compute()`` the first time ``key`` is asked for, the same value after that
         (``key`` names what it is and everything it depends on)."""
         try:
-            return self._derived[key]  # type: ignore[no-any-return]
+            return self._derived[key]
         except KeyError:
             value = self._derived[key] = compute()
             return value

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from datetime import date, datetime
 from typing import Any
 
-from aiohttp import web
+from aiohttp import BodyPartReader, web
 
 from fieldbank.errors import ParameterError
 from fieldbank.figures import render
@@ -230,7 +230,7 @@ class CoreRoutes:
         when: date | None = None
         reader = await call.request.multipart()
         while (part := await reader.next()) is not None:
-            if not isinstance(part, web.BodyPartReader):
+            if not isinstance(part, BodyPartReader):
                 raise ApiError(400, "a nested multipart body is not accepted")
             data = await part.read()
             if len(data) > MAX_UPLOAD_BYTES:

@@ -238,4 +238,4 @@ def names(values: Sequence[object], what: str) -> list[str]:
     """A list of strings from a JSON array, else a 400."""
     if not isinstance(values, list) or not all(isinstance(v, str) for v in values):
         raise ApiError(400, f"{what} must be a list of names")
-    return list(values)  # type: ignore[arg-type]
+    return [str(v) for v in values]

@@ -53,7 +53,8 @@ class WebSession:
     seen: float
 
     def csrf_ok(self, given: str | None) -> bool:
-        return bool(given) and hmac.compare_digest(given.encode(), self.csrf.encode())
+        return given is not None and bool(given) and hmac.compare_digest(given.encode(),
+                                                                         self.csrf.encode())
 
 
 class SessionStore:

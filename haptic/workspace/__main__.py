@@ -49,7 +49,7 @@ def main() -> int:
     db_url, actor = cfg["db_url"], cfg.get("actor") or None
     try:
         res = session.serve(
-            cfg["robot"], before, after, model_ids=tuple(cfg["model_ids"]),  # type: ignore[arg-type]
+            cfg["robot"], before, after, model_ids=(cfg["model_ids"][0], cfg["model_ids"][1]),
             patient_code=cfg.get("patient"), model_info=cfg.get("model_info"),
             config=RendererConfig(rate_hz=int(cfg["rate_hz"])),
             safety=SafetyConfig(force_limit_n=float(cfg["force_limit_n"])),
