@@ -245,6 +245,10 @@
     });
     box.replaceChildren(el("h2", { id: "s-plans" }, "Plans"), rows.length
       ? table(["plan", "label", "steps", "given", "models", "rests on", "checked against later maps"], rows)
-      : el("p", {}, "No plans yet."));
+      : el("p", {}, "No plans yet."),
+    rows.length ? el("p", {}, el("a", { id: "report-link",
+      href: `/api/patients/${enc(d.patient.code)}/report.html`, download: "" },
+    "Download the report of these plans"), " (HTML: each plan's figures, grades, intervals "
+      + "and the check against later maps; to keep or print)") : null);
   });
 })();

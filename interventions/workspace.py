@@ -12,8 +12,10 @@ logged-in account.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from datetime import date
+from datetime import UTC, date, datetime
 from typing import Any
+
+from aiohttp import web
 
 from fieldbank.interventions.composer import (
     Composer,
@@ -26,8 +28,11 @@ from fieldbank.interventions.defaults import value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plandetail import show_plan
 from fieldbank.interventions.plans import give_plan, list_plans
+from fieldbank.interventions.report.build import report_page
+from fieldbank.interventions.report.select import Selection
 from fieldbank.interventions.validate import validate_plans
 from fieldbank.interventions.whatif import DoseSearch, plan_label
+from fieldbank.sanitize import file_component
 from fieldbank.storage import Database
 from fieldbank.web.robot import FeelPair, RobotSeam
 from fieldbank.web.routes import ApiError, Asset, Call, Param, Route, need, optional
@@ -135,6 +140,11 @@ class ComposerRoutes:
                   "A patient's plans: given or not, what each rests on, how a given one was "
                   "checked against later maps (recorded as a read)",
                   (Param("code", description="patient code"),), tags=t),
+            Route("GET", "/api/patients/{code}/report.html", self.report, "read",
+                  "The report of a patient's plans (the page 'fieldbank report --patient' "
+                  "writes), as a file to keep (recorded as a read)",
+                  (Param("code", description="patient code"),),
+                  response={"type": "string", "format": "html"}, tags=t),
             Route("POST", "/api/validate", self.validate, "read",
                   "Stored plans that were given, checked against the maps measured after "
                   "them (as 'fieldbank validate')",
@@ -241,6 +251,23 @@ class ComposerRoutes:
             return {"plans": out}
 
         return await call.run(work)
+
+    async def report(self, call: Call) -> web.StreamResponse:
+        code = call.match("code")
+
+        def work() -> str:
+            call.db.get_patient(code)
+            page = report_page(call.db, Selection(patients=(code,)),
+                               stamp=datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"))
+            call.record_read(code, "report of its plans")
+            return page
+
+        page = await call.run(work)
+        resp = web.Response(text=page, content_type="text/html")
+        # a file to keep and print: downloaded, never run inside the workspace's origin
+        resp.headers["Content-Disposition"] = (
+            f'attachment; filename="report-{file_component(code)}.html"')
+        return resp
 
     async def validate(self, call: Call) -> Any:
         body = await call.json()

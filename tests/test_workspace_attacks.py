@@ -193,6 +193,9 @@ def test_reads_of_a_patient_are_in_the_audit_log_and_fieldbank_audit_shows_them(
     assert c.login("victor") == 200
     assert c.request("GET", "/api/patients/SYN-001")[0] == 200
     assert c.request("GET", "/api/maps/1/figure.svg")[0] == 200
+    status, _, resp, body = c.request("GET", "/api/patients/SYN-001/report.html")
+    assert status == 200 and b"SYN-001" in body and b"<h1>" in body
+    assert resp.headers["Content-Disposition"] == 'attachment; filename="report-SYN-001.html"'
     out = subprocess.run([sys.executable, "-m", "fieldbank.cli", "audit", "--patient",
                           "SYN-001", "--user", "victor", "--since",
                           datetime.date.today().isoformat(), "--json", "--db", url],
@@ -201,6 +204,7 @@ def test_reads_of_a_patient_are_in_the_audit_log_and_fieldbank_audit_shows_them(
     rows = json.loads(out.stdout)
     whats = [r["detail"]["what"] for r in rows if r["action"] == "read"]
     assert "map 1 figure" in whats and any(w.startswith("patient page") for w in whats)
+    assert "report of its plans" in whats
     assert all(r["actor"] == "victor" and r["detail"]["request"]["from"] == "127.0.0.1"
                for r in rows)
     # the text form names the same, one line each
