@@ -112,6 +112,53 @@ def test_session_fixation_a_planted_id_is_never_adopted_and_login_issues_a_new_o
     assert replay.request("GET", "/api/patients")[0] == 401
 
 
+def test_a_data_manager_adds_a_patient_and_ingests_files_all_or_nothing(
+        served: tuple[Workspace, str]) -> None:
+    ws, url = served
+    d = ws.client()
+    assert d.login("dana") == 200
+    status, doc, _, _ = d.request("POST", "/api/patients", {
+        "code": "DM-7", "body_mass_kg": 72, "height_m": 1.74, "side": "right"})
+    assert status == 200 and doc["code"] == "DM-7"
+    status, doc, _, _ = d.request("POST", "/api/patients", {
+        "code": "<b>x</b>", "body_mass_kg": 68, "height_m": 1.7, "side": "left"})
+    assert status == 400 and "must be a pseudonym" in doc["error"]  # the CLI's words
+    root = Path(url.removeprefix("sqlite:///")).parents[1] / "samples" / "SYN-001" / "pre-BoNT"
+    # SYN-001's map as another lab's file of DM-7 (no patient named in it)
+    good = b"".join(line for line in (root / "postural.csv").read_bytes().splitlines(True)
+                    if not line.startswith((b"# patient:", b"# session:")))
+
+    def upload(files: list[tuple[str, bytes]]) -> tuple[int, dict[str, object]]:
+        b = "workspace-boundary"
+        parts = [f'--{b}\r\nContent-Disposition: form-data; name="date"\r\n\r\n'
+                 "2024-05-01\r\n".encode()]
+        for name, data in files:
+            parts.append(f'--{b}\r\nContent-Disposition: form-data; name="file"; '
+                         f'filename="{name}"\r\nContent-Type: text/csv\r\n\r\n'.encode()
+                         + data + b"\r\n")
+        status, doc, _, _ = d.request(
+            "POST", "/api/patients/DM-7/sessions/first/files",
+            raw=b"".join(parts) + f"--{b}--\r\n".encode(),
+            headers={"Content-Type": f"multipart/form-data; boundary={b}"})
+        return status, doc
+    # one bad file among good ones: nothing stored, every problem named
+    status, doc = upload([("postural.csv", good), ("bad.csv", b"x_m,y_m\n1,2\n")])
+    assert status == 400 and "Nothing was stored" in str(doc["error"])
+    with Database.open(url) as db:
+        assert db.list_maps("DM-7") == []
+    status, doc = upload([("postural.csv", good)])
+    assert status == 200 and doc["stored"] == 1, doc
+    with Database.open(url) as db:
+        assert [m.session_label for m in db.list_maps("DM-7")] == ["first"]
+        e = next(e for e in db.audit_entries(5, actor="dana") if e.action == "ingest")
+        assert e.detail["request"]["via"] == "session"
+    # a clinician may not
+    c = ws.client()
+    assert c.login("alice") == 200
+    assert c.request("POST", "/api/patients", {"code": "X-2", "body_mass_kg": 68,
+                                               "height_m": 1.7, "side": "left"})[0] == 403
+
+
 def test_guessing_a_password_is_throttled_even_when_the_guess_is_right(
         served: tuple[Workspace, str]) -> None:
     ws, url = served
