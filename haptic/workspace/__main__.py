@@ -18,7 +18,8 @@ from fieldbank.errors import FieldbankError
 from fieldbank.haptic import session
 from fieldbank.haptic.client import ControlClient
 from fieldbank.haptic.errors import HapticError
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database
