@@ -5,10 +5,11 @@ A **run** is one batch command spread over workers (``fieldbank fit --all``, ``r
 pending, one per unit of work (a session to fit, a group of report cases, a patient's plans to
 check), keyed uniquely within the run. The worker that runs a job marks it started
 (:meth:`Jobs.start_job`: ``attempts`` + 1, which worker, when) and finished
-(:meth:`Jobs.finish_job`: done, skipped or failed, with its result or error); a job whose
-worker died stays ``running`` until the engine runs it again. ``fieldbank jobs`` reads them:
-what ran, what failed, what is left. The run's random ``token`` lets a worker check that it
-writes into the database the run was started on.
+(:meth:`Jobs.finish_job`: done, skipped or failed, with its result or error) - only while
+that attempt is the job's live one; a job whose worker died stays ``running`` until the engine
+runs it again, or gives it up (:meth:`Jobs.give_up_job`: failed, unless it ended
+meanwhile). ``fieldbank jobs`` reads them: what ran, what failed, what is left. The run's
+random ``token`` lets a worker check that it writes into the database the run was started on.
 
 Derived documents of a fit (``fit_intervals``): the prediction intervals of one plan over the
 fit's parameter samples, stored under a key of everything they depend on
@@ -25,9 +26,9 @@ from __future__ import annotations
 import json
 import secrets
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import delete, func, select, update
+from sqlalchemy import CursorResult, delete, func, select, update
 from sqlalchemy.orm import Session
 
 from fieldbank.errors import ParameterError, StorageError
@@ -148,22 +149,48 @@ class Jobs(DatabaseCore):
 
     def finish_job(self, run_id: int, key: str, state: str,
                    result: Mapping[str, Any] | None = None, error: str | None = None,
-                   payload: bytes | None = None) -> JobRecord:
-        """Record how a job ended: 'done', 'skipped' (nothing to do: found already) or
-        'failed' (``error`` says why); ``result`` a small JSON document, ``payload`` what the
-        run's own process reads back (:meth:`job_payloads`)."""
+                   payload: bytes | None = None, *, attempt: int) -> tuple[JobRecord, bool]:
+        """Record how attempt ``attempt`` of a job ended: 'done', 'skipped' (nothing to do:
+        found already) or 'failed' (``error`` says why); ``result`` a small JSON document,
+        ``payload`` what the run's own process reads back (:meth:`job_payloads`).
+
+        Only a live attempt ends its job: the job is written only while it is running under
+        that attempt. A job that another attempt ended, or that the run's process gave up on
+        (:meth:`give_up_job`), keeps what it holds. Returns the job as the database holds it
+        and whether this call wrote it."""
         if state not in FINAL_STATES:
             raise ParameterError(f"a job ends as one of {', '.join(FINAL_STATES)}; got "
                                  f"{state!r}.")
+        return self._end_job(run_id, key, [JobRow.state == "running", JobRow.attempts == attempt],
+                             state, error, result, payload)
+
+    def give_up_job(self, run_id: int, key: str, error: str) -> JobRecord:
+        """Record as failed a job the run's process lost (its workers kept dying, the
+        scheduler went away) unless it has ended already; returns the job as the database
+        holds it, so that what the command reports is what is stored. A worker still running
+        it can no longer end it (:meth:`finish_job`)."""
+        return self._end_job(run_id, key, [JobRow.state.not_in(FINAL_STATES)], "failed",
+                             error)[0]
+
+    def _end_job(self, run_id: int, key: str, only_if: list[Any], state: str,
+                 error: str | None, result: Mapping[str, Any] | None = None,
+                 payload: bytes | None = None) -> tuple[JobRecord, bool]:
+        """One conditional UPDATE (the database decides between racing writers: a worker
+        ending its attempt and the run's process giving up), then the job as it is."""
         with self._write() as s:
             r = self._job_row(s, run_id, key)
-            r.state, r.finished_at, r.error = state, now(), error
-            r.result_json = None if result is None else json.dumps(dict(result), sort_keys=True)
-            r.payload = payload
-            if state == "failed":
+            written = cast(CursorResult[Any], s.execute(
+                update(JobRow).where(JobRow.id == r.id, *only_if).values(
+                    state=state, finished_at=now(), error=error, payload=payload,
+                    result_json=None if result is None else json.dumps(dict(result),
+                                                                        sort_keys=True)),
+                execution_options={"synchronize_session": False})).rowcount > 0
+            if written and state == "failed":
                 self._audit(s, "fail", "job", r.id, {"run": run_id, "key": key,
                                                      "error": (error or "")[:500]})
-            return _job(r)
+            s.flush()
+            s.refresh(r)
+            return _job(r), written
 
     def job_payloads(self, run_id: int) -> dict[str, bytes]:
         """Each finished job's payload by job key (jobs without one are left out)."""
