@@ -35,6 +35,11 @@ COMMANDS: dict[str, LazyCommand] = {
               "Measured postural and stiffness maps."),
     "ingest": C("fieldbank.cli.ingest", "ingest",
                 "Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3)."),
+    "inspect": C("fieldbank.cli.inspect", "inspect",
+                 "Show what FILES hold (C3D markers, analog channels and events; NWB series "
+                 "anywhere in the file; KINARM trials; MAT and HDF5 variables; CSV header) "
+                 "and what ingest would map from each, or why not and the options that map "
+                 "it."),
     "export": C("fieldbank.cli.export", "export",
                 "Export maps matching the filters (SI units, arm-on-handle as stored)."),
     "samples": C("fieldbank.cli.samples", "samples",

@@ -313,6 +313,9 @@ class IncomingFile:
     file_format: str
     content: bytes
     maps: tuple[FieldMap, ...]
+    #: Per map, the (label, date) of the session it belongs to when the file says so (an NWB
+    #: export of several sessions), else None: the batch's session. Empty: all the batch's.
+    map_sessions: tuple[tuple[str, date | None] | None, ...] = ()
 
 
 @dataclass(frozen=True)
