@@ -13,7 +13,11 @@ a scratch database; and a SQLite file):
   the same wrapper; its own time is what the wrapper reports (``Outcome.seconds``);
 * the bookkeeping: ``--tasks`` tasks that do nothing, through the wrapper: wall and CPU time
   per task, the statements and transactions each sends (SQLAlchemy's events) and the
-  connections opened (the pool's).
+  connections opened (the pool's);
+* the two marks alone, as they are written now (``start_job``, ``finish_job``: each one
+  UPDATE ... RETURNING) and as they were written before (:func:`former_marks`: each a write
+  transaction that reads the job row, changes it and commits), in blocks interleaved with the
+  wrapper's so that all three meet the same load.
 
 Both run beside ``--busy`` processes that keep a core busy each (default: one per core), as
 the other workers' fits do on a worker machine: there every round trip to the database
@@ -99,6 +103,25 @@ def _counting(db: Any) -> dict[str, int]:
     return n
 
 
+def former_marks(db: Any, run_id: int, key: str, worker: str) -> None:
+    """The job marks as they were written before: each a transaction that reads the row (the
+    ORM), changes it, and commits (BEGIN, SELECT, UPDATE, COMMIT); the end read back."""
+    from sqlalchemy import select
+
+    from fieldbank.storage.core import now
+    from fieldbank.storage.orm import JobRow
+
+    with db._write() as s:
+        r = s.scalar(select(JobRow).where(JobRow.run_id == run_id, JobRow.key == key))
+        r.state, r.worker, r.started_at, r.finished_at = "running", worker, now(), None
+        r.attempts += 1
+    with db._write() as s:
+        r = s.scalar(select(JobRow).where(JobRow.run_id == run_id, JobRow.key == key))
+        r.state, r.finished_at, r.error, r.result_json, r.payload = "done", now(), None, "{}", None
+        s.flush()
+        s.refresh(r)
+
+
 def measure(url: str, store: str | None, tasks: int, fits: int) -> dict[str, float]:
     from fieldbank import engine
     from fieldbank.engine import Task, Where
@@ -119,28 +142,51 @@ def measure(url: str, store: str | None, tasks: int, fits: int) -> dict[str, flo
         fit_cpu.append(time.process_time() - c0)
         assert out.state == "done", out.detail
         fit_wall.append(out.seconds)
-    # the bookkeeping: tasks that do nothing, through the same wrapper and handle
+    # the bookkeeping: tasks that do nothing, through the same wrapper and handle; the former
+    # marks in blocks between them, on the same handle
     with Database.open(url, store_root=store) as db:
         run = db.start_run("fit", "bench", {}, [(f"t{i}", code, label) for i in range(tasks)])
+        old = db.start_run("fit", "bench", {}, [(f"o{i}", code, label) for i in range(tasks)])
     where = Where(url, store, run.id, run.token)
     engine._execute(where, nothing, {}, Task("t0", code, label))  # the handle, opened once
     handle = engine._worker_db(where)
+    former_marks(handle, old.id, "o0", "bench")
     n = _counting(handle)
-    walls, cpus = [], []
-    for i in range(1, tasks):
-        w0, c0 = time.perf_counter(), time.process_time()
-        out = engine._execute(where, nothing, {}, Task(f"t{i}", code, label))
-        cpus.append(time.process_time() - c0)
-        walls.append(time.perf_counter() - w0)
-        assert out.state == "done", out.detail
+    counted = {"statements": 0, "transactions": 0, "connections": 0}
+    with Database.open(url, store_root=store) as db:
+        new = db.start_run("fit", "bench", {}, [(f"n{i}", code, label) for i in range(tasks)]).id
+    walls, cpus, old_walls, old_cpus, new_walls, new_cpus = [], [], [], [], [], []
+    for block in range(1, tasks, 10):
+        for i in range(block, min(tasks, block + 10)):
+            w0, c0 = time.perf_counter(), time.process_time()
+            out = engine._execute(where, nothing, {}, Task(f"t{i}", code, label))
+            cpus.append(time.process_time() - c0)
+            walls.append(time.perf_counter() - w0)
+            assert out.state == "done", out.detail
+        counted = dict(n)  # the wrapper's only
+        for i in range(block, min(tasks, block + 10)):
+            w0, c0 = time.perf_counter(), time.process_time()
+            former_marks(handle, old.id, f"o{i}", "bench")
+            old_cpus.append(time.process_time() - c0)
+            old_walls.append(time.perf_counter() - w0)
+            w0, c0 = time.perf_counter(), time.process_time()
+            rec = handle.start_job(new, f"n{i}", "bench")
+            handle.finish_job(new, f"n{i}", "done", {}, attempt=rec.attempts)
+            new_cpus.append(time.process_time() - c0)
+            new_walls.append(time.perf_counter() - w0)
+        for k, v in counted.items():
+            n[k] = v
     with Database.open(url, store_root=store) as db:
         assert db.get_run(run.id).counts["done"] == tasks
     engine._forget_databases()
     k = tasks - 1
     return {"fit_wall": statistics.fmean(fit_wall), "fit_cpu": statistics.fmean(fit_cpu),
             "wall": statistics.median(walls), "cpu": statistics.median(cpus),
-            "statements": n["statements"] / k, "transactions": n["transactions"] / k,
-            "connections": n["connections"]}
+            "old_wall": statistics.median(old_walls), "old_cpu": statistics.median(old_cpus),
+            "new_wall": statistics.median(new_walls), "new_cpu": statistics.median(new_cpus),
+            "statements": counted["statements"] / k,
+            "transactions": counted["transactions"] / k,
+            "connections": counted["connections"]}
 
 
 def main() -> int:
@@ -165,15 +211,21 @@ def main() -> int:
             results.append(("SQLite", measure(f"sqlite:///{d}/fb.sqlite3", f"{d}/arrays",
                                               args.tasks, args.fits)))
     print(f"{'database':<11}{'fit wall':>10}{'fit CPU':>9}{'books wall':>12}{'books CPU':>11}"
-          f"{'stmts':>7}{'txns':>6}{'conns':>7}{'wall %':>8}{'CPU %':>7}")
+          f"{'stmts':>7}{'txns':>6}{'conns':>7}{'wall %':>8}{'CPU %':>7}"
+          f"{'marks wall':>12}{'former':>9}{'marks CPU':>11}{'former':>9}{'  marks/former':>14}")
     for name, r in results:
         print(f"{name:<11}{r['fit_wall']:>9.2f}s{r['fit_cpu']:>8.2f}s"
               f"{1e3 * r['wall']:>10.1f}ms{1e3 * r['cpu']:>9.1f}ms{r['statements']:>7.1f}"
               f"{r['transactions']:>6.1f}{r['connections']:>7.0f}"
-              f"{100 * r['wall'] / r['fit_wall']:>7.2f}%{100 * r['cpu'] / r['fit_cpu']:>6.2f}%")
-    print(f"bookkeeping per task (median of {args.tasks - 1}) against a default fit of one "
-          f"session (mean of {args.fits}); target <= {100 * TARGET:g}% of a task; stmts, txns: "
-          f"per task; conns: opened during the tasks; beside {args.busy} busy process(es)")
+              f"{100 * r['wall'] / r['fit_wall']:>7.2f}%{100 * r['cpu'] / r['fit_cpu']:>6.2f}%"
+              f"{1e3 * r['new_wall']:>10.1f}ms{1e3 * r['old_wall']:>7.1f}ms"
+              f"{1e3 * r['new_cpu']:>9.1f}ms{1e3 * r['old_cpu']:>7.1f}ms"
+              f"  {r['new_wall'] / r['old_wall']:.2f} wall, {r['new_cpu'] / r['old_cpu']:.2f} CPU")
+    print(f"books: the wrapper around a task that does nothing (median of {args.tasks - 1}), "
+          f"against a default fit of one session (mean of {args.fits}); target <= "
+          f"{100 * TARGET:g}% of a task; stmts, txns: per task; conns: opened during the "
+          "tasks; marks: start_job + finish_job alone; former: the same two marks as "
+          f"read-modify-write transactions, interleaved; beside {args.busy} busy process(es)")
     print(f"at end: {load_line()}")
     return 0
 

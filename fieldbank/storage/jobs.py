@@ -29,9 +29,11 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, cast
 
 from sqlalchemy import CursorResult, delete, func, select, update
+from sqlalchemy import exc as sa_exc
 from sqlalchemy.orm import Session
 
 from fieldbank.errors import ParameterError, StorageError
+from fieldbank.storage.config import db_failure
 from fieldbank.storage.core import DatabaseCore, now, to_utc, to_utc_opt
 from fieldbank.storage.orm import (
     JOB_KINDS,
@@ -47,7 +49,19 @@ from fieldbank.storage.records import JobRecord, JobRunRecord
 FINAL_STATES = ("done", "skipped", "failed")
 
 
-def _job(r: JobRow) -> JobRecord:
+#: A job row's columns, as an UPDATE ... RETURNING gives them back.
+_COLUMNS = tuple(JobRow.__table__.c)
+
+
+def _ended(state: str, error: str | None, result: Mapping[str, Any] | None,
+           payload: bytes | None) -> dict[str, Any]:
+    """The columns a job's end sets."""
+    return {"state": state, "finished_at": now(), "error": error, "payload": payload,
+            "result_json": None if result is None else json.dumps(dict(result), sort_keys=True)}
+
+
+def _job(r: Any) -> JobRecord:
+    """A job row (ORM or a returned row: the same column names) as its record."""
     return JobRecord(r.id, r.run_id, r.key, r.patient_code, r.session_label, r.state,
                      r.attempts, r.worker, to_utc_opt(r.started_at), to_utc_opt(r.finished_at),
                      r.error, None if r.result_json is None else json.loads(r.result_json))
@@ -138,14 +152,14 @@ class Jobs(DatabaseCore):
     def start_job(self, run_id: int, key: str, worker: str) -> JobRecord:
         """Mark a job started by ``worker`` (one more attempt); returns it as it was before
         when it had already finished (a task run twice finds its own result)."""
-        with self._write() as s:
-            r = self._job_row(s, run_id, key)
-            if r.state in FINAL_STATES:
-                return _job(r)
-            r.state, r.worker, r.started_at = "running", worker[:255], now()
-            r.attempts += 1
-            r.finished_at = None
-            return _job(r)
+        row = self._mark(update(JobRow).where(
+            JobRow.run_id == run_id, JobRow.key == key, JobRow.state.not_in(FINAL_STATES)
+        ).values(state="running", worker=worker[:255], started_at=now(), finished_at=None,
+                 attempts=JobRow.attempts + 1).returning(*_COLUMNS))
+        if row is not None:
+            return _job(row)
+        with self._read() as s:  # ended already (or no such job: the storage error)
+            return _job(self._job_row(s, run_id, key))
 
     def finish_job(self, run_id: int, key: str, state: str,
                    result: Mapping[str, Any] | None = None, error: str | None = None,
@@ -161,8 +175,15 @@ class Jobs(DatabaseCore):
         if state not in FINAL_STATES:
             raise ParameterError(f"a job ends as one of {', '.join(FINAL_STATES)}; got "
                                  f"{state!r}.")
-        return self._end_job(run_id, key, [JobRow.state == "running", JobRow.attempts == attempt],
-                             state, error, result, payload)
+        live = [JobRow.state == "running", JobRow.attempts == attempt]
+        if state == "failed":  # audited with it: a transaction of its own
+            return self._end_job(run_id, key, live, state, error, result, payload)
+        row = self._mark(update(JobRow).where(JobRow.run_id == run_id, JobRow.key == key, *live)
+                         .values(_ended(state, error, result, payload)).returning(*_COLUMNS))
+        if row is not None:
+            return _job(row), True
+        with self._read() as s:
+            return _job(self._job_row(s, run_id, key)), False
 
     def give_up_job(self, run_id: int, key: str, error: str) -> JobRecord:
         """Record as failed a job the run's process lost (its workers kept dying, the
@@ -181,9 +202,7 @@ class Jobs(DatabaseCore):
             r = self._job_row(s, run_id, key)
             written = cast(CursorResult[Any], s.execute(
                 update(JobRow).where(JobRow.id == r.id, *only_if).values(
-                    state=state, finished_at=now(), error=error, payload=payload,
-                    result_json=None if result is None else json.dumps(dict(result),
-                                                                        sort_keys=True)),
+                    _ended(state, error, result, payload)),
                 execution_options={"synchronize_session": False})).rowcount > 0
             if written and state == "failed":
                 self._audit(s, "fail", "job", r.id, {"run": run_id, "key": key,
@@ -191,6 +210,21 @@ class Jobs(DatabaseCore):
             s.flush()
             s.refresh(r)
             return _job(r), written
+
+    def _mark(self, stmt: Any) -> Any:
+        """Run one statement that marks a job (an UPDATE ... RETURNING, atomic by itself) and
+        return its row, or None. A worker sends two per task, so they cost one round trip
+        each on a server: in autocommit, with no BEGIN and no COMMIT around them (on a busy
+        worker machine each round trip waits for the server's process to get a core). SQLite
+        runs in this process: its write transaction, one sync either way."""
+        if self.engine.dialect.name == "sqlite":
+            with self._write() as s:
+                return s.execute(stmt).one_or_none()
+        try:
+            with self.engine.connect().execution_options(isolation_level="AUTOCOMMIT") as c:
+                return c.execute(stmt).one_or_none()
+        except sa_exc.DBAPIError as exc:
+            raise StorageError(db_failure("Marking a job in", self.engine.url, exc)) from None
 
     def job_payloads(self, run_id: int) -> dict[str, bytes]:
         """Each finished job's payload by job key (jobs without one are left out)."""
