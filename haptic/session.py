@@ -181,7 +181,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
           trace_dir: str | Path | None = None, trace_name: str | None = None,
           db: HapticStore | StoreOpener | None = None, say: Say = _quiet,
           watchdog_ms: int = WATCHDOG_MS, environment: Environment | None = None,
-          on_renderer: Callable[[Renderer], None] | None = None) -> SessionResult:
+          on_renderer: Callable[[Renderer], None] | None = None,
+          snapshot_dir: str | Path | None = None) -> SessionResult:
     """Render ``before`` (A) and ``after`` (B) on ``robot``; store the trace.
 
     Parameters
@@ -234,6 +235,9 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         the remote link puts a distant patient there).
     on_renderer : callable(Renderer), optional
         Called with the renderer once it is built, before the robot is armed.
+    snapshot_dir : str or Path, optional
+        Publish the loop's snapshot (:mod:`haptic.snapshot`) in this directory, for a display
+        in another process (the workspace's robot view); a station makes its own.
 
     Returns
     -------
@@ -278,6 +282,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
             if control:
                 server = stack.enter_context(ControlServer(rd, socket_path, vet=vet))
                 where = f"; control socket {server.path}"
+            if snapshot_dir is not None:
+                rd.snapshot = stack.enter_context(SnapshotWriter(snapshot_dir))
             if station is not None:
                 # started before the loop takes real-time priority, which a child would inherit
                 snap = stack.enter_context(SnapshotWriter())

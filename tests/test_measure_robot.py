@@ -56,7 +56,7 @@ def test_severe_elbow_measured_on_the_robot_is_fitted_severe(tmp_path: Path) -> 
     meta = full[0].metadata
     assert meta["raw_format"] == "NWB" and "trials_dropped" in meta
     assert json.loads(meta["protocol"])["grid"] == [3, 3]
-    assert json.loads(meta["channels"])["fx"].startswith("hand_force")
+    assert json.loads(meta["channels"])["fx"].startswith("acquisition/hand_force")
     # a second measurement never overwrites the raw file
     again = runner.invoke(cli, ["haptic", "measure", "--db", url, "--robot",
                                    "sim://?patient=elbow=severe", "--patient", "SEV",
