@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import socket
 import subprocess
 import threading
@@ -149,10 +150,12 @@ def _session(tmp: Path, key: Path, name: str, *, via_proxy: bool = False,
     engaged its clinician, from this process, and returns what its socket received."""
     port = _free_udp_port()
     link = ["--key", str(key), "--lockstep"]
+    # a data directory of its own (the module's fixture runs before the per-test one)
+    env = {**os.environ, "FIELDBANK_HOME": str(tmp / name / "home")}
     patient = subprocess.Popen(
         _cli("patient", "--robot", PATIENT_ROBOT, "--bind", f"127.0.0.1:{port}", "--log-dir",
              str(tmp / name), "--wait-s", "120", "--json", *link),
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     p_lines = Lines(patient)
     proxy = Proxy(port) if via_proxy else None
     try:
@@ -160,7 +163,8 @@ def _session(tmp: Path, key: Path, name: str, *, via_proxy: bool = False,
         clinician = subprocess.Popen(
             _cli("clinician", "--robot", _clinician_robot(), "--peer", f"127.0.0.1:{target}",
                  "--duration-s", str(DURATION_S), "--trace-dir", str(tmp / name), "--no-db",
-                 "--json", *link), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                 "--json", *link), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=env)
         got: list[bytes] = []
         if attack is not None:
             p_lines.wait_for("clinician confirmed")
