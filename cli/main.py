@@ -59,8 +59,17 @@ COMMANDS: dict[str, LazyCommand] = {
     "validate": C("fieldbank.cli.validate", "validate",
                   "Check predictions against maps measured after the plan; --loo: leave maps "
                   "out of a fit."),
+    "cluster": C("fieldbank.cli.cluster", "cluster",
+                 "The Dask cluster of the batch commands: its certificates (docs/scale-out.md)."),
     "config": C("fieldbank.cli.config", "config",
                 "Settings: fieldbank.toml, environment variables and their defaults."),
+    "serve": C("fieldbank.cli.serve", "serve",
+               "Serve the workspace: log in, find a patient, compose a plan, feel it on the "
+               "robot."),
+    "users": C("fieldbank.cli.users", "users",
+               "Accounts of the workspace: add, list, passwords, roles, API tokens."),
+    "audit": C("fieldbank.cli.audit", "audit",
+               "Show the audit log, newest first: who did or read what, when, from where."),
     "demo": C("fieldbank.cli.demo", "demo",
               "Run the whole product once on synthetic sample data, saying what it does."),
 }

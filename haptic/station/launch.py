@@ -24,7 +24,8 @@ from dataclasses import dataclass, field, replace
 from typing import IO, Any
 
 from fieldbank.haptic.errors import HapticError
-from fieldbank.haptic.station.config import StationConfig, new_token
+from fieldbank.haptic.station.config import STATION_BOUNDS, StationConfig, check_view, new_token
+from fieldbank.validation import check_fields
 
 #: Longest wait for the station process to listen, s: starting Python and the page's web
 #: server takes about a second on an idle machine, and twenty or more on a busy one.
@@ -58,6 +59,10 @@ class StationOptions:
     view: str = "opposite"
     training: dict[str, Any] = field(default_factory=dict)
     remote: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_fields(self, STATION_BOUNDS, what="station setting", names=("port",))
+        check_view(self.view)
 
 
 def _loopback(host: str) -> bool:
@@ -98,8 +103,6 @@ class StationProcess:
             raise HapticError(f"the station binds to 127.0.0.1 unless told otherwise; "
                               f"{host!r} is reachable from other machines (pass "
                               f"--station-allow-remote to mean it)")
-        if view not in ("opposite", "behind"):
-            raise HapticError(f"station view is 'opposite' or 'behind'; got {view!r}")
         self.config = StationConfig(str(snapshot_path), str(socket_path), new_token(), host,
                                     int(port), training=dict(training or {}), view=view,
                                     remote=dict(remote or {}))
@@ -113,12 +116,16 @@ class StationProcess:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}/?token={self.config.token}"
 
-    def start(self, timeout_s: float = START_TIMEOUT_S) -> StationProcess:
+    def start(self, timeout_s: float = START_TIMEOUT_S,
+              stderr: IO[Any] | None = None) -> StationProcess:
+        """Start the process and wait until it listens; its log goes to ``stderr`` (default:
+        this process's)."""
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
         proc = subprocess.Popen([sys.executable, "-m", "fieldbank.haptic.station"],
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr,
+                                env=env)
         self._proc = proc
         assert proc.stdin is not None and proc.stdout is not None
         proc.stdin.write((json.dumps(self.config.to_dict()) + "\n").encode())

@@ -57,8 +57,10 @@ from fieldbank.haptic.safety import FaultCode, Mode
 from fieldbank.haptic.snapshot import SnapshotReader
 from fieldbank.haptic.station.config import StationConfig
 from fieldbank.haptic.training import TrainingProtocol
+from fieldbank.logthrottle import ThrottledLog
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.sanitize import printable
 
 log = logging.getLogger("fieldbank.haptic.station")
 
@@ -74,6 +76,8 @@ MAX_PAGE_MESSAGE = 4096
 MAX_PAGES = 8
 #: How often the info is fetched even when nothing changed, s.
 INFO_REFRESH_S = 2.0
+#: Refused requests are logged at most this often per reason, with counts, s.
+REFUSED_LOG_INTERVAL_S = 1.0
 #: Commands a remote assessment's page sends to the station itself (not to the renderer).
 DESK_COMMANDS = ("prior", "assess_answer")
 #: How often a remote station reads the link's tap, s, and sends the link's figures.
@@ -373,31 +377,56 @@ _REFUSED = """<!DOCTYPE html><html lang="en"><meta charset="utf-8"><title>Statio
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
 
-def make_app(station: Station) -> web.Application:
-    """The aiohttp application of ``station`` (routes in the module docstring)."""
+def page_html(station: Station, extra: Mapping[str, Any] | None = None,
+              nav: str = "") -> tuple[str, str]:
+    """The station page (HTML with its script and style inline) and the
+    Content-Security-Policy that lets exactly those run. ``extra`` goes into the page's
+    configuration (the workspace's robot view: its WebSocket's path); ``nav``: markup for the
+    top bar (a way back into the workspace), empty for the station on its own."""
     cfg = station.config
-    template = (resources.files("fieldbank.haptic.station") / "page.html").read_text("utf-8")
-    script = (resources.files("fieldbank.haptic.station") / "station.js").read_text("utf-8")
-    style = (resources.files("fieldbank.haptic.station") / "station.css").read_text("utf-8")
+    pkg = resources.files("fieldbank.haptic.station")
+    template = (pkg / "page.html").read_text("utf-8")
+    script = (pkg / "station.js").read_text("utf-8")
+    style = (pkg / "station.css").read_text("utf-8")
     if station.desk is not None:  # a remote assessment's panels, in files of their own
-        script += (resources.files("fieldbank.haptic.station") / "remote.js").read_text("utf-8")
-        style += (resources.files("fieldbank.haptic.station") / "remote.css").read_text("utf-8")
-
+        script += (pkg / "remote.js").read_text("utf-8")
+        style += (pkg / "remote.css").read_text("utf-8")
     # what the page knows from the start: the view, what 'Start training' runs, the muscles
     proto = TrainingProtocol.from_dict(cfg.training or {})
-    page_base = {
+    config = {
         "view": cfg.view,
         "training": {"name": proto.title, "n_trials": proto.n_trials},
         "muscles": [{"code": k, "name": v} for k, v in MUSCLE_GROUP_NAMES.items()],
+        "remote": station.desk is not None,
+        "assess": {} if station.desk is None else {
+            "groups": station.desk.groups, "levels": station.desk.levels},
+        **(extra or {}),
     }
+    nonce = secrets.token_urlsafe(16)
+    body = (template.replace("{{nonce}}", nonce).replace("{{style}}", style)
+            .replace("{{nav}}", nav).replace("{{script}}", script)
+            .replace("{{config}}", json.dumps(config).replace("<", "\\u003c")))
+    csp = (f"default-src 'none'; script-src 'nonce-{nonce}'; style-src 'nonce-{nonce}'; "
+           "connect-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'; "
+           "frame-ancestors 'none'")
+    return body, csp
+
+
+def make_app(station: Station) -> web.Application:
+    """The aiohttp application of ``station`` (routes in the module docstring)."""
+    cfg = station.config
+
+    # a flood of refused requests gives a line a second per reason, with counts
+    refused = ThrottledLog(log, REFUSED_LOG_INTERVAL_S, schedule=lambda delay, fn: (
+        asyncio.get_running_loop().call_later(delay, fn)))
 
     @web.middleware
     async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
         if request.path == "/favicon.ico":  # browsers ask without the token; nothing to give
             return web.Response(status=404)
         if not _authorised(request, cfg.token):
-            log.warning("station request without a valid token refused: %s %s", request.method,
-                        request.path)
+            refused.note("station request without a valid token refused",
+                         f"{request.method} {printable(request.path)[:200]}")
             return web.Response(status=403, text=_REFUSED, content_type="text/html")
         resp = await handler(request)
         resp.headers["Referrer-Policy"] = "no-referrer"
@@ -406,19 +435,9 @@ def make_app(station: Station) -> web.Application:
         return resp
 
     async def page(request: web.Request) -> web.Response:
-        nonce = secrets.token_urlsafe(16)
-        body = (template.replace("{{nonce}}", nonce).replace("{{style}}", style)
-                .replace("{{script}}", script)
-                .replace("{{config}}", json.dumps({
-                    **page_base, "remote": station.desk is not None,
-                    "assess": {} if station.desk is None else {
-                        "groups": station.desk.groups, "levels": station.desk.levels},
-                }).replace("<", "\\u003c")))
+        body, csp = page_html(station)
         resp = web.Response(text=body, content_type="text/html")
-        resp.headers["Content-Security-Policy"] = (
-            f"default-src 'none'; script-src 'nonce-{nonce}'; style-src 'nonce-{nonce}'; "
-            "connect-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'; "
-            "frame-ancestors 'none'")
+        resp.headers["Content-Security-Policy"] = csp
         resp.headers["X-Frame-Options"] = "DENY"
         return resp
 
@@ -430,7 +449,8 @@ def make_app(station: Station) -> web.Application:
     async def socket(request: web.Request) -> web.StreamResponse:
         origin = request.headers.get("Origin")
         if origin is not None and origin != f"http://{request.host}":
-            log.warning("station WebSocket from origin %s refused", origin)
+            refused.note("station WebSocket from another origin refused",
+                         printable(origin)[:200])
             return web.Response(status=403, text="cross-origin WebSocket refused")
         if len(station.pages) >= MAX_PAGES:
             return web.Response(status=503, text="too many station pages open")
@@ -474,6 +494,7 @@ def make_app(station: Station) -> web.Application:
             app["desk"] = asyncio.create_task(station.produce_desk())
 
     async def stop_producer(app: web.Application) -> None:
+        refused.flush()
         app["producer"].cancel()
         if "desk" in app:
             app["desk"].cancel()

@@ -8,8 +8,10 @@ order whatever the number of workers, figures carry no dates, and the page state
 leaves it out only when asked, so that reruns can be byte-identical).
 The database's URL is never embedded (a report travels; the URL may carry a host, a user or a
 password). Text cells of ``metrics.csv`` are neutralised against formula injection
-(:func:`fieldbank.sanitize.csv_cell`). Each file is written to a temporary name and renamed,
-so a failed run leaves no half-written file.
+(:func:`fieldbank.sanitize.csv_cell`). The files are written together into a temporary
+directory beside ``--out`` and renamed into place once all are complete
+(:func:`fieldbank.files.write_directory`), so a failed run - a full disk - leaves nothing
+behind and its rerun is not refused.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from typing import Any
 from fieldbank.engine import progress_bar
 from fieldbank.errors import FileRefused
 from fieldbank.figures import svg
-from fieldbank.files import write_atomic
+from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, write_directory
 from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
 from fieldbank.interventions.report.figures.cohort import (
@@ -45,6 +47,7 @@ from fieldbank.interventions.report.trust import (
     with_known_intervals,
 )
 from fieldbank.sanitize import csv_cell
+from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
 SCHEMA = "fieldbank.report"
@@ -164,10 +167,50 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
     return out
 
 
+def checked_cases(db: Database, selection: Selection, accept_poor_fit: bool = False
+                  ) -> list[CaseSpec]:
+    """The selected cases; SelectionError for none, and for a case whose model comes from a
+    poor fit unless ``accept_poor_fit`` (then each case records it)."""
+    cases = select_cases(db, selection)
+    poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
+    if poor and not accept_poor_fit:
+        raise SelectionError(
+            "the model before of " + ", ".join(f"plan {c.plan_id} ({c.patient_code})"
+                                               for c in poor)
+            + " comes from a poor fit; its predictions would not describe the patient. "
+            "Narrow the selection, refit, or give --accept-poor-fit (recorded in the report).")
+    if accept_poor_fit:
+        cases = [dataclasses.replace(c, accept_poor_fit=True) for c in cases]
+    return cases
+
+
+def report_page(db: Database, selection: Selection, stamp: str | None = None) -> str:
+    """The report's page (``report.html``) of ``selection``, computed in this process and
+    returned as text, not written (the workspace's download of a patient's report); the
+    intervals are read from, and kept with, the fits as :func:`build_report` does."""
+    cases = with_known_intervals(db, checked_cases(db, selection))
+    results, _ = compute_all(cases, 1)
+    keep_intervals(db, cases, [r.intervals for r in results])
+    return render(results, page_inputs(cases, selection, None, stamp), cohort_figures(results))
+
+
+def page_inputs(cases: list[CaseSpec], selection: Selection, title: str | None,
+                stamp: str | None) -> dict[str, Any]:
+    """What the page states it was made from: title, selection, cases, when (``stamp``)."""
+    if title is None:
+        title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
+                 f"fieldbank report: {len(cases)} cases")
+    inputs: dict[str, Any] = {"title": title, "selection": selection.describe(),
+                              "cases": len(cases)}
+    if stamp:
+        inputs["generated"] = stamp
+    return inputs
+
+
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
                  title: str | None = None, accept_poor_fit: bool = False,
-                 force: bool = False, scheduler: str | None = None,
+                 force: bool = False, scheduler: Scheduler | str | None = None,
                  say: Callable[[str], None] | None = None) -> ReportOutput:
     """Select, compute and write the report; raises SelectionError for an empty selection,
     and for cases whose model comes from a poor fit unless ``accept_poor_fit`` (then each such
@@ -180,16 +223,7 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
     if there and not force:
         raise FileRefused(f"{out_dir} already holds a report ({', '.join(there)}); give --force "
                           "to replace it, or choose another --out.")
-    cases = select_cases(db, selection)
-    poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
-    if poor and not accept_poor_fit:
-        raise SelectionError(
-            "the model before of " + ", ".join(f"plan {c.plan_id} ({c.patient_code})"
-                                               for c in poor)
-            + " comes from a poor fit; its predictions would not describe the patient. "
-            "Narrow the selection, refit, or give --accept-poor-fit (recorded in the report).")
-    if accept_poor_fit:
-        cases = [dataclasses.replace(c, accept_poor_fit=True) for c in cases]
+    cases = checked_cases(db, selection, accept_poor_fit)
     wrap = None
     if progress:
         from tqdm import tqdm
@@ -206,18 +240,18 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
         cases = with_known_intervals(db, cases)
         results, used = compute_all(cases, jobs, wrap)
         keep_intervals(db, cases, [r.intervals for r in results])
-    if title is None:
-        title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
-                 f"fieldbank report: {len(cases)} cases")
-    inputs: dict[str, Any] = {"title": title, "selection": selection.describe(),
-                              "cases": len(cases)}
-    if stamp:
-        inputs["generated"] = stamp
+    inputs = page_inputs(cases, selection, title, stamp)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = [out / f for f in FILES]
     json_inputs = {**inputs, "selection": selection.to_dict()}
-    write_atomic(paths[1], metrics_csv(results).encode("utf-8"))
-    write_atomic(paths[2], metrics_json(results, json_inputs).encode("utf-8"))
-    write_atomic(paths[0], render(results, inputs, cohort_figures(results)).encode("utf-8"))
+    files = {FILES[1]: metrics_csv(results), FILES[2]: metrics_json(results, json_inputs),
+             FILES[0]: render(results, inputs, cohort_figures(results))}
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_directory(out, files)
+    except OSError as exc:
+        if exc.errno in DISK_FULL_ERRNOS:
+            raise FileRefused(disk_full_message(out, exc)) from None
+        raise FileRefused(f"cannot write the report into {out}: {exc.strerror or exc}; "
+                          "nothing was written.") from None
     return ReportOutput(out, paths[0], paths[1], paths[2], len(cases), used)
