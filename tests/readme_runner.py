@@ -35,12 +35,15 @@ directives cannot rot as the README changes. ``ACTION`` is one of
     started and left running once its output shows TEXT (a renderer the next commands talk
     to); at the end of the block it is ended by its ``stop`` command, else waited for;
 ``stop COMMAND``
-    how a ``background`` command is ended at the end of its block (``fieldbank haptic stop``).
+    how a ``background`` command is ended at the end of its block (``fieldbank haptic stop``);
+``offline REASON``
+    the command names another machine but sends it nothing (``cluster certs --host``: a
+    certificate for that address): it runs, and the reason says why that is safe.
 
 Several directives may name the same command. No command may name a machine other than this
 one: an address that is not the loopback (in ``tcp://``, ``tls://``, ``socket://``, a database
-URL, ``--bind``/``--peer``/``--host``) fails the test unless the command is skipped - the test
-never sends a packet beyond the loopback.
+URL, ``--bind``/``--peer``/``--host``) fails the test unless the command is skipped or marked
+``offline`` - the test never sends a packet beyond the loopback.
 """
 
 from __future__ import annotations
@@ -58,7 +61,7 @@ from pathlib import Path
 from typing import IO
 
 ROOT = Path(__file__).resolve().parents[1]
-ACTIONS = ("exit", "expect", "add", "instead", "skip", "background", "stop")
+ACTIONS = ("exit", "expect", "add", "instead", "skip", "background", "stop", "offline")
 #: A hang guard for one command, never a timing target: a busy machine is slow.
 COMMAND_TIMEOUT_S = 1800.0
 _FENCE = re.compile(r"^```sh\s*\n(.*?)^```", re.S | re.M)
@@ -81,6 +84,7 @@ class Command:
     skip: str = ""
     background: str = ""
     stop: str = ""
+    offline: str = ""
 
     @property
     def bare(self) -> str:
@@ -289,7 +293,7 @@ class Runner:
                     self.skipped.append((cmd, cmd.skip))
                     self.log.write(f"# skipped: {cmd.text}\n#   {cmd.skip}\n")
                     continue
-                hosts = foreign_addresses(cmd.to_run)
+                hosts = [] if cmd.offline else foreign_addresses(cmd.to_run)
                 if hosts:
                     problems.append(f"{where} names another machine ({', '.join(hosts)}): "
                                     "use the loopback or skip it with the reason")

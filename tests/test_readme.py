@@ -37,13 +37,14 @@ def test_every_directive_names_one_command_and_no_command_leaves_this_machine() 
     commands = [c for b in blocks for c in b.commands]
     assert len(commands) > 40
     for c in commands:
-        if not c.skip:
+        if not c.skip and not c.offline:
             assert not foreign_addresses(c.to_run), (c.line, c.text)
         if c.background:
             assert c.stop or "--duration-s" in c.to_run or c.exit == 0, c.text
     # the tours start where a new user starts, and the skips say why
     assert commands[0].bare == "scripts/demo"
     assert all(len(c.skip) > 20 for c in commands if c.skip)
+    assert all(len(c.offline) > 20 for c in commands if c.offline)
 
 
 def test_the_address_check_catches_another_machine() -> None:
