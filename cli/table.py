@@ -23,20 +23,29 @@ _BREAKS = "&?/,;="
 def table(header: Sequence[str], rows: Sequence[Sequence[str]], align: str = "",
           width: int = WIDTH) -> list[str]:
     """``header`` and ``rows`` as lines: ``align`` per column '<' or '>' (default '<'), the
-    last column wrapped within ``width``."""
+    last column wrapped within ``width``; when the other columns leave it less than
+    :data:`MIN_LAST`, the widest of them is narrowed and its cells wrapped too."""
     n = len(header)
     cells = [list(header), *([str(c) for c in r] for r in rows)]
-    widths = [max(len(r[k]) for r in cells) for k in range(n - 1)]
+    widths = [max(len(r[k]) for r in cells) for k in range(n)]
     ways = (align + "<" * n)[:n]
-    lead = sum(widths) + 2 * (n - 1)
-    room = max(MIN_LAST, width - lead)
+
+    def lead() -> int:
+        return sum(widths[:-1]) + 2 * (n - 1)
+
+    while n > 1 and lead() + MIN_LAST > width:  # narrow the widest of the other columns
+        k = max(range(n - 1), key=lambda i: widths[i])
+        if widths[k] <= MIN_LAST:
+            break
+        widths[k] = max(MIN_LAST, widths[k] - (lead() + MIN_LAST - width))
+    widths[-1] = max(MIN_LAST, width - lead())
     out = []
     for r in cells:
-        head = "  ".join(f"{c:{ways[k]}{widths[k]}}" for k, c in enumerate(r[:-1]))
-        head = head + "  " if n > 1 else head
-        last = _wrap_cell(r[-1], room)
-        out.append((head + last[0]).rstrip())
-        out += [" " * len(head) + more for more in last[1:]]
+        parts = [_wrap_cell(c, widths[k]) for k, c in enumerate(r)]
+        for i in range(max(len(p) for p in parts)):
+            line = "  ".join(f"{(p[i] if i < len(p) else ''):{ways[k]}{widths[k]}}"
+                             for k, p in enumerate(parts))
+            out.append(line.rstrip())
     return out
 
 

@@ -78,18 +78,21 @@ def test_config_show_prints_each_value_and_its_source_without_secrets(clean_env:
     r = run("config", "show", env={"FIELDBANK_HOME": str(clean_env / "h")})
     assert r.exit_code == 0
     assert "s3cret" not in r.output
-    lines: dict[str, str] = {}  # a row and the lines its last column wrapped onto
+    out = r.stdout.splitlines()
+    assert max(len(ln) for ln in out) <= 100
+    # each row's columns, with the lines a long cell wrapped onto (at the header's columns)
+    at_value, at_from = out[0].index("value"), out[0].index("from")
+    rows: dict[str, list[str]] = {}
     last = ""
-    for ln in r.stdout.splitlines()[1:]:
-        if ln.startswith(" "):
-            lines[last] += " " + ln.strip()
-        else:
+    for ln in out[1:]:
+        if not ln.startswith(" "):
             last = ln.split()[0]
-            lines[last] = ln
-    assert max(len(ln) for ln in r.stdout.splitlines()) <= 100
-    assert "ana:***@db.example" in lines["db"] and "fieldbank.toml" in lines["db"]
-    assert "variable FIELDBANK_HOME" in lines["home"]
-    assert "max_rows=5" in lines["ingest.limits"]
+            rows[last] = ["", ""]
+        rows[last][0] += ln[at_value:at_from].strip()
+        rows[last][1] += " " + ln[at_from:].strip()
+    assert "ana:***@db.example" in rows["db"][0] and "fieldbank.toml" in rows["db"][1]
+    assert "variable FIELDBANK_HOME" in " ".join(rows["home"][1].split())
+    assert "max_rows=5" in rows["ingest.limits"][0]
     doc = json.loads(run("config", "show", "--json").stdout)
     assert doc["file"].endswith("fieldbank.toml")
     assert {s["name"] for s in doc["settings"]} >= {"db", "home", "robot", "scheduler",

@@ -221,8 +221,8 @@ def test_a_fault_the_robot_reports_is_said_in_words() -> None:
     assert "a fault of its own" in text and "a timeout (no frame in time) (code 2)" in text
     link = RobotLink(MemoryPort())
     guard = RobotGuard(link, Safety(SafetyConfig(), 0.001), 0.001)
-    link.watchdog_flag_frames += 1
-    link.flags = FLAG_WATCHDOG
+    link.state.watchdog_flag_frames += 1  # a STATE with the watchdog flag has come in
+    link.state.flags = FLAG_WATCHDOG
     code, msg = guard.check(1)
     assert code == FaultCode.DEVICE and "watchdog tripped" in msg
     assert "flags" not in msg and "code 0" not in msg
