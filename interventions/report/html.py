@@ -57,7 +57,8 @@ tr.treated td, tr.treated th { background: #fdf0e6; }
 .verdict.failed { color: #fff; background: #b03a00; border-color: #b03a00; }
 .verdict.partial { color: #6b3d00; background: #fdecd2; border-color: #D55E00; }
 .verdict.open { color: #444; background: #f0f0f4; border-color: #888; }
-p.checked { font-size: 1em; }
+p.checked { font-size: 1em; line-height: 1.7; }
+.checkitem { white-space: nowrap; }
 .rests { font-size: 0.92em; }
 .legend, .nochange { color: #555; font-size: 0.88em; max-width: 70em; }
 .nochange { border-left: 3px solid #ccd; padding-left: 0.6em; }
@@ -435,9 +436,9 @@ def render(results: Sequence[CaseResult], inputs: Mapping[str, Any],
     if checked:  # every verdict at the top, a failed one as plain as a confirmed one
         out.append('<p class="checked">Predictions checked against maps measured after the '
                    "plan: " + "; ".join(
-                       f'{verdict_badge(str(r.row["validation"]))} <a href="#plan-'
-                       f'{r.spec.plan_id}">{escape(r.spec.patient_code or "")} plan '
-                       f"{r.spec.plan_id}</a>" for r in checked) + ".</p>")
+                       f'<span class="checkitem">{verdict_badge(str(r.row["validation"]))} '
+                       f'<a href="#plan-{r.spec.plan_id}">{escape(r.spec.patient_code or "")} '
+                       f"plan {r.spec.plan_id}</a></span>" for r in checked) + ".</p>")
     out += [_figure(k, c, s) for k, c, s in summary]
     out.append('<h2 id="contents">Contents</h2><ol class="toc">')
     for code, cases in groups.items():
