@@ -11,7 +11,7 @@ from __future__ import annotations
 # fieldbank.fitting (ALGORITHMS, DEFAULT_ALGORITHM), .space, .uncertainty
 FIT_ALGORITHMS: tuple[str, ...] = ("mlsl+lbfgs", "crs2+bobyqa", "direct+lbfgs", "dual_annealing")
 FIT_DEFAULT_ALGORITHM = "mlsl+lbfgs"
-FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest")
+FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest", "slack")
 # fieldbank.model.MODEL_VERSION: the model version fits are made under (fit --older-than)
 MODEL_VERSION = 1
 FIT_DEFAULT_PRIOR_WEIGHT = 1.0

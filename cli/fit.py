@@ -324,10 +324,10 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
     m = detail.model
     p = m.params
     click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}")
-    click.echo("  group                        Km N/m    alpha N    beta")
+    click.echo("  group                        Km N/m    alpha N    beta  slack mm")
     for i, g in enumerate(GROUPS):
         click.echo(f"  {g} {GROUP_NAMES[g]:<24}{p.km_n_per_m[i]:>10.1f} {p.alpha_n[i]:>10.1f} "
-                   f"{p.beta[i]:>7.3f}")
+                   f"{p.beta[i]:>7.3f} {1000 * p.slack_offset_m[i]:>+9.1f}")
     q = [math.degrees(v) for v in p.q_rest_rad]
     click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
     if detail.lineage:

@@ -35,7 +35,7 @@ what-if must say:
 Which parameters a step acts on follows from the catalogue's public contract (``targets()``
 and ``EFFECTS``): a change of α or β scales the group's reflex force, which rests on both α
 and β of the group; a change of Km or of the slack length moves its passive force, which rests
-on Km.
+on Km and (when the fit fitted it) the slack length.
 """
 
 from __future__ import annotations
@@ -71,8 +71,9 @@ GUESS_WIDENING = 1.25
 #: Changed parameter (catalogue ``EFFECTS`` key) -> what the change scales and the fitted
 #: parameters that size it.
 _FORCE_OF = {"alpha_n": ("reflex", ("alpha", "beta")), "beta": ("reflex", ("alpha", "beta")),
-             "km_n_per_m": ("passive", ("km",)), "slack_offset_m": ("passive", ("km",))}
-_WHAT = {"reflex": "stretch reflex (α, β)", "passive": "passive stiffness (Km)"}
+             "km_n_per_m": ("passive", ("km", "slack")),
+             "slack_offset_m": ("passive", ("km", "slack"))}
+_WHAT = {"reflex": "stretch reflex (α, β)", "passive": "passive force (Km, slack length)"}
 
 
 class PoorFitError(InterventionError):
@@ -476,7 +477,8 @@ def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: C
 
 def _values(params: ArmParams) -> dict[str, float]:
     out = {}
-    for kind, attr in (("km", "km_n_per_m"), ("alpha", "alpha_n"), ("beta", "beta")):
+    for kind, attr in (("km", "km_n_per_m"), ("alpha", "alpha_n"), ("beta", "beta"),
+                       ("slack", "slack_offset_m")):
         for g, v in zip(("sf", "se", "ef", "ee", "bf", "be"), getattr(params, attr),
                         strict=True):
             out[f"{kind}_{g}"] = float(v)

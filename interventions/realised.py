@@ -451,7 +451,7 @@ class Treated:
 def treated(before: ArmParams, after: ArmParams) -> tuple[Treated, ...]:
     """The groups and forces the change from ``before`` to ``after`` acts on, in model order.
     A change of α or β moves the reflex force, which rests on both; of Km or the slack
-    length, the passive force, which rests on Km."""
+    length, the passive force, which rests on Km and the slack length."""
     out = []
     for k, g in enumerate(GROUPS):
         changed = [f for f in _FIELDS if getattr(before, f)[k] != getattr(after, f)[k]]
@@ -460,7 +460,7 @@ def treated(before: ArmParams, after: ArmParams) -> tuple[Treated, ...]:
         if any(f in _REFLEX_FIELDS for f in changed):
             out.append(Treated(g, "reflex", (f"alpha_{g}", f"beta_{g}")))
         if any(f not in _REFLEX_FIELDS for f in changed):
-            out.append(Treated(g, "passive", (f"km_{g}",)))
+            out.append(Treated(g, "passive", (f"km_{g}", f"slack_{g}")))
     return tuple(out)
 
 

@@ -75,7 +75,8 @@ D reaches the level (a one-dimensional root). Targets (:func:`parse_severity_opt
     elbow:dynamic=mild           both directions of the joint, reflex only
 
 Read-outs of a fitted model name the parameters behind each grade that the maps did not
-identify (``unidentified``): Km of the group for the passive grade, α and β for the dynamic one.
+identify (``unidentified``): Km (and the slack length, when fitted) of the group for the passive
+grade, α and β for the dynamic one.
 """
 
 from __future__ import annotations
@@ -121,7 +122,7 @@ COMPONENTS: tuple[str, ...] = ("passive", "dynamic")
 
 MUSCLE_GROUP_NAMES: dict[str, str] = GROUP_NAMES
 #: The fitted parameters each component rests on, per group.
-COMPONENT_PARAMETERS: dict[str, tuple[str, ...]] = {"passive": ("km",),
+COMPONENT_PARAMETERS: dict[str, tuple[str, ...]] = {"passive": ("km", "slack"),
                                                     "dynamic": ("alpha", "beta")}
 
 _ALIASES = {

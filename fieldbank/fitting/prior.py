@@ -16,6 +16,11 @@ the held parameters from a stated prior range instead of keeping them at the hel
   10^s, β rising from 0.1 to 1) at which the group's dynamic ratio is r - on the default arm
   the elbow flexors run from α 100 N, β 0.1 to α ≈ 1,300 N, β 1. When only one of α and β is
   held the other keeps its fitted samples;
+* **contracture** (the slack offset of the group, when the fit fits it): from no contracture
+  (0) to the brief's shortest slack (:data:`fieldbank.fitting.space.SLACK_RANGE_M`, -20 mm),
+  linear in the place in the range - the severity scale does not reach a contracture's
+  grade (20 mm shorter makes the elbow's passive torque ≈ 1.7 × unimpaired), so its range is
+  the brief's, on the same [0, top] place as the others (:func:`contracture_slack`);
 * **draws**: the severity score uniform on [0, top] - each level equally likely - stratified
   (one draw in each of n equal slices, in a seeded random order), so 40 samples reach both
   ends of the range. The held units of one sample share their place in their ranges (the
@@ -59,6 +64,7 @@ from fieldbank.evaluate.severity import (
     reflex_path,
 )
 from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.space import SLACK_RANGE_M
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUP_INDEX, GROUPS
@@ -75,8 +81,17 @@ RANGE_BISECTIONS = 12
 #: path's own top when a group's reflex needs more to reach the top of the severe band.
 PATH_POINTS = 65
 PATH_TOP = 1.6
-#: Kind of each fitted parameter -> the component of the severity grade it sizes.
-COMPONENT_OF: dict[str, str] = {"km": "passive", "alpha": "dynamic", "beta": "dynamic"}
+#: Kind of each fitted parameter -> the component of its prior range: the severity grade it
+#: sizes, or the contracture (the slack offset).
+COMPONENT_OF: dict[str, str] = {"km": "passive", "alpha": "dynamic", "beta": "dynamic",
+                                "slack": "contracture"}
+
+
+def contracture_slack(scores: FloatArray) -> FloatArray:
+    """The slack offset (m) at places ``scores`` (0 … :data:`SCORE_HIGH`) of a contracture's
+    range: linear from 0 to the brief's shortest slack (module docstring)."""
+    return np.asarray(np.asarray(scores, dtype=float) / SCORE_HIGH * SLACK_RANGE_M[0],
+                      dtype=float)
 
 
 def unit_of(name: str) -> tuple[str, str]:
@@ -89,8 +104,8 @@ def unit_of(name: str) -> tuple[str, str]:
     """
     kind, _, group = name.rpartition("_")
     if kind not in COMPONENT_OF or group not in GROUP_INDEX:
-        raise FitError(f"{name!r} has no prior range on the severity scale (only Km, α and β "
-                       "of a muscle group do).")
+        raise FitError(f"{name!r} has no prior range on the severity scale (only Km, α, β and "
+                       "the slack length of a muscle group do).")
     return group, COMPONENT_OF[kind]
 
 
@@ -98,7 +113,7 @@ def units(names: Collection[str]) -> dict[tuple[str, str], tuple[str, ...]]:
     """The names grouped by (group, component), in the fit's order (Km, α, β per group);
     names without a range (q_rest) are left out."""
     out: dict[tuple[str, str], list[str]] = {}
-    for kind in ("km", "alpha", "beta"):
+    for kind in ("km", "alpha", "beta", "slack"):
         for g in GROUPS:
             name = f"{kind}_{g}"
             if name in names:
@@ -127,7 +142,10 @@ class GuessRange:
         return self.score_high < SCORE_HIGH
 
     @property
-    def ratio_high(self) -> float:
+    def ratio_high(self) -> float | None:
+        """The severity ratio at the top (None for a contracture: its range is in mm)."""
+        if self.component == "contracture":
+            return None
         return ratio_of_score(self.score_high, self.component)
 
     def to_dict(self) -> dict[str, Any]:
@@ -228,6 +246,8 @@ class Prior:
                ) -> dict[str, FloatArray]:
         """The parameters of ``group``'s ``component`` at severity scores (n,): {name: (n,)}."""
         sc = np.atleast_1d(np.asarray(scores, dtype=float))
+        if component == "contracture":
+            return {f"slack_{group}": contracture_slack(sc)}
         ratio = np.array([ratio_of_score(float(x), component, self.scale) for x in sc])
         i = GROUP_INDEX[group]
         if component == "passive":
@@ -321,7 +341,9 @@ def prior_dict(ranges: Sequence[GuessRange], prior: Prior) -> dict[str, Any]:
         "description": ("held parameters are drawn, for prediction intervals, from the "
                         "severity scale between unimpaired (score 0) and the top of its "
                         f"severe band (score {SCORE_HIGH:g}, {ratio_of_score(SCORE_HIGH):.3g} "
-                        "× unimpaired), uniform in the score, unless the maps allow less"),
+                        "× unimpaired), uniform in the score, unless the maps allow less; "
+                        "a held slack length from none to the brief's shortest "
+                        f"({1000 * SLACK_RANGE_M[0]:g} mm)"),
         "score_high": SCORE_HIGH,
         "ranges": [{**r.to_dict(), "values": {n: list(v) for n, v in
                                               prior.interval(r).items()}} for r in ranges],
