@@ -129,11 +129,14 @@ def main() -> None:
     for nz in args.noise:
         sub = [r for r in rows if r["noise"] == nz]
         inside = sum(r["low"] <= r["slack"] <= r["high"] for r in sub)
-        print(f"\nnoise {100 * nz:g}%: slack error {1000 * np.mean([abs(r['fitted'] - r['slack']) for r in sub]):.2f} mm "
-              f"mean, {1000 * np.max([abs(r['fitted'] - r['slack']) for r in sub]):.2f} mm worst; "
+        err = [1000 * abs(r["fitted"] - r["slack"]) for r in sub]
+        poor = sum(r["poor_slack"] for r in sub)
+        poor0 = sum(r["poor_base"] for r in sub)
+        print(f"\nnoise {100 * nz:g}%: slack error {np.mean(err):.2f} mm mean, "
+              f"{np.max(err):.2f} mm worst; "
               f"95% interval holds the truth in {inside}/{len(sub)}; identified in "
-              f"{sum(r['identified'] for r in sub)}/{len(sub)}; poor fits {sum(r['poor_slack'] for r in sub)}"
-              f"/{len(sub)} with the slack, {sum(r['poor_base'] for r in sub)}/{len(sub)} without; "
+              f"{sum(r['identified'] for r in sub)}/{len(sub)}; poor fits {poor}"
+              f"/{len(sub)} with the slack, {poor0}/{len(sub)} without; "
               f"the other groups' slack (truth 0) inside its interval "
               f"{sum(r['others_inside'] for r in sub)}/{5 * len(sub)}, mean |fitted| "
               f"{1000 * np.mean([r['others_err'] for r in sub]):.2f} mm")
