@@ -38,6 +38,13 @@ When the maps that see the change still differ from the model before + f × the 
 than the noise and the fit's spread explain (χ²/dof > 1), the SE is multiplied by √(χ²/dof)
 (:func:`misfit_scale`, a Birge ratio), as a fit's residual scale widens its intervals.
 
+**Never below what the noise allows.** The model before was fitted to the first session's
+maps: along the direction of the predicted change it cannot be known better than those maps'
+noise allows, 1/S₀ with S₀ the predicted change's whitened size on them (the first session's
+own sd). A fit's samples can claim less - parameters held at a guess or pinned by the prior do
+not vary in them - so the fit part of the SE is at least 1/S₀ (:func:`first_session_se`), and
+the SE is never below √(1/S² + 1/S₀²), the two sessions' noise alone.
+
 ``tests/test_validate_calibration.py`` checks the result on a seeded cohort with realised
 effects between 0 and 1.2 (the truth within 2 SE in ≥ 90% of decided cases);
 ``benchmarks/bench_validate.py`` measures the verdicts' false-alarm rate.
@@ -52,19 +59,24 @@ The verdict (:class:`Rules`, every number a documented default)
 ---------------------------------------------------------------
 With SE ≤ :data:`MAX_CHANGE_SE` and the interval f ± 2 SE = [lo, hi]:
 
-* **prediction confirmed**: lo ≥ :data:`CONFIRM_FLOOR` (0.5) and hi ≥ 1 − tolerance (0.8): at
-  least half the predicted change came, and the maps are consistent with all of it;
+* **prediction confirmed**: lo ≥ :data:`CONFIRM_FLOOR` (0.5), hi ≥ 1 − tolerance (0.8) and
+  f ≤ 1 + tolerance (1.2): at least half the predicted change came, the maps are consistent
+  with all of it, and the best estimate is not beyond the tolerance;
+* **stronger than predicted** (an over-effect): f > 1 + tolerance and lo > 1: clearly more
+  than predicted, best estimated beyond the tolerance (1.44 ± 0.15 was "confirmed" before: its
+  interval reached the tolerance, its estimate was far past it);
 * **partial effect**: 0 < lo and hi < 1 − tolerance: clearly some change, clearly less than
   predicted;
 * **prediction failed**: hi < 1 − tolerance and lo ≤ 0 (no change distinguishable from none;
-  an opposite change when hi < 0), or lo > 1 + tolerance (clearly stronger than predicted);
+  an opposite change when hi < 0);
   also, whatever f, when a map differs from the model before plus f × the predicted change by
   more than its noise and the fit's uncertainty explain (its χ²/n above the limit of
   :mod:`fieldbank.fitting.quality`): the maps changed in a way the plan does not predict;
 * **inconclusive** otherwise: the change is not observable (S < 4 sd), rests on a guess, its
   SE exceeds 0.25, or the interval reaches both below 0.5 and up to 0.8 (partial or as
-  predicted: the maps cannot tell). A misfit as above is not laid on the plan either where the
-  fit used no map measured like the misfitting one (:class:`Footprint`: the model may not
+  predicted: the maps cannot tell), or the estimate is beyond the tolerance but the interval
+  reaches 1 (as predicted or stronger: the maps cannot tell). A misfit as above is not laid on
+  the plan either where the fit used no map measured like the misfitting one (:class:`Footprint`: the model may not
   describe the arm there) or where a change of a group the fit held at the unimpaired value
   explains it (:func:`guesses_explain`).
 
@@ -93,11 +105,12 @@ from fieldbank.params import BOUNDS, GROUPS, ArmParams
 #: Verdicts of a session, a plan and a whole check.
 CONFIRMED = "prediction confirmed"
 PARTIAL = "partial effect"
+OVER = "stronger than predicted"
 FAILED = "prediction failed"
 INCONCLUSIVE = "inconclusive"
 NOT_CHECKED = "not checked"
 #: Verdicts that contradict a prediction (``fieldbank validate`` exits with status 1).
-CONTRADICTED = (FAILED, PARTIAL)
+CONTRADICTED = (FAILED, OVER, PARTIAL)
 
 #: Width of the interval the verdict reads, in SE (≈ 95%).
 Z = 2.0
@@ -146,20 +159,21 @@ class Rules:
         z, t, lo, hi = self.z, self.tolerance, self.confirm_floor, 1.0 - self.tolerance
         return [
             "f = measured ÷ predicted change (1 as predicted, 0 none); SE from the later maps' "
-            "noise and the fit's samples; interval f ± "
-            f"{z:g} SE. Decided only when the predicted change moves the maps by ≥ "
-            f"{self.min_sensitivity:g} sd and SE ≤ {self.max_se:g}.",
-            f"  {CONFIRMED}: interval ≥ {lo:g} and reaching {hi:g} (at least half the "
-            "change, consistent with all of it)",
+            "noise and the fit's samples, never below what the two sessions' noise allows; "
+            f"interval f ± {z:g} SE. Decided only when the predicted change moves the maps by "
+            f"≥ {self.min_sensitivity:g} sd and SE ≤ {self.max_se:g}.",
+            f"  {CONFIRMED}: interval ≥ {lo:g} and reaching {hi:g}, f ≤ {1 + t:g} (at least "
+            "half the change, consistent with all of it, not beyond the tolerance)",
+            f"  {OVER}: f > {1 + t:g} and interval above 1: clearly more than predicted",
             f"  {PARTIAL}: interval inside (0, {hi:g}): clearly some change, clearly less "
             "than predicted",
-            f"  {FAILED}: interval below {hi:g} and reaching 0 (no change), or above "
-            f"{1 + t:g} (stronger); or a map changed in a way the plan does not predict "
-            "(χ²/n above its limit at the realised fraction, fit uncertainty allowed for)",
+            f"  {FAILED}: interval below {hi:g} and reaching 0 (no change); or a map changed "
+            "in a way the plan does not predict (χ²/n above its limit at the realised "
+            "fraction, fit uncertainty allowed for)",
             f"  {INCONCLUSIVE}: the maps cannot see the change, it rests on a guess, SE > "
-            f"{self.max_se:g}, or the interval spans below {lo:g} and up to {hi:g}; or the "
-            "maps differ from the model where the fit saw no map like them, or in a way a "
-            "parameter the fit guessed explains",
+            f"{self.max_se:g}, the interval spans below {lo:g} and up to {hi:g}, or f > "
+            f"{1 + t:g} with the interval reaching 1; or the maps differ from the model where "
+            "the fit saw no map like them, or in a way a parameter the fit guessed explains",
         ]
 
 
@@ -181,10 +195,12 @@ class Footprint:
     kind: str
     velocity_m_per_s: tuple[float, float]
     positions_m: FloatArray
+    #: The map itself (its sd sets what the first session can tell: :func:`first_session_se`).
+    measured: FieldMap | None = None
 
     @classmethod
     def of(cls, m: FieldMap) -> Footprint:
-        return cls(m.kind, m.velocity_m_per_s, np.asarray(m.positions_m, dtype=float))
+        return cls(m.kind, m.velocity_m_per_s, np.asarray(m.positions_m, dtype=float), m)
 
     def covers(self, m: FieldMap) -> bool:
         """``m`` was measured like this map: same kind and velocity, positions among its."""
@@ -361,12 +377,22 @@ class Fraction:
     #: √(χ²/dof) of the maps that see the change against the model before + f × the change
     #: (sd widened by the fit's spread), when above 1: misfit neither explains widens the SE.
     misfit: float = 1.0
+    #: 1/S₀: what the first session's noise allows along the predicted change (a floor of the
+    #: fit part, module docstring); None: not known.
+    first_se: float | None = None
+
+    @property
+    def fit_part(self) -> float | None:
+        """The fit part of the SE: the samples' spread, at least :attr:`first_se`."""
+        if self.fit_se is None and self.first_se is None:
+            return None
+        return max(self.fit_se or 0.0, self.first_se or 0.0)
 
     @property
     def se(self) -> float | None:
         if self.noise_se is None:
             return None
-        return math.hypot(self.noise_se, self.fit_se or 0.0) * self.misfit
+        return math.hypot(self.noise_se, self.fit_part or 0.0) * self.misfit
 
 
 def fraction_of(changes: Sequence[MapChange]) -> Fraction:
@@ -395,6 +421,20 @@ def fraction_of(changes: Sequence[MapChange]) -> Fraction:
         lo, hi = np.percentile(fs, _SPREAD_PERCENTILES)
         fit_se = float((hi - lo) / 2.0) if hi < _UNKNOWN / 2 else math.inf
     return Fraction(f, 1.0 / sens, fit_se, sens, n, misfit_scale(used, f))
+
+
+def first_session_se(spread: FitSpread, before: ArmParams, after: ArmParams) -> float | None:
+    """1/S₀: the SE the first session's maps allow along the predicted change (module
+    docstring); None when the maps the fit used are not known or do not see the change."""
+    maps = [f.measured for f in spread.footprints or () if f.measured is not None]
+    if not maps:
+        return None
+    arm_b = Arm.from_params(before)
+    try:
+        s0 = _whitened(arm_b, arm_like(arm_b, after), maps)
+    except (ParameterError, ValueError):
+        return None
+    return 1.0 / s0 if s0 > 0 else None
 
 
 def misfit_scale(changes: Sequence[MapChange], fraction: float) -> float:
@@ -542,9 +582,13 @@ def decide(f: float, se: float, rules: Rules = DEFAULT_RULES) -> tuple[str, str]
     lo, hi = f - rules.z * se, f + rules.z * se
     top = 1.0 - rules.tolerance
     span = f"{lo:.2f} to {hi:.2f} at {rules.z:g} SE"
-    if lo > 1.0 + rules.tolerance:
-        return FAILED, (f"the change is stronger than predicted: {span}, above "
-                        f"{1 + rules.tolerance:g}")
+    if f > 1.0 + rules.tolerance:
+        if lo > 1.0:
+            return OVER, (f"the change is stronger than predicted: {f:.2f}, beyond "
+                          f"{1 + rules.tolerance:g}, and {span}, above 1")
+        return INCONCLUSIVE, (f"the maps leave open whether the change came as predicted or "
+                              f"stronger: {f:.2f}, beyond {1 + rules.tolerance:g}, but {span} "
+                              "reaches 1")
     if hi < top:
         if hi < 0:
             return FAILED, f"the maps changed the opposite way to the prediction: {span}"
