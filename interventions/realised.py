@@ -42,8 +42,9 @@ than the noise and the fit's spread explain (χ²/dof > 1), the SE is multiplied
 maps: along the direction of the predicted change it cannot be known better than those maps'
 noise allows, 1/S₀ with S₀ the predicted change's whitened size on them (the first session's
 own sd). A fit's samples can claim less - parameters held at a guess or pinned by the prior do
-not vary in them - so the fit part of the SE is at least 1/S₀ (:func:`first_session_se`), and
-the SE is never below √(1/S² + 1/S₀²), the two sessions' noise alone.
+not vary in them - so the fit part of the SE is at least 1/S₀
+(:func:`fieldbank.interventions.spread.first_session_se`), and the SE is never below
+√(1/S² + 1/S₀²), the two sessions' noise alone.
 
 ``tests/test_validate_calibration.py`` checks the result on a seeded cohort with realised
 effects between 0 and 1.2 (the truth within 2 SE in ≥ 90% of decided cases);
@@ -76,9 +77,10 @@ With SE ≤ :data:`MAX_CHANGE_SE` and the interval f ± 2 SE = [lo, hi]:
   SE exceeds 0.25, or the interval reaches both below 0.5 and up to 0.8 (partial or as
   predicted: the maps cannot tell), or the estimate is beyond the tolerance but the interval
   reaches 1 (as predicted or stronger: the maps cannot tell). A misfit as above is not laid on
-  the plan either where the fit used no map measured like the misfitting one (:class:`Footprint`: the model may not
-  describe the arm there) or where a change of a group the fit held at the unimpaired value
-  explains it (:func:`guesses_explain`).
+  the plan either where the fit used no map measured like the misfitting one
+  (:class:`~fieldbank.interventions.spread.Footprint`: the model may not describe the arm
+  there) or where a change of a group the fit held at the unimpaired value explains it
+  (:func:`guesses_explain`).
 
 With a calibrated SE a change that came as predicted is called failed or partial only when f
 falls more than 2 SE + 0.2 below 1 or above 1.2: well under 5% of such cases.
@@ -87,9 +89,8 @@ falls more than 2 SE + 0.2 below 1 or above 1.2: well under 5% of such cases.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -97,7 +98,7 @@ from fieldbank.errors import ParameterError
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, synthesize
 from fieldbank.fitting.problem import map_sd
 from fieldbank.fitting.quality import MapFit, Thresholds, map_fit
-from fieldbank.fitting.uncertainty import FitSamples
+from fieldbank.interventions.spread import arm_like
 from fieldbank.maps import FieldMap, model_map_like
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import BOUNDS, GROUPS, ArmParams
@@ -180,87 +181,6 @@ class Rules:
 DEFAULT_RULES = Rules()
 
 
-# --- what is known about the model before ------------------------------------------------------
-#: A later map is "like" a map the fit used when it has the same kind, a hand velocity within
-#: this much (m/s) and every position within :data:`COVER_DISTANCE_M` of one of its positions.
-COVER_SPEED_M_PER_S = 0.05
-COVER_DISTANCE_M = 0.01
-
-
-@dataclass(frozen=True, eq=False)
-class Footprint:
-    """Where and how a map the fit used was measured: kind, hand velocity (m/s), positions
-    (N, 2) m."""
-
-    kind: str
-    velocity_m_per_s: tuple[float, float]
-    positions_m: FloatArray
-    #: The map itself (its sd sets what the first session can tell: :func:`first_session_se`).
-    measured: FieldMap | None = None
-
-    @classmethod
-    def of(cls, m: FieldMap) -> Footprint:
-        return cls(m.kind, m.velocity_m_per_s, np.asarray(m.positions_m, dtype=float), m)
-
-    def covers(self, m: FieldMap) -> bool:
-        """``m`` was measured like this map: same kind and velocity, positions among its."""
-        if m.kind != self.kind or math.dist(m.velocity_m_per_s,
-                                            self.velocity_m_per_s) > COVER_SPEED_M_PER_S:
-            return False
-        d = np.linalg.norm(m.positions_m[:, None, :] - self.positions_m[None, :, :], axis=2)
-        return bool(np.all(d.min(axis=1) <= COVER_DISTANCE_M))
-
-
-@dataclass(frozen=True, eq=False)
-class FitSpread:
-    """How sure the model before is: the fit's parameter samples written into it, the
-    parameters the fit did not identify, and why samples are missing when they are.
-
-    ``samples`` empty: the SE counts the later maps' noise only (``note`` says why).
-    """
-
-    fit_id: int | None = None
-    samples: tuple[ArmParams, ...] = ()
-    unidentified: tuple[str, ...] = ()
-    varied: frozenset[str] = frozenset()
-    held: tuple[str, ...] = ()
-    note: str = "the model before is not a fitted model: no fit uncertainty to carry"
-    #: The maps the fit used (None: no fit lies behind the model, which is taken as it is).
-    footprints: tuple[Footprint, ...] | None = None
-
-    def covers(self, m: FieldMap) -> bool:
-        """The model before was fitted to a map measured like ``m`` (always, without a fit):
-        where it was not, a misfit may be the model's, not a change."""
-        return self.footprints is None or any(f.covers(m) for f in self.footprints)
-
-    @classmethod
-    def from_report(cls, fit_id: int, report: Mapping[str, Any], before: ArmParams,
-                    same_model: bool, fitted_model_id: int | None = None,
-                    fit_maps: Sequence[FieldMap] = ()) -> FitSpread:
-        """From a stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`) and the maps
-        the fit used (none given: no later map counts as measured like them)."""
-        unid = tuple(str(u.get("name")) for u in report.get("unidentified", [])
-                     if isinstance(u, Mapping))
-        held = tuple(str(h) for h in report.get("held_at_unimpaired", []) or [])
-        prints = tuple(Footprint.of(m.as_arm_on_handle()) for m in fit_maps)
-        found = FitSamples.from_report(report)
-        if found is None:
-            return cls(fit_id, (), unid, frozenset(), held,
-                       f"fit {fit_id} stored no parameter samples (refit to get them): the SE "
-                       "counts the later maps' noise only", prints)
-        if not same_model:
-            return cls(fit_id, (), unid, frozenset(), held,
-                       f"the model before is derived from fitted model {fitted_model_id} by "
-                       "earlier plans: the SE counts the later maps' noise only")
-        spread = np.ptp(found.values, axis=0) if found.values.size else np.zeros(0)
-        varied = frozenset(n for n, s in zip(found.names, spread, strict=True) if s > 0)
-        return cls(fit_id, tuple(found.params(before)), unid, varied, held,
-                   f"{found.values.shape[0]} parameter samples of fit {fit_id}", prints)
-
-
-NO_FIT = FitSpread()
-
-
 # --- one map: its values before, after, measured, at the fit and at each sample ----------------
 @dataclass(frozen=True, eq=False)
 class MapChange:
@@ -312,13 +232,6 @@ class MapChange:
         sd = np.sqrt(self.sd**2 + self.spread_of(fraction) ** 2)
         return map_fit(0, self.measured, pred.reshape(self.measured.values.shape),
                        sd.reshape(self.measured.values.shape), thresholds, label=label)
-
-
-def arm_like(compiled: Arm, p: ArmParams) -> Arm:
-    try:  # a sample or a plan changes muscle values only: the geometry is compiled once
-        return compiled.with_muscles(p)
-    except ParameterError:
-        return Arm.from_params(p)
 
 
 def map_changes(before: ArmParams, after: ArmParams, maps: Sequence[tuple[int, FieldMap]],
@@ -421,20 +334,6 @@ def fraction_of(changes: Sequence[MapChange]) -> Fraction:
         lo, hi = np.percentile(fs, _SPREAD_PERCENTILES)
         fit_se = float((hi - lo) / 2.0) if hi < _UNKNOWN / 2 else math.inf
     return Fraction(f, 1.0 / sens, fit_se, sens, n, misfit_scale(used, f))
-
-
-def first_session_se(spread: FitSpread, before: ArmParams, after: ArmParams) -> float | None:
-    """1/S₀: the SE the first session's maps allow along the predicted change (module
-    docstring); None when the maps the fit used are not known or do not see the change."""
-    maps = [f.measured for f in spread.footprints or () if f.measured is not None]
-    if not maps:
-        return None
-    arm_b = Arm.from_params(before)
-    try:
-        s0 = _whitened(arm_b, arm_like(arm_b, after), maps)
-    except (ParameterError, ValueError):
-        return None
-    return 1.0 / s0 if s0 > 0 else None
 
 
 def misfit_scale(changes: Sequence[MapChange], fraction: float) -> float:
@@ -554,17 +453,6 @@ def guesses_explain(changes: Sequence[MapChange], before: ArmParams, held: Seque
         if chi2 > thresholds.chi2_limit(k):
             return ()
     return tuple(n for n, x in zip(names, coef, strict=True) if abs(x) > 1e-9)
-
-
-def _whitened(arm_b: Arm, arm_x: Arm, maps: Sequence[FieldMap]) -> float:
-    """Whitened size (sd, each map's own sd) of the change from ``arm_b`` to ``arm_x``."""
-    total = 0.0
-    for raw in maps:
-        m = raw.as_arm_on_handle()
-        sd = map_sd(m).reshape(m.values.shape)
-        d = model_map_like(arm_x, m).values - model_map_like(arm_b, m).values
-        total += float(np.sum((d / sd) ** 2))
-    return math.sqrt(total)
 
 
 def positions_of(changes: Sequence[MapChange]) -> FloatArray:

@@ -19,7 +19,8 @@ import numpy as np
 from fieldbank.evaluate.probing import STRETCH_SPEED_RAD_S, lengthening_direction
 from fieldbank.evaluate.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES, POSITIONED_STRETCH
 from fieldbank.fitting.problem import DEFAULT_RELATIVE_SD, map_sd
-from fieldbank.interventions.realised import Treated, arm_like
+from fieldbank.interventions.realised import Treated
+from fieldbank.interventions.spread import arm_like
 from fieldbank.maps import FieldMap, model_map_like, postural_map, stiffness_map
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams

@@ -56,11 +56,9 @@ from fieldbank.interventions.realised import (
     INCONCLUSIVE,
     MAX_CHANGE_SE,
     MAX_REPORTED_SE,
-    NO_FIT,
     NOT_CHECKED,
     OVER,
     PARTIAL,
-    FitSpread,
     Fraction,
     MapChange,
     Rules,
@@ -68,11 +66,11 @@ from fieldbank.interventions.realised import (
     fraction_of,
     guesses_explain,
     map_changes,
-    first_session_se,
     physical_range,
     positions_of,
     treated,
 )
+from fieldbank.interventions.spread import NO_FIT, FitSpread, first_session_se
 from fieldbank.interventions.suggest import suggestion
 from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind

@@ -146,7 +146,7 @@ def test_the_se_is_never_below_what_the_two_sessions_noise_allows() -> None:
     """A fit whose samples do not vary (every parameter pinned) claims no uncertainty; the
     first session's own noise still bounds what the model before knows along the change."""
     from fieldbank.interventions import Botulinum, Plan
-    from fieldbank.interventions.realised import FitSpread, Footprint, first_session_se
+    from fieldbank.interventions.spread import FitSpread, Footprint, first_session_se
     from fieldbank.interventions.validate import check_session
 
     before = synthesize({"elbow": "severe"})

@@ -108,7 +108,8 @@ class ProtocolSight:
         head = (f"what the protocol sees ({c.grid[0]}×{c.grid[1]} postures {c.spacing_m * 1000:.0f}"
                 f" mm apart around ({c.centre_m[0]:.3f}, {c.centre_m[1]:.3f}) m, passes at "
                 f"{c.stretch_speed_m_per_s:g} m/s):")
-        lines = [head, f"  {'group':<27}{'past slack length':>18}{REFLEX_LEVEL + ' reflex fires':>19}"
+        fires = f"{REFLEX_LEVEL} reflex fires"
+        lines = [head, f"  {'group':<27}{'past slack length':>18}{fires:>19}"
                        f"{'reflex seen from':>18}  verdict"]
         for s in self.groups:
             verdict = "seen" if s.seen else "NOT SEEN: " + " and ".join(
