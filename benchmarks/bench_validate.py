@@ -154,7 +154,8 @@ def main() -> None:
         rows = [r for rs in pool.map(run_patient, jobs) for r in rs]
     wall = time.perf_counter() - t0
     print(f"bench_validate: {args.patients} patients × {len(args.sets)} map sets × "
-          f"{len(args.noise)} noise levels × {len(TRUTHS)} truths = {len(rows)} checks; later maps at "
+          f"{len(args.noise)} noise levels × {len(TRUTHS)} truths = {len(rows)} checks; "
+          "later maps at "
           f"{'new positions' if args.new_positions else 'the first session positions'}; "
           f"{'contractures; ' if args.contracture else ''}fit {','.join(kinds)}; "
           f"{wall:.0f} s wall on {args.jobs} processes; load average "
