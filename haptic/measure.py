@@ -311,8 +311,9 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
     the_plan = plan(protocol, arm)
     check_plan_fits(the_plan, cfg)
     seen = sight(the_plan, arm)
-    for line in seen.table() if report is not None else ():
-        report(line)
+    if report is not None:
+        for line in seen.table():
+            report(line)
     check_must_see(the_plan, arm, must_see, lambda p: _fits(p, cfg), seen)
     started = datetime.now(UTC)
     stamp = started.strftime("%Y%m%dT%H%M%SZ")

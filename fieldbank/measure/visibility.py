@@ -105,8 +105,8 @@ class ProtocolSight:
     def table(self) -> list[str]:
         """The read-out as text: one line per group."""
         c = self.config
-        head = (f"what the protocol sees ({c.grid[0]}×{c.grid[1]} postures {c.spacing_m * 1000:.0f}"
-                f" mm apart around ({c.centre_m[0]:.3f}, {c.centre_m[1]:.3f}) m, passes at "
+        head = (f"what the protocol sees ({c.grid[0]}×{c.grid[1]} postures {c.spacing * 1000:.0f}"
+                f" mm apart around ({c.centre[0]:.3f}, {c.centre[1]:.3f}) m, passes at "
                 f"{c.stretch_speed_m_per_s:g} m/s):")
         fires = f"{REFLEX_LEVEL} reflex fires"
         lines = [head, f"  {'group':<27}{'past slack length':>18}{fires:>19}"
@@ -122,7 +122,7 @@ class ProtocolSight:
 
     def to_dict(self) -> dict[str, Any]:
         return {"config": {"grid": list(self.config.grid), "spacing_m": self.config.spacing_m,
-                           "centre_m": list(self.config.centre_m),
+                           "centre_m": list(self.config.centre),
                            "stretch_speed_m_per_s": self.config.stretch_speed_m_per_s,
                            "parts": list(self.config.parts)},
                 "criteria": {"min_postures": MIN_POSTURES, "min_pass_points": MIN_PASS_POINTS,
@@ -188,7 +188,7 @@ def sight(p: Plan, arm: Arm, reflexes: _Reflexes | None = None) -> ProtocolSight
 def _variants(c: ProtocolConfig) -> list[tuple[str, ProtocolConfig]]:
     """Changes to try, the smallest first: the centre moved (2-8 cm), the spacing widened,
     a posture more each way, a faster pass."""
-    cx, cy = c.centre_m
+    cx, cy = c.centre
     out: list[tuple[str, ProtocolConfig]] = []
     for d in (0.02, 0.04, 0.06, 0.08):
         for dx, dy in ((0.0, d), (0.0, -d), (d, 0.0), (-d, 0.0)):
@@ -196,7 +196,7 @@ def _variants(c: ProtocolConfig) -> list[tuple[str, ProtocolConfig]]:
             out.append((f"--centre {centre[0]:g},{centre[1]:g}",
                         dataclasses.replace(c, centre_m=centre)))
     for f in (1.25, 1.5):
-        sp = round(c.spacing_m * f, 3)
+        sp = round(c.spacing * f, 3)
         if sp <= 0.2:
             out.append((f"--spacing-mm {sp * 1000:g}", dataclasses.replace(c, spacing_m=sp)))
     nx, ny = c.grid
