@@ -41,16 +41,24 @@ PROGRESS_MIN_FILES = 20
                    "do not say.")
 @click.option("--column", "columns", multiple=True, metavar="NAME=HEADER",
               help="Read the file's column (or raw channel) HEADER as NAME, e.g. x_mm=HandX, "
-                   "fx_n=ForceX; for C3D/NWB recordings NAME is x, y, vx, vy, fx, fy "
-                   "(repeatable).")
+                   "fx_n=ForceX; for C3D recordings NAME is x, y, vx, vy, fx, fy and HEADER an "
+                   "analog label or MARKER:x; for NWB position, velocity, force and HEADER a "
+                   "series' name or path; for MAT files a variable (repeatable).")
 @click.option("--shoulder", metavar="X,Y",
               help="Raw recordings: the shoulder's position in the file's coordinates, m "
                    "(required for KINARM exams).")
+@click.option("--trial-events", "trial_events", multiple=True, metavar="LABEL",
+              help="Raw recordings: the events (by label) that start a trial; other events "
+                   "are ignored (repeatable).")
+@click.option("--unit", "units", multiple=True, metavar="ROLE=UNIT",
+              help="Raw recordings: the unit of a channel the file states none for, e.g. "
+                   "fx=N, position=mm (repeatable; never overrides a unit the file states).")
 @json_option
 def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, session_label: str,
            session_date: date | None, dry_run: bool, limit_items: tuple[str, ...],
            kind: str | None, frame: str | None, sign: str | None, velocity: str | None,
-           columns: tuple[str, ...], shoulder: str | None, as_json: bool) -> None:
+           columns: tuple[str, ...], shoulder: str | None, trial_events: tuple[str, ...],
+           units: tuple[str, ...], as_json: bool) -> None:
     """Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3), or
     raw NWB, C3D and KINARM recordings whose maps are estimated (docs/measuring.md).
 
@@ -61,7 +69,8 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
 
     limits = IngestLimits.from_environment(limit_items)
     options = ReadOptions.from_flags(kind, frame, sign, velocity, columns,
-                                     xy_metres(shoulder, "--shoulder") if shoulder else None)
+                                     xy_metres(shoulder, "--shoulder") if shoulder else None,
+                                     trial_events, units)
     bar: tqdm | None = None
     if len(files) >= PROGRESS_MIN_FILES:
         from tqdm import tqdm

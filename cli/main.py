@@ -35,6 +35,11 @@ COMMANDS: dict[str, LazyCommand] = {
               "Measured postural and stiffness maps."),
     "ingest": C("fieldbank.cli.ingest", "ingest",
                 "Ingest postural and stiffness maps from FILES (CSV, HDF5, MATLAB .mat v5/v7.3)."),
+    "inspect": C("fieldbank.cli.inspect", "inspect",
+                 "Show what FILES hold (C3D markers, analog channels and events; NWB series "
+                 "anywhere in the file; KINARM trials; MAT and HDF5 variables; CSV header) "
+                 "and what ingest would map from each, or why not and the options that map "
+                 "it."),
     "export": C("fieldbank.cli.export", "export",
                 "Export maps matching the filters (SI units, arm-on-handle as stored)."),
     "samples": C("fieldbank.cli.samples", "samples",
@@ -55,6 +60,13 @@ COMMANDS: dict[str, LazyCommand] = {
                   "out of a fit."),
     "config": C("fieldbank.cli.config", "config",
                 "Settings: fieldbank.toml, environment variables and their defaults."),
+    "serve": C("fieldbank.cli.serve", "serve",
+               "Serve the workspace: log in, find a patient, compose a plan, feel it on the "
+               "robot."),
+    "users": C("fieldbank.cli.users", "users",
+               "Accounts of the workspace: add, list, passwords, roles, API tokens."),
+    "audit": C("fieldbank.cli.audit", "audit",
+               "Show the audit log, newest first: who did or read what, when, from where."),
     "demo": C("fieldbank.cli.demo", "demo",
               "Run the whole product once on synthetic sample data, saying what it does."),
 }

@@ -30,7 +30,7 @@ from fieldbank.errors import FieldbankError, StorageError
 from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, write_new
 from fieldbank.ingest import write_hdf5
 from fieldbank.nwbexport import patient_nwb
-from fieldbank.opensimio import arm_osim, storage_text
+from fieldbank.opensimio import COORDINATES, arm_osim, storage_text
 from fieldbank.sanitize import file_component
 from fieldbank.storage import Database
 
@@ -99,6 +99,10 @@ def export_nwb(db: Database, patient_code: str | None, output: str | Path,
     return _write(out, patient_nwb(db, patient_code), force)
 
 
+#: Trace columns written under the .osim coordinates' names (fieldbank.opensimio.COORDINATES).
+TRACE_COORDINATES = dict(zip(("a_q1_rad", "a_q2_rad"), COORDINATES, strict=True))
+
+
 def export_trace(db: Database, haptic_session_id: int, output: str | Path,
                  force: bool = False) -> str:
     """A haptic session's recorded trace (every column, with time) as ``.mot``/``.sto``."""
@@ -115,8 +119,11 @@ def export_trace(db: Database, haptic_session_id: int, output: str | Path,
     for name, tr in traces.items():
         if name == "t_s":
             continue
-        cols[name] = db.get_trace_array(tr.id)
-        units[name] = str(db.trace_attrs(tr.id).get("unit", ""))
+        # arm A's joint angles under the .osim model's coordinate names, so the table plays
+        # on the exported model (export --model); every other column keeps its name
+        label = TRACE_COORDINATES.get(name, name)
+        cols[label] = db.get_trace_array(tr.id)
+        units[label] = str(db.trace_attrs(tr.id).get("unit", ""))
     text = storage_text(f"fieldbank haptic session {sess.id}", t, cols, units)
     return _write(out, text, force)
 

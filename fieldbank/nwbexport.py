@@ -43,6 +43,7 @@ from fieldbank.maps import (
     STIFFNESS_SD_COLUMNS,
     FieldMap,
 )
+from fieldbank.measure.budget import ReadBudget
 from fieldbank.storage import Database
 
 #: Unit of each exported column (NWB's DynamicTable columns carry it in the description).
@@ -233,11 +234,16 @@ def has_nwb_maps(data: bytes) -> bool:
         return "processing/maps" in f
 
 
-def read_nwb_maps(name: str, data: bytes) -> list[tuple[FieldMap, str]]:
-    """The maps of a fieldbank NWB export, each with its location in the file."""
+def read_nwb_maps(name: str, data: bytes, budget: ReadBudget | None = None
+                  ) -> list[tuple[FieldMap, str]]:
+    """The maps of a fieldbank NWB export, each with its location in the file; each map's
+    ``session`` (and ``session_date``) of the export in its metadata, so that an export of
+    several sessions goes back into them (:mod:`fieldbank.ingest.batch`). Every column is
+    charged to ``budget`` by its declared size before it is read."""
     import h5py
     from pynwb import NWBHDF5IO
 
+    bud = budget or ReadBudget(1 << 30, len(data))
     out = []
     with h5py.File(io.BytesIO(data), "r") as h5, \
             NWBHDF5IO(file=h5, mode="r", load_namespaces=True) as io_:
@@ -246,6 +252,11 @@ def read_nwb_maps(name: str, data: bytes) -> list[tuple[FieldMap, str]]:
         for tname in sorted(mod.data_interfaces, key=lambda s: (len(s), s)):
             where = f"{name}:/processing/maps/{tname}"
             tab = mod.data_interfaces[tname]
+            for col in getattr(tab, "columns", ()):
+                d: Any = getattr(col, "data", None)
+                if hasattr(d, "shape") and hasattr(d, "dtype"):
+                    bud.charge(int(np.prod(d.shape, dtype=np.float64)) * d.dtype.itemsize,
+                               f"{where}/{col.name}")
             try:
                 desc = json.loads(tab.description)[MAP_TAG]
                 df = tab.to_dataframe()
@@ -259,6 +270,9 @@ def read_nwb_maps(name: str, data: bytes) -> list[tuple[FieldMap, str]]:
                 shape = (n, 2) if kind == "postural" else (n, 2, 2)
                 meta = {str(k): str(v) for k, v in dict(desc.get("metadata", {})).items()}
                 meta["nwb_map_id"] = str(desc.get("map_id", ""))
+                if desc.get("session"):
+                    meta["session"] = str(desc["session"])
+                    meta["session_date"] = str(desc.get("session_date", ""))
                 fm = FieldMap(kind, pos, vals.reshape(shape),
                               None if sd is None else sd.reshape(shape), str(desc["frame"]),
                               str(desc["sign"]), tuple(desc["velocity_m_per_s"]),

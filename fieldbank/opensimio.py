@@ -40,6 +40,10 @@ from fieldbank.errors import FieldbankError
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
 
+#: The model's coordinates (shoulder, elbow), rad: the .osim's names, and the .mot columns of
+#: a trace's joint angles.
+COORDINATES = ("shoulder_flexion", "elbow_flexion")
+
 
 class OpenSimError(FieldbankError, ValueError):
     """A table or model that cannot be written as an OpenSim file."""
@@ -241,8 +245,8 @@ def arm_osim(params: ArmParams, name: str = "fieldbank_arm") -> str:
         f"{body('forearm', m2, c2, i2, [])}"
         "</objects></BodySet>"
         "<JointSet><objects>"
-        f"{pin('shoulder', 'ground', 0.0, 'upper_arm', 'shoulder_flexion', s_lo, s_hi, q1r)}"
-        f"{pin('elbow', 'upper_arm', l1, 'forearm', 'elbow_flexion', e_lo, e_hi, q2r)}"
+        f"{pin('shoulder', 'ground', 0.0, 'upper_arm', COORDINATES[0], s_lo, s_hi, q1r)}"
+        f"{pin('elbow', 'upper_arm', l1, 'forearm', COORDINATES[1], e_lo, e_hi, q2r)}"
         "</objects></JointSet>"
         f"<ForceSet><objects>{''.join(forces)}</objects></ForceSet>"
         f"<MarkerSet><objects><Marker name=\"handle\"><socket_parent_frame>/bodyset/forearm"

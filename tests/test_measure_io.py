@@ -26,7 +26,7 @@ import pytest
 from fieldbank.ingest import ReadOptions
 from fieldbank.ingest.csvfmt import read_csv
 from fieldbank.model import Arm
-from fieldbank.opensimio import read_storage
+from fieldbank.opensimio import arm_osim, read_storage
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.storage import Database
 from tests.report_helpers import run_cli
@@ -120,8 +120,13 @@ def test_a_haptic_trace_as_mot_and_sto(demo: Path, tmp_path: Path) -> None:
         assert labels[0] == "time" and keys["inDegrees"] == "no"
         assert int(keys["nRows"]) == data.shape[0] == traces["t_s"][0].shape[0]
         assert np.allclose(data[:, 0], traces["t_s"][0], rtol=1e-9, atol=0)
+        # arm A's joint angles are the .osim model's coordinates, so the table plays on it
+        assert {"shoulder_flexion", "elbow_flexion"} <= set(labels)
+        assert "a_q1_rad" not in labels and "<Coordinate name=\"shoulder_flexion\">" in \
+            arm_osim(ArmParams.from_anthropometry())
+        back = {"shoulder_flexion": "a_q1_rad", "elbow_flexion": "a_q2_rad"}
         for j, name in enumerate(labels[1:], start=1):
-            arr, unit = traces[name]
+            arr, unit = traces[back.get(name, name)]
             assert keys[f"units_{name}"] == unit
             assert np.allclose(data[:, j], arr, rtol=1e-9, atol=1e-12)
     osim = pytest.importorskip("opensim")

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import io
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import date
 from pathlib import Path
@@ -35,6 +35,7 @@ from fieldbank.ingest.matfmt import read_mat5, read_mat73
 from fieldbank.ingest.options import ReadOptions
 from fieldbank.ingest.parsed import ParsedMap, validate_map
 from fieldbank.ingest.rawfmt import read_c3d, read_kinarm, read_nwb
+from fieldbank.maps import FieldMap
 from fieldbank.measure.c3draw import is_c3d
 from fieldbank.measure.kinarm import is_kinarm_zip
 from fieldbank.model import Arm
@@ -45,7 +46,9 @@ FORMATS = ("csv", "hdf5", "mat5", "mat73", "nwb", "c3d", "kinarm")
 FORMAT_NAMES = {"csv": "CSV", "hdf5": "HDF5", "mat5": "MATLAB v5", "mat73": "MATLAB v7.3",
                 "nwb": "NWB", "c3d": "C3D", "kinarm": "KINARM exam"}
 
-Reader = Callable[[str, bytes, IngestLimits], tuple[list[ParsedMap], list[Problem]]]
+Reader = Callable[[str, bytes, IngestLimits, Mapping[str, str], Mapping[str, str]],
+                  tuple[list[ParsedMap], list[Problem]]]
+#: Map files: (name, data, limits, metadata defaults, column names).
 READERS: dict[str, Reader] = {"csv": read_csv, "hdf5": read_hdf5, "mat5": read_mat5,
                               "mat73": read_mat73}
 RawReader = Callable[[str, bytes, IngestLimits, Arm | None, ReadOptions | None],
@@ -76,6 +79,8 @@ def detect_format(data: bytes) -> str | None:
         return "c3d"
     if is_kinarm_zip(data):
         return "kinarm"
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):   # UTF-16 text (csvfmt decodes it)
+        return "csv"
     if data[:1024].find(b"\0") >= 0:
         return None
     try:
@@ -139,13 +144,15 @@ def read_file(name: str, data: bytes, arm: Arm | None, patient: str = "",
         return None, [Problem(name, "unknown format: expected map CSV, fieldbank HDF5, "
                               "MATLAB .mat v5/v7.3, or a raw NWB, C3D or KINARM recording")]
     opts = options or ReadOptions()
+    misplaced = _misplaced_options(fmt, opts)
+    if misplaced:
+        return None, [Problem(name, misplaced)]
     try:
         if fmt in RAW_READERS:
             parsed, problems = RAW_READERS[fmt](name, data, limits, arm, opts)
-        elif fmt == "csv":
-            parsed, problems = read_csv(name, data, limits, opts.csv_defaults(), opts.columns)
         else:
-            parsed, problems = READERS[fmt](name, data, limits)
+            parsed, problems = READERS[fmt](name, data, limits, opts.csv_defaults(),
+                                            opts.columns)
         if len(parsed) > limits.max_maps:
             return None, [Problem(name, f"{len(parsed):,} maps, more than {limits.max_maps:,} "
                                   f"{limits.hint('max_maps')}")]
@@ -159,13 +166,62 @@ def read_file(name: str, data: bytes, arm: Arm | None, patient: str = "",
         return None, [Problem(name, f"too large to read as {FORMAT_NAMES[fmt]} in the memory "
                               "available; refused")]
     except Exception as exc:  # a damaged file no reader check foresaw: still a message
-        return None, [Problem(name, f"unreadable {FORMAT_NAMES[fmt]} file "
-                              f"({type(exc).__name__}: {exc})")]
+        return None, [Problem(name, f"unreadable {FORMAT_NAMES[fmt]} file: the reader met "
+                              f"something it does not understand ({type(exc).__name__} at "
+                              f"{_where(exc)}); 'fieldbank inspect' shows what it holds")]
     if not problems and not maps:
         problems.append(Problem(name, "no map in file"))
     if problems:
         return None, _capped(problems, limits.max_problems, name)
-    return IncomingFile(name, sha, fmt, data, tuple(maps)), []
+    return IncomingFile(name, sha, fmt, data, tuple(maps), _own_sessions(maps)), []
+
+
+def _misplaced_options(fmt: str, opts: ReadOptions) -> str:
+    """Why an option given does not apply to a file of this format ('' when all do): an
+    option is refused in words, never silently ignored."""
+    if fmt in RAW_READERS:
+        wrong = [f"--{k}" for k in ("kind", "velocity") if k in opts.defaults or
+                 (k == "velocity" and "velocity_vector_m_per_s" in opts.defaults)]
+        if wrong:
+            return (f"{' and '.join(dict.fromkeys(wrong))} do not apply to a raw "
+                    f"{FORMAT_NAMES[fmt]} recording: the estimator makes every map its trials "
+                    "hold (kind and velocity from the trials); remove them for this file")
+        return ""
+    raw = opts.raw_only()
+    if raw:
+        return (f"{', '.join(raw)} apply to raw recordings (NWB, C3D, KINARM) only; this is "
+                f"a {FORMAT_NAMES[fmt]} map file")
+    return ""
+
+
+def _own_sessions(maps: list[FieldMap]) -> tuple[tuple[str, date | None] | None, ...]:
+    """The session each map of an NWB export was exported from (it goes back there), else
+    None (the batch's session)."""
+    out: list[tuple[str, date | None] | None] = []
+    for m in maps:
+        label = m.metadata.get("session", "") if "nwb_map_id" in m.metadata else ""
+        if not label:
+            out.append(None)
+            continue
+        try:
+            day = date.fromisoformat(m.metadata.get("session_date", "")) \
+                if m.metadata.get("session_date") else None
+        except ValueError:
+            day = None
+        out.append((label, day))
+    return tuple(out) if any(out) else ()
+
+
+def _where(exc: BaseException) -> str:
+    """The innermost fieldbank function an unexpected error came from (for a report)."""
+    tb = exc.__traceback__
+    last = "the reader"
+    while tb is not None:
+        code = tb.tb_frame.f_code
+        if "fieldbank" in code.co_filename:
+            last = code.co_name
+        tb = tb.tb_next
+    return last
 
 
 def _capped(problems: list[Problem], most: int, where: str) -> list[Problem]:

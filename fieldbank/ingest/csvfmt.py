@@ -11,6 +11,10 @@ which is dropped). A file whose delimiter is a semicolon or a tab may write deci
 (``0,05``; R's ``write.csv2``, spreadsheets in many locales); such a file must then use them
 throughout, since ``1.000`` would be ambiguous there.
 
+Text is UTF-8; a file in another encoding (a spreadsheet's Windows-1252, UTF-16) is decoded
+with the encoding ``charset-normalizer`` detects, said in the map's ``text_encoding``, or
+refused with "save it as UTF-8" when the encoding cannot be told apart (:func:`decode_text`).
+
 Numbers are parsed strictly: ASCII digits, an optional sign, one decimal separator and an
 exponent (``-1.5e-3``); ``nan`` and ``inf`` are read so that the validation can name them. No
 ``1_000``, no thousands separators, no Arabic-Indic or other non-ASCII digits — Python's
@@ -86,10 +90,9 @@ def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS,
     (:class:`fieldbank.ingest.options.ReadOptions`).
     """
     problems: list[Problem] = []
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        return [], [Problem(name, f"not UTF-8 text (byte {exc.start})")]
+    text, encoding, why = decode_text(data)
+    if text is None:
+        return [], [Problem(name, why)]
     meta: dict[str, str] = {}
     body: list[tuple[int, str]] = []  # (line number, text) of the header and data rows
     for lineno, raw in enumerate(text.splitlines(), start=1):
@@ -135,6 +138,8 @@ def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS,
             problems.append(Problem(f"{name}:row {header_line}", f"--column {ours}={theirs}: "
                                     f"the file has no column {theirs!r} (columns: "
                                     f"{', '.join(header)})"))
+    if encoding:
+        meta.setdefault("text_encoding", f"{encoding} (detected; the file is not UTF-8)")
     kind = meta.get("kind")
     hloc = f"{name}:row {header_line}"
     # Which value columns to expect: from the kind when valid, else guessed from the header.
@@ -232,6 +237,62 @@ def read_csv(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS,
         rows_unread=bool(hprobs) and not cells_of,
     )
     return [pm], problems
+
+
+#: Bytes of a file the encoding detector looks at.
+DETECT_BYTES = 1 << 20
+#: Largest "mess" (charset-normalizer's measure of implausible characters, 0–1) of a decoding
+#: that is accepted; above it the encoding is not told apart with confidence.
+MAX_CHAOS = 0.1
+
+
+def decode_text(data: bytes) -> tuple[str | None, str, str]:
+    """(text, encoding if not UTF-8 else '', reason if refused).
+
+    UTF-8 (with or without BOM) is read as it is; otherwise ``charset-normalizer`` names the
+    encoding (a spreadsheet's Latin-1/Windows-1252, UTF-16 with BOM …) and the text is decoded
+    with it, strictly; a file whose encoding it cannot tell apart is refused in words."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return data.decode("utf-16"), "UTF-16", ""
+        except UnicodeDecodeError:
+            pass
+    try:
+        return data.decode("utf-8-sig"), "", ""
+    except UnicodeDecodeError as exc:
+        first = exc.start
+    from charset_normalizer import from_bytes
+
+    sample = data[:DETECT_BYTES]
+    readings: dict[str, str] = {}
+    for match in from_bytes(sample):
+        if match.encoding in ("utf_8", "ascii") or match.chaos > MAX_CHAOS:
+            continue
+        try:
+            readings[match.encoding] = data.decode(match.encoding)
+        except (UnicodeDecodeError, LookupError):
+            continue
+    texts = set(readings.values())
+    if len(texts) == 1:
+        enc = next(iter(readings))
+        return readings[enc], enc, ""
+    why = f"not UTF-8 text (byte {first})"
+    if len(texts) > 1:   # plausible encodings that read it differently: name what they read
+        a, b = list(readings)[:2]
+        wa, wb = _first_difference(readings[a], readings[b])
+        why += (f", and its encoding cannot be told apart ({a} reads {wa!r}, {b} reads "
+                f"{wb!r})")
+    else:
+        why += ", and its encoding cannot be told"
+    return None, "", why + "; save it as UTF-8 (in a spreadsheet: CSV UTF-8)"
+
+
+def _first_difference(a: str, b: str) -> tuple[str, str]:
+    """The first word two readings of a file disagree on."""
+    for wa, wb in zip(a.split(), b.split(), strict=False):
+        if wa != wb:
+            return wa[:40], wb[:40]
+    return a[:40], b[:40]
 
 
 def _delimiter_name(d: str) -> str:

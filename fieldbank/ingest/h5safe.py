@@ -10,8 +10,9 @@ files. :class:`H5Reader` therefore
   problem, never an access;
 * reads a dataset only after checking its declared size against what is left of the file's
   budget (``max_decompressed_bytes``) and the ratio of the total to the file's size
-  (``max_compression_ratio``, checked once the total passes 1 MiB), and refuses virtual
-  datasets and external storage (:meth:`H5Reader.read`);
+  (``max_compression_ratio``, checked once the total passes 1 MiB), then a slab at a time
+  (:class:`fieldbank.measure.budget.ReadBudget`, the budget NWB and ZIP reads share), and
+  refuses virtual datasets and external storage (:meth:`H5Reader.read`);
 * turns every h5py failure in between into a located problem (:meth:`H5Reader.attrs` for
   attributes of odd types).
 """
@@ -24,7 +25,8 @@ import h5py
 import numpy as np
 
 from fieldbank.errors import Problem
-from fieldbank.ingest.limits import MIB, IngestLimits, LimitExceeded
+from fieldbank.ingest.limits import IngestLimits, LimitExceeded
+from fieldbank.measure.budget import BudgetExceeded, ReadBudget
 
 #: Failures h5py raises on a damaged or hostile file.
 H5_ERRORS = (OSError, KeyError, ValueError, TypeError, RuntimeError, AttributeError)
@@ -43,7 +45,15 @@ class H5Reader:
     def __init__(self, file_bytes: int, limits: IngestLimits) -> None:
         self.file_bytes = max(1, file_bytes)
         self.limits = limits
-        self.total = 0
+        self.budget = ReadBudget(limits.max_decompressed_bytes, file_bytes,
+                                 limits.max_compression_ratio,
+                                 limits.hint("max_decompressed_bytes"),
+                                 limits.hint("max_compression_ratio"))
+
+    @property
+    def total(self) -> int:
+        """Bytes read so far (as declared)."""
+        return self.budget.used
 
     def child(self, group: h5py.Group, key: str, where: str,
               problems: list[Problem]) -> Any:
@@ -82,22 +92,10 @@ class H5Reader:
             raise LimitExceeded(f"{where}: a virtual dataset (made of other files); refused")
         if ds.external:
             raise LimitExceeded(f"{where}: stored in external files; refused")
-        declared = int(np.prod(ds.shape, dtype=np.float64) * ds.dtype.itemsize) \
-            if ds.shape is not None else 0
-        lim = self.limits
-        if self.total + declared > lim.max_decompressed_bytes:
-            raise LimitExceeded(
-                f"{where}: declares {ds.shape} {ds.dtype} = {declared:,} bytes, more than the "
-                f"{lim.max_decompressed_bytes:,} bytes a file may hold once decompressed "
-                f"{lim.hint('max_decompressed_bytes')}")
-        total = self.total + declared
-        if total > MIB and total > lim.max_compression_ratio * self.file_bytes:
-            raise LimitExceeded(
-                f"{where}: declares {total:,} bytes from a {self.file_bytes:,}-byte file, a "
-                f"ratio of {total / self.file_bytes:,.0f} (a decompression bomb?) "
-                f"{lim.hint('max_compression_ratio')}")
-        self.total = total
-        return np.asarray(ds[()])
+        try:
+            return self.budget.read_dataset(ds, where)
+        except BudgetExceeded as exc:
+            raise LimitExceeded(str(exc)) from None
 
     @staticmethod
     def attrs(obj: h5py.HLObject, where: str, problems: list[Problem]) -> dict[str, Any]:

@@ -21,7 +21,7 @@ dataset is read, every h5py failure a located problem.
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
@@ -31,7 +31,13 @@ import numpy as np
 from fieldbank.errors import Problem
 from fieldbank.ingest.h5safe import H5_ERRORS, H5Reader
 from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits, LimitExceeded
-from fieldbank.ingest.parsed import PATIENT_KEYS, RESERVED_KEYS, ParsedMap, parse_velocity
+from fieldbank.ingest.parsed import (
+    PATIENT_KEYS,
+    RESERVED_KEYS,
+    ParsedMap,
+    fill_defaults,
+    parse_velocity,
+)
 from fieldbank.ingest.units import FORCE, LENGTH, STIFFNESS, factor
 from fieldbank.maps import VALUE_UNITS, FieldMap
 
@@ -80,9 +86,18 @@ def _dataset(rd: H5Reader, g: h5py.Group, name: str, where: str, table: dict[str
     return None
 
 
-def read_hdf5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
+def read_hdf5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS,
+              defaults: Mapping[str, str] | None = None,
+              columns: Mapping[str, str] | None = None
               ) -> tuple[list[ParsedMap], list[Problem]]:
+    """The maps of a fieldbank HDF5 file. ``defaults`` fill metadata a map's attributes lack
+    (a map stating another value is a problem); ``columns`` is refused: the datasets' names
+    are the format's own."""
     problems: list[Problem] = []
+    if columns:
+        return [], [Problem(name, f"--column {', '.join(f'{k}={v}' for k, v in columns.items())}"
+                            ": a fieldbank HDF5 file names its datasets positions, values and "
+                            "sd (docs/formats.md); --column does not apply to it")]
     maps: list[ParsedMap] = []
     try:
         f = h5py.File(io.BytesIO(data), "r")
@@ -110,7 +125,7 @@ def read_hdf5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
             if not isinstance(g, h5py.Group):
                 problems.append(Problem(where, "must be a group"))
                 continue
-            pm = _read_group(rd, g, where, problems)
+            pm = _read_group(rd, g, where, problems, defaults or {})
             for k, v in root_meta.items():
                 pm.metadata.setdefault(k, v)
             maps.append(pm)
@@ -118,8 +133,9 @@ def read_hdf5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
 
 
 def _read_group(rd: H5Reader, g: h5py.Group, where: str,
-                problems: list[Problem]) -> ParsedMap:
+                problems: list[Problem], defaults: Mapping[str, str]) -> ParsedMap:
     attrs = H5Reader.attrs(g, where, problems)
+    fill_defaults(attrs, defaults, where, problems, _text)
     kind = _text(attrs["kind"]) if "kind" in attrs else None
     mprobs: list[Problem] = []
     vel_text = None

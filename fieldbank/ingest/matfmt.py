@@ -29,6 +29,7 @@ from __future__ import annotations
 import io
 import struct
 import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -41,7 +42,7 @@ import scipy.io
 from fieldbank.errors import Problem
 from fieldbank.ingest.h5safe import H5_ERRORS, H5Reader
 from fieldbank.ingest.limits import DEFAULT_LIMITS, MIB, IngestLimits, LimitExceeded
-from fieldbank.ingest.parsed import RESERVED_KEYS, ParsedMap, parse_velocity
+from fieldbank.ingest.parsed import RESERVED_KEYS, ParsedMap, fill_defaults, parse_velocity
 from fieldbank.ingest.units import FORCE, LENGTH, STIFFNESS, factor
 from fieldbank.maps import VALUE_UNITS, FieldMap
 
@@ -170,7 +171,9 @@ def inflate_mat5(name: str, data: bytes, limits: IngestLimits) -> tuple[bytes, s
     return b"".join(out), logical
 
 
-def read_mat5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
+def read_mat5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS,
+              defaults: Mapping[str, str] | None = None,
+              columns: Mapping[str, str] | None = None
               ) -> tuple[list[ParsedMap], list[Problem]]:
     try:
         image, logical = inflate_mat5(name, data, limits)
@@ -190,7 +193,7 @@ def read_mat5(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
             variables[k] = v.astype(bool).view(Logical)
         else:
             variables[k] = v
-    return _from_variables(name, variables)
+    return _from_variables(name, variables, defaults, columns)
 
 
 def _mat73_text(arr: np.ndarray) -> str | None:
@@ -208,7 +211,9 @@ def _mat73_text(arr: np.ndarray) -> str | None:
     return None
 
 
-def read_mat73(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
+def read_mat73(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS,
+               defaults: Mapping[str, str] | None = None,
+               columns: Mapping[str, str] | None = None
                ) -> tuple[list[ParsedMap], list[Problem]]:
     try:
         f = h5py.File(io.BytesIO(data), "r")
@@ -253,7 +258,7 @@ def read_mat73(name: str, data: bytes, limits: IngestLimits = DEFAULT_LIMITS
                 variables[k] = arr.T.astype(bool).view(Logical)
             else:
                 variables[k] = arr.T
-    parsed, more = _from_variables(name, variables)
+    parsed, more = _from_variables(name, variables, defaults, columns)
     return parsed, problems + more
 
 
@@ -264,8 +269,21 @@ class Unsupported:
     what: str
 
 
-def _from_variables(name: str, v: dict[str, Any]) -> tuple[list[ParsedMap], list[Problem]]:
+def _from_variables(name: str, v: dict[str, Any], defaults: Mapping[str, str] | None = None,
+                    columns: Mapping[str, str] | None = None
+                    ) -> tuple[list[ParsedMap], list[Problem]]:
     problems: list[Problem] = []
+    for ours, theirs in (columns or {}).items():   # --column positions=pos: a variable's name
+        if ours not in MAT_KEYS:
+            problems.append(Problem(name, f"--column {ours}={theirs}: {ours!r} is not a map "
+                                    f"variable (a MAT map's variables: {', '.join(MAT_KEYS)})"))
+        elif theirs not in v:
+            problems.append(Problem(name, f"--column {ours}={theirs}: the file has no variable "
+                                    f"{theirs!r} (variables: {', '.join(sorted(v)) or 'none'})"))
+        else:
+            v[ours] = v.pop(theirs)
+    fill_defaults(v, defaults or {}, name, problems,
+                  lambda x: x if isinstance(x, str) else str(x))
 
     def text(key: str) -> str | None:
         x = v.get(key)

@@ -11,8 +11,9 @@ Every problem is located (file, row or dataset).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -100,6 +101,28 @@ def parse_velocity(
                                 f"{math.hypot(*vec):g} of velocity_vector_m_per_s"))
         return None, False
     return vec, False
+
+
+def fill_defaults(found: dict[str, Any], defaults: Mapping[str, str], where: str,
+                  problems: list[Problem], text_of: Callable[[Any], str]) -> None:
+    """Metadata the command line supplies (``--kind``, ``--frame``, ``--sign``, ``--velocity``)
+    put into a map file's own metadata ``found`` where it lacks them; a file that states
+    another value is a problem naming both, never overridden (HDF5 attributes, MAT
+    variables)."""
+    for key in ("kind", "frame", "sign"):
+        if key not in defaults:
+            continue
+        if key not in found:
+            found[key] = defaults[key]
+        elif text_of(found[key]).strip().lower() != defaults[key].strip().lower():
+            problems.append(Problem(where, f"the file says {key}: {text_of(found[key])!r}, "
+                                    f"the command line says {defaults[key]!r}; remove one"))
+    if "velocity_m_per_s" in defaults and "velocity_m_per_s" not in found:
+        vec = defaults.get("velocity_vector_m_per_s")
+        if vec:
+            found["velocity_m_per_s"] = np.array([float(x) for x in vec.split(",")])
+        else:
+            found["velocity_m_per_s"] = np.array([float(defaults["velocity_m_per_s"])])
 
 
 def patient_problem(metadata: dict[str, str], patient: str, where: str) -> Problem | None:

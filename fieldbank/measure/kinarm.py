@@ -25,12 +25,16 @@ differentiated from the position (the raw files hold joint velocities, not hand 
 KINARM's coordinates are the robot's global frame, not the shoulder frame, and its task
 protocols are the lab's own: the shoulder's position in those coordinates and the force's sign
 convention must be given (``--shoulder X,Y``, ``--sign``); the holds are found by stillness
-(:mod:`fieldbank.measure.segment`). ZIP members are bounded like every ingested file
-(decompressed size and ratio): an archive bomb is refused before it is inflated.
+(:mod:`fieldbank.measure.segment`). The members' declared sizes are charged all together to the
+file's budget before any is inflated (:func:`exam_members`), each member is stopped if it
+holds more than it declared: an archive bomb, or forty members each within the limits, is
+refused before it is inflated. Newer exams (``.kinarm``, binary channels) are read by
+:mod:`fieldbank.measure.kinarmbin`.
 
 Checked against: the layout above as ``zip_load.m`` reads it — no real exam file was
 available, so the tests build archives in that layout with the ``c3d`` library
-(tests/test_measure_io.py).
+(tests/test_measure_io.py); a single KINARM trial C3D (c3d.org's sample 22, an exoskeleton)
+is read by :mod:`fieldbank.measure.c3draw`.
 """
 
 from __future__ import annotations
@@ -42,103 +46,142 @@ from collections.abc import Mapping
 import numpy as np
 
 from fieldbank.errors import MapError
+from fieldbank.measure.budget import MIB, BudgetExceeded, ReadBudget
+from fieldbank.measure.c3dfile import C3DError, read_c3d
 from fieldbank.measure.recording import Recording, derive_velocity
 from fieldbank.units import channel_factor
 
 ZIP_SIGNATURE = b"PK\x03\x04"
 COMMON = "raw/common.c3d"
+#: Most members an exam archive may list (an exam of a few hundred trials holds a few
+#: thousand channel files).
+MAX_MEMBERS = 100_000
+
+
+def exam_kind(data: bytes) -> str | None:
+    """'c3d' for an exam of C3D trials (``raw/common.c3d``), 'binary' for a ``.kinarm`` exam
+    of binary channel files (``raw/<trial>/*.kinematics``, ``*.position``), else None."""
+    if not data.startswith(ZIP_SIGNATURE):
+        return None
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as z:
+            names = z.namelist()
+    except (zipfile.BadZipFile, ValueError, OSError):
+        return None
+    if COMMON in names:
+        return "c3d"
+    if any(n.startswith("raw/") and n.endswith((".kinematics", ".position")) for n in names):
+        return "binary"
+    return None
 
 
 def is_kinarm_zip(data: bytes) -> bool:
-    """True for a ZIP archive holding ``raw/common.c3d``."""
-    if not data.startswith(ZIP_SIGNATURE):
-        return False
+    """True for a KINARM exam archive of either kind (:func:`exam_kind`)."""
+    return exam_kind(data) is not None
+
+
+def exam_members(name: str, data: bytes, budget: ReadBudget
+                 ) -> tuple[zipfile.ZipFile, list[zipfile.ZipInfo]]:
+    """The open archive and its members under ``raw/`` (and ``exam_info*``), their declared
+    sizes charged to ``budget`` all together before any is inflated: forty members each
+    within the limits are refused when their total is not."""
     try:
-        with zipfile.ZipFile(io.BytesIO(data)) as z:
-            return COMMON in z.namelist()
-    except zipfile.BadZipFile:
-        return False
+        z = zipfile.ZipFile(io.BytesIO(data))
+        infos = z.infolist()
+    except (zipfile.BadZipFile, ValueError, OSError) as exc:
+        raise MapError(f"{name}: not a readable ZIP archive ({exc})") from None
+    if len(infos) > MAX_MEMBERS:
+        z.close()
+        raise MapError(f"{name}: {len(infos):,} members, more than the {MAX_MEMBERS:,} an exam "
+                       "holds; refused")
+    wanted = [i for i in infos if not i.is_dir() and (
+        i.filename.lower().startswith("raw/") or i.filename.lower().startswith("exam_info"))]
+    total = sum(i.file_size for i in wanted)
+    try:
+        budget.charge(total, name, f"its {len(wanted)} members declare {total:,} bytes "
+                      "unpacked")
+        for i in wanted:
+            if i.compress_size > 0 and i.file_size > MIB and \
+                    i.file_size / i.compress_size > budget.max_ratio:
+                raise BudgetExceeded(f"{name}:{i.filename}: {i.file_size:,} bytes unpacked from "
+                                     f"{i.compress_size:,}, a ratio over {budget.max_ratio:g} "
+                                     f"{budget.hint_ratio}")
+    except BudgetExceeded:
+        z.close()
+        raise
+    return z, wanted
 
 
-def _member(z: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, max_bytes: int,
-            max_ratio: float) -> bytes:
-    if info.file_size > max_bytes or (info.compress_size > 0 and
-                                      info.file_size / info.compress_size > max_ratio):
-        raise MapError(f"{name}:{info.filename}: {info.file_size:,} bytes unpacked from "
-                       f"{info.compress_size:,} — over the limits ({max_bytes:,} bytes, "
-                       f"ratio {max_ratio:g}); refused")
-    with z.open(info) as f:
-        data = f.read(max_bytes + 1)
-    if len(data) > max_bytes:
-        raise MapError(f"{name}:{info.filename}: larger than declared; refused")
-    return data
+def member_bytes(z: zipfile.ZipFile, info: zipfile.ZipInfo, name: str,
+                 budget: ReadBudget) -> bytes:
+    """One member inflated, stopped if it holds more than it declared."""
+    try:
+        with z.open(info) as f:
+            return budget.inflate(f, info.file_size, f"{name}:{info.filename}")
+    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError) as exc:
+        raise MapError(f"{name}:{info.filename}: unreadable ZIP member ({exc})") from None
 
 
 def read_kinarm_zip(name: str, data: bytes, channels: Mapping[str, str] | None = None,
-                    max_bytes: int = 200_000_000, max_ratio: float = 200.0
-                    ) -> tuple[Recording, dict[str, str]]:
+                    budget: ReadBudget | None = None) -> tuple[Recording, dict[str, str]]:
     """The trials of a Dexterit-E exam ZIP end to end as one recording (no trial marks yet:
     the caller finds the holds), in the exam's own coordinates; and provenance."""
-    import c3d
-
+    bud = budget or ReadBudget(1 << 28, len(data))
     hand = (dict(channels or {}).get("hand") or "Right").capitalize()
     fx_label = dict(channels or {}).get("fx") or f"{hand}_FS_ForceX"
     fy_label = dict(channels or {}).get("fy") or f"{hand}_FS_ForceY"
-    try:
-        z = zipfile.ZipFile(io.BytesIO(data))
-    except zipfile.BadZipFile as exc:
-        raise MapError(f"{name}: not a readable ZIP archive ({exc})") from None
+    z, members = exam_members(name, data, bud)
     with z:
-        infos = [i for i in z.infolist() if i.filename.lower().startswith("raw/")
-                 and i.filename.lower().endswith(".c3d") and i.filename != COMMON]
+        infos = [i for i in members if i.filename.lower().endswith(".c3d")
+                 and i.filename != COMMON]
         if COMMON not in z.namelist():
             raise MapError(f"{name}: not a Dexterit-E exam (no {COMMON})")
         if not infos:
             raise MapError(f"{name}: the exam holds no trial (no raw/*.c3d besides "
                            "common.c3d)")
         trials: list[tuple[int, str, float, np.ndarray, np.ndarray]] = []
+        punit = "m"
         for info in infos:
             where = f"{name}:{info.filename}"
-            blob = _member(z, info, name, max_bytes, max_ratio)
+            blob = member_bytes(z, info, name, bud)
             try:
-                r = c3d.Reader(io.BytesIO(blob))
-                frames = list(r.read_frames())
-            except Exception as exc:  # the library's own errors on damaged files
-                raise MapError(f"{where}: unreadable C3D ({type(exc).__name__}: {exc})"
-                               ) from None
-            if not frames:
+                r = read_c3d(blob, bud.limit)
+            except C3DError as exc:
+                raise MapError(f"{where}: {exc}") from None
+            if r.frames == 0:
                 raise MapError(f"{where}: no frames")
-            labels = [str(s).strip() for s in r.analog_labels]
-            for label in (fx_label, fy_label):
-                if label not in labels:
-                    raise MapError(f"{where}: no force-sensor channel {label!r} (channels: "
-                                   f"{', '.join(labels[:12])}…); name it with --column "
-                                   "fx=LABEL")
-            units = []
-            up = r.get("ANALOG:UNITS")
-            if up is not None:
-                units = [str(s).strip() for s in np.ravel(up.string_array)]
-            pu = r.get("POINT:UNITS")
-            punit = str(pu.string_value).strip() if pu is not None else "m"
+            labels = r.analog_labels
+            missing = [lab for lab in (fx_label, fy_label) if lab not in labels]
+            if missing:
+                why = ("no hand force: this robot has no force sensor (no *_FS_Force "
+                       "channel)" if not any("_FS_FORCE" in s.upper() for s in labels) else
+                       f"no force-sensor channel {', '.join(missing)}")
+                raise MapError(f"{where}: {why}; analog channels: {', '.join(labels[:12])}"
+                               f"{'…' if len(labels) > 12 else ''}; name one with --column "
+                               "fx=LABEL --column fy=LABEL")
+            punit = r.point_unit or "m"
             pf = channel_factor(punit, "length")
             if pf is None:
                 raise MapError(f"{where}: POINT:UNITS {punit!r} is not a length unit")
             k = 0 if hand == "Right" else 1
-            pts = np.array([p[k, :2] for _, p, _ in frames], dtype=float) * pf
-            analog = np.concatenate([a for _, _, a in frames], axis=1).astype(float)
-            per = analog.shape[1] // len(frames)
+            if r.points.shape[1] <= k:
+                raise MapError(f"{where}: no {hand.lower()} hand among the points "
+                               f"({', '.join(r.point_labels) or 'none'})")
+            pts = r.points[:, k, :2] * pf
+            per = max(1, r.analog.shape[1] // r.frames)
             cols = []
             for label in (fx_label, fy_label):
                 i = labels.index(label)
-                unit = units[i] if i < len(units) else "N"
+                unit = r.analog_units[i] or "N"
                 f = channel_factor(unit, "force")
                 if f is None:
                     raise MapError(f"{where}: channel {label!r} has unit {unit!r}, not a force "
                                    "unit fieldbank converts")
-                cols.append(analog[i, ::per] * f)         # at the point rate
-            num = r.get("TRIAL:TRIAL_NUM")
-            order = int(num.int16_value) if num is not None else len(trials)
-            trials.append((order, info.filename, float(r.point_rate), pts,
+                cols.append(r.analog[i, ::per] * f)         # at the point rate
+            num = r.param("TRIAL:TRIAL_NUM")
+            order = int(num.first(len(trials))) if num is not None and num.type != -1 \
+                else len(trials)
+            trials.append((order, info.filename, float(r.point_rate_hz), pts,
                            np.column_stack(cols)))
     trials.sort(key=lambda x: (x[0], x[1]))
     ts, ps, fs = [], [], []

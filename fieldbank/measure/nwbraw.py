@@ -16,11 +16,15 @@ Written (:func:`write_recording`), one file per measurement:
 * the patient code (scratch ``patient``), session description and start time, the device.
 
 Read (:func:`read_recording`): the same layout, and a lab's own NWB file when it names its
-channels: any TimeSeries of shape (N, 2) (or two (N,) series) whose name the caller maps to
-x/y, vx/vy, fx/fy (:class:`fieldbank.measure.channels.ChannelMap`), converted from its own unit
-with its ``conversion`` factor. Without velocity the velocity is differentiated from the
-position (said in the provenance); without a trials table, holds are found by segmentation
-(:func:`fieldbank.measure.segment.find_holds`).
+channels: any TimeSeries of shape (N, 2) or more columns (x and y first), in ``acquisition/``
+or a processing module, found by name or path (:mod:`fieldbank.measure.nwbseries`), converted
+from its own unit with its ``conversion`` and ``offset``; a series without a real unit
+(pynwb's ``unknown``, an extension's ``ADDME``) is refused as such unless ``--unit`` gives it
+(:mod:`fieldbank.measure.channels`). Every dataset is checked by its declared size before it
+is read (:class:`fieldbank.measure.budget.ReadBudget`). Without velocity the velocity is
+differentiated from the position (said in the provenance); without a trials table, holds are
+found by segmentation (:func:`fieldbank.measure.segment.find_holds`); a trials table without
+fieldbank's columns gives its rows' spans, the roles found by position.
 """
 
 from __future__ import annotations
@@ -30,15 +34,18 @@ import os
 import tempfile
 import uuid
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
 from fieldbank.errors import MapError
-from fieldbank.measure.recording import Recording, Trial, derive_velocity
-from fieldbank.units import channel_factor
+from fieldbank.measure.budget import ReadBudget
+from fieldbank.measure.channels import unit_factor
+from fieldbank.measure.nwbseries import SeriesInfo, SeriesMissing, all_series, find
+from fieldbank.measure.recording import ChannelProblems, Recording, Trial, derive_velocity
+from fieldbank.measure.segment import holds_in_spans
 
 NWB_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 REFERENCE_FRAME = ("shoulder frame (BRIEF §3): origin at the shoulder, +x to the patient's "
@@ -133,85 +140,119 @@ def write_recording(rec: Recording, info: RecordingInfo,
         os.unlink(path)
 
 
-def _series(nwb: Any, name: str) -> Any:
-    acq = nwb.acquisition
-    if name in acq:
-        return acq[name]
-    for ts in acq.values():
-        # a Position/BehavioralTimeSeries container holds its series by name
-        inner = getattr(ts, "spatial_series", None) or getattr(ts, "time_series", None)
-        if inner and name in inner:
-            return inner[name]
-    raise MapError(f"no acquisition series {name!r}; found "
-                   f"{', '.join(sorted(acq)) or 'none'}")
-
-
-def _si(ts: Any, where: str, quantity: str) -> np.ndarray:
-    data = np.asarray(ts.data[:], dtype=float)
-    unit = str(getattr(ts, "unit", "")).strip()
-    scale = channel_factor(unit, quantity)
-    if scale is None:
-        raise MapError(f"{where}: unit {unit!r} is not a {quantity} unit fieldbank converts")
+def _si(role: str, info: SeriesInfo, ts: Any, budget: ReadBudget, units: Mapping[str, str],
+        quantity: str) -> np.ndarray:
+    """The series' first two columns in SI (its unit, ``conversion`` and ``offset``)."""
+    where = info.path
+    data = budget.read_dataset(ts.data, where) if hasattr(ts.data, "dtype") and \
+        hasattr(ts.data, "id") else np.asarray(ts.data)
+    arr = np.asarray(data, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] < 2:
+        raise MapError(f"{where}: shape {arr.shape}; the {role} needs (N, 2) — x and y in "
+                       "columns")
+    scale, _unit = unit_factor({"position": "x", "velocity": "vx", "force": "fx"}[role],
+                               info.unit, units, where)
     conv = float(getattr(ts, "conversion", 1.0) or 1.0)
     off = float(getattr(ts, "offset", 0.0) or 0.0)
-    return np.asarray((data * conv + off) * scale, dtype=float)
+    del quantity
+    return np.asarray((arr[:, :2] * conv + off) * scale, dtype=float)
 
 
-def _times(ts: Any) -> np.ndarray:
+def _times(info: SeriesInfo, ts: Any, n: int, budget: ReadBudget) -> np.ndarray:
     stamps = getattr(ts, "timestamps", None)
     if stamps is not None:
         if hasattr(stamps, "timestamps"):   # linked to another series
             stamps = stamps.timestamps
-        return np.asarray(stamps[:], dtype=float)
-    rate = float(ts.rate)
-    n = len(ts.data)
-    return float(getattr(ts, "starting_time", 0.0) or 0.0) + np.arange(n) / rate
+        t = np.asarray(budget.read_dataset(stamps, f"{info.path}/timestamps")
+                       if hasattr(stamps, "id") else stamps, dtype=float)
+    else:
+        rate = float(ts.rate)
+        t = float(getattr(ts, "starting_time", 0.0) or 0.0) + np.arange(n) / rate
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        k = int(back[0])
+        raise MapError(f"{info.path}: time runs backwards or stands still at sample {k + 1} "
+                       f"({t[k]:.6g} s, then {t[k + 1]:.6g} s; {back.size} place(s) in all): "
+                       "the timestamps cannot order the samples")
+    return t
 
 
-def read_recording(name: str, data: bytes,
-                   channels: Mapping[str, str] | None = None
+def read_recording(name: str, data: bytes, channels: Mapping[str, str] | None = None,
+                   units: Mapping[str, str] | None = None, budget: ReadBudget | None = None
                    ) -> tuple[Recording, np.ndarray | None, dict[str, str]]:
     """A recording, its planned postures (or None) and provenance from NWB bytes.
 
-    ``channels`` maps 'position', 'velocity', 'force' to acquisition series names (default
-    hand_position, hand_velocity, hand_force). Raises MapError naming the file and series.
+    ``channels`` maps 'position', 'velocity', 'force' to series names or paths anywhere in the
+    file (default hand_position, hand_velocity, hand_force); ``units`` gives the unit of a
+    series that states none. Every dataset is charged to ``budget`` by its declared size before
+    it is read. Raises MapError naming the file and series; a missing position and force are
+    reported together (ChannelProblems).
     """
     import h5py
     from pynwb import NWBHDF5IO
 
+    bud = budget or ReadBudget(1 << 30, len(data))
+    given = dict(channels or {})
     names = {"position": "hand_position", "velocity": "hand_velocity", "force": "hand_force",
-             **dict(channels or {})}
+             **given}
     with h5py.File(io.BytesIO(data), "r") as h5, \
             NWBHDF5IO(file=h5, mode="r", load_namespaces=True) as io_:
         nwb = io_.read()
+        series = all_series(nwb)
+        found: dict[str, tuple[SeriesInfo, Any]] = {}
+        reasons = []
+        for role in ("position", "force", "velocity"):
+            try:
+                found[role] = find(nwb, role if role != "position" else "hand position",
+                                   names[role], role, series)
+            except SeriesMissing as exc:
+                if role != "velocity" or role in given:
+                    reasons.append(f"{name}: {exc}")
+        if reasons:
+            raise ChannelProblems(reasons)
+        pinfo, pos_ts = found["position"]
+        finfo, force_ts = found["force"]
         try:
-            pos_ts = _series(nwb, names["position"])
-            force_ts = _series(nwb, names["force"])
-        except MapError as exc:
-            raise MapError(f"{name}: {exc}") from None
-        pos = _si(pos_ts, f"{name}:{names['position']}", "length")
-        force = _si(force_ts, f"{name}:{names['force']}", "force")
-        t = _times(pos_ts)
+            pos = _si("position", pinfo, pos_ts, bud, dict(units or {}), "length")
+        except ValueError as exc:
+            reasons.append(f"{name}: {exc}")
         try:
-            vel_ts = _series(nwb, names["velocity"])
-            vel = _si(vel_ts, f"{name}:{names['velocity']}", "speed")
-            derived = False
-        except MapError:
+            force = _si("force", finfo, force_ts, bud, dict(units or {}), "force")
+        except ValueError as exc:
+            reasons.append(f"{name}: {exc}")
+        if reasons:
+            raise ChannelProblems(reasons)
+        t = _times(pinfo, pos_ts, pos.shape[0], bud)
+        derived = "velocity" not in found
+        if not derived:
+            vinfo, vel_ts = found["velocity"]
+            try:
+                vel = _si("velocity", vinfo, vel_ts, bud, dict(units or {}), "speed")
+            except ValueError as exc:
+                raise MapError(f"{name}: {exc}") from None
+        else:
             vel = derive_velocity(t, pos)
-            derived = True
         for label, arr in (("position", pos), ("force", force), ("velocity", vel)):
-            if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] != t.shape[0]:
-                raise MapError(f"{name}:{names[label]}: shape {arr.shape}, expected "
-                               f"({t.shape[0]}, 2) to match the position's timestamps")
+            if arr.shape[0] != t.shape[0]:
+                raise MapError(f"{name}:{found.get(label, (pinfo,))[0].path}: {arr.shape[0]} "
+                               f"samples, the position's timestamps {t.shape[0]}: they must "
+                               "match")
+        names = {k: found[k][0].path for k in found}
         trials: list[Trial] = []
         table = nwb.trials
+        spans: list[tuple[float, float]] = []
         if table is not None and len(table) > 0:
+            for col in table.columns:
+                d: Any = getattr(col, "data", None)
+                if hasattr(d, "shape") and hasattr(d, "dtype"):
+                    bud.charge(int(np.prod(d.shape, dtype=np.float64)) * d.dtype.itemsize,
+                               f"{name}:/intervals/trials/{col.name}")
             df = table.to_dataframe()
             need = ("role", "posture", "window_start", "window_stop")
-            missing = [c for c in need if c not in df.columns]
-            if missing:
-                raise MapError(f"{name}:/intervals/trials lacks the column(s) "
-                               f"{', '.join(missing)} the estimator reads")
+            if any(c not in df.columns for c in need):   # a lab's own trials: their spans
+                spans = [(float(a), float(b)) for a, b in zip(df["start_time"],
+                                                             df["stop_time"], strict=True)]
+                df = df.iloc[0:0]
             for i, row in enumerate(df.itertuples()):
                 try:
                     trials.append(Trial(
@@ -224,7 +265,8 @@ def read_recording(name: str, data: bytes,
                     raise MapError(f"{name}:/intervals/trials row {i}: {exc}") from None
         postures = None
         if "postures" in nwb.scratch:
-            postures = np.asarray(nwb.scratch["postures"].data[:], dtype=float)
+            postures = np.asarray(bud.read_dataset(nwb.scratch["postures"].data,
+                                                   f"{name}:/scratch/postures"), dtype=float)
         protocol = ""
         if "protocol" in nwb.scratch:
             protocol = str(nwb.scratch["protocol"].data)
@@ -239,13 +281,16 @@ def read_recording(name: str, data: bytes,
             prov["patient"] = str(subject)
         if protocol:
             prov["protocol"] = protocol
-        chans = {"x": f"{names['position']}[:, 0] ({pos_ts.unit})",
-                 "y": f"{names['position']}[:, 1] ({pos_ts.unit})",
-                 "fx": f"{names['force']}[:, 0] ({force_ts.unit})",
-                 "fy": f"{names['force']}[:, 1] ({force_ts.unit})"}
+        chans = {"x": f"{names['position']}[:, 0] ({pinfo.unit})",
+                 "y": f"{names['position']}[:, 1] ({pinfo.unit})",
+                 "fx": f"{names['force']}[:, 0] ({finfo.unit})",
+                 "fy": f"{names['force']}[:, 1] ({finfo.unit})"}
         if not derived:
             chans["vx"] = f"{names['velocity']}[:, 0]"
             chans["vy"] = f"{names['velocity']}[:, 1]"
     rec = Recording(t, pos, vel, force, tuple(trials), chans, source=name,
                     velocity_derived=derived)
+    if spans:
+        rec = replace(rec, trials=tuple(holds_in_spans(rec, spans)))
+        prov["trials_from"] = "the trials table's start and stop times; roles by position"
     return rec, postures, prov

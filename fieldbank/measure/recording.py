@@ -32,6 +32,15 @@ from fieldbank.model import FloatArray
 ROLES = ("base", "displaced", "pass")
 
 
+class ChannelProblems(MapError):
+    """Every problem found in a raw file's channels at once (each a sentence naming the
+    channel); the message joins them."""
+
+    def __init__(self, reasons: list[str]) -> None:
+        self.reasons = list(reasons)
+        super().__init__("; ".join(self.reasons))
+
+
 @dataclass(frozen=True)
 class Trial:
     """One hold or pass of a recording (see the module docstring). Times in s."""

@@ -53,6 +53,26 @@ def find_holds(rec: Recording, config: SegmentConfig | None = None) -> list[Tria
         if sl.stop <= sl.start:
             continue
         holds.append((t0, t1, w0, rec.position_m[sl].mean(axis=0)))
+    return _classify(rec, holds, cfg)
+
+
+def holds_in_spans(rec: Recording, spans: list[tuple[float, float]],
+                   config: SegmentConfig | None = None) -> list[Trial]:
+    """Trials from spans the file marks (``--trial-events``: each from its event to the next),
+    read after the transient, their roles by position as in :func:`find_holds`."""
+    cfg = config or SegmentConfig()
+    holds = []
+    for t0, t1 in spans:
+        w0 = min(t0 + cfg.transient_s, t1)
+        sl = rec.span(w0, t1)
+        if sl.stop - sl.start < 2:
+            continue
+        holds.append((t0, t1, w0, rec.position_m[sl].mean(axis=0)))
+    return _classify(rec, holds, cfg)
+
+
+def _classify(rec: Recording, holds: list[tuple[float, float, float, np.ndarray]],
+              cfg: SegmentConfig) -> list[Trial]:
     centres: list[list[np.ndarray]] = []
     member: list[int] = []
     for *_, pos in holds:

@@ -157,8 +157,10 @@ class MapStore(DatabaseCore):
                     array_sha256=pending.ref.sha256 if pending else None, ingested_at=at,
                     ingested_by=self.actor))
                 s.flush()  # rows refer to each other by foreign key only, not relationships
-                rows = [self._map_row(m, p.id, sess.id, f.sha256, i, at)
-                        for i, m in enumerate(f.maps)]
+                own = f.map_sessions or (None,) * len(f.maps)
+                rows = [self._map_row(m, p.id, sess.id if at_ is None else self._session_row(
+                    s, p, at_[0], at_[1], create=True).id, f.sha256, i, at)
+                        for i, (m, at_) in enumerate(zip(f.maps, own, strict=True))]
                 s.add_all(rows)
                 s.flush()
                 ids = tuple(r.id for r in rows)
