@@ -129,3 +129,23 @@ def test_the_reliability_figures() -> None:
         assert a.truth in GROUPS, a
         g = a.truth
         assert a.params.group_value("km_n_per_m", g) == pytest.approx(600.0)
+
+
+def test_a_design_that_covers_stretches_every_group_the_candidates_differ_in() -> None:
+    """The two strokes designed for three joint groups never stretched the directions in which
+    an elbow-extensor reflex differs; with ``cover`` the set starts with a stroke along each
+    group's lengthening direction."""
+    import math
+
+    from fieldbank.evaluate.design import design, severity_candidates
+    from fieldbank.evaluate.probing import lengthening_direction
+
+    cands = severity_candidates(("elbow",), ("severe",), unimpaired=True, base=BODY)
+    d = design(cands, max_probes=2, polish_evals=0, cover=True)
+    assert differing_groups(cands) == ("ef", "ee")
+    arm = cands[0].arm
+    for g in ("ef", "ee"):
+        want = lengthening_direction(arm, g)
+        angle = math.degrees(math.atan2(want[1], want[0]))
+        assert any(abs((p.direction_deg - angle + 180.0) % 360.0 - 180.0) <= 30.0
+                   for p in d.paths), (g, [p.direction_deg for p in d.paths])
