@@ -258,7 +258,8 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
                    err=True)
     if out.fitter.status_ == "poor":
         click.echo("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons) + "). It is "
-                   "stored, but what-ifs and reports refuse it unless given --accept-poor-fit.",
+                   "stored, but what-ifs and reports refuse it unless given --accept-poor-fit. "
+                   "A contracture needs its slack length fitted: --fit km,alpha,beta,slack.",
                    err=True)
 
 

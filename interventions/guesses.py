@@ -235,7 +235,8 @@ def check_fit(basis: FitBasis | None, accept_poor_fit: bool = False) -> str | No
         raise PoorFitError(
             f"the model comes from fit {basis.fit_id}, a poor fit ({why}); a prediction from "
             "it would not describe this patient. Refit (other maps, 'fieldbank fit --fit "
-            "km,alpha,beta,q_rest'), or give --accept-poor-fit to run it anyway (recorded in "
+            "km,alpha,beta,q_rest', or with a contracture's slack length: '--fit "
+            "km,alpha,beta,slack'), or give --accept-poor-fit to run it anyway (recorded in "
             "the output).")
     return f"poor fit accepted by the user (--accept-poor-fit): fit {basis.fit_id}: {why}"
 
