@@ -240,10 +240,10 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
     prev: tuple[dict[str, FloatArray], FloatArray] | None = None
     last = -np.inf
     if cover and family == "stroke":
-        for s in coverage_strokes(cands, ctx.limits, noise, start):
-            v = np.array(s.values, dtype=float)
-            chosen.append(v)
-            pos, vel, t = fam.make(start, v[None], DESIGN_SAMPLES)
+        for s in coverage_strokes(cands, ctx.limits, noise, (float(start[0]), float(start[1]))):
+            cv = np.array(s.values, dtype=float)
+            chosen.append(cv)
+            pos, vel, t = fam.make(start, cv[None], DESIGN_SAMPLES)
             sep, kl = ctx.evaluate(pos, vel, t, fam.closed, robust=True)
             sep, kl = _combine(sep, kl, prev)
             prev = ({k: x[:, 0] for k, x in sep.items()}, kl[:, 0])
