@@ -283,7 +283,8 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
     if out.fitter.status_ == "poor":
         click.echo(wrap("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons)
                         + "). It is stored, but what-ifs and reports refuse it unless given "
-                        "--accept-poor-fit."), err=True)
+                        "--accept-poor-fit. A contracture needs its slack length fitted: "
+                        "--fit km,alpha,beta,slack."), err=True)
     for line in changes:
         say(textwrap.fill(line, 100, subsequent_indent="  "))
 
@@ -349,9 +350,10 @@ def models_show(ctx: click.Context, model_id: int, as_json: bool, db_url: str | 
     m = detail.model
     p = m.params
     lines = [f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}",
-             "  group                        Km N/m    alpha N    beta"]
+             "  group                        Km N/m    alpha N    beta  slack mm"]
     lines += [f"  {g} {GROUP_NAMES[g]:<24}{p.km_n_per_m[i]:>10.1f} {p.alpha_n[i]:>10.1f} "
-              f"{p.beta[i]:>7.3f}" for i, g in enumerate(GROUPS)]
+              f"{p.beta[i]:>7.3f} {1000 * p.slack_offset_m[i]:>+9.1f}"
+              for i, g in enumerate(GROUPS)]
     q = [math.degrees(v) for v in p.q_rest_rad]
     lines.append(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
     if detail.lineage:
