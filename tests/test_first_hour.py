@@ -75,7 +75,10 @@ def test_a_bad_file_is_refused_naming_the_file_and_the_key(clean_env: Path) -> N
 def test_config_show_prints_each_value_and_its_source_without_secrets(clean_env: Path) -> None:
     Path("fieldbank.toml").write_text(
         'db = "postgresql+psycopg://ana:s3cret@db.example/fb"\n[ingest.limits]\nmax_rows = 5\n')
-    r = run("config", "show", env={"FIELDBANK_HOME": str(clean_env / "h")})
+    # a home deep enough that its path alone would push the row past 100 columns
+    home = clean_env / "clinic-data" / ("a-directory-with-a-long-name-" * 3) / "fieldbank-home"
+    assert len(str(home)) > 100
+    r = run("config", "show", env={"FIELDBANK_HOME": str(home)})
     assert r.exit_code == 0
     assert "s3cret" not in r.output
     out = r.stdout.splitlines()
@@ -92,6 +95,7 @@ def test_config_show_prints_each_value_and_its_source_without_secrets(clean_env:
         rows[last][1] += " " + ln[at_from:].strip()
     assert "ana:***@db.example" in rows["db"][0] and "fieldbank.toml" in rows["db"][1]
     assert "variable FIELDBANK_HOME" in " ".join(rows["home"][1].split())
+    assert rows["home"][0] == str(home)  # wrapped whole, nothing cut or elided
     assert "max_rows=5" in rows["ingest.limits"][0]
     doc = json.loads(run("config", "show", "--json").stdout)
     assert doc["file"].endswith("fieldbank.toml")
