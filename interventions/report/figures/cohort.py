@@ -171,8 +171,10 @@ def validation_figure(points: Sequence[CheckPoint], title: str,
                         [v + e for v, e in zip(vals, ses, strict=True)],
                         [1.0 - tolerance, 1.0 + tolerance, 0.0])
         panel = Panel.at(scene, (x0, 50, pw, ps), (lo, hi), (0.0, float(len(frac))))
-        panel.frame("", "measured ÷ predicted change (1: as predicted, 0: none)", "",
-                    yticks=[], grid=False)
+        panel.frame("", "measured ÷ predicted change", "", yticks=[], grid=False)
+        # what the axis's two marks mean, on a line of its own: the panel is narrow
+        scene.text(x0 + pw / 2, 50 + ps + 42, "1: as predicted · 0: no change", FONT_SMALL,
+                   "middle", "hanging", colour=GREY)
         panel.band([1.0 - tolerance, 1.0 + tolerance], [0.0, 0.0],
                    [float(len(frac))] * 2, ACCENT_OK, 0.12)
         panel.vline(1.0, ACCENT_OK, 1.0, None)
