@@ -144,3 +144,39 @@ def test_the_colour_check_catches_a_palette_of_near_pinks() -> None:
     # red against green is the classic pair a deuteranope loses
     assert _closest_pair(["#d62728", "#2ca02c"], DICHROMATS["deuteranopia"]) < \
         _closest_pair(["#d62728", "#2ca02c"], None) / 2
+
+
+# --- intervals that rest on a guess -------------------------------------------------------------
+def test_an_interval_resting_on_a_guess_is_marked_and_shown_after_the_identified_one() -> None:
+    from fieldbank.interventions.report.html import _trust
+
+    detail = {"fit": None, "intervals": {"samples": 200, "metrics": {
+        "elbow flexion, fast": {"unit": "N·m", "before": 1.39, "after": 1.2, "change": -0.19,
+                                "before_interval": [1.35, 15.60], "after_interval": [1.1, 14.0],
+                                "change_interval": [-1.6, 0.0], "rests_on_guess": True,
+                                "without_guesses": {"before_interval": [1.35, 1.43],
+                                                    "after_interval": [1.15, 1.25],
+                                                    "change_interval": [-0.22, -0.16]}},
+        "elbow extension, slow": {"unit": "N·m", "before": 0.5, "after": 0.4, "change": -0.1,
+                                  "before_interval": [0.45, 0.55], "after_interval": [0.35, 0.45],
+                                  "change_interval": [-0.12, -0.08], "rests_on_guess": False}}}}
+    page = "".join(_trust(detail))
+    rows = re.findall(r"<tr><th class=\"t\">(.*?)</th>(.*?)</tr>", page)
+    named = {name: cells for name, cells in rows}
+    guessed = named["elbow flexion, fast (N·m) *"]
+    first = re.search(r"<td>(.*?)</td>", guessed)
+    assert first and first.group(1).startswith("1.39 [1.35, 1.43]")  # identified first
+    assert '<span class="guess">* [1.35, 15.60]</span>' in first.group(1)
+    assert "elbow extension, slow (N·m)" in named and "*" not in named[
+        "elbow extension, slow (N·m)"]
+    assert "* The interval rests on parameters the fit did not identify" in page
+
+
+# --- who answered the training ------------------------------------------------------------------
+def test_training_results_say_when_a_simulated_trainee_answered() -> None:
+    from fieldbank.haptic.trainingresults import trainee_note
+
+    assert trainee_note([3], []).startswith("Simulated trainee, not a person: session(s) 3")
+    both = trainee_note([3], [4, 5])
+    assert "3 were answered by the simulated trainee" in both and "4, 5 by a person" in both
+    assert "simulated" not in trainee_note([], [4])
