@@ -86,6 +86,9 @@ def test_a_date_before_year_one_and_a_centre_at_infinity_are_refused_in_words() 
     assert "there is no year 0" in refused(run(*base, "--date", "0000-01-01"))
     err = refused(run(*base, "--centre", "inf,0"))
     assert "--centre must read X,Y in metres, two finite numbers" in err
+    err = refused(run(*base, "--must-see", "ef,zz"), code=1)  # before the database opens
+    assert "--must-see: unknown muscle group(s) zz" in " ".join(err.split())
+    assert "No database" not in err
     from fieldbank.errors import ParameterError
     from fieldbank.measure.protocol import ProtocolConfig
 
