@@ -293,7 +293,8 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
 
     Before the robot moves, what the protocol sees of each muscle group goes to ``report``
     line by line; a group of ``must_see`` it would not see refuses the measurement
-    (:class:`fieldbank.measure.visibility.ProtocolBlind`, with a suggestion).
+    (:class:`fieldbank.measure.visibility.ProtocolBlind`, with a suggestion). While the robot
+    moves, ``progress`` hears the robot time done and the whole (:func:`run_protocol`).
     """
     cfg = config or MeasureConfig()
     if not session_label.strip():  # before the robot moves, not after
