@@ -180,3 +180,19 @@ def test_training_results_say_when_a_simulated_trainee_answered() -> None:
     both = trainee_note([3], [4, 5])
     assert "3 were answered by the simulated trainee" in both and "4, 5 by a person" in both
     assert "simulated" not in trainee_note([], [4])
+
+
+# --- one name per muscle group ------------------------------------------------------------------
+def test_the_group_that_crosses_both_joints_has_one_name_on_every_page() -> None:
+    station = ROOT / "haptic" / "station"
+    page = (station / "page.html").read_text(encoding="utf-8")
+    buttons = dict(re.findall(r'class="train-answer answer" data-answer="(\w+)"[^>]*>([^<]+)<',
+                              page))
+    assert buttons == {"shoulder": "Shoulder", "elbow": "Elbow", "both": "Bi-articular"}
+    remote = (station / "remote.js").read_text(encoding="utf-8")
+    for table in ("GROUP_WORD", "GROUP_SHORT"):
+        found = re.search(table + r" = \{([^}]*)\}", remote)
+        assert found and '"Bi-articular"' in found.group(1) and "Both" not in found.group(1)
+    from fieldbank.haptic.trainingresults import _ANSWER_WORDS
+
+    assert _ANSWER_WORDS["both"] == "bi-articular"
