@@ -53,24 +53,41 @@ def _wrap(text: str, indent: str = "  ", first: str | None = None) -> list[str]:
                          subsequent_indent=indent + "  ", break_on_hyphens=False) or [""]
 
 
+def _columns(heads: Sequence[Sequence[str]], rows: Sequence[Sequence[str]]) -> list[str]:
+    """Header lines and rows, the first column left-aligned, the others right-aligned; each
+    column as wide as its widest cell, two spaces apart: never one cell run into the next."""
+    widths = [max(len(x) for x in (*h, *(r[i] for r in rows))) for i, h in enumerate(heads)]
+
+    def line(row: Sequence[str]) -> str:
+        return (f"{row[0]:<{widths[0]}}" + "".join(f"  {v:>{w}}" for v, w in
+                                                   zip(row[1:], widths[1:], strict=True)))
+    return ([line([h[k] for h in heads]).rstrip() for k in range(len(heads[0]))]
+            + [line(r) for r in rows])
+
+
 def _stretch_lines(c: Comparison) -> list[str]:
-    """Per joint and direction: slow and fast resisting torque, velocity-dependent part, catch."""
+    """Per joint and direction: slow and fast resisting torque and its velocity-dependent part;
+    then where each stretch meets the catch (a table of its own: both within 100 columns)."""
     first: JointStretch = c.before.stretches[0]
-    out = [f"{'Joint stretch':<19}{f'slow {first.slow_speed_deg_s:.0f}°/s':>13}"
-           f"{f'fast {first.speed_deg_s:.0f}°/s':>18}{'velocity-dependent':>19}"
-           f"{'R1 °':>10}{'R2 °':>10}{'R2−R1 °':>10}",
-           f"{'(before → after)':<19}{'N·m':>13}{'N·m':>18}{'N·m':>19}"]
-    for name, b, a in c.stretch_rows():
-        out.append(
-            f"{name:<19}"
-            f"{f'{b.slow_torque_n_m:.2f} → {a.slow_torque_n_m:.2f}':>13}"
-            f"{f'{b.peak_torque_n_m:.2f} → {a.peak_torque_n_m:.2f}':>13}"
-            f"{_pct(b.peak_torque_n_m, a.peak_torque_n_m):>5}"
-            f"{f'{b.reflex_torque_n_m:.2f} → {a.reflex_torque_n_m:.2f}':>14}"
-            f"{_pct(b.reflex_torque_n_m, a.reflex_torque_n_m):>5}"
-            f"{_pair(b.catch_angle_deg, a.catch_angle_deg):>10}"
-            f"{_pair(b.slow_stop_angle_deg, a.slow_stop_angle_deg):>10}"
-            f"{_pair(b.dynamic_range_deg, a.dynamic_range_deg):>10}")
+    rows = list(c.stretch_rows())
+    pct_w = max([len(_pct(b.peak_torque_n_m, a.peak_torque_n_m)) for _, b, a in rows]
+                + [len(_pct(b.reflex_torque_n_m, a.reflex_torque_n_m)) for _, b, a in rows])
+    out = _columns(
+        [("Joint stretch", "(before → after)"), (f"slow {first.slow_speed_deg_s:.0f}°/s", "N·m"),
+         (f"fast {first.speed_deg_s:.0f}°/s", "N·m"), ("velocity-dependent", "N·m")],
+        [(name, f"{b.slow_torque_n_m:.2f} → {a.slow_torque_n_m:.2f}",
+          f"{b.peak_torque_n_m:.2f} → {a.peak_torque_n_m:.2f} "
+          f"{_pct(b.peak_torque_n_m, a.peak_torque_n_m):>{pct_w}}",
+          f"{b.reflex_torque_n_m:.2f} → {a.reflex_torque_n_m:.2f} "
+          f"{_pct(b.reflex_torque_n_m, a.reflex_torque_n_m):>{pct_w}}")
+         for name, b, a in rows])
+    out.append("")
+    out += _columns(
+        [("Catch angle", "(before → after)"), ("R1 °", "fast"), ("R2 °", "slow"),
+         ("R2−R1 °", "")],
+        [(name, _pair(b.catch_angle_deg, a.catch_angle_deg),
+          _pair(b.slow_stop_angle_deg, a.slow_stop_angle_deg),
+          _pair(b.dynamic_range_deg, a.dynamic_range_deg)) for name, b, a in rows])
     thresholds = ", ".join(f"{name} {b.catch_threshold_n_m:.2f} N·m"
                            for name, b, _ in c.stretch_rows())
     out += _wrap("R1 and R2: where the fast and the slow stretch first meet the catch torque "

@@ -263,6 +263,26 @@ def test_the_severity_table_keeps_its_columns_apart_with_scores() -> None:
     assert max(len(ln) for ln in lines) <= 100
 
 
+def test_the_stretch_tables_keep_their_columns_apart_for_a_severe_arm() -> None:
+    # torques past 10 N·m, changes of -100 %, catch angles of three digits: the widest cells
+    r = run("whatif", "--severity", "shoulder=severe,elbow=severe", "--tenotomy", "ef",
+            "--interval-samples", "0")
+    assert r.exit_code == 0, r.output
+    lines = r.stdout.splitlines()
+    for head, ncells in (("Joint stretch", 4), ("Catch angle", 4)):
+        start = next(k for k, ln in enumerate(lines) if ln.startswith(head))
+        rows = lines[start + 2:start + 6]
+        assert {" ".join(row.split()[:2]) for row in rows} == {
+            "elbow extension", "elbow flexion", "shoulder extension", "shoulder flexion"}
+        for row in rows:  # a change in % follows its pair; every pair two spaces from the next
+            cells = [c for c in re.split(r" {2,}", re.sub(r" [+-]\d+%", "", row)) if c.strip()]
+            assert len(cells) == ncells, row
+            assert all(re.fullmatch(r"−?[\d.]+ → (−?[\d.]+|—)|— → —", c) for c in cells[1:]), row
+    torque = next(ln for ln in lines if ln.startswith("elbow extension"))
+    assert "-100%" in torque and "11.12 → 11.12" in " ".join(lines)
+    assert max(len(ln) for ln in lines) <= 100
+
+
 def test_a_measurement_reports_its_robot_time_as_it_goes(tmp_path: Path) -> None:
     from fieldbank.cli.progress import robot_time_text
     from fieldbank.evaluate.severity import synthesize
