@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fieldbank.errors import ParameterError
-from fieldbank.model import Arm, FloatArray, hand_force
-from fieldbank.muscle import passive_force, reflex_force
+from fieldbank.model import Arm, FloatArray, endpoint_field, hand_force
+from fieldbank.muscle import passive_force, passive_tension, reflex_force, reflex_tension
 from fieldbank.params import ArmParams
 
 #: ArmParams fields that may differ between the parameter sets of one :class:`ArmBatch`: every
@@ -147,6 +147,28 @@ class ArmBatch:
         q, _, (ia, ib, ic, id_), (qd1, qd2) = geo.hand_state(x, v)
         lam = self.muscle_lengths(q)
         return geo._out_vec(self._force(self.passive_force(lam), lam, ia, ib, ic, id_, qd1, qd2))
+
+    def field(self, x: ArrayLike, v: ArrayLike | None = None
+              ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`Arm.field` of every set: force (S, N, 2), stiffness K = -∂F/∂x and damping
+        B = -∂F/∂v (S, N, 2, 2) at hand positions x (N, 2), m, and velocity v ((2,) or
+        (N, 2), m/s; None: static). The same equations in the same order as one arm's
+        (:func:`fieldbank.model.endpoint_field`), so each set's values are those of its own
+        compiled arm to the last bit (``tests/test_armbatch_field.py``)."""
+        geo = self.geometry
+        q, jac, jinv, qd = geo.hand_state(x, v)
+        jl = geo.jl
+        lam = self.muscle_lengths(q)
+        ldot = np.outer(qd[0], jl[:, 0]) + np.outer(qd[1], jl[:, 1])
+        psi, dpsi = passive_tension(lam, self.lam_slack[:, None, :], self.km[:, None, :],
+                                    self.excursion[:, None, :], geo.w)
+        phi, dphi_l, dphi_ld = reflex_tension(
+            lam, ldot, geo.ldot_max, self.alpha[:, None, :], self.beta[:, None, :],
+            self.excursion[:, None, :], self.lam_rest[:, None, :], self.lam_min[:, None, :],
+            self.lam_max[:, None, :])
+        force, stiff, damp = endpoint_field(psi, dpsi, phi, dphi_l, dphi_ld, jl,
+                                            geo._jl_products, jac, jinv, qd)
+        return geo._out_vec(force), geo._out_mat(stiff), geo._out_mat(damp)
 
     def grid_force(self, x: ArrayLike, velocities: ArrayLike) -> FloatArray:
         """:meth:`endpoint_force` at every hand position x (N, 2), m, with every velocity of
