@@ -10,9 +10,10 @@ compiled arms (the prediction intervals of a what-if and of a report).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from dataclasses import fields as dataclass_fields
+from operator import attrgetter
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -244,5 +245,6 @@ _GEOMETRY_FIELDS: tuple[str, ...] = tuple(
     f.name for f in dataclass_fields(ArmParams) if f.name not in SAMPLED_FIELDS)
 
 
-def _geometry_key(p: ArmParams) -> tuple[object, ...]:
-    return tuple(getattr(p, f) for f in _GEOMETRY_FIELDS)
+#: The geometry fields of a set, as one tuple (a copy made by ``with_group`` shares their
+#: objects, so comparing two keys is mostly identity checks).
+_geometry_key: Callable[[ArmParams], tuple[object, ...]] = attrgetter(*_GEOMETRY_FIELDS)
