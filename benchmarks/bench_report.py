@@ -31,7 +31,10 @@ then - the kept intervals dropped - on a ``distributed.LocalCluster`` of one wor
 speaking TLS with the certificates ``fieldbank cluster certs`` makes, twice (intervals
 computed, then kept). Per case: the worker's CPU time against ``--jobs 1`` in this process
 (the target), and beside it this process's main thread (the command: selecting, reading the
-payloads back, writing) and the two together. The worker is warmed up as this process is -
+payloads back, writing), the two together, and the share of the worker's CPU that the same
+worker spends idle over the same wall time (Dask's heartbeats and system monitor, the TLS
+event loop; measured for ``IDLE_S`` seconds before the runs) - on a loaded machine a case
+takes long in wall time, and that share grows with it. The worker is warmed up as this process is -
 one case computed there (imports, its database, first compilations) - before the clock
 starts.
 
@@ -69,6 +72,8 @@ TARGET_MS_FIRST = 100.0
 TARGET_MS_KEPT = 60.0
 TARGET_WORKER_RATIO = 1.2
 TARGET_KB_PER_CASE = 100.0
+#: Seconds the idle worker is watched for its background CPU.
+IDLE_S = 5.0
 FILES = ("report.html", "metrics.csv", "metrics.json")
 Check = tuple[str, float, bool, str]
 
@@ -237,6 +242,12 @@ def run_worker(n: int, server_url: str, tmp: Path) -> list[Check]:
             build_report(db, Selection(plan_ids=(cases[0].plan_id,)), out / "warm",
                          scheduler=sched)
             _forget_intervals(url)
+            # what the worker process spends doing nothing (Dask's heartbeats, its system
+            # monitor, the TLS event loop): CPU seconds per second of wall time
+            wk0, w0 = _worker_cpu(client), time.perf_counter()
+            time.sleep(IDLE_S)
+            idle = (_worker_cpu(client) - wk0) / (time.perf_counter() - w0)
+            print(f"  {'one idle TLS worker':<44} {1e3 * idle:7.1f} ms CPU per second")
             for name in ("first", "kept"):
                 wk0, th0, p0 = _worker_cpu(client), time.thread_time(), time.process_time()
                 w0 = time.perf_counter()
@@ -250,7 +261,9 @@ def run_worker(n: int, server_url: str, tmp: Path) -> list[Check]:
                      f" = {remote[name] / local[name]:.2f}x --jobs 1 here\n  {'':<44} and the "
                      f"command's own {1e3 * th / n:.1f} ms CPU per case "
                      f"({(wk + th) / n / local[name]:.2f}x with the worker's; this process "
-                     f"with the scheduler {1e3 * pr / n:.1f} ms)")
+                     f"with the scheduler {1e3 * pr / n:.1f} ms);\n  {'':<44} the idle "
+                     f"worker's share {1e3 * idle * w / n:.1f} ms per case (the rest "
+                     f"{(wk - idle * w) / n / local[name]:.2f}x --jobs 1 here)")
     same = same_files([out / d for d in ("local-first", "local-kept", "worker-first",
                                          "worker-kept")])
     print(f"  identical bytes, here and on the worker: {'yes' if same else 'NO'}")
