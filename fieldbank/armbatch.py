@@ -16,7 +16,7 @@ from dataclasses import fields as dataclass_fields
 from operator import attrgetter
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray, endpoint_field, hand_force
@@ -135,10 +135,10 @@ class ArmBatch:
             return np.broadcast_to(lam, (len(self.params), *lam.shape))
         return self.lam_rest[:, None, :] + (qa - self.q_rest[:, None, :]) @ self.geometry.jl.T
 
-    def columns(self, lam: FloatArray, cols: ArrayLike) -> FloatArray:
-        """The muscles ``cols`` of λ (S, N, 6): (S, N, k), broadcast as λ is."""
+    def columns(self, lam: FloatArray, cols: NDArray[np.intp]) -> FloatArray:
+        """The muscles ``cols`` (indices, (k,)) of λ (S, N, 6): (S, N, k), broadcast as λ is."""
         if self._one(lam):
-            return np.broadcast_to(lam[:1][..., cols], (*lam.shape[:2], len(np.atleast_1d(cols))))
+            return np.broadcast_to(lam[:1][..., cols], (*lam.shape[:2], len(cols)))
         return lam[..., cols]
 
     def _one(self, lam: FloatArray) -> bool:

@@ -146,19 +146,19 @@ class _ReadOnce:
         return self._seen[key]
 
     def get_model(self, model_id: int) -> StoredModel:
-        return self._once(("model", model_id),  # type: ignore[no-any-return]
+        return self._once(("model", model_id),
                           lambda: self._db.get_model(model_id))
 
     def model_lineage(self, model_id: int) -> list[StoredModel]:
-        return self._once(("lineage", model_id),  # type: ignore[no-any-return]
+        return self._once(("lineage", model_id),
                           lambda: self._db.model_lineage(model_id))
 
     def list_fits(self, patient_code: str) -> list[FitRecord]:
-        return self._once(("fits", patient_code),  # type: ignore[no-any-return]
+        return self._once(("fits", patient_code),
                           lambda: self._db.list_fits(patient_code))
 
     def list_maps(self, patient_code: str, session_label: str | None = None) -> list[StoredMap]:
-        return self._once(("maps", patient_code, session_label),  # type: ignore[no-any-return]
+        return self._once(("maps", patient_code, session_label),
                           lambda: self._db.list_maps(patient_code, session_label))
 
 
