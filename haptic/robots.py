@@ -61,18 +61,14 @@ def _origin(ep: EntryPoint) -> str:
     return f"{ep.value!r} of {dist.name} {dist.version}" if dist is not None else repr(ep.value)
 
 
-def open_robot(url: str, rate_hz: int, watchdog_ms: int) -> RobotPort:
-    """The robot ``url`` names, connected and its handshake done at ``rate_hz`` with the
-    robot's watchdog asked for ``watchdog_ms``; not armed. Close it with ``close()``."""
+def adapter_for(url: str) -> EntryPoint | None:
+    """The installed adapter that opens ``url`` (None: the project's own link does - a device
+    path or a built-in scheme); a :class:`~haptic.errors.HapticError` when no adapter, or more
+    than one, claims its scheme. Nothing is imported or opened: a configuration naming a robot
+    is checked with it where it is made."""
     scheme = scheme_of(url)
     if scheme is None or scheme in BUILT_IN:
-        link = RobotLink.open(url)
-        try:
-            link.handshake(rate_hz, watchdog_ms)
-        except BaseException:
-            link.close()
-            raise
-        return link
+        return None
     found = adapters().get(scheme, [])
     if not found:
         known = ", ".join(f"{s}://" for s in sorted(adapters())) or "none"
@@ -82,7 +78,22 @@ def open_robot(url: str, rate_hz: int, watchdog_ms: int) -> RobotPort:
     if len(found) > 1:
         raise HapticError(f"{len(found)} robot adapters claim {scheme}://: "
                           f"{'; '.join(_origin(ep) for ep in found)}; uninstall all but one")
-    ep = found[0]
+    return found[0]
+
+
+def open_robot(url: str, rate_hz: int, watchdog_ms: int) -> RobotPort:
+    """The robot ``url`` names, connected and its handshake done at ``rate_hz`` with the
+    robot's watchdog asked for ``watchdog_ms``; not armed. Close it with ``close()``."""
+    ep = adapter_for(url)
+    if ep is None:
+        link = RobotLink.open(url)
+        try:
+            link.handshake(rate_hz, watchdog_ms)
+        except BaseException:
+            link.close()
+            raise
+        return link
+    scheme = ep.name.lower()
     try:
         factory = ep.load()
     except Exception as exc:  # an adapter's import error, whatever it is
