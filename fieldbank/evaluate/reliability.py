@@ -171,6 +171,11 @@ class Outcome:
     baseline_answer: str = ""
     baseline_probability: float = float("nan")
     baseline_right: bool = False
+    #: The classifier's uncalibrated posterior over the sets of impaired groups (most
+    #: probable first), from which :func:`fieldbank.evaluate.openset.calibrated` states its
+    #: answer; kept so that a calibration can be measured on the same trials.
+    labels: tuple[str, ...] = ()
+    label_probability: tuple[float, ...] = ()
 
     @property
     def right(self) -> bool:
@@ -225,7 +230,9 @@ def run_trials(arms: Sequence[TrialArm], noise: NoiseModel, draws: int = 4, seed
                          "baseline_probability": b.group_posterior[b.group],
                          "baseline_right": truth <= held and bool(held) == bool(truth)}
             out.append(Outcome(arm.family, arm.name, arm.truth, answer, stated, c.explains,
-                               c.fit_p_value, **extra))  # type: ignore[arg-type]
+                               c.fit_p_value, labels=c.labels,
+                               label_probability=tuple(float(v) for v in c.raw_probability),
+                               **extra))  # type: ignore[arg-type]
         if progress is not None:
             progress(k + 1, len(arms))
     return out
