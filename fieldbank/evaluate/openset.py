@@ -212,9 +212,10 @@ class OpenClassification:
 
     @property
     def group_probability(self) -> dict[str, float]:
-        """Each group's stated probability of being impaired (an arm outside the set left
-        out: these and :attr:`other_probability` are what the recording tells)."""
-        q = self.label_probability
+        """Each group's stated probability of being impaired, should the arm be one of the
+        set (:attr:`other_probability` says how likely it is not)."""
+        q = np.power(np.asarray(self.raw_probability, dtype=float), self.calibration.power)
+        q = q / q.sum()
         return {g: float(sum(v for lab, v in zip(self.labels, q, strict=True)
                              if g in lab.split("+"))) for g in GROUPS}
 
