@@ -65,8 +65,9 @@ def main() -> None:
     cal, score = fit_calibration(out)
     print(f"tune_open_calibration: {len(out)} trials ({', '.join(TUNING_FAMILIES)}; seed "
           f"{args.seed}), {time.perf_counter() - t0:.0f} s wall; {load_line()}")
+    raw = float(np.mean([np.log(max(o.truth_probability(RAW), 1e-6)) for o in out]))
     print(f"fitted: power {cal.power:g}, other {cal.other:g}; mean log probability of the "
-          f"truth {score:.3f} (raw {np.mean([np.log(max(o.truth_probability(RAW), 1e-6)) for o in out]):.3f})")
+          f"truth {score:.3f} (raw {raw:.3f})")
     for family in TUNING_FAMILIES:
         for name, c in (("raw", RAW), ("fitted", cal)):
             got = [o.restated(c) for o in out if o.family == family]

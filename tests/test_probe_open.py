@@ -12,10 +12,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design import NoiseModel, open_candidates
 from fieldbank.evaluate.design.coverage import differing_groups, stretch_set
 from fieldbank.evaluate.observation import Observation, with_force_noise
-from fieldbank.errors import ParameterError
 from fieldbank.evaluate.openset import (
     KINDS,
     NONE_OF_THEM,

@@ -151,7 +151,9 @@ class Calibration:
     raised to ``power`` and renormalised (below 1: the likelihood tempered for the misfit the
     grid of states leaves - an arm between the grid's states, a partner group compensating),
     then a share ``other`` set aside for an arm the set does not hold, which no residual
-    reveals (its force fitted within the noise by some arm of the set)."""
+    reveals (its force fitted within the noise by some arm of the set). Above 1 the
+    posterior is sharpened: a grid coarser than what the recording tells spreads it.
+    Fitted on arms of their own (:func:`fieldbank.evaluate.reliability.fit_calibration`)."""
 
     power: float = 1.0
     other: float = 0.0
@@ -160,7 +162,7 @@ class Calibration:
         check_fields(self, CALIBRATION_BOUNDS, what="open-set calibration")
 
 
-CALIBRATION_BOUNDS = {"power": Interval(0.0, 1.0, "", low_closed=False),
+CALIBRATION_BOUNDS = {"power": Interval(0.0, 2.0, "", low_closed=False),
                       "other": Interval(0.0, 1.0, "", high_closed=False)}
 #: No calibration: the posterior as the likelihood and the prior give it.
 RAW = Calibration()
@@ -462,7 +464,25 @@ def _chi2(obs: Sequence[Observation], arms: Sequence[Arm], noise: NoiseModel) ->
     return out
 
 
-__all__ = ["CALIBRATED", "CALIBRATION_BOUNDS", "COMPONENTS", "CONTRACTURES_M", "EXACT_TOP",
-           "GROUP_PRIOR", "KINDS", "MAX_GROUPS", "NONE_OF_THEM", "RAW", "SCORES",
-           "STATES_PER_GROUP", "Calibration", "classify_on_body", "GroupState", "OpenClassification", "OpenSet",
-           "OpenTrace", "classify_open", "predict"]
+__all__ = [
+    "CALIBRATED",
+    "CALIBRATION_BOUNDS",
+    "COMPONENTS",
+    "CONTRACTURES_M",
+    "EXACT_TOP",
+    "GROUP_PRIOR",
+    "KINDS",
+    "MAX_GROUPS",
+    "NONE_OF_THEM",
+    "RAW",
+    "SCORES",
+    "STATES_PER_GROUP",
+    "Calibration",
+    "GroupState",
+    "OpenClassification",
+    "OpenSet",
+    "OpenTrace",
+    "classify_on_body",
+    "classify_open",
+    "predict",
+]

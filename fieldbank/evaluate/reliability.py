@@ -218,7 +218,7 @@ class Outcome:
 
 #: The calibrations :func:`fit_calibration` tries: the posterior's power, the share for an
 #: arm outside the set.
-POWERS = tuple(round(0.05 * k, 2) for k in range(1, 21))
+POWERS = tuple(round(0.05 * k, 2) for k in range(1, 41))
 OTHERS = tuple(round(0.01 * k, 2) for k in range(0, 41))
 
 
