@@ -157,13 +157,18 @@ class Calibration:
 
     power: float = 1.0
     other: float = 0.0
+    #: Below this p-value of the fit test the share for an arm outside the set is at least
+    #: 1 − p/level (a residual a little beyond the noise: a rest posture other than assumed,
+    #: a partner group compensating), as below the fit test's own level.
+    misfit_level: float = FIT_LEVEL
 
     def __post_init__(self) -> None:
         check_fields(self, CALIBRATION_BOUNDS, what="open-set calibration")
 
 
 CALIBRATION_BOUNDS = {"power": Interval(0.0, 2.0, "", low_closed=False),
-                      "other": Interval(0.0, 1.0, "", high_closed=False)}
+                      "other": Interval(0.0, 1.0, "", high_closed=False),
+                      "misfit_level": Interval(FIT_LEVEL, 0.5, "")}
 #: No calibration: the posterior as the likelihood and the prior give it.
 RAW = Calibration()
 #: The calibration the classifier states its answers with (placeholder until measured).
@@ -200,10 +205,11 @@ class OpenClassification:
     @property
     def other_probability(self) -> float:
         """The stated probability that no arm of the set made the recording: 1 − p/level when
-        the residual says so (the fit test below its level), else the calibration's share."""
-        if not self.explains:
-            return max(1.0 - self.fit_p_value / FIT_LEVEL, self.calibration.other)
-        return self.calibration.other
+        the residual says so (the fit test below the calibration's misfit level, at least
+        :data:`~fieldbank.evaluate.classify.FIT_LEVEL`), and never below the calibration's
+        share."""
+        level = max(self.calibration.misfit_level, FIT_LEVEL)
+        return max(1.0 - self.fit_p_value / level, self.calibration.other)
 
     @property
     def label_probability(self) -> FloatArray:
@@ -262,8 +268,7 @@ class OpenClassification:
                              "expected": round(self.fit_expected, 3),
                              "p_value": float(f"{self.fit_p_value:.4g}"), "level": FIT_LEVEL},
                 "temperature": round(self.temperature, 4),
-                "calibration": {"power": self.calibration.power,
-                                "other": self.calibration.other}}
+                "calibration": dataclasses.asdict(self.calibration)}
 
 
 def predict(arms: Sequence[Arm], obs: Observation) -> FloatArray:

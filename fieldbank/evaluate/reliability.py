@@ -29,13 +29,14 @@ such answers were right; :func:`calibration_error` is the trial-weighted mean ga
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from fieldbank.evaluate.classify import classify
+from fieldbank.evaluate.classify import FIT_LEVEL, classify
 from fieldbank.evaluate.design import NoiseModel, draw_execution, severity_candidates
 from fieldbank.evaluate.design.coverage import stretch_noise, stretch_set
 from fieldbank.evaluate.observation import Observation, with_force_noise
@@ -217,24 +218,24 @@ class Outcome:
 
 
 #: The calibrations :func:`fit_calibration` tries: the posterior's power, the share for an
-#: arm outside the set.
-POWERS = tuple(round(0.05 * k, 2) for k in range(1, 41))
-OTHERS = tuple(round(0.01 * k, 2) for k in range(0, 41))
+#: arm outside the set, the fit test's p-value below which the residual adds to that share.
+POWERS = tuple(round(0.1 * k, 1) for k in range(1, 21))
+OTHERS = tuple(round(0.02 * k, 2) for k in range(0, 21))
+MISFIT_LEVELS = (FIT_LEVEL, 0.003, 0.01, 0.03, 0.1)
 
 
 def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
-    """The calibration of :data:`POWERS` × :data:`OTHERS` under which the truth is most
-    probable over ``outcomes`` (the mean log probability of the truth, each floored at 1e-6:
-    a proper score, so the stated probabilities come out as often right as they say), with
-    that mean log score."""
+    """The calibration of :data:`POWERS` × :data:`OTHERS` × :data:`MISFIT_LEVELS` under which
+    the truth is most probable over ``outcomes`` (the mean log probability of the truth, each
+    floored at 1e-6: a proper score, so the stated probabilities come out as often right as
+    they say), with that mean log score."""
     best, score = RAW, -math.inf
-    for power in POWERS:
-        for other in OTHERS:
-            cal = Calibration(power, other)
-            s = float(np.mean([math.log(max(o.truth_probability(cal), 1e-6))
-                               for o in outcomes]))
-            if s > score:
-                best, score = cal, s
+    for power, other, level in itertools.product(POWERS, OTHERS, MISFIT_LEVELS):
+        cal = Calibration(power, other, level)
+        s = float(np.mean([math.log(max(o.truth_probability(cal), 1e-6))
+                           for o in outcomes]))
+        if s > score:
+            best, score = cal, s
     return best, score
 
 
@@ -342,7 +343,7 @@ def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[i
     return sum(not o.right for o in sure), len(sure)
 
 
-__all__ = ["BINS", "FAMILIES", "NONE_OF_THEM", "OTHERS", "POWERS", "Outcome", "ReliabilityBin",
-           "TrialArm", "calibration_error", "family_arms", "fit_calibration",
+__all__ = ["BINS", "FAMILIES", "MISFIT_LEVELS", "NONE_OF_THEM", "OTHERS", "POWERS", "Outcome",
+           "ReliabilityBin", "TrialArm", "calibration_error", "family_arms", "fit_calibration",
            "reliability_bins", "run_trials",
            "truth_label", "wrong_when_sure"]
