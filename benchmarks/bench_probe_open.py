@@ -129,9 +129,10 @@ def main() -> None:
     results: dict[tuple[str, float], list[Outcome]] = {}
     if args.load is not None:
         for row in json.loads(args.load.read_text()):
+            sd = float(row.pop("noise_n"))
             o = Outcome(**{**row, "labels": tuple(row["labels"]),
                            "label_probability": tuple(row["label_probability"])})
-            results.setdefault((o.family, float(row["noise_n"])), []).append(o)
+            results.setdefault((o.family, sd), []).append(o)
         noise = sorted({sd for _f, sd in results})
         baseline = all(o.baseline_answer for v in results.values() for o in v)
         print(f"bench_probe_open: {sum(len(v) for v in results.values())} trials from "

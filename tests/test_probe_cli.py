@@ -237,10 +237,14 @@ def test_classify_open_says_per_group_how_it_is_impaired_and_when_no_state_expla
     r = _run("probe", "classify", *files, "--open", *body, "--json")
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
-    assert doc["answer"] == "ef" and doc["probability"] > 0.5, doc
+    assert doc["answer"] == "ef" and doc["probability"] > 0.3, doc
     g = doc["groups"]["ef"]
-    assert g["impaired"] > 0.8 and g["spasticity"] > 0.5 * g["impaired"], g
-    assert g["contracture"] < 0.1, g
+    assert g["impaired"] > 0.6 and g["impaired"] == max(v["impaired"] for v in
+                                                        doc["groups"].values()), doc["groups"]
+    kinds = {k: g[k] for k in ("stiffness", "spasticity", "spasticity and stiffness",
+                               "contracture")}
+    assert max(kinds, key=kinds.__getitem__) == "spasticity" and g["contracture"] < 0.1, g
+    assert sum(kinds.values()) == pytest.approx(g["impaired"], abs=1e-5)
     assert all(doc["groups"][o]["impaired"] < 0.2 for o in ("sf", "se", "ee")), doc["groups"]
     assert doc["explains_recording"] and doc["none_of_the_candidates"] < 0.5
     text = _run("probe", "classify", *files, "--open", *body)
