@@ -443,7 +443,8 @@ def _open_text(cl: OpenClassification) -> str:
                      "   " + "  ".join(f"{v:>10.2f}" for v in row))
     lines.append(f"  none of the candidates: p = {cl.other_probability:.2f} (fit of the most "
                  f"probable arm: p = {cl.fit_p_value:.3g} under the noise model; below "
-                 f"{FIT_LEVEL:g} none of them explains it)")
+                 f"{FIT_LEVEL:g} none of them explains it, below "
+                 f"{cl.calibration.misfit_level:g} this rises)")
     lines.append(f"  most probable arm: {', '.join(cl.best)}")
     lines.append("  spasticity: velocity-dependent resistance (the stretch reflex); stiffness: "
                  "position-dependent, slack length normal; contracture: the slack length short")
