@@ -214,8 +214,8 @@ def test_a_simulated_robot_url_is_quoted_as_typed() -> None:
 def test_a_fault_the_robot_reports_is_said_in_words() -> None:
     from fieldbank.haptic.link import RobotLink
     from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode, device_report
-    from fieldbank.haptic.remote.guard import RobotGuard
-    from fieldbank.haptic.safety import Safety, SafetyConfig
+    from fieldbank.haptic.monitor import SafetyMonitor
+    from fieldbank.haptic.safety import Mode, SafetyConfig
     from tests.haptic_util import MemoryPort
 
     assert device_report(0, FLAG_WATCHDOG) == ("the robot stopped itself: its watchdog tripped "
@@ -223,12 +223,16 @@ def test_a_fault_the_robot_reports_is_said_in_words() -> None:
     text = device_report(2, FLAG_FAULT)
     assert "a fault of its own" in text and "a timeout (no frame in time) (code 2)" in text
     link = RobotLink(MemoryPort())
-    guard = RobotGuard(link, Safety(SafetyConfig(), 0.001), 0.001)
-    link.state.watchdog_flag_frames += 1  # a STATE with the watchdog flag has come in
-    link.state.flags = FLAG_WATCHDOG
-    code, msg = guard.check(1)
-    assert code == FaultCode.DEVICE and "watchdog tripped" in msg
-    assert "flags" not in msg and "code 0" not in msg
+    for counter, words in (("watchdog_flag_frames", "watchdog tripped"),
+                           ("fault_flag_frames", "a fault of its own")):
+        monitor = SafetyMonitor(link, SafetyConfig(), 0.001)
+        monitor.safety.mode = Mode.ARMED  # armed, as a running loop is
+        setattr(link.state, counter, getattr(link.state, counter) + 1)  # a flagged STATE came
+        monitor.check(1)
+        (rec,) = [r for r in monitor.safety.latched_records() if r.code == FaultCode.DEVICE]
+        assert rec.code == FaultCode.DEVICE and words in rec.message, rec.message
+        assert "flags" not in rec.message and "code 0" not in rec.message
+        assert rec.message.startswith("the robot stopped itself: ")
 
 
 def test_a_station_that_does_not_start_says_what_happened(tmp_path: Path,
