@@ -213,8 +213,8 @@ def test_a_simulated_robot_url_is_quoted_as_typed() -> None:
 
 def test_a_fault_the_robot_reports_is_said_in_words() -> None:
     from fieldbank.haptic.link import RobotLink
-    from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode, device_report
     from fieldbank.haptic.monitor import SafetyMonitor
+    from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode, device_report
     from fieldbank.haptic.safety import Mode, SafetyConfig
     from tests.haptic_util import MemoryPort
 

@@ -148,8 +148,11 @@ class StationProcess:
                                 env=env)
         self._proc = proc
         assert proc.stdin is not None and proc.stdout is not None
-        proc.stdin.write((json.dumps(self.config.to_dict()) + "\n").encode())
-        proc.stdin.flush()  # the pipe stays open: the station ends when it closes
+        try:
+            proc.stdin.write((json.dumps(self.config.to_dict()) + "\n").encode())
+            proc.stdin.flush()  # the pipe stays open: the station ends when it closes
+        except BrokenPipeError:
+            pass  # it ended before reading its settings: its status says why (below)
         line, closed = _readline(proc.stdout, timeout_s)
         if not line.startswith(b"LISTENING "):
             try:  # its output closed: it has ended (or is ending) - its status, not a guess
