@@ -189,7 +189,7 @@ def test_the_group_that_crosses_both_joints_has_one_name_on_every_page() -> None
     buttons = dict(re.findall(r'class="train-answer answer" data-answer="(\w+)"[^>]*>([^<]+)<',
                               page))
     assert buttons == {"shoulder": "Shoulder", "elbow": "Elbow", "both": "Bi-articular"}
-    remote = (station / "remote.js").read_text(encoding="utf-8")
+    remote = (ROOT / "haptic" / "remote" / "desk.js").read_text(encoding="utf-8")
     for table in ("GROUP_WORD", "GROUP_SHORT"):
         found = re.search(table + r" = \{([^}]*)\}", remote)
         assert found and '"Bi-articular"' in found.group(1) and "Both" not in found.group(1)
