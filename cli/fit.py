@@ -32,6 +32,7 @@ from fieldbank.cli.options import (
     figure_path,
     json_option,
     open_db,
+    read_db,
     say,
     scheduler_option,
 )
@@ -41,7 +42,7 @@ from fieldbank.sanitize import printable
 if TYPE_CHECKING:  # typing only: the library loads when a command runs
     from fieldbank.engine import BatchResult
     from fieldbank.fitting.records import FitOutcome, FitStore
-    from fieldbank.storage import StoredModel
+    from fieldbank.stored.records import ListedModel
 
 StoreFactory = Callable[[str | None], "FitStore"]
 
@@ -57,7 +58,17 @@ def _store(ctx: click.Context, db_url: str | None) -> FitStore:
     return factory(db_url)
 
 
-def _plans_cell(m: StoredModel) -> str:
+def _listed_models(ctx: click.Context, db_url: str | None,
+                   patient: str | None) -> list[ListedModel]:
+    """The models ``models list`` shows: from the caller's FitStore when it provides one, else
+    read from the database through its driver alone (:func:`read_db`)."""
+    if isinstance(ctx.obj, Mapping) and ctx.obj.get("fit_store") is not None:
+        return list(_store(ctx, db_url).list_models(patient))
+    with read_db(db_url) as db:
+        return list(db.list_models(patient))
+
+
+def _plans_cell(m: ListedModel) -> str:
     """'plan 4' (the plan that made it) and '-> 5,6' (plans applied to it)."""
     parts = ([f"plan {m.plan_id}"] if m.plan_id is not None else []) + (
         ["->" + ",".join(map(str, m.plans_from))] if m.plans_from else [])
@@ -293,9 +304,9 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
                 db_url: str | None) -> None:
     """List models with their origin, parent and plans (the plan that made each, and the
     plans applied to it: 'fieldbank plans show ID')."""
-    from fieldbank.fitting.records import model_summary
+    from fieldbank.stored.records import model_summary
 
-    rows = list(_store(ctx, db_url).list_models(patient))
+    rows = _listed_models(ctx, db_url, patient)
     if as_json:
         emit_json([model_summary(m) for m in rows])
         return

@@ -47,7 +47,7 @@ from sqlalchemy.engine import make_url
 from fieldbank.config import setting
 from fieldbank.errors import FieldbankError, ParameterError
 from fieldbank.storage import Database
-from fieldbank.storage.records import JobRunRecord
+from fieldbank.stored.records import JobRunRecord
 
 #: Seconds to wait for the scheduler to answer before giving up.
 CONNECT_TIMEOUT_S = 10.0

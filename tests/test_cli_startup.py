@@ -2,9 +2,13 @@
 
 * every command's and subcommand's ``--help`` loads none of the numerics, the database layer or
   the plotting (numpy, scipy, nlopt, SQLAlchemy, alembic, h5py, matplotlib, pyserial);
-* a command that reads the database (``patient list``, ``models list``, ``maps list``,
-  ``plans list``) loads the storage layer and nothing of the fitting, the arrays or the
-  migrations (no scipy, nlopt, h5py, matplotlib, alembic) when the database is at head;
+* a command that lists what the database holds (``patient list``, ``models list``, ``maps
+  list``, ``plans list``, ``jobs``, with their filters and ``--json``) reads a database at head
+  through its driver alone: none of the above, nor the storage layer (``fieldbank.storage``:
+  its ORM, the array store ``fieldbank.arraystore``, the integrity check), nor psycopg for a
+  SQLite file; on PostgreSQL psycopg and still no SQLAlchemy or numpy. A database behind head
+  is opened through the storage layer (which migrates it) - the light path is not taken
+  blindly;
 * the choices and defaults the options show (``fieldbank.cli.choices``) are the library's.
 
 ``benchmarks/bench_cli_startup.py`` measures the times, as ratios to ``import click``.
@@ -24,8 +28,13 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Nothing of these may load for --help.
 HEAVY_FOR_HELP = ("numpy", "scipy", "nlopt", "sqlalchemy", "alembic", "h5py", "matplotlib",
                   "serial")
-#: Nothing of these may load for a command that reads a database at head.
-HEAVY_FOR_READS = ("scipy", "nlopt", "alembic", "h5py", "matplotlib", "serial")
+#: Nothing of these may load for a command that lists a database at head (a SQLite file).
+HEAVY_FOR_READS = (*HEAVY_FOR_HELP, "fieldbank.storage", "fieldbank.storage.check",
+                   "fieldbank.arraystore", "psycopg")
+#: The list commands, with filters and --json.
+READS = ["patient list", "patient list --json", "models list", "models list --patient P-1",
+         "maps list", "maps list --patient P-1 --kind postural --json", "plans list",
+         "plans list --kind botulinum --json", "jobs", "jobs 1 --json", "jobs --kind fit"]
 #: Commands whose module this check does not cover yet (their --help still loads numerics).
 NOT_COVERED: set[tuple[str, ...]] = set()
 
@@ -96,7 +105,8 @@ print(json.dumps(sorted(h for h in json.loads(sys.argv[1]) if h in sys.modules))
 
 @pytest.fixture(scope="module")
 def stored_home(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A data directory with a database at head holding a patient, two models and a plan."""
+    """A data directory with a database at head holding a patient, two models, a plan and a
+    batch run."""
     from fieldbank.interventions import Botulinum, Plan
     from fieldbank.interventions.whatif import save_plan
     from fieldbank.modelsource import synthetic
@@ -108,17 +118,53 @@ def stored_home(tmp_path_factory: pytest.TempPathFactory) -> Path:
         source = synthetic(["elbow=severe"])
         saved = save_plan(db, source, Plan((Botulinum({"ef": 100.0}),)))
         assert saved.plan_id == 1
+        run = db.start_run("fit", "local processes (1)", {}, [("P-1/pre", "P-1", "pre")])
+        db.finish_job(run.id, "P-1/pre", "failed", error="no maps")
     return home
 
 
-@pytest.mark.parametrize("command", ["patient list", "models list", "maps list",
-                                     "plans list"])
-def test_reading_the_database_loads_storage_only(stored_home: Path, command: str) -> None:
-    env = {**os.environ, "FIELDBANK_HOME": str(stored_home)}
-    env.pop("FIELDBANK_DB", None)
-    loaded = _python(_READ, json.dumps([*HEAVY_FOR_READS, "sqlalchemy"]), command, env=env)
-    assert "sqlalchemy" in loaded  # it did open the database
-    assert [m for m in loaded if m != "sqlalchemy"] == [], loaded
+def _reads(command: str, heavy: tuple[str, ...], **env: str) -> list[str]:
+    environ = {**os.environ, **env}
+    environ.pop("FIELDBANK_DB", None)
+    loaded = _python(_READ, json.dumps([*heavy, "sqlite3", "fieldbank.stored.listing"]),
+                     command, env=environ)
+    assert isinstance(loaded, list)
+    return loaded
+
+
+@pytest.mark.parametrize("command", READS)
+def test_listing_a_database_loads_its_driver_only(stored_home: Path, command: str) -> None:
+    loaded = _reads(command, HEAVY_FOR_READS, FIELDBANK_HOME=str(stored_home))
+    assert {"sqlite3", "fieldbank.stored.listing"} <= set(loaded)  # it did read the database
+    assert sorted(set(loaded) - {"sqlite3", "fieldbank.stored.listing"}) == [], loaded
+
+
+@pytest.mark.postgres
+def test_listing_a_server_database_loads_psycopg_and_no_sqlalchemy(pg_url: str) -> None:
+    from fieldbank.storage import Database
+
+    with Database.open(pg_url, upgrade="always") as db:
+        db.add_patient("P-1", 70.0, 1.7, "right")
+    for command in ("patient list --json", "jobs", "plans list"):
+        loaded = _reads(f"{command} --db {pg_url}", (*HEAVY_FOR_HELP, "fieldbank.storage",
+                                                     "psycopg"))
+        assert "psycopg" in loaded and "fieldbank.stored.listing" in loaded
+        assert sorted(set(loaded) - {"psycopg", "fieldbank.stored.listing", "sqlite3"}) == [], \
+            loaded
+
+
+def test_a_database_behind_head_is_opened_through_the_storage_layer(tmp_path: Path) -> None:
+    from sqlalchemy import create_engine
+
+    from fieldbank.storage import migrate
+
+    home = tmp_path / "home"
+    home.mkdir()
+    engine = create_engine(f"sqlite:///{home / 'fieldbank.sqlite3'}")
+    migrate.upgrade(engine, migrate.known_revisions()[-2])
+    engine.dispose()
+    loaded = _reads("patient list", ("sqlalchemy", "alembic"), FIELDBANK_HOME=str(home))
+    assert {"sqlalchemy", "alembic"} <= set(loaded)  # migrated to head, then listed
 
 
 def test_the_options_show_the_library_s_choices_and_defaults() -> None:
@@ -142,7 +188,7 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     from fieldbank.interventions.realised import CHANGE_TOLERANCE, MAX_CHANGE_SE
     from fieldbank.measure.protocol import PARTS, ProtocolConfig
     from fieldbank.model import MODEL_VERSION
-    from fieldbank.storage.orm import JOB_KINDS
+    from fieldbank.stored.records import JOB_KINDS
 
     assert ch.FIT_ALGORITHMS == tuple(ALGORITHMS)
     assert ch.FIT_DEFAULT_ALGORITHM == DEFAULT_ALGORITHM

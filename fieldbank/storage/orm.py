@@ -237,15 +237,11 @@ class FitIntervalRow(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
-#: Kinds of batch work, and the states of one task of a run.
-JOB_KINDS = ("fit", "report", "validate")
-JOB_STATES = ("pending", "running", "done", "skipped", "failed")
-
-
 class JobRunRow(Base):
     """One batch command (``fit --all``, ``report``, ``validate``) spread over workers."""
 
     __tablename__ = "job_runs"
+    # the kinds are fieldbank.stored.records.JOB_KINDS, the states of jobs.state its JOB_STATES
     __table_args__ = (CheckConstraint("kind IN ('fit', 'report', 'validate')", name="kind"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))
