@@ -26,7 +26,8 @@ from fieldbank.haptic.clock import RealClock, realtime
 from fieldbank.haptic.commands import Arm as ArmCommand
 from fieldbank.haptic.commands import Switch
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams

@@ -60,7 +60,8 @@ from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.clock import RealClock, cpu_plan, realtime
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm
 
@@ -161,7 +162,7 @@ def session(minutes: float, rate_hz: int) -> dict[str, Any]:
         def rearm() -> None:
             nonlocal rearms
             while not stop.wait(0.5):
-                if rd.running and rd.mode_name == "FAULT":
+                if rd.running and rd.safety.mode.name == "FAULT":
                     try:
                         rd.submit("arm").wait(2.0)
                         rearms += 1

@@ -42,7 +42,8 @@ from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.commands import Arm as ArmCommand
 from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.station.launch import StationProcess

@@ -19,6 +19,12 @@ Part 3 - the full renderer tick against the in-process simulated robot (sim://, 
 per-phase means the renderer measures itself; and the record phase with and without the
 station's snapshot, as a ratio.
 
+Part 3b - **the loop's own cost**: the renderer's tick against a robot port that answers at
+once (:class:`InstantPort`: the handle on a Lissajous path, no device, no system call), CPU
+time per tick in blocks of 5,000 (best block and median), beside MuJoCo's ``mj_step`` of the
+same run as the ratio: what the renderer, its safety monitor, its models and its recording
+cost, without the link.
+
 Part 4 - **the whole haptic tick at ``--rate`` (4000 Hz) with the device in its own process**
 (the simulated robot on a pty, real-time priority, its own core; the loop SCHED_FIFO on the
 other): tick cost p50/p99/max from a real-time run of ``--seconds``, as a share of the period
@@ -49,9 +55,11 @@ from fieldbank.haptic import protocol as P
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.pair import build_sim
+from fieldbank.haptic.port import HandleState
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import NCOL, TraceBuffer
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import Safety, SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
@@ -98,7 +106,8 @@ def _inside(params: np.ndarray, state: np.ndarray, n: int, hx: float, hy: float)
     return acc
 
 
-def arm_table(n: int, dt_s: float) -> None:
+def arm_table(n: int, dt_s: float) -> float | None:
+    """Part 1; MuJoCo's ``mj_step`` CPU µs per call (None without MuJoCo)."""
     before = synthesize({"elbow": "severe"})
     after = ArmParams.from_anthropometry()
     ref = build_sim(before, dt_s)
@@ -141,12 +150,73 @@ def arm_table(n: int, dt_s: float) -> None:
     if base_cpu is None:
         print("  MuJoCo is not installed (pip install 'fieldbank[bench]'): no ratios, no "
               "verdict on the 0.5× target")
-        return
+        return None
     one = rows[2][2] / base_cpu
     per_arm = rows[3][2] / 2 / base_cpu
     print(f"  target arm tick <= {ARM_TARGET:g}× mj_step (CPU): one call per arm {one:.2f}× "
           f"({'met' if one <= ARM_TARGET else 'NOT met'}); in the loop's call {per_arm:.2f}× "
           f"per arm ({'met' if per_arm <= ARM_TARGET else 'NOT met'})")
+    return base_cpu
+
+
+class InstantPort:
+    """A robot port that answers at once: a new state on every poll, the handle on a
+    Lissajous path of a few centimetres around (x0, y0), forces taken and dropped."""
+
+    def __init__(self, x0: float, y0: float) -> None:
+        self.state = HandleState(x=x0, y=y0)
+        self.device = P.DeviceInfo(P.PROTOCOL_VERSION, "instant", 4000, 60.0, 20)
+        self.x0, self.y0, self.k = x0, y0, 0
+
+    def poll(self) -> int:
+        st = self.state
+        self.k += 1
+        t = self.k * 1e-3
+        st.x, st.y = self.x0 + 0.05 * math.sin(2 * t), self.y0 + 0.03 * math.sin(3 * t)
+        st.vx, st.vy = 0.1 * math.cos(2 * t), 0.09 * math.cos(3 * t)
+        st.states += 1
+        return 1
+
+    def wait_state(self, timeout_s: float, spin_s: float = 0.0) -> int:
+        return self.poll()
+
+    def send_force(self, fx_n: float, fy_n: float) -> None:
+        pass
+
+    def arm(self) -> None:
+        pass
+
+    def disarm(self) -> None:
+        pass
+
+    def counters(self) -> dict[str, int]:
+        return {"states": self.state.states}
+
+    def close(self) -> None:
+        pass
+
+
+def own_cost(ticks: int, mj_step_cpu_us: float | None) -> None:
+    """Part 3b: the renderer's tick against :class:`InstantPort`, CPU µs per tick."""
+    before = synthesize({"elbow": "severe"})
+    x0, y0 = (float(v) for v in Arm.from_params(before).rest_position())
+    rd = Renderer(InstantPort(x0, y0), before, ArmParams.from_anthropometry(),
+                  RendererConfig(realtime_priority=False))
+    rd.start(expected_ticks=ticks + 10)
+    block = 5000
+    per_tick = []
+    for _ in range(max(1, ticks // block)):
+        c0 = time.thread_time_ns()
+        for _ in range(block):
+            rd.tick()
+        per_tick.append((time.thread_time_ns() - c0) / block / 1e3)
+    per_tick.sort()
+    best, med = per_tick[0], per_tick[len(per_tick) // 2]
+    ratio = f"; {best / mj_step_cpu_us:.1f}× mj_step" if mj_step_cpu_us else ""
+    print(f"Part 3b - the loop's own cost: the renderer's tick against a port that answers at "
+          f"once ({rd.safety.mode.name}, {len(per_tick)} blocks of {block} ticks; "
+          f"{load_line()}):")
+    print(f"  CPU per tick: best block {best:.2f} µs, median {med:.2f} µs{ratio}")
 
 
 def whole_tick(rate_hz: int, seconds: float, back_to_back: int) -> None:
@@ -208,7 +278,7 @@ def main() -> int:
     ap.add_argument("--rate", type=int, default=4000, help="Part 4's tick rate, Hz")
     ap.add_argument("--seconds", type=float, default=10.0, help="Part 4's real-time run, s")
     a = ap.parse_args()
-    arm_table(a.ticks, 1.0 / a.rate)
+    mj_cpu = arm_table(a.ticks, 1.0 / a.rate)
     before = synthesize({"elbow": "severe"})
     after = ArmParams.from_anthropometry()
     sa = build_sim(before, 1e-3)
@@ -264,6 +334,7 @@ def main() -> int:
     print(f"  without the snapshot {without:7.2f}   with it {with_:7.2f}   ratio "
           f"{with_ / without:.2f} (+{with_ - without:.2f} µs per tick)")
     snap.close()
+    own_cost(max(a.ticks, 50_000), mj_cpu)
     whole_tick(a.rate, a.seconds, a.ticks)
     return 0
 

@@ -180,7 +180,7 @@ def run_haptic(db: Database, patient: str, before_id: int, plan_id: int, duratio
     the array store).
     """
     from fieldbank.haptic import session
-    from fieldbank.haptic.renderer import RendererConfig
+    from fieldbank.haptic.rendererconfig import RendererConfig
 
     before = db.get_model(before_id).params
     plan = db.get_plan(plan_id)

@@ -214,3 +214,14 @@ def abx_answer(answer: str, socket_path: Path | None, as_json: bool) -> None:
                + (f"; {res['flagged']} flagged (fault or no force) and left out"
                   if res.get("flagged") else ""))
     emit(r, as_json, msg)
+
+
+@abx.command("stop")
+@socket_option
+@json_option
+def abx_stop(socket_path: Path | None, as_json: bool) -> None:
+    """End the running A/B/X block early; the answers so far are kept and scored."""
+    r = _request(socket_path, "abx", action="stop")
+    res = r["result"]
+    emit(r, as_json, f"block stopped after {res['answered']} of {res['n_trials']} trials: "
+                     f"{res['correct']} of {res['counted']} counted answers correct")

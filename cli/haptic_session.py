@@ -57,8 +57,9 @@ def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
 
 @click.command("serve")
 @click.option("--robot", default=None, help="Robot port URL: /dev/ttyUSB0, a pty path, "
-              "socket://host:port, or sim://?mode=realtime&motion=explore for the simulation "
-              "(default: FIELDBANK_ROBOT, else robot in fieldbank.toml).")
+              "socket://host:port, sim://?mode=realtime&motion=explore for the simulation, or "
+              "a URL an installed robot adapter serves (docs/robot-adapters.md) (default: "
+              "FIELDBANK_ROBOT, else robot in fieldbank.toml).")
 @click.option("--rate-hz", "--rate", "rate_hz", type=click.IntRange(500, 4000), default=1000,
               show_default=True, help="Tick rate, Hz (4000 for stiffer rendering and lower "
               "latency; the session records it).")
@@ -121,7 +122,7 @@ def serve(robot: str | None, rate_hz: int, duration_s: float | None, before_file
     database (unless --no-db). With --station, the clinician's station page is served.
     """
     from fieldbank.haptic import session
-    from fieldbank.haptic.renderer import RendererConfig
+    from fieldbank.haptic.rendererconfig import RendererConfig
     from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.haptic.station.launch import StationOptions
 

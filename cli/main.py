@@ -60,6 +60,13 @@ COMMANDS: dict[str, LazyCommand] = {
                   "out of a fit."),
     "config": C("fieldbank.cli.config", "config",
                 "Settings: fieldbank.toml, environment variables and their defaults."),
+    "serve": C("fieldbank.cli.serve", "serve",
+               "Serve the workspace: log in, find a patient, compose a plan, feel it on the "
+               "robot."),
+    "users": C("fieldbank.cli.users", "users",
+               "Accounts of the workspace: add, list, passwords, roles, API tokens."),
+    "audit": C("fieldbank.cli.audit", "audit",
+               "Show the audit log, newest first: who did or read what, when, from where."),
     "demo": C("fieldbank.cli.demo", "demo",
               "Run the whole product once on synthetic sample data, saying what it does."),
 }

@@ -3,8 +3,9 @@
 The loop keeps one row per tick in a :class:`~haptic.recording.TraceBuffer`; at the end the rows
 become a :class:`~haptic.recording.Trace` with everything needed to read it later without the
 renderer: both models' parameters, the events and faults, the loop's timing figures, and in the
-metadata the renderer's and the safety layer's settings, the device, the A/B/X blocks and the
-training results (an unfinished training protocol is kept, marked abandoned).
+metadata the renderer's and the safety layer's settings, the device, and the results of its
+activities (:mod:`haptic.activities`: the A/B/X blocks, the training protocols; one still
+running at the end is kept as it stood, a training protocol marked abandoned).
 """
 
 from __future__ import annotations
@@ -15,11 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.haptic.abx import AbxSession
 from fieldbank.haptic.protocol import DeviceInfo
 from fieldbank.haptic.recording import NCOL, Trace, TraceBuffer
 from fieldbank.haptic.safety import Safety
-from fieldbank.haptic.training import TrainingSession
 from fieldbank.params import ArmParams
 
 
@@ -29,25 +28,14 @@ def settings(config: object) -> dict[str, Any]:
             for k, v in asdict(config).items()}  # type: ignore[call-overload]
 
 
-def close_blocks(t_s: float, abx: AbxSession | None, abx_results: list[dict[str, Any]],
-                 training: TrainingSession | None,
-                 training_results: list[dict[str, Any]]) -> None:
-    """At the session's end: the running A/B/X block's result, and an unfinished training
-    protocol's (marked abandoned), appended to their lists."""
-    if abx is not None:
-        abx_results.append(abx.result())
-    if training is not None and not training.done:
-        training.finish(t_s, abandon=True)
-        training_results.append(training.result())
-
-
 def assemble_trace(buf: TraceBuffer | None, *, rate_hz: int,
                    params: tuple[ArmParams, ArmParams], events: list[dict[str, Any]],
                    safety: Safety, stats: dict[str, Any], metadata: dict[str, Any],
                    renderer_config: object, device: DeviceInfo | None,
-                   abx_results: list[dict[str, Any]],
-                   training_results: list[dict[str, Any]]) -> Trace:
-    """The session's :class:`~haptic.recording.Trace` (float32 rows, ``rate_hz`` Hz)."""
+                   results: dict[str, list[dict[str, Any]]]) -> Trace:
+    """The session's :class:`~haptic.recording.Trace` (float32 rows, ``rate_hz`` Hz);
+    ``results``: the activities' results by kind (``abx``, ``training``), kept in the
+    metadata under their kind."""
     if buf is not None:
         t, data = buf.arrays()
     else:
@@ -57,8 +45,8 @@ def assemble_trace(buf: TraceBuffer | None, *, rate_hz: int,
     meta.setdefault("safety", settings(safety.config))
     if device is not None:
         meta.setdefault("device", asdict(device))
-    meta["abx"] = abx_results
-    meta["training"] = training_results
+    for kind, done in results.items():
+        meta[kind] = done
     return Trace(t_s=t, data=data.astype(np.float32, copy=False), rate_hz=float(rate_hz),
                  models={"A": params[0].to_dict(), "B": params[1].to_dict()},
                  events=list(events), faults=[r.to_dict() for r in safety.log_records],

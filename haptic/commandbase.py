@@ -7,46 +7,23 @@ The commands themselves and the tables that name them are :mod:`haptic.commands`
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, TypeAlias
+from typing import Any, ClassVar, Protocol
 
-from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.activities.base import Activities, ActivityHost
 from fieldbank.haptic.errors import CommandError
-from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair
-from fieldbank.haptic.training import TrainingSession
-from fieldbank.params import ArmParams
-
-if TYPE_CHECKING:  # typing only
-    from fieldbank.armkernel import ArmPair
 
 #: A command's answer: a JSON-able mapping.
 Result = dict[str, Any]
-#: Compiled arms A (before) and B (after), built outside the loop.
-SimPair: TypeAlias = "ArmPair"
 
 
-class CommandTarget(Protocol):
-    """The renderer as its commands see it (:class:`haptic.renderer.Renderer`)."""
+class CommandTarget(ActivityHost, Protocol):
+    """The renderer as its commands see it (:class:`haptic.renderer.Renderer`): the loop as
+    its activities see it (:class:`~haptic.activities.base.ActivityHost`: time, safety state,
+    models, events), its activities, arming and its read-outs."""
 
     running: bool
-    t_s: float
-    abx: AbxSession | None
-    abx_results: list[dict[str, Any]]
-    training: TrainingSession | None
-    training_results: list[dict[str, Any]]
+    activities: Activities
 
-    @property
-    def mode_name(self) -> str: ...
-    def crossfade(self, weight: float) -> None: ...
-    def log_event(self, kind: str, **data: Any) -> dict[str, Any]: ...
-    def compile_pair(self, before: ArmParams, after: ArmParams) -> SimPair: ...
-    def queue_models(self, sims: SimPair, params: tuple[ArmParams, ArmParams],
-                     model_ids: ModelIds | None,
-                     model_info: ModelInfoPair | None = None, session: bool = True) -> None: ...
-    def require_armed(self, what: str) -> None: ...
-    def open_window(self) -> None: ...
-    def trial_window(self) -> dict[str, Any]: ...
-    def begin_training(self) -> None: ...
-    def end_training(self) -> None: ...
     def felt(self) -> Result: ...
     def arm(self) -> None: ...
     def disarm(self) -> None: ...

@@ -25,6 +25,7 @@ Control-channel requests (JSON lines, :mod:`haptic.control`) and the command eac
                                                                         -> AbxStart
     {"cmd": "abx", "action": "present", "label": "A" | "B" | "X"}       -> AbxPresent
     {"cmd": "abx", "action": "answer", "answer": "A" | "B"}             -> AbxAnswer
+    {"cmd": "abx", "action": "stop"}                                    -> AbxStop
     {"cmd": "train", "action": "start", "protocol": {TrainingProtocol}} -> TrainStart
     {"cmd": "train", "action": "next"}                                  -> TrainNext
     {"cmd": "train", "action": "answer", "answer": "shoulder" | "elbow" | "both"}
@@ -44,12 +45,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar
 
-from fieldbank.haptic.abx import MAX_ABX_TRIALS, AbxSession
-from fieldbank.haptic.commandbase import CommandTarget as CommandTarget
-from fieldbank.haptic.commandbase import RendererCommand as RendererCommand
-from fieldbank.haptic.commandbase import Result as Result
-from fieldbank.haptic.commandbase import SimPair as SimPair
-from fieldbank.haptic.commandbase import int_field
+from fieldbank.haptic.activities.abx import MAX_ABX_TRIALS, AbxBlock
+from fieldbank.haptic.activities.base import Activity
+from fieldbank.haptic.activities.training import NextTrial, Training
+from fieldbank.haptic.commandbase import CommandTarget, RendererCommand, Result, int_field
 from fieldbank.haptic.errors import CommandError, HapticError
 from fieldbank.haptic.modelinfo import (
     ModelIds,
@@ -57,15 +56,10 @@ from fieldbank.haptic.modelinfo import (
     check_model_ids,
     model_info_pair,
 )
-from fieldbank.haptic.training import (
-    TrainingProtocol,
-    TrainingSession,
-    Trial,
-    probe_paths,
-)
-from fieldbank.model import Arm as CompiledArm
+from fieldbank.haptic.pair import SimPair
+from fieldbank.haptic.safety import Mode
+from fieldbank.haptic.training import TrainingProtocol
 from fieldbank.params import ArmParams
-from fieldbank.probepath import ProbePath
 
 _SWITCH_WEIGHTS: dict[object, float] = {"A": 0.0, "B": 1.0, "before": 0.0, "after": 1.0,
                                         0: 0.0, 1: 1.0}
@@ -97,14 +91,14 @@ class Switch(RendererCommand):
         return cls(req.get("to"))
 
     def apply(self, target: CommandTarget) -> Result:
-        if target.mode_name == "FAULT":
-            target.require_armed("switch")
-        if target.abx is not None or (target.training is not None
-                                      and not target.training.done):
+        if target.safety.mode == Mode.FAULT:
+            target.safety.require_armed("switch")
+        run = target.activities.running
+        if run is not None and run.owns_blend:
             raise CommandError("switch refused: a blinded block or a training protocol runs; "
                                "it chooses what is felt")
         w = self.weight
-        target.crossfade(w)
+        target.pair.crossfade(w)
         target.log_event("switch", to=w)
         return {"blend_target": w, **target.felt()}
 
@@ -138,15 +132,16 @@ class Push(RendererCommand):
     def prepare(self, target: CommandTarget) -> Push:
         if self.sims is not None:
             return self
-        return replace(self, sims=target.compile_pair(self.before, self.after))
+        return replace(self, sims=target.pair.compile(self.before, self.after))
 
     def apply(self, target: CommandTarget) -> Result:
         if self.sims is None:
             raise CommandError("push: the models were not compiled (submit it to the renderer)")
-        if target.training is not None and not target.training.done:
-            raise CommandError("push refused: a training protocol is running (stop it first)")
-        if target.mode_name == "FAULT":
-            target.require_armed("push")
+        run = target.activities.running
+        if run is not None and run.owns_models:
+            raise CommandError(f"push refused: {run.title} is running (stop it first)")
+        if target.safety.mode == Mode.FAULT:
+            target.safety.require_armed("push")
         target.queue_models(self.sims, (self.before, self.after), self.model_ids,
                             self.model_info)
         target.log_event("push", model_ids=dict(self.model_ids or {}))
@@ -161,7 +156,7 @@ class Arm(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         target.arm()
-        return {"mode": target.mode_name}
+        return {"mode": target.safety.mode.name}
 
 
 @dataclass(frozen=True)
@@ -172,7 +167,7 @@ class Disarm(RendererCommand):
 
     def apply(self, target: CommandTarget) -> Result:
         target.disarm()
-        return {"mode": target.mode_name}
+        return {"mode": target.safety.mode.name}
 
 
 @dataclass(frozen=True)
@@ -213,17 +208,37 @@ class Info(RendererCommand):
         return target.info()
 
 
-def _abx(target: CommandTarget) -> AbxSession:
-    if target.abx is None:
-        raise CommandError("no A/B/X block running; start one with 'fieldbank haptic abx start' "
-                           "(or the station's A/B/X button)")
-    return target.abx
+#: Why an A/B/X step or a training step was refused: none is running.
+NO_ABX = ("no A/B/X block running; start one with 'fieldbank haptic abx start' (or the "
+          "station's A/B/X button)")
+NO_TRAINING = "no training protocol running; start one with train start"
+
+
+def _abx(target: CommandTarget) -> AbxBlock:
+    act = target.activities.addressed(AbxBlock.kind)
+    if not isinstance(act, AbxBlock):
+        raise CommandError(NO_ABX)
+    return act
+
+
+def _training(target: CommandTarget) -> Training:
+    act = target.activities.addressed(Training.kind)
+    if not isinstance(act, Training):
+        raise CommandError(NO_TRAINING)
+    return act
+
+
+def _stepped(target: CommandTarget, act: Activity, out: Result) -> Result:
+    """``out``, once the activity's finished result is kept (if this step finished it)."""
+    target.activities.after_step(act)
+    return out
 
 
 @dataclass(frozen=True)
 class AbxStart(RendererCommand):
-    """Start a block of ``n_trials`` blinded A/B/X trials (:class:`haptic.abx.AbxSession`):
-    A is always before and B after; only X is hidden."""
+    """Start a block of ``n_trials`` blinded A/B/X trials (:class:`haptic.activities.abx.AbxBlock`):
+    A is always before and B after; only X is hidden. A block still running is closed first,
+    its answers kept."""
 
     name: ClassVar[str] = "abx_start"
     n_trials: int = 10
@@ -242,14 +257,7 @@ class AbxStart(RendererCommand):
                    int_field(req, "seed", 0, 0, 2**63 - 1, "abx start"))
 
     def apply(self, target: CommandTarget) -> Result:
-        if target.training is not None and not target.training.done:
-            raise CommandError("an A/B/X block cannot start while a training protocol runs")
-        target.require_armed("A/B/X start")
-        abx = AbxSession(self.n_trials, self.seed)
-        target.abx = abx
-        target.open_window()
-        target.log_event("abx_start", n_trials=abx.n_trials, seed=abx.seed)
-        return {"trial": 0, "n_trials": abx.n_trials}
+        return target.activities.start(AbxBlock(self.n_trials, self.seed), target)
 
 
 @dataclass(frozen=True)
@@ -268,12 +276,7 @@ class AbxPresent(RendererCommand):
         return cls(req.get("label"))  # type: ignore[arg-type]  # checked when made
 
     def apply(self, target: CommandTarget) -> Result:
-        abx = _abx(target)
-        target.require_armed("A/B/X")
-        label = str(self.label).upper()
-        target.crossfade(float(abx.model_for(label)))
-        target.log_event("abx_present", label=label, trial=abx.trial)
-        return {"presenting": label, "trial": abx.trial}
+        return _abx(target).present(target, self.label)
 
 
 @dataclass(frozen=True)
@@ -292,40 +295,25 @@ class AbxAnswer(RendererCommand):
         return cls(req.get("answer"))  # type: ignore[arg-type]  # checked when made
 
     def apply(self, target: CommandTarget) -> Result:
-        abx = _abx(target)
-        target.require_armed("A/B/X answer")  # no answer counts while nothing is felt
-        rec = abx.answer(str(self.answer), target.t_s, target.trial_window())
-        target.open_window()
-        target.log_event("abx_answer", trial=rec["trial"], answer=rec["answer"],
-                         flagged=rec["flagged"])
-        out: Result = {"trial": rec["trial"] + 1, "done": abx.done,
-                       "flagged": rec["flagged"], "flags": rec["flags"]}
-        if abx.done:
-            target.abx_results.append(abx.result())
-            out["result"] = abx.result()
-            target.abx = None
-        return out
+        act = _abx(target)
+        return _stepped(target, act, act.answer(target, self.answer))
 
 
-def _training(target: CommandTarget) -> TrainingSession:
-    if target.training is None:
-        raise CommandError("no training protocol running; start one with train start")
-    return target.training
+@dataclass(frozen=True)
+class AbxStop(RendererCommand):
+    """End the A/B/X block early; the answers so far are kept and scored."""
 
+    name: ClassVar[str] = "abx_stop"
 
-def _record_training(target: CommandTarget, tr: TrainingSession) -> Result:
-    res = tr.result()
-    target.training_results.append(res)
-    target.end_training()
-    target.log_event("train_end", abandoned=tr.abandoned, answered=len(
-        [r for r in tr.records if r["answer"] is not None]))
-    return res
+    def apply(self, target: CommandTarget) -> Result:
+        act = _abx(target)
+        return _stepped(target, act, act.stop(target))
 
 
 @dataclass(frozen=True)
 class TrainStart(RendererCommand):
-    """Start the seed's training protocol (:mod:`haptic.training`); ``train_next`` presents the
-    first trial."""
+    """Start the seed's training protocol (:mod:`haptic.activities.training`); ``train_next``
+    presents the first trial."""
 
     name: ClassVar[str] = "train_start"
     protocol: TrainingProtocol = field(default_factory=TrainingProtocol)
@@ -335,17 +323,7 @@ class TrainStart(RendererCommand):
         return cls(TrainingProtocol.from_dict(req.get("protocol") or {}))
 
     def apply(self, target: CommandTarget) -> Result:
-        if target.abx is not None:
-            raise CommandError("training cannot start while an A/B/X block runs")
-        if target.training is not None and not target.training.done:
-            raise CommandError("a training protocol is already running (train stop ends it)")
-        target.require_armed("training start")
-        target.begin_training()
-        tr = TrainingSession(self.protocol)
-        target.training = tr
-        target.log_event("train_start", n_trials=len(tr.trials),
-                         instruction=self.protocol.instruction, seed=self.protocol.seed)
-        return tr.state(target.t_s)
+        return target.activities.start(Training(self.protocol), target)
 
 
 @dataclass(frozen=True)
@@ -354,46 +332,18 @@ class TrainNext(RendererCommand):
     fade); after the last trial, close the protocol."""
 
     name: ClassVar[str] = "train_next"
-    index: int | None = None
-    session: TrainingSession | None = field(default=None, compare=False, repr=False)
-    params: ArmParams | None = field(default=None, compare=False, repr=False)
-    sims: SimPair | None = field(default=None, compare=False, repr=False)
-    paths: tuple[ProbePath, ...] = field(default=(), compare=False, repr=False)
+    activity: Training | None = field(default=None, compare=False, repr=False)
+    trial: NextTrial | None = field(default=None, compare=False, repr=False)
 
     def prepare(self, target: CommandTarget) -> TrainNext:
-        tr = _training(target)
-        nxt: Trial | None = tr.next_trial
-        if nxt is None:
-            return replace(self, index=-1, session=tr)
-        target.require_armed("next trial")
-        if tr.awaiting_answer:
-            raise CommandError("training: answer this trial first (shoulder, elbow or both)")
-        p = nxt.params(tr.protocol.base())
-        paths: tuple[ProbePath, ...] = ()
-        if tr.protocol.instruction == "instructed":
-            paths = probe_paths(CompiledArm.from_params(p), tr.protocol.probes,
-                                tr.protocol.extra_probes)
-        return replace(self, index=nxt.index, session=tr, params=p,
-                       sims=target.compile_pair(p, p), paths=paths)
+        act = _training(target)
+        return replace(self, activity=act, trial=act.prepare(target))
 
     def apply(self, target: CommandTarget) -> Result:
-        tr = _training(target)
-        if self.session is not tr or self.index is None:
+        act = _training(target)
+        if self.activity is not act or self.trial is None:
             raise CommandError("train next: the training protocol changed; ask again")
-        if self.index == -1:
-            if not tr.done:
-                tr.finish(target.t_s, window=target.trial_window())
-                if tr.done:
-                    _record_training(target, tr)
-            return tr.state(target.t_s)
-        assert self.sims is not None and self.params is not None
-        target.require_armed("next trial")
-        trial = tr.begin(self.index, target.t_s, self.paths, window=target.trial_window())
-        target.open_window()
-        target.queue_models(self.sims, (self.params, self.params), None, None, session=False)
-        target.log_event("train_trial", trial=trial.index, phase=trial.phase,
-                         condition=trial.condition)
-        return tr.state(target.t_s)
+        return _stepped(target, act, act.next(target, self.trial))
 
 
 @dataclass(frozen=True)
@@ -413,16 +363,8 @@ class TrainAnswer(RendererCommand):
         return cls(req.get("answer"))  # type: ignore[arg-type]  # checked when made
 
     def apply(self, target: CommandTarget) -> Result:
-        tr = _training(target)
-        target.require_armed("training answer")  # no answer counts while nothing is felt
-        rec = tr.answer(self.answer, target.t_s, window=target.trial_window())
-        target.log_event("train_answer", trial=rec["trial"], answer=rec["answer"],
-                         flagged=rec["flagged"])
-        out: Result = {"trial": rec["trial"] + 1, "recorded": True, "done": tr.done,
-                       "flagged": rec["flagged"], "flags": rec["flags"]}
-        if tr.done:
-            out["result"] = _record_training(target, tr)
-        return out
+        act = _training(target)
+        return _stepped(target, act, act.answer(target, self.answer))
 
 
 @dataclass(frozen=True)
@@ -432,17 +374,14 @@ class TrainStop(RendererCommand):
     name: ClassVar[str] = "train_stop"
 
     def apply(self, target: CommandTarget) -> Result:
-        tr = _training(target)
-        if not tr.done:
-            tr.finish(target.t_s, abandon=True, window=target.trial_window())
-            _record_training(target, tr)
-        return tr.state(target.t_s)
+        act = _training(target)
+        return _stepped(target, act, act.stop(target))
 
 
 #: Every command by its name.
 COMMANDS: dict[str, type[RendererCommand]] = {
     c.name: c for c in (Switch, Push, Arm, Disarm, Stop, Status, Info, AbxStart, AbxPresent,
-                        AbxAnswer, TrainStart, TrainNext, TrainAnswer, TrainStop)
+                        AbxAnswer, AbxStop, TrainStart, TrainNext, TrainAnswer, TrainStop)
 }
 #: Control-channel ``cmd`` -> command (``abx`` and ``train`` go by their ``action``).
 WIRE: dict[str, type[RendererCommand]] = {
@@ -450,7 +389,7 @@ WIRE: dict[str, type[RendererCommand]] = {
     "disarm": Disarm, "stop": Stop,
 }
 ABX_ACTIONS: dict[str, type[RendererCommand]] = {
-    "start": AbxStart, "present": AbxPresent, "answer": AbxAnswer,
+    "start": AbxStart, "present": AbxPresent, "answer": AbxAnswer, "stop": AbxStop,
 }
 TRAIN_ACTIONS: dict[str, type[RendererCommand]] = {
     "start": TrainStart, "next": TrainNext, "answer": TrainAnswer, "stop": TrainStop,

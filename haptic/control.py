@@ -46,7 +46,8 @@ from fieldbank.haptic.client import (
     push_models,
 )
 from fieldbank.haptic.clock import keep_up_with_the_loop
-from fieldbank.haptic.commands import RendererCommand, Request, Result, parse_request
+from fieldbank.haptic.commandbase import RendererCommand, Result
+from fieldbank.haptic.commands import Request, parse_request
 from fieldbank.haptic.errors import CommandError, ControlError
 
 __all__ = [

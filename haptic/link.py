@@ -3,11 +3,12 @@
 :class:`RobotLink` wraps any port :func:`serial.serial_for_url` returns (a USB serial device, a
 pty, ``socket://``, or the simulated robot ``sim://``). Reads never block the loop: each
 :meth:`RobotLink.poll` takes the bytes that have arrived, reassembles frames, keeps the newest
-STATE in plain attributes, and counts what went wrong (CRC and other decode errors, frames lost
-to sequence gaps, duplicates, device FAULT frames, STATE frames whose flags report a device
-fault or a tripped watchdog - each frame counted, even when a newer STATE of the same read
-replaces it; the fault flag even in a frame dropped as a duplicate). Judging those counts is
-the safety layer's job (:mod:`haptic.safety`); a port that fails raises :class:`LinkDown`.
+STATE in its :class:`~haptic.port.HandleState`, and counts what went wrong (CRC and other
+decode errors, frames lost to sequence gaps, duplicates, device FAULT frames, STATE frames whose
+flags report a device fault or a tripped watchdog - each frame counted, even when a newer STATE
+of the same read replaces it; the fault flag even in a frame dropped as a duplicate). It is a
+:class:`~haptic.port.RobotPort`; judging its counts is the safety monitor's job
+(:mod:`haptic.monitor`); a port that fails raises :class:`LinkDown`.
 
 Sequence numbers: a frame numbered behind the last one is a duplicate and dropped. One forged
 or corrupted-but-valid frame far ahead would then make every genuine frame look old and blind
@@ -21,11 +22,13 @@ from __future__ import annotations
 import os
 import select
 import time
+from typing import Any
 
 import serial
 
 from fieldbank.haptic import protocol as P
 from fieldbank.haptic.errors import HandshakeError, HapticError, LinkDown
+from fieldbank.haptic.port import HandleState
 from fieldbank.redact import mask_port, redact_port
 
 # pyserial resolves a URL scheme X to the module <package>.protocol_X: sim:// -> protocol_sim
@@ -41,16 +44,23 @@ STATE_FLAGS_AT = 20
 
 
 class RobotLink:
-    """Protocol endpoint on the host.
+    """Protocol endpoint on the host: a :class:`~haptic.port.RobotPort`.
 
-    Attributes (newest STATE): ``t_us``, ``x``, ``y``, ``vx``, ``vy`` (m, m/s, robot frame),
-    ``flags``, ``echo_seq`` (last FORCE seq the device applied), ``states`` (STATE frames
-    received so far). Newest force-sensor reading, once :meth:`sensor_on` was sent to a device
-    that has one: ``sensor_t_us``, ``sensor_fx``, ``sensor_fy`` (N, force of the hand on the
-    handle, robot frame), ``sensors`` (SENSOR frames so far). Counters: ``frames_lost``,
-    ``max_gap``, ``duplicates``, ``resyncs``,
-    ``device_faults`` (FAULT frames), ``fault_flag_frames`` and ``watchdog_flag_frames``
-    (STATE frames with those flags), ``decode_errors`` (by kind, from the frame reader).
+    Attributes
+    ----------
+    state : HandleState
+        The newest STATE (``t_us``, ``x``, ``y``, ``vx``, ``vy``, ``flags``, ``states``), the
+        newest force-sensor reading once :meth:`sensor_on` was sent to a device that has one
+        (``sensor_fx``, ``sensor_fy``: N, force of the hand on the handle; ``sensors``), and
+        the fault evidence: ``crc_errors``, ``max_gap``, ``device_faults`` (FAULT frames),
+        ``fault_flag_frames`` and ``watchdog_flag_frames`` (STATE frames with those flags).
+    echo_seq : int
+        The last FORCE sequence number the device applied (from the newest STATE).
+    sensor_t_us : int, µs
+        The device's time of the newest force-sensor reading.
+    frames_rx, frames_tx, frames_lost, duplicates, resyncs, tx_dropped : int
+        What went through and what went wrong on the wire; ``decode_errors`` by kind from the
+        frame reader (``reader.errors``).
     """
 
     def __init__(self, port: serial.SerialBase) -> None:
@@ -59,26 +69,16 @@ class RobotLink:
         self._tx_seq = 0
         self._rx_seq = -1
         self.device: P.DeviceInfo | None = None
-        self.t_us = 0
-        self.x = self.y = self.vx = self.vy = 0.0
-        self.flags = 0
+        self.state = HandleState()
         self.echo_seq = 0
-        self.states = 0
         self.sensor_t_us = 0
-        self.sensor_fx = self.sensor_fy = 0.0
-        self.sensors = 0
         self.frames_rx = 0
         self.frames_tx = 0
         self.frames_lost = 0
-        self.max_gap = 0
         self.duplicates = 0
         self.resyncs = 0
         self._resync_next = -1
         self._resync_run = 0
-        self.device_faults = 0
-        self.last_device_fault = 0
-        self.fault_flag_frames = 0
-        self.watchdog_flag_frames = 0
         try:
             self._fd: int | None = port.fileno()
         except (AttributeError, OSError, ValueError, serial.SerialException):
@@ -106,12 +106,34 @@ class RobotLink:
         return cls(port)
 
     @property
-    def crc_errors(self) -> int:
-        return self.reader.errors.get("crc", 0)
-
-    @property
     def decode_errors(self) -> int:
         return sum(self.reader.errors.values())
+
+    def counters(self) -> dict[str, Any]:
+        """What went wrong on the link so far, and how much went through it."""
+        return {"crc_errors": self.state.crc_errors, "decode_errors": dict(self.reader.errors),
+                "frames_lost": self.frames_lost, "duplicates": self.duplicates,
+                "states": self.state.states, "frames_tx": self.frames_tx}
+
+    # --- the newest state under the names the remote sites read (haptic/remote) -----------
+    # The remote sites read the link's state as attributes of the link; they move to
+    # ``state`` with their next change, and these go then.
+    x = property(lambda self: self.state.x)
+    y = property(lambda self: self.state.y)
+    vx = property(lambda self: self.state.vx)
+    vy = property(lambda self: self.state.vy)
+    flags = property(lambda self: self.state.flags)
+    sensor_fx = property(lambda self: self.state.sensor_fx)
+    sensor_fy = property(lambda self: self.state.sensor_fy)
+    sensors = property(lambda self: self.state.sensors)
+    crc_errors = property(lambda self: self.state.crc_errors)
+    device_faults = property(lambda self: self.state.device_faults)
+    last_device_fault = property(lambda self: self.state.last_device_fault)
+    fault_flag_frames = property(lambda self: self.state.fault_flag_frames)
+    watchdog_flag_frames = property(lambda self: self.state.watchdog_flag_frames)
+
+    def take_gap(self) -> int:
+        return self.state.take_gap()
 
     # --- sending ----------------------------------------------------------------------------
     def _send(self, msg_type: int, payload: bytes = b"") -> int:
@@ -189,11 +211,13 @@ class RobotLink:
         if not data:
             return 0
         new = 0
+        st = self.state
+        errors = self.reader.errors
         for frame in self.reader.feed(data):
             self.frames_rx += 1
             seq = frame.seq
             if frame.type == P.MsgType.STATE and frame.payload[STATE_FLAGS_AT] & P.FLAG_FAULT:
-                self.fault_flag_frames += 1  # every one counts, even a frame dropped below
+                st.fault_flag_frames += 1  # every one counts, even a frame dropped below
             if self._rx_seq >= 0:
                 lost = (seq - self._rx_seq - 1) & 0xFFFF
                 if lost >= 0x8000:  # behind the last frame: a duplicate, unless a run of them
@@ -208,26 +232,27 @@ class RobotLink:
                 self._resync_run = 0
                 if lost:
                     self.frames_lost += lost
-                    if lost > self.max_gap:
-                        self.max_gap = lost
+                    if lost > st.max_gap:
+                        st.max_gap = lost
             self._rx_seq = seq
             t = frame.type
             if t == P.MsgType.STATE:
-                (self.t_us, self.x, self.y, self.vx, self.vy, self.flags,
+                (st.t_us, st.x, st.y, st.vx, st.vy, st.flags,
                  self.echo_seq) = P.STATE_FMT.unpack(frame.payload)
-                self.states += 1
+                st.states += 1
                 new += 1
-                if self.flags & P.FLAG_WATCHDOG:
-                    self.watchdog_flag_frames += 1
+                if st.flags & P.FLAG_WATCHDOG:
+                    st.watchdog_flag_frames += 1
             elif t == P.MsgType.SENSOR:
-                self.sensor_t_us, self.sensor_fx, self.sensor_fy = P.SENSOR_FMT.unpack(
+                self.sensor_t_us, st.sensor_fx, st.sensor_fy = P.SENSOR_FMT.unpack(
                     frame.payload)
-                self.sensors += 1
+                st.sensors += 1
             elif t == P.MsgType.HELLO_ACK:
                 self.device = P.DeviceInfo.from_payload(frame.payload)
             elif t == P.MsgType.FAULT:
-                self.device_faults += 1
-                self.last_device_fault = P.FAULT_FMT.unpack(frame.payload)[0]
+                st.device_faults += 1
+                st.last_device_fault = P.FAULT_FMT.unpack(frame.payload)[0]
+        st.crc_errors = errors.get("crc", 0)
         return new
 
     def wait_state(self, timeout_s: float, spin_s: float = 0.0) -> int:
@@ -259,12 +284,6 @@ class RobotLink:
             if new:
                 return new
 
-    def take_gap(self) -> int:
-        """Largest sequence gap since the last call (and reset it)."""
-        g = self.max_gap
-        self.max_gap = 0
-        return g
-
     # --- session ----------------------------------------------------------------------------
     def handshake(self, rate_hz: int, watchdog_ms: int, timeout_s: float = 1.0,
                   attempts: int = 3) -> P.DeviceInfo:
@@ -276,10 +295,10 @@ class RobotLink:
                 self.wait_state(min(0.01, max(0.0, deadline - time.perf_counter())))
                 if self.device is not None:
                     break
-                if self.device_faults:
+                if self.state.device_faults:
                     raise HandshakeError(
                         f"the robot refused HELLO (protocol {P.PROTOCOL_VERSION}, {rate_hz} Hz): "
-                        f"fault code {self.last_device_fault}"
+                        f"fault code {self.state.last_device_fault}"
                     )
             if self.device is not None:
                 break

@@ -21,8 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.haptic.link import RobotLink
-
 #: The phases of a tick, in order; the renderer sums the cost of each (ns) in this order.
 PHASES = ("link_in", "checks", "models", "safety", "link_out", "record")
 
@@ -68,16 +66,9 @@ def _percentiles(x: np.ndarray, scale: float = 1.0) -> dict[str, float]:
             "max": float(x.max() / scale)}
 
 
-def link_counters(link: RobotLink) -> dict[str, Any]:
-    """What went wrong on the link so far, and how much went through it."""
-    return {"crc_errors": link.crc_errors, "decode_errors": dict(link.reader.errors),
-            "frames_lost": link.frames_lost, "duplicates": link.duplicates,
-            "states": link.states, "frames_tx": link.frames_tx}
-
-
 def loop_stats(times: LoopTimes, *, ticks: int, rate_hz: int, overrun_ms: float,
                realtime_scheduling: bool | None, passivity_active_ticks: int,
-               link: RobotLink, last: int | None = None,
+               link: dict[str, Any], last: int | None = None,
                realtime: dict[str, Any] | None = None) -> dict[str, Any]:
     """The loop's figures (module docstring) over the whole session or its ``last`` iterations.
 
@@ -97,7 +88,8 @@ def loop_stats(times: LoopTimes, *, ticks: int, rate_hz: int, overrun_ms: float,
         Whether SCHED_FIFO was granted (None: the loop has not run).
     passivity_active_ticks : int
         Ticks in which the passivity controller added damping.
-    link : RobotLink
+    link : dict
+        The robot port's counters (:meth:`haptic.port.RobotPort.counters`).
     last : int, optional
         Only the last this many iterations (the tick cost means are always whole-session).
     realtime : dict, optional
@@ -131,7 +123,7 @@ def loop_stats(times: LoopTimes, *, ticks: int, rate_hz: int, overrun_ms: float,
     if tick_ns.size:
         out["tick_total_us"] = _percentiles(tick_ns / 1e3)
     out["passivity_active_ticks"] = passivity_active_ticks
-    out["link"] = link_counters(link)
+    out["link"] = link
     return out
 
 

@@ -15,14 +15,15 @@ during a pass — measured on the virtual patient, a severe reflex slowed a 1 m/
 biased the moving stiffness by 16 % without it, ≤ 5 % with it. What offset remains costs nothing:
 the estimator reads the measured positions and velocities.
 
-Safety is the rendering's (:mod:`haptic.safety`): every command passes the force-rate limit and
-the saturation (``force_limit_n``, 40 N), every STATE is checked (workspace, speed, NaN, CRC,
-sequence gaps, the device's fault and watchdog flags, timeout) and any fault zeroes the force,
-disarms and latches. The passivity controller is off here: it guards a *virtual environment*
-against energy the sampled loop invents, whereas the servo moves the arm by design (the energy
-it puts in is bounded by the force and speed limits). A fault ends the measurement: the trial it
-fell in and every later one are marked with the fault, and :class:`MeasurementAborted` carries
-the recording so far so nothing measured is lost.
+Safety is the rendering's, through the same monitor (:mod:`haptic.monitor`,
+:mod:`haptic.safety`): every command passes the force-rate limit and the saturation
+(``force_limit_n``, 40 N), every STATE is checked (workspace, speed, NaN, CRC, sequence gaps,
+the device's fault and watchdog flags, timeout) and any fault zeroes the force, disarms and
+latches. The passivity controller is off here: it guards a *virtual environment* against energy
+the sampled loop invents, whereas the servo moves the arm by design (the energy it puts in is
+bounded by the force and speed limits). A fault ends the measurement: the trial it fell in and
+every later one are marked with the fault, and :class:`MeasurementAborted` carries the
+recording so far so nothing measured is lost.
 
 The samples (time, handle position and velocity, force sensor, commanded force) are kept at the
 loop rate, in the shoulder frame (robot frame − ``shoulder_offset_m``), with the force as the arm
@@ -45,8 +46,9 @@ from fieldbank.errors import ParameterError
 from fieldbank.files import write_new
 from fieldbank.haptic.errors import HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode
-from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
+from fieldbank.haptic.monitor import SafetyMonitor
+from fieldbank.haptic.protocol import FaultCode
+from fieldbank.haptic.safety import Mode, SafetyConfig
 from fieldbank.home import data_home
 from fieldbank.ingest import IngestReport, ingest_data
 from fieldbank.measure.nwbraw import RecordingInfo, write_recording
@@ -56,7 +58,7 @@ from fieldbank.model import Arm
 from fieldbank.redact import mask_url
 from fieldbank.sanitize import file_component
 from fieldbank.storage import Database
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields, check_tuple
 
 #: Allowed range of every numeric setting of :class:`MeasureConfig`.
 MEASURE_BOUNDS: dict[str, Interval] = {
@@ -85,8 +87,9 @@ class MeasureConfig:
     safety: SafetyConfig = field(default_factory=lambda: SafetyConfig(passivity=False))
 
     def __post_init__(self) -> None:
-        for name, interval in MEASURE_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="measure setting")
+        check_fields(self, MEASURE_BOUNDS, what="measure setting")
+        check_tuple("shoulder_offset_m", self.shoulder_offset_m, 2, Interval(None, None, "m"),
+                    what="measure setting")
 
 
 class MeasurementAborted(HapticError):
@@ -130,23 +133,22 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
     link.handshake(cfg.rate_hz, round(cfg.safety.state_timeout_ms) or 20)
     link.sensor_on()
     link.heartbeat()
+    st = link.state
     deadline = clock() + 1.0  # type: ignore[operator]
-    while link.sensors == 0:
+    while st.sensors == 0:
         link.send_force(0.0, 0.0)
         link.wait_state(0.01)
-        if link.device_faults:
+        if st.device_faults:
             raise HapticError(f"the robot at {mask_url(url)} has no force sensor (it answered "
-                              f"SENSOR_ON with fault {link.last_device_fault}); measuring "
+                              f"SENSOR_ON with fault {st.last_device_fault}); measuring "
                               "needs one")
         if clock() > deadline:  # type: ignore[operator]
             raise HapticError(f"the robot at {mask_url(url)} sent no force-sensor reading "
                               "within 1 s of SENSOR_ON; measuring needs a force sensor")
     ox, oy = cfg.shoulder_offset_m
-    safety = Safety(cfg.safety, dt)
-    safety.rearm((link.x, link.y, link.vx, link.vy))
-    link.arm()
-    seen = (link.device_faults, link.fault_flag_frames, link.watchdog_flag_frames)
-    approach = _approach((link.x - ox, link.y - oy), plan.start_m, cfg.approach_speed_m_per_s)
+    monitor = SafetyMonitor(link, cfg.safety, dt)
+    monitor.arm(running=False)
+    approach = _approach((st.x - ox, st.y - oy), plan.start_m, cfg.approach_speed_m_per_s)
     t_off = approach.duration_s
     total = t_off + plan.duration_s
     n_ticks = math.ceil(total / dt) + 2
@@ -154,11 +156,9 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
     k_s, b_s = cfg.servo_k_n_per_m, cfg.servo_b_n_s_per_m
     ff = cfg.force_feedforward
     lp = 1.0 - math.exp(-2.0 * math.pi * cfg.feedforward_cutoff_hz * dt)
-    hfx, hfy = link.sensor_fx, link.sensor_fy
+    hfx, hfy = st.sensor_fx, st.sensor_fy
     seg_i = 0
     segs = plan.segments
-    timeout_ticks = max(1, math.ceil(cfg.safety.state_timeout_ms * 1e-3 / dt))
-    missed = 0
     fault = ""
     n = 0
     realtime = not url.startswith("sim://") or "realtime" in url
@@ -171,45 +171,25 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
             tp = t - t_off
             seg_i = plan.segment_at(tp, seg_i)
             rx, ry, rvx, rvy = segs[seg_i].reference(tp)
-        x, y = link.x - ox, link.y - oy
-        vx, vy = link.vx, link.vy
+        x, y = st.x - ox, st.y - oy
+        vx, vy = st.vx, st.vy
         # the hand's force, low-passed, is cancelled so the arm cannot drag the handle off the
         # reference's velocity (the reflex makes the force steep in the velocity)
-        hfx += lp * (link.sensor_fx - hfx)
-        hfy += lp * (link.sensor_fy - hfy)
+        hfx += lp * (st.sensor_fx - hfx)
+        hfy += lp * (st.sensor_fy - hfy)
         fx = k_s * (rx - x) + b_s * (rvx - vx) - ff * hfx
         fy = k_s * (ry - y) + b_s * (rvy - vy) - ff * hfy
-        fx, fy = safety.output(fx, fy, vx, vy)
-        try:
-            link.send_force(fx, fy)
-            new = link.wait_state(cfg.state_wait_s)
-        except LinkDown as exc:
-            fault = f"{FaultCode.DISCONNECT.name}: {exc}"
-            break
-        missed = 0 if new else missed + 1
-        code, msg = safety.check_handle(link.x, link.y, link.vx, link.vy)
-        if not code and missed > timeout_ticks:
-            code, msg = FaultCode.TIMEOUT, f"no STATE for {missed} ticks"
-        if not code and safety.check_crc(link.crc_errors):
-            code, msg = FaultCode.CRC, f"{link.crc_errors} CRC errors"
-        gap = link.take_gap()
-        if not code and gap > cfg.safety.max_seq_gap:
-            code, msg = FaultCode.SEQ_GAP, f"sequence gap of {gap} frames"
-        now_seen = (link.device_faults, link.fault_flag_frames, link.watchdog_flag_frames)
-        if not code and (now_seen != seen or link.flags & (FLAG_FAULT | FLAG_WATCHDOG)):
-            code, msg = FaultCode.DEVICE, (f"the robot reported a fault (code "
-                                           f"{link.last_device_fault}, flags {link.flags})")
-        if not code and safety.limiter.nan_seen:
-            code, msg = FaultCode.NAN, "non-finite servo force"
-        rows[n] = (t - t_off, link.x - ox, link.y - oy, link.vx, link.vy, link.sensor_fx,
-                   link.sensor_fy, fx, fy)
+        # every check is the monitor's (haptic.monitor): a fault zeroes the force and latches
+        fx, fy = monitor.output(fx, fy, vx, vy)
+        monitor.send(fx, fy)
+        monitor.check(monitor.read(cfg.state_wait_s, t))
+        rows[n] = (t - t_off, st.x - ox, st.y - oy, st.vx, st.vy, st.sensor_fx,
+                   st.sensor_fy, fx, fy)
         n += 1
-        if code:
-            safety.trip(code, t, msg)
-            fault = f"{FaultCode(code).name}: {msg}"
-            break
-        if safety.mode != Mode.ARMED:
-            fault = "the safety layer disarmed the servo"
+        if monitor.mode != Mode.ARMED:
+            first = monitor.safety.log_records[:1]
+            fault = (f"{FaultCode(first[0].code).name}: {first[0].message}" if first
+                     else "the safety layer disarmed the servo")
             break
         if realtime:
             wait = t_wall0 + (k + 1) * dt - clock()  # type: ignore[operator]

@@ -30,6 +30,8 @@ import math
 import random
 from collections.abc import Callable, Sequence
 
+from fieldbank.errors import ParameterError
+
 MotionFn = Callable[[float], tuple[float, float, float, float]]
 
 MOTIONS = ("hold", "pull", "fastpull", "ellipse", "circle", "explore", "path")
@@ -148,14 +150,15 @@ def parse_path(text: str) -> list[tuple[float, float, float]]:
         try:
             t, x, y = (float(v) for v in parts)
         except ValueError:
-            raise ValueError(f"path point {k + 1} {item!r} must read t:x:y (s, m, m)") from None
+            raise ParameterError(f"path point {k + 1} {item!r} must read t:x:y (s, m, m)") from None
         if not all(math.isfinite(v) for v in (t, x, y)):
-            raise ValueError(f"path point {k + 1} {item!r} is not finite")
+            raise ParameterError(f"path point {k + 1} {item!r} is not finite")
         if pts and t <= pts[-1][0]:
-            raise ValueError(f"path point {k + 1}: time {t:g} s does not follow {pts[-1][0]:g} s")
+            raise ParameterError(f"path point {k + 1}: time {t:g} s does not follow "
+                                 f"{pts[-1][0]:g} s")
         pts.append((t, x, y))
     if len(pts) < 2:
-        raise ValueError(f"a path needs at least 2 points; got {len(pts)}")
+        raise ParameterError(f"a path needs at least 2 points; got {len(pts)}")
     return pts
 
 
@@ -253,7 +256,7 @@ def make_motion(kind: str, x0: float, y0: float, seed: int = 0,
         return circle(x0, y0, distance_m if distance_m is not None else 0.06)
     if kind == "explore":
         return explore(x0, y0, distance_m if distance_m is not None else 0.06, seed=seed)
-    raise ValueError(f"unknown motion {kind!r}; known: {', '.join(MOTIONS)}")
+    raise ParameterError(f"unknown motion {kind!r}; known: {', '.join(MOTIONS)}")
 
 
 def motion_duration_s(kind: str, duration_s: float | None = None, path_text: str = "") -> float:

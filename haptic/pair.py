@@ -17,14 +17,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeAlias
 
 from fieldbank.armkernel import ArmPair
-from fieldbank.haptic.commands import SimPair
+from fieldbank.errors import UnreachableError
+from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.modelinfo import ModelIds, ModelInfoPair, to_wire
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig
+
+#: Compiled arms A (before) and B (after), built outside the loop.
+SimPair: TypeAlias = ArmPair
 
 
 class Ramp:
@@ -119,6 +123,18 @@ class ModelPair:
         return ArmPair.of(make(before, self.dt_s, self.coupling),
                           make(after, self.dt_s, self.coupling))
 
+    def reset_at(self, hx: float, hy: float) -> None:
+        """Both arms at rest with the hand at (hx, hy), m, shoulder frame (at their rest
+        posture where that is not a number or out of reach)."""
+        for sim in self.sims:
+            try:
+                if math.isfinite(hx) and math.isfinite(hy):
+                    sim.reset_at_hand(hx, hy)
+                else:
+                    sim.reset()
+            except (UnreachableError, ValueError):
+                sim.reset()
+
     def crossfade(self, weight: float) -> None:
         """Ramp the blend to ``weight`` (0 = A, 1 = B) over ``crossfade_s``."""
         self.blend.go(weight, self.crossfade_ticks)
@@ -133,6 +149,32 @@ class ModelPair:
         """Hold compiled models for :meth:`swap` (``session``: they become the session's
         models; False: a training arm, rendered but not the session's)."""
         self.pending = (sims, params, model_ids, model_info, session)
+
+    def tick(self, x: float, y: float, vx: float, vy: float) -> tuple[float, float, bool]:
+        """One tick of both arms with the handle at (x, y) m moving at (vx, vy) m/s, shoulder
+        frame, after this tick's blend and gain steps (the compiled call blends as it ticks):
+        the force on the handle F = g · ((1 − w) F_A + w F_B), N, and False when an arm
+        diverged (its force not a number; the force is then 0). A state that is not a number
+        leaves the arms as they are and gives 0."""
+        w = self.blend.step()
+        g = self.gain.step()
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(vx)
+                and math.isfinite(vy)):
+            return 0.0, 0.0, True
+        try:
+            mx, my, fa_x, fa_y, fb_x, fb_y = self.sims.tick(x, y, vx, vy, w, g)
+        except (ArithmeticError, ValueError):  # overflow inside a diverging arm
+            return 0.0, 0.0, False
+        if math.isfinite(fa_x + fa_y) and math.isfinite(fb_x + fb_y):
+            return mx, my, True
+        return 0.0, 0.0, False
+
+    def current(self) -> tuple[SimPair, tuple[ArmParams, ArmParams]]:
+        """The pair rendered now, to be put back later (refused while pushed models wait to be
+        swapped in: they would be lost)."""
+        if self.pending is not None:
+            raise CommandError("pushed models are being swapped in")
+        return self.sims, self.params
 
     @property
     def swapping(self) -> bool:

@@ -39,6 +39,7 @@ from fieldbank.modelsource import ModelSource, from_file, stored, synthetic
 from fieldbank.params import ArmParams
 from fieldbank.sim import ArmSim, CouplingConfig
 from fieldbank.storage import Database
+from fieldbank.validation import Interval, check_fields
 
 #: Grip between hand and handle (assumption; see the module docstring).
 GRIP_N_PER_M = 1.0e6
@@ -64,12 +65,22 @@ def resolve_patient(spec: str) -> ModelSource:
     return synthetic([s for s in text.split(",") if s.strip()])
 
 
+#: Allowed range of each coordinate of :class:`PatientPlacement`.
+PLACEMENT_BOUNDS: dict[str, Interval] = {
+    "shoulder_x_m": Interval(None, None, "m"),
+    "shoulder_y_m": Interval(None, None, "m"),
+}
+
+
 @dataclass(frozen=True)
 class PatientPlacement:
-    """Where the patient sits: the shoulder's position in robot coordinates, m."""
+    """Where the patient sits: the shoulder's position in robot coordinates, m (finite)."""
 
     shoulder_x_m: float = 0.0
     shoulder_y_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_fields(self, PLACEMENT_BOUNDS, what="patient placement")
 
 
 class VirtualPatient:

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.observation import Observation
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.haptic.clock import VirtualClock
@@ -30,7 +31,8 @@ from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import LEAD_IN_S, MOTIONS, format_path, motion_duration_s
 from fieldbank.haptic.recording import Trace
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
@@ -111,7 +113,7 @@ def probe(params: ArmParams, motion: str = "pull", robot: str | None = None,
     polyline ``path_text`` of :func:`haptic.motions.format_path`, robot frame), its hand
     wandering by ``wander_m``."""
     if motion not in MOTIONS:
-        raise ValueError(f"unknown motion {motion!r}; known: {', '.join(MOTIONS)}")
+        raise ParameterError(f"unknown motion {motion!r}; known: {', '.join(MOTIONS)}")
     url = robot or "sim://"
     simulated = url.startswith("sim://")
     if simulated:

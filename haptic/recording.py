@@ -25,7 +25,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from fieldbank.errors import StorageError
+from fieldbank.errors import ParameterError, StorageError
 from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, write_new
 from fieldbank.redact import mask_url
 from fieldbank.sanitize import csv_comment
@@ -120,7 +120,8 @@ class Trace:
         try:
             return self.data[:, COLUMN_INDEX[name]]
         except KeyError:
-            raise KeyError(f"no trace column {name!r}; known: {', '.join(COLUMN_INDEX)}") from None
+            raise ParameterError(f"no trace column {name!r}; known: "
+                                 f"{', '.join(COLUMN_INDEX)}") from None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])

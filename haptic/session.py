@@ -5,8 +5,9 @@ product tour run.
 
 1. with a database, checks the session's patient against its models' (a session rendering
    another patient's models needs a stated reason) before anything moves;
-2. opens the robot's port (a ``sim://`` URL gets a simulated operator who starts at model A's
-   rest hand position) and handshakes at the loop's rate;
+2. opens the robot (:func:`haptic.robots.open_robot`: the project's link, or an installed
+   adapter's; a ``sim://`` URL gets a simulated operator who starts at model A's rest hand
+   position) and handshakes at the loop's rate;
 3. renders model A (before) and B (after) — with the control channel open (``fieldbank
    haptic switch``, ``push``, ``abx``, ``train`` …; pushed model ids are checked against the
    database and the session's patient), optionally the clinician's station
@@ -32,24 +33,26 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fieldbank.haptic.commands import Push, RendererCommand, Switch
+from fieldbank.haptic.commandbase import RendererCommand
+from fieldbank.haptic.commands import Push, Switch
 from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.dbsink import DatabaseTraceSink, HapticStore
 from fieldbank.haptic.errors import HapticError
-from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.modelinfo import ModelInfoPair, model_info_pair, to_wire
 from fieldbank.haptic.pair import Environment
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.protocol import DeviceInfo
 from fieldbank.haptic.recording import Hdf5TraceSink, Trace
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
+from fieldbank.haptic.robots import open_robot
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.snapshot import SnapshotWriter
 from fieldbank.haptic.station.launch import StationOptions, StationProcess
 from fieldbank.home import data_home
 from fieldbank.params import ArmParams
 from fieldbank.redact import mask_url
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: One line of progress for the user.
 Say = Callable[[str], None]
@@ -76,6 +79,10 @@ def trace_name_now() -> str:
     return "haptic-" + _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
 
 
+#: Allowed range of a scheduled switch's time.
+SWITCH_BOUNDS: dict[str, Interval] = {"at_s": Interval(0.0, None, "s")}
+
+
 @dataclass(frozen=True)
 class ScheduledSwitch:
     """Crossfade to ``to`` ('A'/'before' or 'B'/'after') ``at_s`` seconds after rendering
@@ -85,7 +92,7 @@ class ScheduledSwitch:
     to: str
 
     def __post_init__(self) -> None:
-        check_number("at_s", self.at_s, Interval(0.0, None, "s"), what="switch time")
+        check_fields(self, SWITCH_BOUNDS, what="switch time")
         Switch(self.to)
 
 
@@ -181,14 +188,16 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
           trace_dir: str | Path | None = None, trace_name: str | None = None,
           db: HapticStore | StoreOpener | None = None, say: Say = _quiet,
           watchdog_ms: int = WATCHDOG_MS, environment: Environment | None = None,
-          on_renderer: Callable[[Renderer], None] | None = None) -> SessionResult:
+          on_renderer: Callable[[Renderer], None] | None = None,
+          snapshot_dir: str | Path | None = None) -> SessionResult:
     """Render ``before`` (A) and ``after`` (B) on ``robot``; store the trace.
 
     Parameters
     ----------
     robot : str
-        Port URL: ``/dev/ttyUSB0``, a pty path, ``socket://host:port``, or ``sim://?…`` for the
-        simulated robot (``mode=realtime`` for a live session).
+        Port URL: ``/dev/ttyUSB0``, a pty path, ``socket://host:port``, ``sim://?…`` for the
+        simulated robot (``mode=realtime`` for a live session), or a URL of a scheme an
+        installed robot adapter serves (:mod:`haptic.robots`).
     before, after : ArmParams
         Models A and B.
     model_ids : (int or None, int or None)
@@ -234,6 +243,9 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
         the remote link puts a distant patient there).
     on_renderer : callable(Renderer), optional
         Called with the renderer once it is built, before the robot is armed.
+    snapshot_dir : str or Path, optional
+        Publish the loop's snapshot (:mod:`haptic.snapshot`) in this directory, for a display
+        in another process (the workspace's robot view); a station makes its own.
 
     Returns
     -------
@@ -255,13 +267,14 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
     given = robot
     if robot.startswith("sim://"):
         robot = sim_url(before, SIM_MOTION, cfg.shoulder_offset_m, robot)
-    link = RobotLink.open(robot)
+    port = open_robot(robot, cfg.rate_hz, watchdog_ms)
     try:
-        device = link.handshake(cfg.rate_hz, watchdog_ms)
+        device = port.device
+        assert device is not None  # open_robot refuses a robot that does not say what it is
         say(f"robot {device.device_id!r}: protocol {device.protocol_version}, up to "
             f"{device.max_rate_hz} Hz, device force limit {device.force_limit_n:g} N, "
             f"watchdog {device.watchdog_ms} ms")
-        rd = Renderer(link, before, after, cfg, safety=safety, environment=environment)
+        rd = Renderer(port, before, after, cfg, safety=safety, environment=environment)
         if on_renderer is not None:
             on_renderer(rd)
         # the trace, its file, the database record and every printout keep the URL masked
@@ -278,6 +291,8 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
             if control:
                 server = stack.enter_context(ControlServer(rd, socket_path, vet=vet))
                 where = f"; control socket {server.path}"
+            if snapshot_dir is not None:
+                rd.snapshot = stack.enter_context(SnapshotWriter(snapshot_dir))
             if station is not None:
                 # started before the loop takes real-time priority, which a child would inherit
                 snap = stack.enter_context(SnapshotWriter())
@@ -296,7 +311,7 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
             stack.callback(over.set)
             trace = rd.run(duration_s)
     finally:
-        link.close()
+        port.close()
     trace_file = sha = ref = None
     if trace_dir is not None:
         sink = Hdf5TraceSink(trace_dir)

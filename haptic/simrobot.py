@@ -137,12 +137,12 @@ class SimRobotConfig:
         values: dict[str, object] = {}
         for key, raw in parse_qsl(query, keep_blank_values=True):
             if key not in known:
-                raise ValueError(f"unknown sim:// option {key!r}; known: {', '.join(known)}")
+                raise ParameterError(f"unknown sim:// option {key!r}; known: {', '.join(known)}")
             default = getattr(cls, key)
             try:
                 values[key] = type(default)(raw)
             except ValueError:
-                raise ValueError(
+                raise ParameterError(
                     f"sim:// option {key}={raw!r} is not a {type(default).__name__}"
                 ) from None
         return cls(**values)  # type: ignore[arg-type]

@@ -55,13 +55,17 @@ from typing import Any
 
 from fieldbank.evaluate.severity import LEVEL_RATIO
 from fieldbank.haptic import commands as C
+from fieldbank.haptic.activities.training import Training
 from fieldbank.haptic.clock import VirtualClock
+from fieldbank.haptic.commandbase import RendererCommand
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import explore
 from fieldbank.haptic.pair import Environment
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import Trace
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import SimDevice
 from fieldbank.haptic.training import TrainingProtocol
@@ -185,7 +189,7 @@ class DirectionTrainee:
     def answer(self, directions: Sequence[float]) -> str:
         """'shoulder', 'elbow' or 'both': the group whose template is nearest."""
         if not self.templates:
-            raise ValueError("the trainee has felt no familiarisation trial to answer from")
+            raise HapticError("the trainee has felt no familiarisation trial to answer from")
         felt = self.perceive(directions)
 
         def distance(group: str) -> float:
@@ -238,7 +242,7 @@ class _Driver:
         self.rd = rd
         self.device = device
 
-    def run(self, cmd: C.RendererCommand) -> dict[str, Any]:
+    def run(self, cmd: RendererCommand) -> dict[str, Any]:
         req = self.rd.submit(cmd)
         while not req.done.is_set():
             self.rd.tick()
@@ -248,7 +252,7 @@ class _Driver:
         """Tick through a pushed model's fade out, swap and fade in."""
         rd = self.rd
         for _ in range(100_000):
-            if not rd.swapping:
+            if not rd.pair.swapping:
                 return
             rd.tick()
 
@@ -368,14 +372,16 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
                 if state["done"]:
                     break
                 drive.settle_models()
-                tr = rd.training
-                assert tr is not None and tr.current is not None
+                act = rd.activities.addressed(Training.kind)
+                assert isinstance(act, Training)
+                tr = act.session
                 trial = tr.current
+                assert trial is not None
                 directions: list[float] = []
                 means: list[tuple[float, float]] = []
                 if protocol.instruction == "instructed":
                     for p in tr.paths:
-                        x, y = link.x - offset[0], link.y - offset[1]
+                        x, y = link.state.x - offset[0], link.state.y - offset[1]
                         ref = _approach(x, y, p, m)
                         t0 = m.approach_s + m.hold_s
                         means.append(drive.follow(ref, offset, t0, ref.duration_s)[1])
@@ -383,7 +389,7 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
                         normal.append(means)
                     directions = _extra_directions(means, normal)
                 else:
-                    x, y = link.x - offset[0], link.y - offset[1]
+                    x, y = link.state.x - offset[0], link.state.y - offset[1]
                     wander = explore(x, y, m.explore_amplitude_m,
                                      seed=protocol.seed * 100_003 + trial.index)
                     n = round(m.explore_s * rate_hz)
@@ -424,5 +430,5 @@ def simulate(protocol: TrainingProtocol, rule: DirectionRule | None = None,
         link.close()
     results = trace.metadata.get("training") or []
     if not results:
-        raise ValueError("the simulated training session recorded no result")
+        raise HapticError("the simulated training session recorded no result")
     return SimulationResult(trace, results[-1], rd.t_s, severities)

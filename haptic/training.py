@@ -20,11 +20,12 @@ Melendez-Calderon et al., "Experimental protocol":
 Every count and duration is a field of :class:`TrainingProtocol` (bounds in
 :data:`TRAINING_BOUNDS`); :meth:`TrainingProtocol.seed_protocol` is the paper's.
 
-:class:`TrainingSession` is the protocol's state, owned by the renderer like an A/B/X block and
-driven by the ``train_*`` commands of :mod:`haptic.commands`: ``next`` renders the next trial's
-arm (compiled outside the loop, swapped in behind the push fade), ``answer`` records an
-assessment answer with its response time. Times are the loop's session time (s), so each
-trial's window [started_s, ended_s] is its reference into the session's trace.
+:class:`TrainingSession` is the protocol's state; on the loop it is run by the
+:class:`~haptic.activities.training.Training` activity, which the ``train_*`` commands of
+:mod:`haptic.commands` address: ``next`` renders the next trial's arm (compiled outside the loop,
+swapped in behind the push fade), ``answer`` records an assessment answer with its response
+time. Times are the loop's session time (s), so each trial's window [started_s, ended_s] is its
+reference into the session's trace.
 """
 
 from __future__ import annotations
@@ -299,8 +300,8 @@ class TrainingProtocol:
 class TrainingSession:
     """A training protocol being run: the plan, the current trial, every trial's record.
 
-    Owned by the renderer's loop thread (commands change it at tick boundaries); other threads
-    only read :meth:`state`.
+    Owned by its activity in the loop's thread (commands change it at tick boundaries); other
+    threads only read :meth:`state`.
     """
 
     protocol: TrainingProtocol

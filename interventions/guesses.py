@@ -296,23 +296,30 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
     if not basis.same_model:
         return (), (f"the model before is derived from fitted model {basis.fitted_model_id} by "
                     "earlier plans: intervals need the fitted model itself"), 0
-    plain = basis.samples.params(before, n_samples)
+    # what depends on the fit and the model before only is derived once per use case
+    # (ArmCache.derived): a composer changing doses on one model reuses it
+    fit = (basis.fit_id, basis.fitted_model_id, basis.same_model, basis.seed, before,
+           n_samples)
+    samples = basis.samples
     if not basis.ranges:
+        plain = arms.derived(("fit samples", *fit), lambda: samples.params(before, n_samples))
         # the model itself rides along as set 0: its metrics are the point predictions
-        sm = sample_metrics([before, *plain], plan, cond, arms(before))
+        sm = sample_metrics([before, *plain], plan, cond, arms(before), memo=arms)
         note = (f"95% intervals over {len(plain)} parameter samples of fit {basis.fit_id}; "
                 "the fit held no parameter at a guessed value")
         return intervals_of(sm, bands), note, len(plain)
-    prior = Prior.for_arm(arms(before))
+    prior = arms.derived(("prior", before), lambda: Prior.for_arm(arms(before)))
     # as many draws as asked for: the fit's replicates are cycled when fewer, the guesses
     # drawn afresh for each
-    guessed = draw(basis.samples, basis.ranges, prior, n_samples, seed=basis.seed
-                   ).params(before)
-    plain = draw(basis.samples, (), prior, n_samples).params(before)
+    ranges, seed = basis.ranges, basis.seed
+    guessed = arms.derived(("drawn guesses", *fit), lambda: draw(
+        samples, ranges, prior, n_samples, seed=seed).params(before))
+    plain = arms.derived(("held guesses", *fit), lambda: draw(
+        samples, (), prior, n_samples).params(before))
     n = len(guessed)
     # one pass: the model (set 0), the samples with the guesses drawn (1…n), the samples with
     # the held values kept (n+1…2n)
-    sm = sample_metrics([before, *guessed, *plain], plan, cond, arms(before))
+    sm = sample_metrics([before, *guessed, *plain], plan, cond, arms(before), memo=arms)
     drawn = intervals_of(_rows(sm, range(0, n + 1)), bands)
     kept = intervals_of(_rows(sm, [0, *range(n + 1, 2 * n + 1)]))
     out = tuple(_with_identified(a, b) for a, b in zip(drawn, kept, strict=True))

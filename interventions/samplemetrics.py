@@ -17,6 +17,7 @@ import numpy as np
 
 from fieldbank.armbatch import ArmBatch
 from fieldbank.errors import ParameterError
+from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.batch import (
     peak_magnitude,
     probe_forces,
@@ -107,18 +108,20 @@ class SampleMetrics:
 
 
 def sample_metrics(samples: Sequence[ArmParams], plan: Plan, cond: Conditions,
-                   geometry: Arm) -> SampleMetrics:
+                   geometry: Arm, memo: ArmCache | None = None) -> SampleMetrics:
     """The plan applied to each sample, every sample's metrics before and after in one
     vectorised pass (:class:`fieldbank.model.ArmBatch`: ``geometry`` compiled once, every
     muscle value free per sample). A plan that changed the geometry itself falls back to
-    :func:`sample_metrics_per_sample`."""
+    :func:`sample_metrics_per_sample`. ``memo``: the use case's cache, which keeps the
+    metrics before (they do not depend on the plan)."""
     afters = [plan.apply(p) for p in samples]
     try:
         b = ArmBatch.from_params(samples, geometry)
         a = ArmBatch.from_params(afters, geometry)
     except ParameterError:
         return sample_metrics_per_sample(samples, plan, cond)
-    mb, cb = headline_metrics_batch(b, cond)
+    mb, cb = (headline_metrics_batch(b, cond) if memo is None else memo.derived(
+        ("sample metrics before", cond, tuple(samples)), lambda: headline_metrics_batch(b, cond)))
     ma, ca = headline_metrics_batch(a, cond)
     keys = tuple(mb)
     return SampleMetrics(keys, tuple(mb[k][1] for k in keys),

@@ -35,7 +35,12 @@ from pathlib import Path
 from typing import Any
 
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.compare import Comparison, Conditions, compare
+from fieldbank.evaluate.compare import (
+    Comparison,
+    Conditions,
+    compare_evaluations,
+    evaluate_arm,
+)
 from fieldbank.files import to_json, write_atomic
 from fieldbank.interventions.course import TimeCourse, time_course
 from fieldbank.interventions.defaults import value
@@ -211,7 +216,7 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
                save_to: DatabaseOpener | None = None,
                session_limit_units: float | None = None, accept_poor_fit: bool = False,
                interval_samples: int = DEFAULT_INTERVAL_SAMPLES,
-               given_on: date | None = None) -> WhatIf:
+               given_on: date | None = None, arms: ArmCache | None = None) -> WhatIf:
     """Apply ``plan`` (or the plan ``search`` finds) to the model of ``source`` and compare.
 
     Parameters
@@ -239,6 +244,10 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
         Fit samples carried through the plan for the intervals (0: none).
     given_on : date, optional
         With ``save_to``: the day the plan was carried out.
+    arms : ArmCache, optional
+        A cache that outlives the call (the workspace's composer keeps one per model): what
+        depends on the model before alone - its conditions, its evaluation, the prior, the
+        fit's samples and their metrics - is computed once in it, the rest as usual.
     """
     if plan is None and search is None:
         raise InterventionError("what-if: give a plan or a dose search.")
@@ -246,9 +255,9 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
         raise InterventionError("what-if: a date the plan was given is stored with the plan; "
                                 "it needs --save.")
     accepted = check_fit(FitBasis.of(source), accept_poor_fit)  # before any work or writing
-    arms = ArmCache()
+    arms = arms if arms is not None else ArmCache()
     arm_b = arms(source.params)
-    cond = Conditions.standard(arm_b)
+    cond = arms.derived(("conditions", source.params), lambda: Conditions.standard(arm_b))
     inverse = None
     if search is not None:
         inverse = optimise_botulinum(arm_b, search.total_units, search.groups,
@@ -258,7 +267,10 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     assert plan is not None
     after, derivation = plan.derive(source.params)
     arm_a = arms(after)
-    comparison = compare(arm_b, arm_a, cond, source.unidentified)
+    unid = source.unidentified
+    before_ev = arms.derived(("evaluation", cond, unid),
+                             lambda: evaluate_arm(arm_b, cond, unid))
+    comparison = compare_evaluations(before_ev, evaluate_arm(arm_a, cond, unid))
     guesses = examine(source, plan, cond, arms, accept_poor_fit=accept_poor_fit,
                       n_samples=interval_samples)
     course = time_course(arm_b, plan, conditions=cond, arms=arms) if timecourse else None

@@ -19,7 +19,8 @@ from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
 from fieldbank.model import Arm

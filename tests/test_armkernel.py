@@ -14,7 +14,8 @@ from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import sim_url
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sim import CouplingConfig

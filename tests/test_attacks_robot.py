@@ -19,7 +19,8 @@ from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RESYNC_FRAMES, RobotLink
 from fieldbank.haptic.protocol import FaultCode
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import Mode
 from tests.haptic_util import MemoryPort, rest_hand, severe_shoulder
 
@@ -132,20 +133,20 @@ def test_rearm_tick_runs_the_safety_checks() -> None:
 def test_one_forged_sequence_number_does_not_blind_the_host() -> None:
     rd, dev = _renderer()
     _settle(rd, dev, 100)
-    states = rd.link.states
+    states = rd.port.state.states
     dev.state(seq=(dev.seq + 20_000) & 0xFFFF)  # forged, far ahead
     rd.tick()
     assert rd.safety.mode == Mode.FAULT  # the jump is a sequence gap: zero force at once
     ticks_blind = 0
     for _ in range(50):
-        before = rd.link.states
+        before = rd.port.state.states
         dev.state()
         rd.tick()
-        if rd.link.states == before:
+        if rd.port.state.states == before:
             ticks_blind += 1
     # without resynchronisation every genuine frame would look old for 20,000 frames (20 s)
     assert ticks_blind == RESYNC_FRAMES - 1
-    assert rd.link.resyncs == 1 and rd.link.states > states + 40
+    assert rd.port.resyncs == 1 and rd.port.state.states > states + 40
     req = rd.submit("arm")
     dev.state()
     rd.tick()
@@ -177,9 +178,9 @@ def _run_script(script: list[TickScript]) -> Iterator[tuple[bool, Renderer]]:
                 dev.state(flags, seq=dev.seq - 1)
             else:
                 dev.state(flags, seq=dev.seq + 1000)
-        flagged_before = rd.link.fault_flag_frames
+        flagged_before = rd.port.state.fault_flag_frames
         rd.tick()
-        flagged_now = rd.link.fault_flag_frames > flagged_before
+        flagged_now = rd.port.state.fault_flag_frames > flagged_before
         accepted = False
         if req is not None:
             try:

@@ -8,9 +8,14 @@ import pytest
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design import NoiseModel, Perception, ProbeLimits
-from fieldbank.haptic.renderer import RendererConfig
+from fieldbank.haptic.measure import MeasureConfig
+from fieldbank.haptic.patient import PatientPlacement
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
+from fieldbank.haptic.session import ScheduledSwitch
 from fieldbank.haptic.simrobot import SimRobotConfig
+from fieldbank.haptic.station.config import StationConfig
+from fieldbank.haptic.station.launch import StationOptions
 from fieldbank.haptic.trainee import TraineeMotion
 from fieldbank.haptic.training import TrainingProtocol
 from fieldbank.ingest.limits import IngestLimits
@@ -60,9 +65,25 @@ def test_every_problem_in_one_message_and_whole_numbers_stay_whole() -> None:
      "noise parameter"),
     (lambda: ProbeLimits(max_speed_m_per_s=0.0, max_bulge=2.0),
      ("max_speed_m_per_s", "max_bulge"), "probe limit"),
+    (lambda: MeasureConfig(rate_hz=100, state_wait_s=-1.0), ("rate_hz", "state_wait_s"),
+     "measure setting"),
+    (lambda: StationConfig("s", "c", "t", port=70000, frame_hz=0.0), ("port", "frame_hz"),
+     "station setting"),
+    (lambda: StationOptions(port=-1), ("port",), "station setting"),
+    (lambda: PatientPlacement(float("nan"), float("inf")), ("shoulder_x_m", "shoulder_y_m"),
+     "patient placement"),
+    (lambda: ScheduledSwitch(-1.0, "B"), ("at_s",), "switch time"),
 ])
 def test_each_configuration_names_every_field_out_of_bounds(make, fields_, what) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ParameterError) as err:
         make()
     for name in fields_:
         assert f"The '{name}' {what} must be a" in str(err.value), str(err.value)
+
+
+def test_a_station_view_is_one_of_the_two() -> None:
+    for make in (lambda: StationOptions(view="sideways"),
+                 lambda: StationConfig("s", "c", "t", view="sideways")):
+        with pytest.raises(ParameterError, match="'view' station setting must be opposite or "
+                                                 "behind; got 'sideways'"):
+            make()

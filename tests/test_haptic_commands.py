@@ -8,10 +8,12 @@ import pytest
 
 from fieldbank.errors import ParameterError
 from fieldbank.haptic import commands as C
+from fieldbank.haptic.commandbase import RendererCommand
 from fieldbank.haptic.errors import CommandError, HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import sim_url
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from tests.haptic_util import severe_shoulder, unimpaired
 
 
@@ -29,7 +31,7 @@ from tests.haptic_util import severe_shoulder, unimpaired
     ({"cmd": "abx", "action": "answer", "answer": "a"}, C.AbxAnswer("a")),
 ])
 def test_requests_parse_into_the_command_table(req: dict[str, object],
-                                               expected: C.RendererCommand) -> None:
+                                               expected: RendererCommand) -> None:
     assert C.parse_request(req) == expected
 
 
@@ -48,7 +50,7 @@ def test_push_request_parses_models_and_ids() -> None:
 @pytest.mark.parametrize("req,message", [
     ({"to": "A"}, '"cmd" string'),
     ({"cmd": "explode"}, "unknown control command 'explode'"),
-    ({"cmd": "abx", "action": "skip"}, "abx action must be start, present or answer"),
+    ({"cmd": "abx", "action": "skip"}, "abx action must be start, present, answer or stop"),
     ({"cmd": "switch", "to": "C"}, "switch to 'before'/'A' or 'after'/'B'; got 'C'"),
     ({"cmd": "switch", "to": ["A"]}, "switch to"),
 ])
@@ -59,7 +61,7 @@ def test_malformed_requests_say_what_is_wrong(req: dict[str, object], message: s
 
 def test_every_command_is_in_the_table_once() -> None:
     assert set(C.COMMANDS) == {"switch", "push", "arm", "disarm", "stop", "status", "info",
-                               "abx_start", "abx_present", "abx_answer", "train_start",
+                               "abx_start", "abx_present", "abx_answer", "abx_stop", "train_start",
                                "train_next", "train_answer", "train_stop"}
     assert all(cls.name == name for name, cls in C.COMMANDS.items())
     assert (set(C.WIRE.values()) | set(C.ABX_ACTIONS.values()) | set(C.TRAIN_ACTIONS.values())
@@ -83,9 +85,9 @@ def test_the_renderer_answers_every_submission() -> None:
             rd.submit("switch", target="C").wait()
         with pytest.raises(CommandError, match="unknown renderer command 'explode'"):
             rd.submit("explode").wait()
-        req = rd.push_params(unimpaired(), p, {"A": 1, "B": 2})
+        req = rd.submit(C.Push(unimpaired(), p, {"A": 1, "B": 2}))
         assert req.wait()["pushed"] is True
-        assert rd.params == (unimpaired(), p) and rd.metadata["model_ids"] == {"A": 1, "B": 2}
+        assert rd.pair.params == (unimpaired(), p) and rd.metadata["model_ids"] == {"A": 1, "B": 2}
         with pytest.raises(HapticError, match="did not answer"):
             C.Request("status").wait(timeout_s=0.01)
     finally:

@@ -15,11 +15,13 @@ import pytest
 
 from fieldbank.haptic import commands as C
 from fieldbank.haptic.client import MAX_REQUEST_BYTES
+from fieldbank.haptic.commandbase import RendererCommand
 from fieldbank.haptic.control import MAX_CONNECTIONS, ControlServer
 from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import sim_url
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from tests.haptic_util import severe_shoulder, unimpaired
 
 
@@ -116,7 +118,7 @@ def test_every_hostile_line_gets_an_error_reply_and_the_connection_lives(server)
         # the same connection still answers, and nothing changed in the renderer
         reply = _ask(s, b'{"cmd": "status"}\n')
         assert reply["ok"] is True and reply["result"]["running"] is True  # type: ignore[index]
-        assert rd.abx is None and rd.training is None
+        assert rd.activities.running is None and not rd.activities.newest
     finally:
         s.close()
 
@@ -206,7 +208,7 @@ def test_push_checks_model_ids_and_descriptions() -> None:
 
 def test_a_vet_hook_refuses_pushed_ids_the_database_does_not_know(rd: Renderer,
                                                                   tmp_path: Path) -> None:
-    def vet(cmd: C.RendererCommand) -> None:
+    def vet(cmd: RendererCommand) -> None:
         if isinstance(cmd, C.Push) and (cmd.model_ids or {}).get("A") not in (None, 1):
             raise CommandError(f"push: no model with id {cmd.model_ids['A']}")  # type: ignore[index]
 

@@ -15,7 +15,8 @@ from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.protocol import FaultCode
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimDevice
 from fieldbank.params import ArmParams
@@ -226,7 +227,7 @@ def test_random_bytes_over_a_pty_never_crash_the_renderer() -> None:
             rd.tick()
         trace = rd.finish()
         link.close()
-    assert rd.link.decode_errors > 0
+    assert rd.port.decode_errors > 0
     assert np.all(np.hypot(trace.column("fx_n"), trace.column("fy_n")) <= 40.0)
 
 

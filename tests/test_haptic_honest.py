@@ -14,6 +14,8 @@ from click.testing import CliRunner
 
 from fieldbank.cli.main import cli
 from fieldbank.evaluate.severity import synthesize
+from fieldbank.haptic.activities.abx import AbxBlock
+from fieldbank.haptic.activities.training import Training
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.commands import Push
 from fieldbank.haptic.dbsink import DatabaseTraceSink
@@ -21,7 +23,8 @@ from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.modelinfo import ModelInfo, to_wire
 from fieldbank.haptic.probe import sim_url
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.training import TrainingProtocol
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database
@@ -66,7 +69,7 @@ def _ticks(rd: Renderer, n: int) -> None:
 
 
 def _inject_nan(rd: Renderer) -> None:
-    device = rd.link.port.device  # type: ignore[attr-defined]  # the sim:// port's device
+    device = rd.port.port.device  # type: ignore[attr-defined]  # the sim:// port's device
     device.nan_frames = 2
 
 
@@ -89,7 +92,7 @@ def test_a_fault_pauses_training_and_flags_its_trial(db: Database) -> None:
     # a fault mid-trial: force zero, the protocol waits, nothing is answered
     _inject_nan(rd)
     _ticks(rd, 5)
-    assert rd.mode_name == "FAULT" and rd.fx == rd.fy == 0.0
+    assert rd.safety.mode.name == "FAULT" and rd.fx == rd.fy == 0.0
     st = rd.status()
     assert st["paused"] is True and st["faults_now"][0]["name"] == "NAN"
     assert "invalid handle position" in st["faults_now"][0]["what"]
@@ -99,7 +102,8 @@ def test_a_fault_pauses_training_and_flags_its_trial(db: Database) -> None:
                       ("switch", {"target": "A"})):
         with pytest.raises(CommandError, match=r"paused by a fault \(NAN"):
             _do(rd, cmd, **args)
-    assert rd.training is not None and not rd.training.records  # no answer counted
+    tr = rd.activities.running
+    assert isinstance(tr, Training) and not tr.session.records  # no answer counted
     # re-armed: the protocol goes on; the trial that held the fault is kept, flagged
     _do(rd, "arm")
     _ticks(rd, 400)
@@ -118,7 +122,7 @@ def test_a_fault_pauses_training_and_flags_its_trial(db: Database) -> None:
     assert rd.status()["felt"] == "B (after)"
     assert rd.metadata["model_ids"] == {"A": 1, "B": 5}
     trace = rd.finish()
-    rd.link.close()
+    rd.port.close()
     ref = DatabaseTraceSink(db, "P-1").write_trace(trace, "honest")
     sid = int(ref.split(":")[1])
     sess = db.get_haptic_session(sid)
@@ -154,7 +158,8 @@ def test_a_fault_pauses_abx_and_push_and_switch_tell_the_truth() -> None:
         _do(rd, "abx_answer", answer="A")
     with pytest.raises(CommandError, match="push refused: paused by a fault"):
         _do(rd, Push(before, after))
-    assert rd.abx is not None and rd.abx.answers == []
+    abx = rd.activities.running
+    assert isinstance(abx, AbxBlock) and abx.session.answers == []
     _do(rd, "arm")
     _ticks(rd, 400)
     first = _do(rd, "abx_answer", answer="A")
@@ -173,7 +178,7 @@ def test_a_fault_pauses_abx_and_push_and_switch_tell_the_truth() -> None:
     sw = _do(rd, "switch", target="A")
     assert sw["mode"] == "DISARMED" and sw["rearm_refused_because"] == []
     rd.finish()
-    rd.link.close()
+    rd.port.close()
 
 
 def test_a_trial_with_no_force_is_flagged() -> None:
@@ -192,7 +197,7 @@ def test_a_trial_with_no_force_is_flagged() -> None:
     ans = _do(rd, "train_answer", answer="both")
     assert ans["flagged"] and ans["flags"] == ["no force for 0.30 s (robot not armed)"]
     rd.finish()
-    rd.link.close()
+    rd.port.close()
 
 
 def test_rearm_says_every_reason_it_refuses() -> None:
@@ -200,17 +205,17 @@ def test_rearm_says_every_reason_it_refuses() -> None:
     rd = _renderer(p, p)
     rd.start(expected_ticks=2000)
     _ticks(rd, 10)
-    device = rd.link.port.device  # type: ignore[attr-defined]
+    device = rd.port.port.device  # type: ignore[attr-defined]
     device.x = 5.0  # the handle far outside the workspace, moving fast
     device.vx = 9.0
     _ticks(rd, 2)
-    assert rd.mode_name == "FAULT"
+    assert rd.safety.mode.name == "FAULT"
     problems = rd.status()["rearm_refused_because"]
     assert any("outside the workspace" in p for p in problems), problems
     with pytest.raises(CommandError, match="cannot arm: handle at"):
         _do(rd, "arm")
     rd.finish()
-    rd.link.close()
+    rd.port.close()
 
 
 @pytest.mark.parametrize("backend", ["sqlite", pytest.param("postgres",

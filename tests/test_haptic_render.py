@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fieldbank.evaluate.severity import synthesize
-from fieldbank.haptic.renderer import RendererConfig
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.model import Arm
 from tests.haptic_util import pty_session, severe_shoulder, unimpaired

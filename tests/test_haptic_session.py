@@ -21,14 +21,15 @@ from fieldbank.cli.main import cli
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.evaluate.severity import parse_severity_options, synthesize
 from fieldbank.haptic import motions
-from fieldbank.haptic.abx import AbxSession
+from fieldbank.haptic.activities.abx import AbxBlock, AbxSession
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.control import ControlClient, ControlServer, push_models
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import probe, sim_url
 from fieldbank.haptic.recording import COLUMNS, Hdf5TraceSink, read_trace_h5, write_trace_h5
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.replay import rerun
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import PtyRobot, SimRobotConfig
@@ -155,7 +156,9 @@ def test_abx_through_the_renderer_hides_and_records() -> None:
         cmds.append(rd.submit("abx_present", label="X"))
         for _ in range(600):
             rd.tick()
-        expected_w = float(rd.abx.model_for("X")) if rd.abx else None
+        abx = rd.activities.running
+        assert isinstance(abx, AbxBlock)
+        expected_w = float(abx.session.model_for("X"))
         assert rd.pair.blend.value == pytest.approx(expected_w)
         cmds.append(rd.submit("abx_answer", answer=ans))
         rd.tick()
@@ -211,9 +214,9 @@ def test_control_push_switch_status_stop(served) -> None:  # type: ignore[no-unt
     # the answer is the renderer's true state: armed, fading to the new pair
     assert pushed["pushed"] is True and pushed["mode"] == "ARMED" and pushed["swapping"]
     deadline = time.time() + 3
-    while rd.params[1] != after and time.time() < deadline:
+    while rd.pair.params[1] != after and time.time() < deadline:
         time.sleep(0.01)
-    assert rd.params == (before, after)  # swapped in by the loop after the fade-out
+    assert rd.pair.params == (before, after)  # swapped in by the loop after the fade-out
     sw = c.request("switch", to="B")
     assert sw["blend_target"] == 1.0 and sw["mode"] == "ARMED" and sw["faults_now"] == []
     with pytest.raises(HapticError, match="switch to"):
@@ -302,9 +305,9 @@ def test_device_watchdog_over_a_pty_in_real_time() -> None:
         # a hang guard, not a bound: when the watchdog trips (20 ms after the last FORCE, on
         # the device's clock) is checked on a virtual clock in tests/test_haptic_faults.py
         deadline = time.monotonic() + 30.0
-        while not link.flags & P.FLAG_WATCHDOG and time.monotonic() < deadline:
+        while not link.state.flags & P.FLAG_WATCHDOG and time.monotonic() < deadline:
             link.wait_state(0.01)
-        assert link.flags & P.FLAG_WATCHDOG and not link.flags & P.FLAG_ARMED
+        assert link.state.flags & P.FLAG_WATCHDOG and not link.state.flags & P.FLAG_ARMED
         assert robot.device.fx_cmd == 0.0 and robot.device.watchdog_tripped
         link.close()
 
@@ -437,6 +440,15 @@ def test_cli_talks_to_a_running_renderer(served) -> None:  # type: ignore[no-unt
     assert res["done"] and res["result"]["answered"] == 2
     r = run.invoke(haptic, ["abx", "answer", "B", *s])
     assert isinstance(r.exception, HapticError)
+    # a block stopped early keeps its answers and scores them; then none runs
+    assert run.invoke(haptic, ["abx", "start", "--trials", "4", *s]).exit_code == 0
+    assert run.invoke(haptic, ["abx", "answer", "A", *s]).exit_code == 0
+    r = run.invoke(haptic, ["abx", "stop", *s])
+    assert r.exit_code == 0 and "block stopped after 1 of 4 trials" in r.output
+    assert json.loads(run.invoke(haptic, ["status", *s, "--json"]).stdout)["abx_trial"] is None
+    r = run.invoke(haptic, ["abx", "stop", *s])
+    assert isinstance(r.exception, HapticError) and "no A/B/X block running" in str(r.exception)
+    assert [b["answered"] for b in rd.activities.results["abx"]] == [2, 1]
     assert run.invoke(haptic, ["disarm", *s]).exit_code == 0
     assert rd.safety.mode == Mode.DISARMED
     r = run.invoke(haptic, ["switch", "A", *s])
@@ -483,9 +495,9 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     assert rendered["pushed"] is True and rendered["mode"] == "ARMED"
     before = synthesize({"elbow": "severe"})
     deadline = time.time() + 3
-    while rd.params[0] != before and time.time() < deadline:
+    while rd.pair.params[0] != before and time.time() < deadline:
         time.sleep(0.01)
-    a, b = rd.params
+    a, b = rd.pair.params
     assert a == before
     assert b != before and b.km_n_per_m == before.km_n_per_m  # botulinum acts on α, β only
     assert b.alpha_n[2] < before.alpha_n[2]

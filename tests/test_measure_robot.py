@@ -176,3 +176,26 @@ def test_raw_nwb_recording_passes_nwbinspector(tmp_path: Path) -> None:
     assert prov["patient"] == "P1"
     assert np.array_equal(back.force_n, rec.force_n) and len(back.trials) == len(rec.trials)
     assert postures is not None and np.allclose(postures, pl.postures_m)
+
+
+def test_a_fault_ends_the_measurement_with_every_sample_kept() -> None:
+    """The measurement's checks are the renderer's (haptic.monitor): the handle led out of the
+    safety workspace on the way to the second posture trips WORKSPACE on the first state read
+    outside it, and the samples taken so far come with the error."""
+    from fieldbank.haptic.measure import MeasureConfig, MeasurementAborted
+    from fieldbank.haptic.safety import SafetyConfig
+
+    arm = Arm.from_params(resolve_patient("elbow=mild").params)
+    pl = plan(ProtocolConfig(parts=("postural",), grid=(2, 1)), arm)
+    assert pl.postures_m[0][0] < 0.0 < pl.postures_m[1][0]  # x −0.02 m, then +0.02 m
+    box = (-0.6, 0.01, 0.05, 0.8)  # the start and the first posture inside, the second not
+    cfg = MeasureConfig(safety=SafetyConfig(passivity=False, workspace_m=box))
+    with pytest.raises(MeasurementAborted, match="WORKSPACE") as info:
+        run_protocol("sim://?patient=elbow=mild", pl, cfg)
+    err = info.value
+    assert err.recording is not None and err.commanded is not None
+    n = len(err.recording.t_s)
+    assert len(err.commanded) == n and err.recording.t_s[-1] > 1.25  # into the move
+    # the last sample is the first outside the box
+    x = err.recording.position_m[:, 0]
+    assert x[-1] > 0.01 and np.all(x[:-1] <= 0.01) and np.any(err.commanded != 0.0)

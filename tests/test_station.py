@@ -26,7 +26,8 @@ from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import sim_url
 from fieldbank.haptic.recording import read_trace_h5
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.snapshot import FIELDS, SnapshotReader, SnapshotWriter
 from fieldbank.haptic.station.launch import StationProcess
 from fieldbank.storage import Database
@@ -105,7 +106,7 @@ def test_the_renderer_publishes_each_tick() -> None:
             rd.tick()
         rec = reader.read()
         assert rec["ticks"] == 299 and rec["t_s"] == pytest.approx(0.299)
-        assert (rec["x_m"], rec["y_m"]) == (link.x, link.y)
+        assert (rec["x_m"], rec["y_m"]) == (link.state.x, link.state.y)
         assert (rec["fx_n"], rec["fy_n"]) == (rd.fx, rd.fy)
         assert rec["a_q1_rad"] == rd.pair.sims[0].state.q1 and rec["mode"] == 1.0
         assert rec["blinded"] == 0.0

@@ -14,12 +14,15 @@ from fieldbank.errors import ParameterError
 from fieldbank.evaluate import probing
 from fieldbank.evaluate.severity import classify
 from fieldbank.haptic import commands as C
+from fieldbank.haptic.activities.training import Training
 from fieldbank.haptic.clock import RealClock
+from fieldbank.haptic.commandbase import RendererCommand
 from fieldbank.haptic.dbsink import DatabaseTraceSink
 from fieldbank.haptic.errors import CommandError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import sim_url
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.trainee import DirectionRule, DirectionTrainee, simulate
 from fieldbank.haptic.training import (
     TrainingProtocol,
@@ -182,7 +185,7 @@ def test_training_through_the_renderer_commands() -> None:
     rd = Renderer(link, p, p, RendererConfig(state_wait_s=0.05, realtime_priority=False))
     rd.start()
 
-    def run(cmd: C.RendererCommand) -> dict[str, object]:
+    def run(cmd: RendererCommand) -> dict[str, object]:
         req = rd.submit(cmd)
         while not req.done.is_set():
             rd.tick()
@@ -204,17 +207,19 @@ def test_training_through_the_renderer_commands() -> None:
             st = run(C.TrainNext())
             for _ in range(700):  # the push fade: out, swap, in
                 rd.tick()
-        assert st["phase"] == "assessment" and rd.blinded
-        trial = rd.training.current  # type: ignore[union-attr]
+        assert st["phase"] == "assessment" and rd.activities.blinded
+        tr = rd.activities.running
+        assert isinstance(tr, Training)
+        trial = tr.session.current
         assert trial is not None
-        assert rd.params[0] == trial.params(proto.base()) == rd.params[1]  # the trial's arm
+        assert rd.pair.params[0] == trial.params(proto.base()) == rd.pair.params[1]  # its arm
         assert rd.info()["models"] == "hidden" and rd.info()["params"] is None
         assert rd.status()["blend"] == "hidden"
         with pytest.raises(CommandError, match="push refused"):
             run(C.Push(p, p))
         run(C.TrainAnswer("shoulder"))
         run(C.TrainStop())
-        assert rd.training.done and rd.training.abandoned  # type: ignore[union-attr]
+        assert tr.done and tr.session.abandoned and rd.activities.running is None
     finally:
         trace = rd.finish()
         link.close()

@@ -46,8 +46,15 @@ leave this package)::
     db.list_jobs(run_id, states=None) / db.job_payloads(run_id) / db.clear_payloads(run_id)
     db.finish_run(run_id)
     db.fit_document(fit_id, key) / db.put_fit_document(fit_id, key, model_version, doc, arrays)
-    # audit, integrity and clean-up                      database.py, check.py, arrays.py
-    db.audit_entries(limit=None) -> [AuditEntry]
+    # accounts of the workspace (hashes made by fieldbank.web.accounts)           accounts.py
+    db.add_user(name, role, password_hash) / db.get_user(name) / db.find_user(name)
+    db.list_users() / db.set_user(name, role=, password_hash=, disabled=)
+    db.add_token(name, sha256, label) / db.list_tokens(name=None) / db.revoke_token(id)
+    db.user_for_token(sha256) -> (UserRecord, token id) | None
+    db.acting_as(actor, **context) -> Database   # same engine; writes audited as actor
+    # audit, integrity and clean-up              audit.py, database.py, check.py, arrays.py
+    db.audit_entries(limit=None, patient=, actor=, since=, action=) -> [AuditEntry]
+    db.record_read(patient_code, what, detail=None)   # a read of a patient's data
     db.check() -> CheckReport      # check.check(db): reads db.engine and db.arrays only
     db.gc() -> CollectReport       # orphans removed, safely while others write
     db.engine / db.store / db.arrays / db.actor / db.url_masked
@@ -80,6 +87,8 @@ Modules::
     lineage.py     Lineage mixin: models, fits, plans
     traces.py      Traces mixin: haptic sessions and traces
     jobs.py        Jobs mixin: batch runs, their jobs, documents derived from a fit
+    accounts.py    Accounts mixin: the workspace's users and API tokens (rows only)
+    audit.py       AuditTrail mixin: the audit log read and filtered, reads recorded
     arrays.py      where large arrays live (store directory or array_chunks), write, read, gc
     check.py       check(db) -> CheckReport: every reference and checksum, orphans
     records.py     the frozen records returned by Database (those the list commands read
@@ -102,6 +111,7 @@ from fieldbank.storage.config import data_home, make_engine, resolve_url
 from fieldbank.storage.database import Database
 from fieldbank.storage.mapstore import IngestProgress
 from fieldbank.storage.records import (
+    ApiTokenRecord,
     AuditEntry,
     CheckReport,
     FitRecord,
@@ -113,10 +123,12 @@ from fieldbank.storage.records import (
     SourceFileInfo,
     StoredModel,
     TraceRecord,
+    UserRecord,
 )
 from fieldbank.stored.records import JobRecord, JobRunRecord, PatientInfo, PlanRecord, StoredMap
 
 __all__ = [
+    "ApiTokenRecord",
     "AuditEntry",
     "CheckReport",
     "Database",
@@ -135,6 +147,7 @@ __all__ = [
     "StoredMap",
     "StoredModel",
     "TraceRecord",
+    "UserRecord",
     "data_home",
     "make_engine",
     "mask_url",

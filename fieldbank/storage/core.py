@@ -15,12 +15,13 @@ timeout instead of failing when they upgrade a read lock. Database failures beco
 
 from __future__ import annotations
 
+import copy
 import json
 import sqlite3
 from collections.abc import Iterator, Mapping
 from contextlib import AbstractContextManager, contextmanager
 from datetime import UTC, date, datetime
-from typing import Any
+from typing import Any, Self
 
 from sqlalchemy import Engine, func, select
 from sqlalchemy import exc as sa_exc
@@ -112,6 +113,17 @@ class DatabaseCore:
         self.store = store
         self.arrays = ArrayAccess(engine, store)
         self.actor = actor
+        #: Where the writes come from, recorded with each (``acting_as``); empty: this process.
+        self.context: dict[str, str] = {}
+
+    def acting_as(self, actor: str, **context: str) -> Self:
+        """This database (the same engine and store) writing as ``actor``: what a server
+        holding one database for many users hands each request. ``context`` (e.g. ``via``,
+        ``from``) goes into the audit detail of every write, under ``request``."""
+        other = copy.copy(self)
+        other.actor = actor
+        other.context = dict(context)
+        return other
 
     @property
     def url_masked(self) -> str:
@@ -128,9 +140,12 @@ class DatabaseCore:
     def _audit(self, s: Session, action: str, entity: str, entity_id: object,
                detail: Mapping[str, Any] | None = None) -> None:
         """Append to the audit log inside the write transaction ``s`` (``detail``: JSON)."""
+        doc = dict(detail or {})
+        if self.context:
+            doc["request"] = dict(self.context)
         s.add(AuditRow(at=now(), actor=self.actor, action=action, entity=entity,
                        entity_id=str(entity_id),
-                       detail_json=json.dumps(dict(detail or {}), sort_keys=True, default=str)))
+                       detail_json=json.dumps(doc, sort_keys=True, default=str)))
 
     # --- what is missing --------------------------------------------------------------------
     def _no_row(self, s: Session, row: type[Any], what: str, key: object,

@@ -1,16 +1,19 @@
-"""The :class:`Database` facade: opening and closing, patients, sessions, audit and check.
+"""The :class:`Database` facade: opening and closing, patients, sessions and check.
 
 :class:`Database` is the one class the rest of fieldbank uses (its API is listed in
 :mod:`fieldbank.storage`). It is assembled from one mixin per aggregate, all on the shared
 :class:`~fieldbank.storage.core.DatabaseCore` (engine, array store, actor, transactions, audit,
 patient and session rows)::
 
-    Database(MapStore, Lineage, Traces, Jobs, RemoteLinks)   this module: open/close,
+    Database(MapStore, Lineage, Traces, Jobs, RemoteLinks, Accounts, AuditTrail)
+    │                                          this module: open/close, patients, sessions
     ├── MapStore(DatabaseCore)                 mapstore.py: ingest, maps, source files
     ├── Lineage(DatabaseCore)                  lineage.py: models, fits, plans
     ├── Traces(DatabaseCore)                   traces.py: haptic sessions, traces
     ├── Jobs(DatabaseCore)                     jobs.py: batch runs and jobs, fit documents
-    └── RemoteLinks(DatabaseCore)              remote.py: remote links, assessments
+    ├── RemoteLinks(DatabaseCore)              remote.py: remote links, assessments
+    ├── Accounts(DatabaseCore)                 accounts.py: the workspace's users and tokens
+    └── AuditTrail(DatabaseCore)               audit.py: the audit log read, reads recorded
 
 Why mixins rather than objects the facade holds: the aggregates share one engine, one store and
 one actor, and several writes span two of them in ONE transaction (an ingest creates the
@@ -24,7 +27,6 @@ plus the patient and session rows that :class:`DatabaseCore` provides.
 from __future__ import annotations
 
 import getpass
-import json
 import re
 from datetime import date
 from pathlib import Path
@@ -37,7 +39,9 @@ from fieldbank.arraystore import ArrayStore
 from fieldbank.errors import DatabaseMissing, ParameterError, StorageError
 from fieldbank.params import ArmParams
 from fieldbank.storage import migrate
+from fieldbank.storage.accounts import Accounts
 from fieldbank.storage.arrays import CollectReport
+from fieldbank.storage.audit import AuditTrail
 from fieldbank.storage.check import check
 from fieldbank.storage.config import (
     db_failure,
@@ -53,8 +57,8 @@ from fieldbank.storage.core import now, to_utc
 from fieldbank.storage.jobs import Jobs
 from fieldbank.storage.lineage import Lineage
 from fieldbank.storage.mapstore import MapStore
-from fieldbank.storage.orm import AuditRow, MapRow, PatientRow, SessionRow
-from fieldbank.storage.records import AuditEntry, CheckReport, SessionInfo
+from fieldbank.storage.orm import MapRow, PatientRow, SessionRow
+from fieldbank.storage.records import CheckReport, SessionInfo
 from fieldbank.storage.remote import RemoteLinks
 from fieldbank.storage.traces import Traces
 from fieldbank.stored.location import missing_message, url_source
@@ -79,7 +83,7 @@ def _patient_info(r: PatientRow) -> PatientInfo:
                        to_utc(r.created_at))
 
 
-class Database(MapStore, Lineage, Traces, Jobs, RemoteLinks):
+class Database(MapStore, Lineage, Traces, Jobs, RemoteLinks, Accounts, AuditTrail):
     """The field database and its array store. Create with :meth:`open`."""
 
     # --- opening ----------------------------------------------------------------------------
@@ -234,16 +238,7 @@ class Database(MapStore, Lineage, Traces, Jobs, RemoteLinks):
                                 int(k))
                     for r, code, k in s.execute(q)]
 
-    # --- audit and integrity ----------------------------------------------------------------
-    def audit_entries(self, limit: int | None = None) -> list[AuditEntry]:
-        """The audit log, newest first (``limit`` entries at most)."""
-        q = select(AuditRow).order_by(AuditRow.id.desc())
-        if limit is not None:
-            q = q.limit(limit)
-        with self._read() as s:
-            return [AuditEntry(r.id, to_utc(r.at), r.actor, r.action, r.entity, r.entity_id,
-                               json.loads(r.detail_json)) for r in s.scalars(q)]
-
+    # --- integrity -------------------------------------------------------------------------
     def check(self) -> CheckReport:
         """Verify every reference and checksum; see :func:`fieldbank.storage.check.check`."""
         return check(self)

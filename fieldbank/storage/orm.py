@@ -16,7 +16,8 @@ Tables::
                                   ├─ haptic_remote_links  (a remote session's link)
                                   └─ haptic_assessments  (posterior per probe, answer beside)
     job_runs ── jobs  (batch work over workers: what ran, what failed, what is left)
-    audit_log  (append-only: UPDATE and DELETE are refused by triggers)
+    users ── api_tokens  (the workspace's accounts: role, Argon2 hash; tokens as SHA-256)
+    audit_log  (append-only: UPDATE and DELETE are refused by triggers; writes and reads)
 
 An array's bytes (a self-describing HDF5 file image, :mod:`fieldbank.arraystore`) live where
 its ``arrays.location`` says: ``file`` — the array store directory next to a SQLite file;
@@ -395,11 +396,44 @@ class TraceRow(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
+#: The roles an account may have (:mod:`fieldbank.web.accounts` says what each may do).
+ROLES = ("clinician", "data-manager", "viewer")
+
+
+class UserRow(Base):
+    """An account of the workspace (``fieldbank serve``): a name, a role, a password hash
+    (Argon2id, PHC string); disabled accounts are kept so the audit log's actors stay named."""
+
+    __tablename__ = "users"
+    __table_args__ = (
+        CheckConstraint("role IN ('clinician', 'data-manager', 'viewer')", name="role"),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    role: Mapped[str] = mapped_column(String(16))
+    password_hash: Mapped[str] = mapped_column(String(255))
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    disabled_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
+
+
+class ApiTokenRow(Base):
+    """A bearer token of an account for API clients: only its SHA-256 is kept (the token is
+    shown once); a revoked token stays, with when it was revoked."""
+
+    __tablename__ = "api_tokens"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
+    token_sha256: Mapped[str] = mapped_column(SHA, unique=True)
+    label: Mapped[str] = mapped_column(String(128), default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime)
+    revoked_at: Mapped[datetime | None] = mapped_column(DateTime, nullable=True)
+
+
 class AuditRow(Base):
     __tablename__ = "audit_log"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    at: Mapped[datetime] = mapped_column(DateTime)
-    actor: Mapped[str] = mapped_column(String(128))
+    at: Mapped[datetime] = mapped_column(DateTime, index=True)
+    actor: Mapped[str] = mapped_column(String(128), index=True)
     action: Mapped[str] = mapped_column(String(64))
     entity: Mapped[str] = mapped_column(String(64))
     entity_id: Mapped[str] = mapped_column(String(128))

@@ -205,6 +205,30 @@ class AuditEntry:
 
 
 @dataclass(frozen=True)
+class UserRecord:
+    """An account of the workspace. ``password_hash`` is the Argon2id PHC string (never the
+    password); ``disabled_at`` set: the account can no longer log in or use its tokens."""
+
+    id: int
+    name: str
+    role: str
+    password_hash: str = field(repr=False)
+    created_at: datetime
+    disabled_at: datetime | None = None
+
+
+@dataclass(frozen=True)
+class ApiTokenRecord:
+    """A bearer token of an account (only its SHA-256 is stored)."""
+
+    id: int
+    user: str
+    label: str
+    created_at: datetime
+    revoked_at: datetime | None = None
+
+
+@dataclass(frozen=True)
 class CheckReport:
     """Result of :meth:`Database.check`: problems are errors; orphans are harmless leftovers."""
 

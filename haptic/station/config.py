@@ -1,5 +1,7 @@
-"""The station's configuration: light (standard library only), so the renderer's process can
-make one without loading the web server."""
+"""The station's configuration: light (the standard library and the validator only), so the
+renderer's process can make one without loading the web server. One bounds table
+(:data:`STATION_BOUNDS`) and one list of views serve the session's options
+(:class:`haptic.station.launch.StationOptions`) and the station process's configuration."""
 
 from __future__ import annotations
 
@@ -7,6 +9,25 @@ import secrets
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from fieldbank.errors import ParameterError
+from fieldbank.validation import Interval, check_fields
+
+#: How the arm is drawn: the patient faces the clinician (the seed's picture) or is seen from
+#: behind.
+VIEWS = ("opposite", "behind")
+#: Allowed range of each numeric setting of a station (messages are generated).
+STATION_BOUNDS: dict[str, Interval] = {
+    "port": Interval.whole(0, 65535),
+    "frame_hz": Interval(1.0, 240.0, "Hz"),
+}
+
+
+def check_view(view: object) -> None:
+    """ParameterError unless ``view`` is one of :data:`VIEWS`."""
+    if view not in VIEWS:
+        raise ParameterError(f"The 'view' station setting must be {' or '.join(VIEWS)}; got "
+                             f"{view!r} instead.")
 
 
 @dataclass(frozen=True)
@@ -45,6 +66,10 @@ class StationConfig:
     training: dict[str, Any] = field(default_factory=dict)
     view: str = "opposite"
     remote: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_fields(self, STATION_BOUNDS, what="station setting")
+        check_view(self.view)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> StationConfig:

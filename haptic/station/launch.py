@@ -23,7 +23,8 @@ from dataclasses import dataclass, field, replace
 from typing import IO, Any
 
 from fieldbank.haptic.errors import HapticError
-from fieldbank.haptic.station.config import StationConfig, new_token
+from fieldbank.haptic.station.config import STATION_BOUNDS, StationConfig, check_view, new_token
+from fieldbank.validation import check_fields
 
 #: Longest wait for the station process to listen, s.
 START_TIMEOUT_S = 20.0
@@ -56,6 +57,10 @@ class StationOptions:
     view: str = "opposite"
     training: dict[str, Any] = field(default_factory=dict)
     remote: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_fields(self, STATION_BOUNDS, what="station setting", names=("port",))
+        check_view(self.view)
 
 
 def _loopback(host: str) -> bool:
@@ -96,8 +101,6 @@ class StationProcess:
             raise HapticError(f"the station binds to 127.0.0.1 unless told otherwise; "
                               f"{host!r} is reachable from other machines (pass "
                               f"--station-allow-remote to mean it)")
-        if view not in ("opposite", "behind"):
-            raise HapticError(f"station view is 'opposite' or 'behind'; got {view!r}")
         self.config = StationConfig(str(snapshot_path), str(socket_path), new_token(), host,
                                     int(port), training=dict(training or {}), view=view,
                                     remote=dict(remote or {}))

@@ -373,23 +373,44 @@ _REFUSED = """<!DOCTYPE html><html lang="en"><meta charset="utf-8"><title>Statio
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
 
-def make_app(station: Station) -> web.Application:
-    """The aiohttp application of ``station`` (routes in the module docstring)."""
+def page_html(station: Station, extra: Mapping[str, Any] | None = None,
+              nav: str = "") -> tuple[str, str]:
+    """The station page (HTML with its script and style inline) and the
+    Content-Security-Policy that lets exactly those run. ``extra`` goes into the page's
+    configuration (the workspace's robot view: its WebSocket's path); ``nav``: markup for the
+    top bar (a way back into the workspace), empty for the station on its own."""
     cfg = station.config
-    template = (resources.files("fieldbank.haptic.station") / "page.html").read_text("utf-8")
-    script = (resources.files("fieldbank.haptic.station") / "station.js").read_text("utf-8")
-    style = (resources.files("fieldbank.haptic.station") / "station.css").read_text("utf-8")
+    pkg = resources.files("fieldbank.haptic.station")
+    template = (pkg / "page.html").read_text("utf-8")
+    script = (pkg / "station.js").read_text("utf-8")
+    style = (pkg / "station.css").read_text("utf-8")
     if station.desk is not None:  # a remote assessment's panels, in files of their own
-        script += (resources.files("fieldbank.haptic.station") / "remote.js").read_text("utf-8")
-        style += (resources.files("fieldbank.haptic.station") / "remote.css").read_text("utf-8")
-
+        script += (pkg / "remote.js").read_text("utf-8")
+        style += (pkg / "remote.css").read_text("utf-8")
     # what the page knows from the start: the view, what 'Start training' runs, the muscles
     proto = TrainingProtocol.from_dict(cfg.training or {})
-    page_base = {
+    config = {
         "view": cfg.view,
         "training": {"name": proto.title, "n_trials": proto.n_trials},
         "muscles": [{"code": k, "name": v} for k, v in MUSCLE_GROUP_NAMES.items()],
+        "remote": station.desk is not None,
+        "assess": {} if station.desk is None else {
+            "groups": station.desk.groups, "levels": station.desk.levels},
+        **(extra or {}),
     }
+    nonce = secrets.token_urlsafe(16)
+    body = (template.replace("{{nonce}}", nonce).replace("{{style}}", style)
+            .replace("{{nav}}", nav).replace("{{script}}", script)
+            .replace("{{config}}", json.dumps(config).replace("<", "\\u003c")))
+    csp = (f"default-src 'none'; script-src 'nonce-{nonce}'; style-src 'nonce-{nonce}'; "
+           "connect-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'; "
+           "frame-ancestors 'none'")
+    return body, csp
+
+
+def make_app(station: Station) -> web.Application:
+    """The aiohttp application of ``station`` (routes in the module docstring)."""
+    cfg = station.config
 
     @web.middleware
     async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
@@ -406,19 +427,9 @@ def make_app(station: Station) -> web.Application:
         return resp
 
     async def page(request: web.Request) -> web.Response:
-        nonce = secrets.token_urlsafe(16)
-        body = (template.replace("{{nonce}}", nonce).replace("{{style}}", style)
-                .replace("{{script}}", script)
-                .replace("{{config}}", json.dumps({
-                    **page_base, "remote": station.desk is not None,
-                    "assess": {} if station.desk is None else {
-                        "groups": station.desk.groups, "levels": station.desk.levels},
-                }).replace("<", "\\u003c")))
+        body, csp = page_html(station)
         resp = web.Response(text=body, content_type="text/html")
-        resp.headers["Content-Security-Policy"] = (
-            f"default-src 'none'; script-src 'nonce-{nonce}'; style-src 'nonce-{nonce}'; "
-            "connect-src 'self'; img-src 'self' data:; base-uri 'none'; form-action 'none'; "
-            "frame-ancestors 'none'")
+        resp.headers["Content-Security-Policy"] = csp
         resp.headers["X-Frame-Options"] = "DENY"
         return resp
 

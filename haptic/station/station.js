@@ -26,7 +26,10 @@ const pending = new Map();
 // --- connection ------------------------------------------------------------------------------
 function connect() {
   const proto = location.protocol === "https:" ? "wss:" : "ws:";
-  ws = new WebSocket(`${proto}//${location.host}/ws?token=${encodeURIComponent(token)}`);
+  // the station on its own: /ws with the session's token; inside the workspace: the
+  // application's own socket, authenticated by its login session
+  const path = STATION_CONFIG.ws_path || "/ws";
+  ws = new WebSocket(`${proto}//${location.host}${path}?token=${encodeURIComponent(token)}`);
   ws.onopen = () => setMessage("");
   ws.onmessage = (ev) => {
     const msg = JSON.parse(ev.data);

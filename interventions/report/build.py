@@ -164,6 +164,46 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
     return out
 
 
+def checked_cases(db: Database, selection: Selection, accept_poor_fit: bool = False
+                  ) -> list[CaseSpec]:
+    """The selected cases; SelectionError for none, and for a case whose model comes from a
+    poor fit unless ``accept_poor_fit`` (then each case records it)."""
+    cases = select_cases(db, selection)
+    poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
+    if poor and not accept_poor_fit:
+        raise SelectionError(
+            "the model before of " + ", ".join(f"plan {c.plan_id} ({c.patient_code})"
+                                               for c in poor)
+            + " comes from a poor fit; its predictions would not describe the patient. "
+            "Narrow the selection, refit, or give --accept-poor-fit (recorded in the report).")
+    if accept_poor_fit:
+        cases = [dataclasses.replace(c, accept_poor_fit=True) for c in cases]
+    return cases
+
+
+def report_page(db: Database, selection: Selection, stamp: str | None = None) -> str:
+    """The report's page (``report.html``) of ``selection``, computed in this process and
+    returned as text, not written (the workspace's download of a patient's report); the
+    intervals are read from, and kept with, the fits as :func:`build_report` does."""
+    cases = with_known_intervals(db, checked_cases(db, selection))
+    results, _ = compute_all(cases, 1)
+    keep_intervals(db, cases, [r.intervals for r in results])
+    return render(results, page_inputs(cases, selection, None, stamp), cohort_figures(results))
+
+
+def page_inputs(cases: list[CaseSpec], selection: Selection, title: str | None,
+                stamp: str | None) -> dict[str, Any]:
+    """What the page states it was made from: title, selection, cases, when (``stamp``)."""
+    if title is None:
+        title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
+                 f"fieldbank report: {len(cases)} cases")
+    inputs: dict[str, Any] = {"title": title, "selection": selection.describe(),
+                              "cases": len(cases)}
+    if stamp:
+        inputs["generated"] = stamp
+    return inputs
+
+
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
                  title: str | None = None, accept_poor_fit: bool = False,
@@ -180,16 +220,7 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
     if there and not force:
         raise FileRefused(f"{out_dir} already holds a report ({', '.join(there)}); give --force "
                           "to replace it, or choose another --out.")
-    cases = select_cases(db, selection)
-    poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
-    if poor and not accept_poor_fit:
-        raise SelectionError(
-            "the model before of " + ", ".join(f"plan {c.plan_id} ({c.patient_code})"
-                                               for c in poor)
-            + " comes from a poor fit; its predictions would not describe the patient. "
-            "Narrow the selection, refit, or give --accept-poor-fit (recorded in the report).")
-    if accept_poor_fit:
-        cases = [dataclasses.replace(c, accept_poor_fit=True) for c in cases]
+    cases = checked_cases(db, selection, accept_poor_fit)
     wrap = None
     if progress:
         from tqdm import tqdm
@@ -206,13 +237,7 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
         cases = with_known_intervals(db, cases)
         results, used = compute_all(cases, jobs, wrap)
         keep_intervals(db, cases, [r.intervals for r in results])
-    if title is None:
-        title = (f"fieldbank report: {cases[0].title}" if len(cases) == 1 else
-                 f"fieldbank report: {len(cases)} cases")
-    inputs: dict[str, Any] = {"title": title, "selection": selection.describe(),
-                              "cases": len(cases)}
-    if stamp:
-        inputs["generated"] = stamp
+    inputs = page_inputs(cases, selection, title, stamp)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f for f in FILES]
