@@ -5,7 +5,8 @@ Thin: the commands open a :class:`fieldbank.fitting.records.FitStore`, call
 :func:`fieldbank.fitting.batch.fit_all` (a batch on local processes or a Dask cluster).
 The store comes from ``ctx.obj['fit_store']`` when the caller provides one (a factory
 ``db_url -> FitStore``), else from :func:`fieldbank.fitting.dbstore.open_fit_store` on the
-field database.
+field database; without one, ``models list`` reads the database through its driver alone
+(:func:`fieldbank.cli.options.read_db`).
 """
 
 from __future__ import annotations
