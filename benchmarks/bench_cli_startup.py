@@ -130,9 +130,10 @@ def build_cohort(url: str, n: int) -> None:
             db.ingest_files(code, "pre", files)
             model = db.add_model(truth, "synthetic", f"truth of {code}", patient_code=code)
             save_plan(db, stored(db, model.id), plan)
-            db.start_job(run.id, f"{code}/pre", "worker-1")
+            job = db.start_job(run.id, f"{code}/pre", "worker-1")
             db.finish_job(run.id, f"{code}/pre", "failed" if i % 10 == 9 else "done",
-                          {"model_id": model.id}, "stopped" if i % 10 == 9 else None)
+                          {"model_id": model.id}, "stopped" if i % 10 == 9 else None,
+                          attempt=job.attempts)
         db.finish_run(run.id)
 
 

@@ -40,8 +40,7 @@ import numpy as np
 
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.remote.channel import Impairment
-from fieldbank.haptic.remote.patient_site import SiteConfig
-from fieldbank.haptic.remote.ports import LinkConfig
+from fieldbank.haptic.remote.config import LinkConfig, SiteConfig
 from fieldbank.haptic.remote.simulate import (
     Pair,
     Script,

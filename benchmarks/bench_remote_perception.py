@@ -30,8 +30,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 from fieldbank.figures import save
 from fieldbank.haptic.remote.channel import Impairment
+from fieldbank.haptic.remote.config import SiteConfig
 from fieldbank.haptic.remote.figure import accuracy_vs_delay
-from fieldbank.haptic.remote.patient_site import SiteConfig
 from fieldbank.haptic.remote.simulate import linked_environment
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.trainee import DirectionRule, SimulationResult, simulate

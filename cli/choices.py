@@ -57,8 +57,9 @@ MEASURE_STRETCH_SPEED_M_PER_S = 1.0
 # the robot's force limit while measuring (SafetyConfig's default)
 MEASURE_FORCE_LIMIT_N = 40.0
 
-# fieldbank.haptic.remote.ports: the passivity controller of a remote link
+# fieldbank.haptic.remote.config: the passivity controller of a remote link, the sites' rates
 PASSIVITY_MODES: tuple[str, ...] = ("tdpa", "off")
+REMOTE_RATE_HZ: tuple[int, int] = (500, 4000)
 
 # fieldbank.interventions.realised: the verdict's numbers (validate's options)
 VALIDATE_CHANGE_TOLERANCE = 0.2

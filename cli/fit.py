@@ -43,6 +43,7 @@ from fieldbank.sanitize import printable
 if TYPE_CHECKING:  # typing only: the library loads when a command runs
     from fieldbank.engine import BatchResult
     from fieldbank.fitting.records import FitOutcome, FitStore
+    from fieldbank.scheduler import SchedulerFlags
     from fieldbank.stored.records import ListedModel
 
 StoreFactory = Callable[[str | None], "FitStore"]
@@ -204,7 +205,7 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @db_option
 @click.pass_context
 def fit(ctx: click.Context, patient: str | None, session: str | None, batch: bool,
-        patients: tuple[str, ...], older_than: int | None, scheduler: str | None,
+        patients: tuple[str, ...], older_than: int | None, scheduler: SchedulerFlags | None,
         jobs: int | None, algorithm: str, seed: int, fit_kinds: str, prior_weight: float,
         max_evals: int | None, uncertainty: str, replicates: int, plot_path: str | None,
         as_json: bool, db_url: str | None) -> None:
@@ -216,8 +217,9 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
 
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
     if batch:
-        from fieldbank.engine import default_jobs, progress_bar, resolve_scheduler
+        from fieldbank.engine import default_jobs, progress_bar
         from fieldbank.fitting.batch import fit_all
+        from fieldbank.scheduler import resolve_scheduler
 
         if patient is not None or session is not None or plot_path is not None:
             raise click.UsageError("--all fits every session: name patients with --patient; "
@@ -237,7 +239,8 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
     if patient is None:
         raise click.UsageError("give a PATIENT to fit, or --all for every session.")
     if patients or older_than is not None or scheduler is not None or jobs is not None:
-        raise click.UsageError("--patient, --older-than, --scheduler and --jobs go with --all.")
+        raise click.UsageError("--patient, --older-than, --jobs and the scheduler options go "
+                               "with --all.")
 
     def progress(n: int, best: float) -> None:
         click.echo(f"  {n} evaluations, best cost {best:.6g}", err=True)

@@ -2,7 +2,10 @@
 
 ``key`` writes a session key; ``patient`` runs the patient's site (its robot holds the
 patient's hand); ``clinician`` runs the clinician's site (robot and station). Both sites read
-the same key file; nothing from anyone without it is answered.
+the same key file; nothing from anyone without it is answered. Each site prints what happens
+as it happens (engaged, link lost and back, faults, the other site's end) and, at the end, the
+spans in which its force was held at zero and why; the exit status is 1 when the session did
+not render what was asked (never engaged, a fault, the link lost, the other site's end).
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from fieldbank.cli.choices import PASSIVITY_MODES
+from fieldbank.cli.choices import PASSIVITY_MODES, REMOTE_RATE_HZ
 from fieldbank.cli.options import (
     db_option,
     emit,
@@ -28,7 +31,7 @@ from fieldbank.cli.options import (
 
 # The link, the sites and the robot load inside the commands: '--help' starts at once.
 if TYPE_CHECKING:
-    from fieldbank.haptic.remote.patient_site import SiteConfig
+    from fieldbank.haptic.remote.config import SiteConfig
 
 #: Port the patient's site listens on by default.
 DEFAULT_PORT = 47400
@@ -49,9 +52,11 @@ def _address(text: str, name: str) -> tuple[str, int]:
 link_options = option_group(
     click.option("--key", "key_file", required=True,
                  type=click.Path(dir_okay=False, path_type=Path),
-                 help="The session key both sites share ('fieldbank haptic remote key')."),
-    click.option("--rate-hz", type=click.IntRange(250, 4000), default=1000, show_default=True,
-                 help="Loop and link rate (both sites the same)."),
+                 help="The key both sites share ('fieldbank haptic remote key'); each "
+                      "session's own keys are drawn from it and both sites' fresh values."),
+    click.option("--rate-hz", type=click.IntRange(*REMOTE_RATE_HZ), default=1000,
+                 show_default=True, help="Loop and link rate (both sites the same: the "
+                                         "handshake refuses a difference)."),
     click.option("--lockstep", is_flag=True,
                  help="Simulated clocks advancing together, faster than real time (both "
                       "robots simulated, mode=lockstep)."),
@@ -77,8 +82,7 @@ link_options = option_group(
 def _site(o: dict[str, Any]) -> SiteConfig:
     """The site's settings from :data:`link_options`."""
     from fieldbank.haptic.remote.channel import Impairment
-    from fieldbank.haptic.remote.patient_site import SiteConfig
-    from fieldbank.haptic.remote.ports import LinkConfig
+    from fieldbank.haptic.remote.config import LinkConfig, SiteConfig
     from fieldbank.haptic.safety import SafetyConfig
 
     return SiteConfig(rate_hz=o["rate_hz"], lockstep=o["lockstep"],
@@ -157,6 +161,7 @@ def patient(robot: str, bind: str, shoulder: str | None, drawing_file: Path | No
     emit(res.summary | {"log_file": res.log_file}, as_json,
          f"patient's site: {res.ticks} ticks; {res.summary['reason']}"
          + (f"\nlog: {res.log_file}" if res.log_file else ""))
+    _exit_unless_complete(res.account.complete)
 
 
 @remote.command("clinician")
@@ -208,6 +213,8 @@ def clinician(robot: str, peer: str, bind: str | None, shoulder_offset: str | No
         patient_note=patient_note, db=None if no_db else (lambda: open_db(db_url)),
         wait_s=wait_s, say=say)
     out = res.session.summary() | {"link": res.link_summary["link"],
+                                   "account": res.link_summary["account"],
+                                   "link_events": res.link_summary["events"],
                                    "link_file": res.link_file,
                                    "passivity_active_ticks":
                                        res.link_summary["passivity_active_ticks"],
@@ -222,4 +229,13 @@ def clinician(robot: str, peer: str, bind: str | None, shoulder_offset: str | No
          f"{res.link_summary['passivity_active_ticks']} ticks\ntrace: "
          f"{res.session.trace_file}\nlink: {res.link_file}"
          + (f"\ndatabase: {res.session.database}" if res.session.database else ""))
+    _exit_unless_complete(res.account.complete)
+
+
+def _exit_unless_complete(complete: bool) -> None:
+    """Exit status 1 after a session that did not render what was asked (its account, printed
+    on stderr, says why)."""
+    if not complete:
+        say("the session did not render what was asked (see above)")
+        click.get_current_context().exit(1)
 

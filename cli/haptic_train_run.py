@@ -49,7 +49,7 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
     from fieldbank.haptic import trainee
     from fieldbank.haptic.dbsink import DatabaseTraceSink
     from fieldbank.haptic.remote.channel import Impairment
-    from fieldbank.haptic.remote.patient_site import SiteConfig
+    from fieldbank.haptic.remote.config import SiteConfig
     from fieldbank.haptic.remote.simulate import linked_environment
     from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.haptic.session import trace_name_now

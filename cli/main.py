@@ -58,6 +58,8 @@ COMMANDS: dict[str, LazyCommand] = {
     "validate": C("fieldbank.cli.validate", "validate",
                   "Check predictions against maps measured after the plan; --loo: leave maps "
                   "out of a fit."),
+    "cluster": C("fieldbank.cli.cluster", "cluster",
+                 "The Dask cluster of the batch commands: its certificates (docs/scale-out.md)."),
     "config": C("fieldbank.cli.config", "config",
                 "Settings: fieldbank.toml, environment variables and their defaults."),
     "serve": C("fieldbank.cli.serve", "serve",

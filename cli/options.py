@@ -10,10 +10,11 @@ with :func:`read_db`, through its driver alone when they can.
 from __future__ import annotations
 
 import calendar
+import functools
 from collections.abc import Callable
 from datetime import date
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import click
 
@@ -62,15 +63,50 @@ def db_option(f: F) -> F:
     return click.option("--db", "db_url", default=None, metavar="URL", help=DB_HELP)(f)
 
 
-SCHEDULER_HELP = ("Run on the Dask cluster of this scheduler (tcp://HOST:PORT); default: "
-                  "$FIELDBANK_SCHEDULER, else worker processes on this machine (--jobs).")
+SCHEDULER_HELP = ("Run on the Dask cluster of this scheduler: tls://HOST:PORT with the "
+                  "cluster's certificates (tcp:// only on this machine's loopback); default: "
+                  "$FIELDBANK_SCHEDULER, else fieldbank.toml, else worker processes on this "
+                  "machine (--jobs).")
 
 
 def scheduler_option(f: F) -> F:
-    """``--scheduler ADDRESS`` → parameter ``scheduler`` (resolved by
-    :func:`fieldbank.engine.resolve_scheduler` when the command runs)."""
-    return click.option("--scheduler", "scheduler", default=None, metavar="ADDRESS",
-                        help=SCHEDULER_HELP)(f)
+    """The scheduler options → one parameter ``scheduler``: a
+    :class:`~fieldbank.scheduler.SchedulerFlags` of what was given, or None when none was
+    (resolved with the settings by :func:`fieldbank.scheduler.resolve_scheduler` when the
+    command runs).
+
+    ``--scheduler ADDRESS``; ``--tls-ca``, ``--tls-cert``, ``--tls-key`` FILE (the cluster's
+    certificates); ``--insecure-scheduler`` (a plain address beyond the loopback).
+    """
+    from fieldbank.scheduler import SchedulerFlags  # standard library only
+
+    names = ("tls_ca", "tls_cert", "tls_key", "insecure_scheduler")
+
+    @functools.wraps(f)
+    def combined(*args: Any, **kwargs: Any) -> Any:
+        ca, cert, key, insecure = (kwargs.pop(n) for n in names)
+        address = kwargs["scheduler"]
+        given = (address, ca, cert, key, insecure or None)
+        kwargs["scheduler"] = (None if all(v is None for v in given) else
+                               SchedulerFlags(address, ca, cert, key, insecure or None))
+        return f(*args, **kwargs)
+
+    return option_group(
+        click.option("--scheduler", "scheduler", default=None, metavar="ADDRESS",
+                     help=SCHEDULER_HELP),
+        click.option("--tls-ca", "tls_ca", default=None, metavar="FILE",
+                     help="The cluster's CA certificate (PEM) for a tls:// scheduler; "
+                          "default: $FIELDBANK_SCHEDULER_TLS_CA, else [scheduler] tls_ca."),
+        click.option("--tls-cert", "tls_cert", default=None, metavar="FILE",
+                     help="This client's certificate (PEM) for a tls:// scheduler ('fieldbank "
+                          "cluster certs' makes one)."),
+        click.option("--tls-key", "tls_key", default=None, metavar="FILE",
+                     help="This client's private key (PEM, readable by you only)."),
+        click.option("--insecure-scheduler", "insecure_scheduler", is_flag=True, default=False,
+                     help="Accept a tcp:// scheduler on another machine: it is neither "
+                          "encrypted nor authenticated, so anyone who can reach it can run "
+                          "code on its workers and read the tasks."),
+    )(cast(F, combined))
 
 
 def json_option(f: F) -> F:

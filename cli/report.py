@@ -10,6 +10,7 @@ exit status 1.
 from __future__ import annotations
 
 from datetime import date, datetime
+from typing import TYPE_CHECKING
 
 import click
 
@@ -23,6 +24,9 @@ from fieldbank.cli.options import (
     scheduler_option,
 )
 from fieldbank.config import setting
+
+if TYPE_CHECKING:  # typing only
+    from fieldbank.scheduler import SchedulerFlags
 
 
 def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
@@ -62,16 +66,17 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
 def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ...],
            plan_ids: tuple[int, ...], sessions: tuple[str, ...], since: date | None,
            until: date | None, kinds: tuple[str, ...], out_dir: str, force: bool,
-           jobs: int | None, scheduler: str | None, no_date: bool | None, accept_poor_fit: bool,
+           jobs: int | None, scheduler: SchedulerFlags | None, no_date: bool | None,
+           accept_poor_fit: bool,
            as_json: bool) -> None:
     """Report the field changes of stored intervention plans (HTML + CSV + JSON).
 
     Terms (R1, R2, catch, χ²/n, under-determined, ...): docs/glossary.md.
     """
     # the report's numerics load when it runs, so 'report --help' starts at once
-    from fieldbank.engine import resolve_scheduler
     from fieldbank.interventions.catalogue import KINDS
     from fieldbank.interventions.report import Selection, build_report, default_jobs
+    from fieldbank.scheduler import resolve_scheduler
 
     bad = [k for k in kinds if k not in KINDS]
     if bad:

@@ -33,6 +33,7 @@ from fieldbank.cli.options import (
 if TYPE_CHECKING:  # typing only: the checks load when the command runs ('--help' at once)
     from fieldbank.fitting.crossval import CrossValidation
     from fieldbank.interventions.validate import PlanValidation, SessionCheck, ValidationReport
+    from fieldbank.scheduler import SchedulerFlags
 
 #: Text output is wrapped to this width.
 WIDTH = 100
@@ -168,7 +169,7 @@ def loo_text(cv: CrossValidation) -> str:
 @click.pass_context
 def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int, ...],
              loo: bool, model_id: int | None, change_tolerance: float, max_change_se: float,
-             scheduler: str | None, db_url: str | None, as_json: bool) -> None:
+             scheduler: SchedulerFlags | None, db_url: str | None, as_json: bool) -> None:
     """Check given plans against maps measured after them; --loo: does the fit generalise.
 
     Exit status 1 when a plan's prediction is contradicted (failed or partial effect), or with
@@ -176,11 +177,12 @@ def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int,
     --scheduler, also when a task failed (its plans were not checked).
     """
     # the checks and their numerics: when the command runs
-    from fieldbank.engine import progress_bar, resolve_scheduler
+    from fieldbank.engine import progress_bar
     from fieldbank.fitting.crossval import NOT_GENERALISED, cross_validate, latest_fitted_model
     from fieldbank.fitting.dbstore import DatabaseFitStore
     from fieldbank.interventions.validate import validate_plans
     from fieldbank.interventions.validate_batch import validate_on_cluster
+    from fieldbank.scheduler import resolve_scheduler
 
     if loo:
         if plan_ids:

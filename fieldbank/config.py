@@ -21,8 +21,13 @@ An example file (every key optional)::
     home = "~/fieldbank-data"           # data directory (embedded database, traces, socket)
     arrays = "/srv/fieldbank/arrays"    # array store of a SQLite database
     robot = "/dev/ttyUSB0"              # the robot 'haptic serve' drives
-    scheduler = "tcp://10.0.0.5:8786"   # the Dask scheduler batch commands use
     haptic_socket = "/run/fieldbank/haptic.sock"
+
+    [scheduler]                         # the Dask cluster of the batch commands
+    address = "tls://10.0.0.5:8786"     # (or, with no other scheduler key: scheduler = "...")
+    tls_ca = "~/.config/fieldbank/cluster/ca.pem"       # 'fieldbank cluster certs' makes
+    tls_cert = "~/.config/fieldbank/cluster/client.pem" # these (docs/scale-out.md)
+    tls_key = "~/.config/fieldbank/cluster/client-key.pem"
 
     [report]
     jobs = 2                            # worker processes of 'fieldbank report'
@@ -71,8 +76,12 @@ def _path(v: object) -> Path:
 def _scheduler(v: object) -> str:
     text = _text(v).strip()
     m = SCHEDULER_RE.fullmatch(text)
+    if m is None and "@" in text:
+        raise ValueError("a Dask scheduler address SCHEME://HOST:PORT without a user or a "
+                         "password: a scheduler takes neither (a cluster admits its members by "
+                         "their TLS certificates, docs/scale-out.md)")
     if m is None or m.group(1) not in SCHEDULER_SCHEMES or not 0 < int(m.group(3)) < 65536:
-        raise ValueError("a Dask scheduler address tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786, "
+        raise ValueError("a Dask scheduler address tcp://HOST:PORT (e.g. tls://10.0.0.5:8786, "
                          "the address 'dask scheduler' prints; schemes "
                          f"{', '.join(SCHEDULER_SCHEMES)})")
     return text
@@ -148,9 +157,18 @@ KEYS: dict[str, Key] = {k.name: k for k in (
         "FIELDBANK_ARRAYS", unset="(beside the SQLite file)"),
     Key("robot", "the robot 'haptic serve' drives: a port or URL (no default: serve asks)",
         _text, "FIELDBANK_ROBOT", "--robot", None, mask_url, "(none: give --robot)"),
-    Key("scheduler", "Dask scheduler of the batch commands, tcp://HOST:PORT (default: local "
-        "worker processes)", _scheduler, "FIELDBANK_SCHEDULER", "--scheduler",
-        unset="(none: local worker processes)"),
+    Key("scheduler", "Dask scheduler of the batch commands, tls://HOST:PORT (tcp:// only on "
+        "this machine's loopback; default: local worker processes)", _scheduler,
+        "FIELDBANK_SCHEDULER", "--scheduler", unset="(none: local worker processes)"),
+    Key("scheduler.tls_ca", "the cluster's CA certificate, PEM (a tls:// scheduler)", _path,
+        "FIELDBANK_SCHEDULER_TLS_CA", "--tls-ca"),
+    Key("scheduler.tls_cert", "this client's certificate, PEM (a tls:// scheduler)", _path,
+        "FIELDBANK_SCHEDULER_TLS_CERT", "--tls-cert"),
+    Key("scheduler.tls_key", "this client's private key, PEM, readable by its owner only",
+        _path, "FIELDBANK_SCHEDULER_TLS_KEY", "--tls-key"),
+    Key("scheduler.insecure", "accept a tcp:// scheduler beyond the loopback: anyone who "
+        "reaches it can run code on the workers", _flag, "FIELDBANK_INSECURE_SCHEDULER",
+        "--insecure-scheduler", lambda: False),
     Key("haptic_socket", "control socket of a running renderer (default: haptic.sock in the "
         "data directory)", _path, "FIELDBANK_HAPTIC_SOCKET", "--socket",
         unset="(haptic.sock in home)"),
@@ -208,6 +226,16 @@ def config_file() -> Path | None:
     return None
 
 
+#: Other names a file may give a setting: the address inside the ``[scheduler]`` table (a TOML
+#: file cannot hold both ``scheduler = "..."`` and a ``[scheduler]`` table).
+FILE_ALIASES = {"scheduler.address": "scheduler"}
+
+
+def shown_raw(raw: object) -> str:
+    """A value as typed, for a message: URL secrets masked (:func:`mask_url`)."""
+    return repr(mask_url(raw)) if isinstance(raw, str) else repr(raw)
+
+
 def search_path() -> list[Path]:
     """Where ``fieldbank.toml`` is looked for, in order."""
     return [Path.cwd() / FILE_NAME,
@@ -218,12 +246,13 @@ def _flatten(doc: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in doc.items():
         name = f"{prefix}{k}"
-        if name in KEYS:
+        table = isinstance(v, Mapping) and any(n.startswith(name + ".") for n in KEYS)
+        if name in KEYS and not table:
             out[name] = v
         elif isinstance(v, Mapping):
             out.update(_flatten(v, name + "."))
         else:
-            out[name] = v
+            out[FILE_ALIASES.get(name, name)] = v
     return out
 
 
@@ -248,7 +277,7 @@ def read_file(path: Path) -> dict[str, Any]:
         try:
             out[name] = key.convert(raw)
         except ValueError as exc:
-            raise ConfigError(f"{path}: {name} must be {exc}; got {raw!r}.") from None
+            raise ConfigError(f"{path}: {name} must be {exc}; got {shown_raw(raw)}.") from None
     return out
 
 
@@ -260,14 +289,16 @@ def setting(name: str, flag: object = None) -> Setting:
         try:
             return Setting(name, key.convert(flag), f"flag {key.flag or name}")
         except ValueError as exc:
-            raise ConfigError(f"{key.flag or name} must be {exc}; got {flag!r}.") from None
+            raise ConfigError(f"{key.flag or name} must be {exc}; got {shown_raw(flag)}."
+                              ) from None
     if key.env:
         env = os.environ.get(key.env)
         if env and env.strip():
             try:
                 return Setting(name, key.convert(env), f"variable {key.env}")
             except ValueError as exc:
-                raise ConfigError(f"{key.env} must be {exc}; got {env!r}.") from None
+                raise ConfigError(f"{key.env} must be {exc}; got {shown_raw(env)}."
+                                  ) from None
     path = config_file()
     if path is not None:
         values = read_file(path)

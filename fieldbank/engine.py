@@ -5,10 +5,11 @@ to fit, a group of report cases, a patient's plans to check) and hand them to :f
 which records a run and one job per task in the database (:mod:`fieldbank.storage.jobs`), runs
 the tasks and returns one small :class:`Outcome` per task, in task order.
 
-Where they run (:func:`resolve_scheduler`): with a scheduler address (``--scheduler
-tcp://HOST:PORT`` or ``FIELDBANK_SCHEDULER``) on the workers of that Dask cluster
-(``dask.distributed``); without one, in a local process pool (``--jobs`` processes), or in this
-process for one job.
+Where they run (:func:`fieldbank.scheduler.resolve_scheduler`): with a scheduler
+(``--scheduler tls://HOST:PORT`` and the cluster's certificates, or a plain address on the
+loopback) on the workers of that Dask cluster (``dask.distributed``); without one, in a local
+process pool (``--jobs`` processes), or in this process for one job. The scheduler is reached
+before the run is recorded: a scheduler that does not answer leaves no run behind.
 
 What travels, and what does not (``docs/scale-out.md``):
 
@@ -26,12 +27,18 @@ Failures: a task that raises is recorded as failed with the patient and session 
 on and the error; the other tasks go on. A worker that dies mid-task loses nothing: the
 scheduler runs the task again elsewhere, and every task is idempotent (a fit is stored under a
 unique key; a job's payload is rewritten; a job found finished is not run again). A task whose
-workers keep dying (Dask gives up after ``distributed.scheduler.allowed-failures`` attempts) is
-recorded as failed with that reason.
+workers keep dying (Dask gives up after ``distributed.scheduler.allowed-failures`` attempts),
+or whose result the command can no longer get (the scheduler went away), is recorded as failed
+with that reason - unless it has ended in the database meanwhile, and then the command reports
+what the database holds. A worker ends only its own live attempt of a job
+(:meth:`~fieldbank.storage.Database.finish_job` with ``attempt``): once the command has given
+a job up, a worker that finishes it later does not overwrite what the command reported (its
+fit, if it made one, is stored under its key, and the next run finds it).
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import sys
@@ -40,14 +47,17 @@ import traceback
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy.engine import make_url
 
-from fieldbank.config import setting
 from fieldbank.errors import FieldbankError, ParameterError
+from fieldbank.scheduler import Scheduler, resolve_scheduler
 from fieldbank.storage import Database
-from fieldbank.stored.records import JobRunRecord
+from fieldbank.stored.records import JobRecord, JobRunRecord
+
+if TYPE_CHECKING:  # typing only: Dask loads when a batch runs on a cluster
+    from distributed import Client
 
 #: Seconds to wait for the scheduler to answer before giving up.
 CONNECT_TIMEOUT_S = 10.0
@@ -57,23 +67,6 @@ def default_jobs() -> int:
     """Worker processes of a local batch: the cores this process may run on."""
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                else (os.cpu_count() or 1))
-
-
-def resolve_scheduler(option: str | None = None) -> str | None:
-    """The Dask scheduler a batch command uses: ``option`` (``--scheduler``), else the
-    ``scheduler`` setting (``FIELDBANK_SCHEDULER``, then ``fieldbank.toml``:
-    :mod:`fieldbank.config`), else None (the local process pool). An empty value means none.
-
-    Raises
-    ------
-    ConfigError
-        The address is not ``SCHEME://HOST:PORT`` with a scheme Dask speaks; the message names
-        where the value came from.
-    """
-    if option is not None and not option.strip():
-        return None
-    value = setting("scheduler", option).value
-    return str(value) if value is not None else None
 
 
 @dataclass(frozen=True)
@@ -184,26 +177,40 @@ def progress_bar(desc: str) -> Progress:
 
 
 def run_batch(db: Database, kind: str, tasks: Sequence[Task], fn: TaskFn,
-              options: Mapping[str, Any] | None = None, *, scheduler: str | None = None,
-              jobs: int = 1, progress: Progress | None = None,
-              args: Mapping[str, Any] | None = None,
+              options: Mapping[str, Any] | None = None, *,
+              scheduler: Scheduler | str | None = None, jobs: int = 1,
+              progress: Progress | None = None, args: Mapping[str, Any] | None = None,
               say: Callable[[str], None] | None = None) -> BatchResult:
     """Record a run of ``tasks`` and run each through ``fn`` where ``scheduler`` says.
 
-    ``fn`` must be a module-level function (it travels by name); ``options`` are plain JSON
-    values every task gets; ``args`` are recorded with the run (what the command was asked).
-    Returns when every task has ended; the outcomes are in task order.
+    ``scheduler``: as :func:`~fieldbank.scheduler.resolve_scheduler` accepted it, or an
+    address it is to check (with the certificate settings in force). ``fn`` must be a
+    module-level function (it travels by name); ``options`` are plain JSON values every task
+    gets; ``args`` are recorded with the run (what the command was asked). Returns when every
+    task has ended; the outcomes are in task order.
+
+    Raises
+    ------
+    ClusterError
+        The scheduler is refused or does not answer; nothing is recorded.
     """
     opts = dict(options or {})
-    engine = (f"dask {scheduler}" if scheduler else
+    sched = scheduler if isinstance(scheduler, Scheduler) else resolve_scheduler(scheduler or "")
+    engine = (f"dask {sched.address}" if sched else
               "this process" if jobs <= 1 or len(tasks) <= 1 else f"{jobs} local processes")
-    run = db.start_run(kind, engine, dict(args or {}),
-                       [(t.key, t.patient, t.session) for t in tasks])
+    client = _connect(sched, say) if sched else None  # before anything is recorded
+    try:
+        run = db.start_run(kind, engine, dict(args or {}),
+                           [(t.key, t.patient, t.session) for t in tasks])
+    except BaseException:
+        if client is not None:
+            _close(client)
+        raise
     where = Where(db.engine.url.render_as_string(hide_password=False),
                   str(db.store.root), run.id, run.token)
     try:
-        if scheduler:
-            it: Iterable[Outcome] = _on_dask(db, scheduler, kind, where, tasks, fn, opts, say)
+        if client is not None:
+            it: Iterable[Outcome] = _on_dask(db, client, kind, where, tasks, fn, opts, say)
         elif engine == "this process":
             it = (_execute_with(db, where, fn, opts, t) for t in tasks)
         else:
@@ -212,6 +219,8 @@ def run_batch(db: Database, kind: str, tasks: Sequence[Task], fn: TaskFn,
             it = progress(it, len(tasks))
         by_key = {o.key: o for o in it}
     finally:
+        if client is not None:
+            _close(client)
         final = db.finish_run(run.id)
     return BatchResult(final, tuple(by_key[t.key] for t in tasks), engine)
 
@@ -234,50 +243,63 @@ def _on_pool(db: Database, jobs: int, where: Where, tasks: Sequence[Task], fn: T
                     yield _lost(db, where, task, f"its worker process died ({exc})")
 
 
-def _on_dask(db: Database, scheduler: str, kind: str, where: Where, tasks: Sequence[Task],
+def _connect(sched: Scheduler, say: Callable[[str], None] | None) -> Client:
+    """A client of ``sched`` (:meth:`Scheduler.connect`); its risk said first when it is an
+    insecure one."""
+    if sched.warning is not None and say is not None:
+        say(sched.warning)
+    return sched.connect(CONNECT_TIMEOUT_S)
+
+
+def _close(client: Client) -> None:
+    """Close a client. One whose scheduler went away logs the reconnection its closing cancels
+    as an error with a traceback; the command says what happened to each task instead."""
+    log = logging.getLogger("distributed.client")
+    level = log.level
+    log.setLevel(logging.CRITICAL)
+    try:
+        client.close()
+    finally:
+        log.setLevel(level)
+
+
+def _on_dask(db: Database, client: Client, kind: str, where: Where, tasks: Sequence[Task],
              fn: TaskFn, options: Mapping[str, Any],
              say: Callable[[str], None] | None) -> Iterator[Outcome]:
     """Tasks on a Dask cluster, outcomes as they end. The task keys name the kind, so the
     dashboard's progress groups them (``fieldbank-fit``, ``fieldbank-report``, ...)."""
-    from distributed import Client, as_completed
+    from distributed import as_completed
 
     travelling = Where(_without_password(where.url), where.store_root, where.run_id,
                        where.token)
-    try:
-        client = Client(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
-    except OSError as exc:
-        raise FieldbankError(f"cannot reach the Dask scheduler at {scheduler}: {exc}. Start "
-                             "one with 'dask scheduler' and workers with 'dask worker "
-                             f"{scheduler}' (docs/scale-out.md).") from None
-    try:
-        if say is not None:
-            info = client.scheduler_info(n_workers=-1)
-            board = (client.dashboard_link if "dashboard" in info.get("services", {}) else
-                     "none (the scheduler runs without one)")
-            say(f"{kind}: {len(tasks)} task(s) on {scheduler} "
-                f"({len(info.get('workers', {}))} worker(s)); dashboard: {board}")
-        keys = [(f"fieldbank-{kind}", where.run_id, i) for i in range(len(tasks))]
-        futures = client.map(_execute, [travelling] * len(tasks), [fn] * len(tasks),
-                             [options] * len(tasks), list(tasks), key=keys, pure=False)
-        task_of = {f.key: t for f, t in zip(futures, tasks, strict=True)}
-        for fut in as_completed(futures, loop=client.loop):
-            task = task_of[fut.key]
-            try:
-                out = fut.result()
-            except Exception as exc:  # KilledWorker: its workers kept dying; or comms lost
-                out = _lost(db, where, task, f"{type(exc).__name__}: {exc}")
-            fut.release()
-            yield out
-    finally:
-        client.close()
+    if say is not None:
+        info = client.scheduler_info(n_workers=-1)
+        board = (client.dashboard_link if "dashboard" in info.get("services", {}) else
+                 "none (the scheduler runs without one)")
+        say(f"{kind}: {len(tasks)} task(s) on {client.scheduler.address} "
+            f"({len(info.get('workers', {}))} worker(s)); dashboard: {board}")
+    keys = [(f"fieldbank-{kind}", where.run_id, i) for i in range(len(tasks))]
+    futures = client.map(_execute, [travelling] * len(tasks), [fn] * len(tasks),
+                         [options] * len(tasks), list(tasks), key=keys, pure=False)
+    task_of = {f.key: t for f, t in zip(futures, tasks, strict=True)}
+    for fut in as_completed(futures, loop=client.loop):
+        task = task_of[fut.key]
+        try:
+            out = fut.result()
+        except Exception as exc:  # KilledWorker: its workers kept dying; or the scheduler lost
+            out = _lost(db, where, task, " ".join(f"{type(exc).__name__}: {exc}".split()))
+        fut.release()
+        yield out
 
 
 def _lost(db: Database, where: Where, task: Task, why: str) -> Outcome:
-    """A task the engine lost (its workers died): recorded failed, naming whom it concerned."""
-    detail = f"{task.who()}: not finished: {why}"
-    rec = db.finish_job(where.run_id, task.key, "failed", error=detail)
-    return Outcome(task.key, task.patient, task.session, "failed", detail,
-                   attempts=rec.attempts)
+    """A task the engine lost (its workers died, the scheduler went away): recorded failed,
+    naming whom it concerned - unless the job ended in the database meanwhile; the outcome
+    is what the database holds."""
+    rec = db.give_up_job(where.run_id, task.key, f"{task.who()}: not finished: {why}")
+    return Outcome(task.key, task.patient, task.session, rec.state,
+                   rec.error or "finished by its worker", rec.result or {}, rec.attempts,
+                   rec.worker or "")
 
 
 def _without_password(url: str) -> str:
@@ -353,16 +375,28 @@ def _execute_with(db: Database, where: Where, fn: TaskFn, options: Mapping[str, 
                        worker, t0)
     if done.state not in ("done", "skipped"):
         raise ParameterError(f"a task ends 'done' or 'skipped'; got {done.state!r}.")
-    db.finish_job(where.run_id, task.key, done.state, dict(done.result), None, done.payload)
-    return Outcome(task.key, task.patient, task.session, done.state, done.detail,
-                   dict(done.result), rec.attempts, worker, time.perf_counter() - t0)
+    end = db.finish_job(where.run_id, task.key, done.state, dict(done.result), None,
+                        done.payload, attempt=rec.attempts)
+    return _ended(task, end, done.detail, worker, t0)
 
 
 def _failed(db: Database, where: Where, task: Task, detail: str, attempts: int, worker: str,
             t0: float) -> Outcome:
-    db.finish_job(where.run_id, task.key, "failed", error=detail)
-    return Outcome(task.key, task.patient, task.session, "failed", detail, {}, attempts,
-                   worker, time.perf_counter() - t0)
+    end = db.finish_job(where.run_id, task.key, "failed", error=detail, attempt=attempts)
+    return _ended(task, end, detail, worker, t0)
+
+
+def _ended(task: Task, end: tuple[JobRecord, bool], detail: str, worker: str,
+           t0: float) -> Outcome:
+    """The outcome of an attempt as the database holds it (``end``: the job and whether this
+    attempt wrote it): when another ended it first (the run's process gave up on it, another
+    attempt), what that one recorded."""
+    job, written = end
+    if not written:
+        detail = job.error or f"ended by another attempt ({job.state})"
+    return Outcome(task.key, task.patient, task.session, job.state, detail, job.result or {},
+                   job.attempts, worker if written else (job.worker or worker),
+                   time.perf_counter() - t0)
 
 
 def _worker_name() -> str:

@@ -14,6 +14,9 @@ The whole tree, rooted in built-ins so callers may catch either::
     │   ├── IntegrityError(StorageError)              a stored reference or checksum is wrong
     │   └── DatabaseMissing(StorageError)             no database where one was to be read
     ├── FitError(FieldbankError, RuntimeError)        a fit that cannot run or was refused
+    ├── ClusterError(FieldbankError, RuntimeError)    a Dask scheduler refused (an address open
+    │                                                 to anyone, missing certificates) or
+    │                                                 not reached
     ├── InterventionError(FieldbankError, ValueError) subtree in fieldbank.interventions.errors
     └── HapticError(FieldbankError, RuntimeError)     subtree in fieldbank.haptic.errors
 
@@ -108,3 +111,8 @@ class DatabaseMissing(StorageError):
 class FitError(FieldbankError, RuntimeError):
     """A fit that cannot run (no data, wrong patient, inconsistent units) or failed."""
 
+
+class ClusterError(FieldbankError, RuntimeError):
+    """A Dask scheduler fieldbank will not use (a plain address beyond the loopback, a tls://
+    address without the cluster's certificates, certificates that do not fit) or cannot reach;
+    or certificates for a cluster that cannot be made."""

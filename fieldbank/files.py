@@ -8,6 +8,10 @@ target's directory, are flushed and fsynced, renamed over the target with ``os.r
 :func:`write_new` is the same for files a user asked for (exports): it refuses to overwrite an
 existing file unless told to, and never writes through a symbolic link.
 
+:func:`write_directory` does it for a set of files that belong together (a report, a
+cluster's certificates): written in a temporary directory beside the target and renamed into
+place once every file is complete, so a full disk leaves nothing behind.
+
 :func:`read_regular_file` reads a file someone else made (lab files, plans, parameters): only
 a regular file (a symlink is judged by its target), refused without opening it for reading
 when it is a FIFO, a device or a directory, and never more than a limit, so ``/dev/zero``, a
@@ -25,6 +29,7 @@ import errno
 import json
 import math
 import os
+import shutil
 import stat
 from collections.abc import Mapping
 from datetime import date, datetime
@@ -248,6 +253,68 @@ def write_new(path: str | Path, data: bytes | str, force: bool = False) -> Path:
         raise
     fsync_dir(p.parent)
     return p
+
+
+def write_directory(path: str | Path, files: Mapping[str, bytes | str], *,
+                    modes: Mapping[str, int] | None = None, private: bool = False) -> Path:
+    """Write ``files`` (file name -> data; text is UTF-8) into the directory ``path`` all at
+    once or not at all.
+
+    Every file is written and synced in a new temporary directory beside ``path`` (so on the
+    same file system). Then, when ``path`` does not exist, the temporary directory is renamed
+    to it in one step; when it does, each file is renamed into it over what was there. A
+    failure while writing - a full disk, a quota, a file size limit - removes the temporary
+    directory: nothing is left behind and ``path`` keeps what it held. The parent of ``path``
+    must exist.
+
+    ``modes``: a file's permission bits from its creation (a private key: 0o600); the others
+    get 0666 less the umask. ``private``: a new ``path`` is made 0700 (else 0777 less the
+    umask).
+    """
+    out = Path(path)
+    for name in files:
+        if not name or name in (".", "..") or "/" in name or os.sep in name:
+            raise ValueError(f"{name!r} is not a file name")
+    tmp = _new_temp_dir(out, 0o700 if private else 0o777)
+    try:
+        for name, data in files.items():
+            raw = data.encode("utf-8") if isinstance(data, str) else data
+            fd = os.open(os.path.join(tmp, name), os.O_WRONLY | os.O_CREAT | os.O_EXCL
+                         | os.O_CLOEXEC | os.O_NOFOLLOW, (modes or {}).get(name, 0o666))
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(raw)
+                fh.flush()
+                os.fsync(fh.fileno())
+        fsync_dir(tmp)
+        try:
+            os.rename(tmp, out)  # a new directory (or an empty one): one step
+        except OSError as exc:
+            if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR, errno.EISDIR):
+                raise
+            if not out.is_dir() or out.is_symlink():
+                raise FileExistsError(errno.EEXIST, "exists and is not a directory",
+                                      str(out)) from None
+            for name in files:
+                os.replace(os.path.join(tmp, name), out / name)
+            fsync_dir(out)
+            os.rmdir(tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    fsync_dir(out.parent)
+    return out
+
+
+def _new_temp_dir(p: Path, mode: int) -> str:
+    """A new, empty temporary directory beside ``p`` (``mode`` less the umask), its path."""
+    for _ in range(100):
+        tmp = os.path.join(p.parent, f".{p.name}.{os.urandom(6).hex()}")  # as in _new_temp
+        try:
+            os.mkdir(tmp, mode)
+            return tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no free temporary name", str(p.parent))
 
 
 def json_finite(obj: Any) -> Any:

@@ -338,7 +338,7 @@ def logging_off_the_loop(name: str = "fieldbank.haptic") -> Iterator[None]:
 
 @contextlib.contextmanager
 def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S,
-             pin: bool | None = None) -> Iterator[Grant]:
+             pin: bool | None = None, cpu: int | None = None) -> Iterator[Grant]:
     """Run the enclosed loop with the collector frozen and off, SCHED_FIFO, the thread pinned
     to the host's core of :func:`cpu_plan`, a short switch interval; everything is restored on
     leaving, also on an exception.
@@ -351,6 +351,10 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
         The interpreter's thread switch interval inside.
     pin : bool, optional
         Pin the thread to a core of its own (default: when ``priority``).
+    cpu : int, optional
+        That core (default: the host loop's of :func:`cpu_plan`; a second loop on the same
+        machine — the patient's site of a remote session tried on one machine — takes the
+        other).
 
     Yields
     ------
@@ -365,7 +369,10 @@ def realtime(priority: bool = True, switch_interval_s: float = SWITCH_INTERVAL_S
     old_sched, prio, note = _enter_fifo() if priority else (None, None, None)
     if note:
         notes.append(note)
-    cpu = cpu_plan()[0] if (priority if pin is None else pin) else None
+    if not (priority if pin is None else pin):
+        cpu = None
+    elif cpu is None:
+        cpu = cpu_plan()[0]
     old_mask, note = _pin(cpu)
     if note:
         notes.append(note)

@@ -27,6 +27,7 @@ from fieldbank.interventions.validate import (
     plans_to_check,
     validate_plans,
 )
+from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
 _CONVERTER = cattrs.Converter()
@@ -54,7 +55,8 @@ def validate_patient(db: Database, task: Task, options: Mapping[str, Any]) -> Do
                 json.dumps(doc).encode("utf-8"))
 
 
-def validate_on_cluster(db: Database, scheduler: str, patients: Sequence[str] = (),
+def validate_on_cluster(db: Database, scheduler: Scheduler | str,
+                        patients: Sequence[str] = (),
                         plan_ids: Sequence[int] = (), *, tolerance: float = CHANGE_TOLERANCE,
                         max_se: float = MAX_CHANGE_SE, progress: Progress | None = None,
                         say: Callable[[str], None] | None = None

@@ -10,12 +10,10 @@ import threading
 from pathlib import Path
 from typing import Any
 
-import pytest
 from click.testing import CliRunner, Result
 
 from fieldbank.cli.main import cli
-from fieldbank.engine import Task, resolve_scheduler
-from fieldbank.errors import ConfigError
+from fieldbank.engine import Task
 from fieldbank.fitting.batch import fit_session
 from fieldbank.storage import Database
 from tests.cohort_helpers import store_sessions
@@ -161,22 +159,6 @@ def test_racing_writers_with_one_key_store_one_fit(any_db_url: str) -> None:
         assert len([f for f in db.list_fits() if f.fit_key == "k" * 64]) == 1
         # the losers' models rolled back with their fits
         assert len(db.list_models(origin="fitted")) == 2
-
-
-def test_scheduler_resolution(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv("FIELDBANK_SCHEDULER", raising=False)
-    assert resolve_scheduler(None) is None
-    monkeypatch.setenv("FIELDBANK_SCHEDULER", "tcp://10.1.2.3:8786")
-    assert resolve_scheduler(None) == "tcp://10.1.2.3:8786"
-    assert resolve_scheduler("tls://sched:8786") == "tls://sched:8786"
-    monkeypatch.setenv("FIELDBANK_SCHEDULER", "  ")
-    assert resolve_scheduler(None) is None
-    monkeypatch.setenv("FIELDBANK_SCHEDULER", "10.1.2.3:8786")
-    with pytest.raises(ConfigError, match=r"FIELDBANK_SCHEDULER must be a Dask scheduler "
-                                          r"address .*; got '10\.1\.2\.3:8786'"):
-        resolve_scheduler(None)
-    with pytest.raises(ConfigError, match=r"--scheduler must be .*; got 'http://x:1'"):
-        resolve_scheduler("http://x:1")
 
 
 def test_fit_command_line_refuses_mixed_options(sqlite_url: str, tmp_path: Path) -> None:

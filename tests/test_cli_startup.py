@@ -119,7 +119,7 @@ def stored_home(tmp_path_factory: pytest.TempPathFactory) -> Path:
         saved = save_plan(db, source, Plan((Botulinum({"ef": 100.0}),)))
         assert saved.plan_id == 1
         run = db.start_run("fit", "local processes (1)", {}, [("P-1/pre", "P-1", "pre")])
-        db.finish_job(run.id, "P-1/pre", "failed", error="no maps")
+        db.give_up_job(run.id, "P-1/pre", "no maps")
     return home
 
 
@@ -181,7 +181,7 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM
     from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
     from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
-    from fieldbank.haptic.remote.ports import PASSIVITY_MODES
+    from fieldbank.haptic.remote.config import PASSIVITY_MODES, RATE_BOUNDS
     from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.interventions.defaults import DOSE_UNIT, value
     from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
@@ -220,6 +220,7 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     assert (ch.VALIDATE_CHANGE_TOLERANCE, ch.VALIDATE_MAX_CHANGE_SE) == (
         CHANGE_TOLERANCE, MAX_CHANGE_SE)
     assert ch.PASSIVITY_MODES == PASSIVITY_MODES
+    assert ch.REMOTE_RATE_HZ == (RATE_BOUNDS.low, RATE_BOUNDS.high)
     assert ch.MODEL_VERSION == MODEL_VERSION
     assert (ch.MEASURE_SPACING_MM, ch.MEASURE_DISPLACEMENT_MM) == pytest.approx(
         (pc.spacing_m * 1000, pc.displacement_m * 1000))

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from fieldbank.errors import ParameterError, ValidationError
-from fieldbank.files import json_finite, read_json_document, write_atomic
+from fieldbank.files import json_finite, read_json_document, write_atomic, write_directory
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.params import ArmParams
@@ -36,6 +36,28 @@ def test_write_atomic_failure_keeps_the_old_file(tmp_path: Path) -> None:
         write_atomic(target, 12345)  # type: ignore[arg-type]
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_write_directory_puts_a_set_in_place_whole_or_not_at_all(tmp_path: Path) -> None:
+    out = tmp_path / "set"
+    write_directory(out, {"a.txt": "one", "b.key": b"secret"}, modes={"b.key": 0o600},
+                    private=True)
+    assert sorted(p.name for p in out.iterdir()) == ["a.txt", "b.key"]
+    assert stat.S_IMODE(out.stat().st_mode) == 0o700
+    assert stat.S_IMODE((out / "b.key").stat().st_mode) == 0o600
+    # into a directory that exists: each file replaced, others kept
+    (out / "other").write_text("kept")
+    write_directory(out, {"a.txt": "two"})
+    assert (out / "a.txt").read_text() == "two" and (out / "other").read_text() == "kept"
+    # a failure while writing (the second file cannot be encoded): nothing changes, no
+    # temporary directory is left beside the target
+    for target in (out, tmp_path / "new"):
+        with pytest.raises(UnicodeEncodeError):
+            write_directory(target, {"a.txt": "three", "c.txt": "\ud800"})
+    assert (out / "a.txt").read_text() == "two" and not (tmp_path / "new").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["set"]
+    with pytest.raises(ValueError, match="not a file name"):
+        write_directory(out, {"../x": "no"})
 
 
 def test_json_finite() -> None:

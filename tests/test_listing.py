@@ -141,16 +141,17 @@ def _fill(url: str) -> dict[str, int]:
         fit = db.start_run("fit", "local processes (2)", {"all": True},
                            [("P-1/pre", "P-1", "pre"), ("P-1/post", "P-1", "post"),
                             ("P-2/pre", "P-2", "pre"), ("P-10/pre", "P-10", "pre")])
-        db.start_job(fit.id, "P-1/pre", "w1")
-        db.finish_job(fit.id, "P-1/pre", "done", {"model_id": 7})
-        db.start_job(fit.id, "P-1/post", "w2")
-        db.finish_job(fit.id, "P-1/post", "failed", error="no maps: ‘post’")
+        db.finish_job(fit.id, "P-1/pre", "done", {"model_id": 7},
+                      attempt=db.start_job(fit.id, "P-1/pre", "w1").attempts)
+        db.finish_job(fit.id, "P-1/post", "failed", error="no maps: ‘post’",
+                      attempt=db.start_job(fit.id, "P-1/post", "w2").attempts)
         db.start_job(fit.id, "P-2/pre", "w1")
         db.finish_run(fit.id)
         report = db.start_run("report", "tcp://10.0.0.5:8786", {"plans": [1, 2]},
                               [("cases-1", None, None), ("cases-2", None, None)])
-        db.start_job(report.id, "cases-1", "w3")
-        db.finish_job(report.id, "cases-1", "skipped")
+        db.finish_job(report.id, "cases-1", "skipped",
+                      attempt=db.start_job(report.id, "cases-1", "w3").attempts)
+        db.give_up_job(report.id, "cases-2", "the scheduler went away")
     return {"fit_run": fit.id, "report_run": report.id, "loose_model": loose.id,
             "plan2": plan2.plan_id}
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import os
 import stat
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -18,13 +19,14 @@ from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.motions import pull
 from fieldbank.haptic.remote.channel import Endpoint, Impairment, MemoryTransport, UdpTransport
+from fieldbank.haptic.remote.config import LinkConfig, SiteConfig
+from fieldbank.haptic.remote.handshake import Initiator, Responder
 from fieldbank.haptic.remote.passivity import STILL, ForcePort, PortEnergy, VelocityPort
-from fieldbank.haptic.remote.patient_site import SiteConfig
-from fieldbank.haptic.remote.ports import LinkConfig
 from fieldbank.haptic.remote.simulate import (
     Pair,
     clinician_robot,
     created_energy,
+    handshake_in_memory,
     run_link,
     stretch_script,
     transparency,
@@ -33,9 +35,8 @@ from fieldbank.haptic.remote.tap import TapReader, TapWriter
 from fieldbank.haptic.remote.wire import (
     KEY_BYTES,
     REPLAY_WINDOW,
-    Authenticator,
     Kind,
-    Role,
+    SessionCipher,
     State,
     new_key,
     read_key,
@@ -44,36 +45,41 @@ from fieldbank.haptic.remote.wire import (
 from tests.haptic_util import rest_hand
 
 S = State(7, 0.1, 0.5, 0.01, -0.02, 3.0, -4.0, 1.5, 0.5, 0.25)
+HELLO = {"rate_hz": 1000, "lockstep": True}
 
 
-def _pair(key: bytes | None = None, session: int = 42) -> tuple[Authenticator, Authenticator]:
-    k = key or new_key()
-    return Authenticator(k, Role.CLINICIAN, session), Authenticator(k, Role.PATIENT, session)
+def _pair(key: bytes | None = None) -> tuple[SessionCipher, SessionCipher]:
+    """The clinician's and the patient's ciphers of a fresh session."""
+    return handshake_in_memory(key or new_key(), 1000)
 
 
-# --- authentication ---------------------------------------------------------------------------
-def test_a_state_goes_through_and_comes_out_the_same() -> None:
+# --- the datagrams ------------------------------------------------------------------------------
+def test_a_state_goes_through_sealed_and_comes_out_the_same() -> None:
     c, p = _pair()
-    d = p.open(c.seal_state(S, t_us=1000, echo_us=5, hold_us=3, flags=1))
+    data = c.seal_state(S, t_us=1000, echo_us=5, hold_us=3, flags=1)
+    d = p.open(data)
     assert d is not None and d.kind == Kind.STATE and d.state == S
-    assert (d.t_us, d.echo_us, d.hold_us, d.flags, d.seq) == (1000, 5, 3, 1, 1)
+    assert (d.t_us, d.echo_us, d.hold_us, d.flags, d.seq) == (1000, 5, 3, 1, 2)
+    # nothing of the hand's position, velocity or force, nor the flags, is in clear
+    for v in (S.x, S.y, S.vx, S.vy, S.fx, S.fy):
+        assert struct.pack("<d", v) not in data
+    assert len(data) == 22 + 25 + 80 + 16                # header, inner, STATE body, tag
 
 
-def test_nothing_is_accepted_from_an_unknown_key_a_forged_byte_or_the_wrong_role() -> None:
-    c, p = _pair()
-    stranger = Authenticator(new_key(), Role.CLINICIAN, 42)
-    assert p.open(stranger.seal_state(S)) is None
-    good = bytearray(c.seal_state(S))
-    for i in (0, 10, 30, len(good) - 20, len(good) - 1):  # header, body, tag
+def test_nothing_opens_under_another_session_a_changed_byte_or_the_wrong_role() -> None:
+    key = new_key()
+    c, p = _pair(key)
+    c2, _ = _pair(key)                   # the same key, another session: other nonces, keys
+    good = c.seal_state(S)
+    assert p.open(c2.seal_state(S)) is None                 # another session's id
+    for i in (0, 12, 20, 30, len(good) - 20, len(good) - 1):  # header, ciphertext, tag
         bad = bytearray(good)
         bad[i] ^= 0x01
         assert p.open(bytes(bad)) is None
-    assert p.open(bytes(good[:20])) is None
-    # a patient's own datagram sent back to it (a reflection) carries the wrong role
-    other = Authenticator(c._key, Role.PATIENT, 42)
-    assert p.open(other.seal_state(S)) is None
-    assert p.refused["mac"] == 6 and p.refused["short"] == 1 and p.refused["role"] == 1
-    assert p.open(bytes(good)) is not None  # the genuine one still passes
+    assert p.open(good[:30]) is None
+    assert p.open(p.seal_state(S)) is None                  # a reflection: the wrong role
+    assert p.refused == {"session": 2, "version": 1, "role": 1, "aead": 4, "short": 1}
+    assert p.open(good) is not None                          # the genuine one still opens
 
 
 def test_replays_are_refused_and_reordered_datagrams_accepted_once() -> None:
@@ -87,26 +93,109 @@ def test_replays_are_refused_and_reordered_datagrams_accepted_once() -> None:
     assert p.open(sent[2]) is None and p.refused["old"] == 1  # beyond the window
 
 
-def test_a_session_is_opened_only_by_a_hello_and_other_sessions_are_refused() -> None:
-    key = new_key()
-    c = Authenticator(key, Role.CLINICIAN, 99)
-    p = Authenticator(key, Role.PATIENT)          # idle patient site: no session yet
-    assert p.open(c.seal_state(S)) is None and p.refused["session"] == 1
-    hello = c.seal_json(Kind.HELLO, {"rate_hz": 1000})
-    assert p.open(hello) is None                  # a HELLO only counts when one is awaited
-    d = p.open(hello, accept_hello=True)
-    assert d is not None and d.message == {"rate_hz": 1000} and p.session == 99
-    assert p.open(c.seal_state(S)) is not None
-    later = Authenticator(key, Role.CLINICIAN, 100)
-    assert p.open(later.seal_state(S)) is None
-
-
-def test_non_finite_numbers_and_bad_json_are_refused_even_with_a_valid_mac() -> None:
+def test_refused_datagrams_never_take_the_sequence_numbers_of_genuine_ones() -> None:
+    """A key-holding peer sends 30 datagrams with NaN, then the genuine ones under the same
+    sequence numbers: the NaN ones are refused, every genuine one is accepted."""
     c, p = _pair()
-    assert p.open(c.seal_state(State(1, math.nan, 0, 0, 0, 0, 0, 0, 0, 0))) is None
+    base = c.seq
+    for k in range(30):
+        c.seq = base + k
+        assert p.open(c.seal_state(State(k, math.nan, 0, 0, 0, 0, 0, 0, 0, 0))) is None
+    for k in range(30):
+        c.seq = base + k
+        d = p.open(c.seal_state(State(k, 0.1, 0.4, 0, 0, 1.0, 0, 0, 0, 0)))
+        assert d is not None and d.seq == base + k + 1
+    assert p.refused == {"nan": 30} and p.accepted == 31   # the CONFIRM, then the 30
+
+
+def test_non_finite_numbers_and_bad_json_are_refused_even_when_they_open() -> None:
+    c, p = _pair()
+    assert p.open(c.seal_state(State(1, math.inf, 0, 0, 0, 0, 0, 0, 0, 0))) is None
     assert p.open(c.seal(Kind.BYE, b"\xff\xfe")) is None
     assert p.open(c.seal(Kind.BYE, b"[1, 2]")) is None
-    assert p.refused == {"nan": 1, "json": 2}
+    assert p.open(c.seal(Kind.HELLO, b"{}")) is None      # no handshake into a keyed session
+    assert p.refused == {"nan": 1, "json": 2, "handshake": 1}
+
+
+# --- the handshake ------------------------------------------------------------------------------
+def _session(key: bytes, address: str = "clinician") -> dict[str, object]:
+    """One handshake, every datagram kept (what a recorder on the network sees)."""
+    ini = Initiator(key, 77, HELLO)
+    resp = Responder(key)
+    hello = resp.open_hello(ini.hello)
+    assert hello is not None and hello.message == HELLO
+    welcome = resp.welcome(hello, address, {"rate_hz": 1000})
+    got = ini.answer(welcome)
+    assert isinstance(got, tuple) and got[1].message == {"rate_hz": 1000}
+    confirm = ini.confirm(got[0])
+    done = resp.confirm(confirm, address)
+    assert done is not None and done[1].kind == Kind.CONFIRM
+    return {"hello": ini.hello, "welcome": welcome, "confirm": confirm,
+            "state": got[0].seal_state(S), "bye": got[0].seal_json(Kind.BYE, {}),
+            "clinician": got[0], "patient": done[0]}
+
+
+def test_the_handshake_gives_both_sites_the_same_fresh_keys() -> None:
+    key = new_key()
+    one, two = _session(key), _session(key)
+    d = one["patient"].open(one["state"])                  # type: ignore[union-attr]
+    assert d is not None and d.state == S
+    # the same key, the same HELLO settings: other nonces, so other keys and other bytes
+    assert one["state"] != two["state"] and one["hello"] != two["hello"]
+    assert two["patient"].open(one["state"]) is None       # type: ignore[union-attr]
+
+
+def test_a_recorded_session_replayed_to_a_new_responder_opens_nothing() -> None:
+    """Every datagram of a recorded session, replayed: its HELLO still opens (the recorder
+    cannot tell), and earns a WELCOME under fresh keys; the recorded CONFIRM, STATE and BYE
+    confirm nothing."""
+    key = new_key()
+    rec = _session(key)
+    resp = Responder(key)
+    hello = resp.open_hello(rec["hello"])                  # type: ignore[arg-type]
+    assert hello is not None
+    welcome = resp.welcome(hello, "attacker", {"rate_hz": 1000})
+    assert welcome and welcome != rec["welcome"]
+    for kind in ("confirm", "state", "bye"):
+        assert resp.confirm(rec[kind], "attacker") is None  # type: ignore[arg-type]
+    assert resp.confirm(rec["confirm"], "elsewhere") is None  # type: ignore[arg-type]
+    assert resp.refused == {"address": 1}
+    # a recorded WELCOME replayed to a new clinician opens nothing either
+    assert Initiator(key, 77, HELLO).answer(rec["welcome"]) is None  # type: ignore[arg-type]
+
+
+def test_a_replayed_hello_from_elsewhere_does_not_push_out_the_genuine_clinician() -> None:
+    key = new_key()
+    rec = _session(key)
+    ini = Initiator(key, 5, HELLO)
+    resp = Responder(key)
+    genuine = resp.open_hello(ini.hello)
+    assert genuine is not None
+    w = resp.welcome(genuine, ("10.0.0.1", 4000), {})
+    assert resp.welcome(genuine, ("10.0.0.1", 4000), {}) == w   # a repeat: the same WELCOME
+    replayed = resp.open_hello(rec["hello"])               # type: ignore[arg-type]
+    assert replayed is not None
+    resp.welcome(replayed, ("10.0.0.66", 666), {})
+    got = ini.answer(w)
+    assert isinstance(got, tuple)
+    done = resp.confirm(ini.confirm(got[0]), ("10.0.0.1", 4000))
+    assert done is not None and done[0].session == 5
+
+
+def test_strangers_get_nothing_and_a_refusal_reaches_only_its_clinician() -> None:
+    key = new_key()
+    resp = Responder(key)
+    assert resp.open_hello(Initiator(new_key(), 1, HELLO).hello) is None   # another key
+    forged = bytearray(Initiator(key, 1, HELLO).hello)
+    forged[-20] ^= 1                                       # a setting changed in flight
+    assert resp.open_hello(bytes(forged)) is None
+    assert resp.refused == {"aead": 2}
+    ini = Initiator(key, 9, HELLO)
+    hello = resp.open_hello(ini.hello)
+    assert hello is not None
+    refusal = Responder.refusal(hello, "rate 500 Hz; this site runs at 1000 Hz")
+    assert ini.answer(refusal) == "rate 500 Hz; this site runs at 1000 Hz"
+    assert Initiator(key, 9, HELLO).answer(refusal) is None  # another HELLO's: not opened
 
 
 def test_the_key_file_is_private_hex_and_never_written_over(tmp_path: Path) -> None:
@@ -150,25 +239,31 @@ def test_injected_delay_loss_and_jitter_are_what_was_asked() -> None:
     assert 0.08 < s["loss_fraction"] < 0.12
 
 
-def test_udp_carries_authentic_datagrams_and_counts_the_rest() -> None:
-    key = new_key()
+def test_udp_carries_sealed_datagrams_from_the_pinned_peer_only_and_counts_the_rest() -> None:
+    c, p = _pair()
     rx = UdpTransport(("127.0.0.1", 0))
     tx = UdpTransport(("127.0.0.1", 0), rx.address)
+    elsewhere = UdpTransport(("127.0.0.1", 0), rx.address)
     try:
-        ep = Endpoint(rx, Authenticator(key, Role.PATIENT, 5))
-        c = Authenticator(key, Role.CLINICIAN, 5)
+        ep = Endpoint(rx, p, peer=tx.address)
         tx.send(c.seal_state(S))
         tx.send(b"garbage that is long enough to be looked at" * 2)
-        tx.send(Authenticator(new_key(), Role.CLINICIAN, 5).seal_state(S))
+        tx.send(_pair()[0].seal_state(S))                      # another session
+        elsewhere.send(c.seal_state(S))                        # the right keys, elsewhere
+        elsewhere.send(Initiator(new_key(), 1, HELLO).hello)   # a handshake from elsewhere
         for _ in range(100):
             if ep.receive(0.0) is not None:
                 break
             rx.wait_readable(0.01)
-        ep.receive(0.0)
-        assert ep.counters.used == 1 and ep.auth.refused.get("mac") == 2
+        for _ in range(20):
+            ep.receive(0.0)
+            rx.wait_readable(0.01)
+        assert ep.counters.used == 1
+        assert ep.cipher.refused == {"version": 1, "session": 1, "address": 1, "handshake": 1}
     finally:
         rx.close()
         tx.close()
+        elsewhere.close()
 
 
 # --- passivity ------------------------------------------------------------------------------
@@ -273,22 +368,31 @@ def test_a_lost_link_ramps_the_force_to_zero_and_it_comes_back(elbow: tuple) -> 
     clink = clinician_robot(hand, cfg.rate_hz)
     pair = Pair(p, cfg, clink)
     ce = pair.port.endpoint
-    for _ in range(300):
+    for _ in range(600):
         pair.tick()
     clink.port.device.perform(pull(hand[0], hand[1], 0.05, 1.0, (0.0, 1.0)))  # stretch, hold
     for _ in range(1500):
         pair.tick()
     held = math.hypot(pair.renderer.fx, pair.renderer.fy)
     assert held > 2.0
-    real_send = ce.transport.send
-    ce.transport.send = lambda data: None          # type: ignore[method-assign]
-    pair.patient.port.endpoint.transport.send = lambda data: None  # type: ignore
+    pe = pair.patient.port.endpoint
+
+    def lost_on_the_way(ep: Endpoint) -> None:
+        """Every STATE arrives (the lockstep barrier sees its tick) and is then lost, as the
+        injected loss drops them: the link is down, the peer not silent."""
+        def deliver(d: object, now_s: float) -> None:
+            st_ = getattr(d, "state", None)
+            if st_ is not None:
+                ep.peer_tick = max(ep.peer_tick, st_.tick)
+        ep.deliver = deliver                        # type: ignore[method-assign]
+
+    lost_on_the_way(ce)
+    lost_on_the_way(pe)
     forces = []
     for _ in range(600):
         pair.tick()
         forces.append(math.hypot(pair.renderer.fx, pair.renderer.fy))
-    ce.transport.send = real_send                  # type: ignore[method-assign]
-    del pair.patient.port.endpoint.transport.send
+    del ce.deliver, pe.deliver
     for _ in range(1200):
         pair.tick()
         forces.append(math.hypot(pair.renderer.fx, pair.renderer.fy))

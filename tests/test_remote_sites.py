@@ -89,7 +89,8 @@ def test_two_processes_100ms_5pct_loss_severe_elbow_passive_and_peak_as_the_pati
     assert patient.returncode == 0, p_err
     c_sum = json.loads(clinician.stdout)
     p_sum = json.loads(p_out)
-    assert "the clinician ended" in p_sum["reason"]
+    assert "the clinician's site ended the session" in p_sum["reason"]
+    assert c_sum["account"]["complete"] and p_sum["account"]["complete"]
     lk = c_sum["link"]
     assert lk["refused"] == {} and p_sum["link"]["refused"] == {}
     assert 195 <= lk["rtt_ms"] <= 210                    # 100 ms each way + a tick each way

@@ -166,3 +166,42 @@ def test_missing_data_names_what_is_missing(tmp_path: Path) -> None:
     assert "Patient 'P-1' has no fitted model and no stored plans" in res.stderr
     assert "fieldbank fit P-1" in res.stderr
     assert not out.exists()
+
+
+def test_a_full_disk_leaves_nothing_behind_and_the_rerun_is_not_refused(
+        batch: dict[str, Any], tmp_path: Path) -> None:
+    """The report's process may not write files beyond a size limit (RLIMIT_FSIZE: each
+    write past it fails with EFBIG, as on a full disk) - large enough for metrics.csv, too
+    small for metrics.json and report.html."""
+    import os
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    first = tmp_path / "first"  # also keeps the intervals, so the limited run writes no data
+    assert run_cli("report", "--db", batch["url"], "--out", str(first), "--jobs", "1",
+                   "--no-date").exit_code == 0
+    sizes = {f: (first / f).stat().st_size for f in FILES}
+    # SQLite's shared-memory index of the database needs 32 KiB of file
+    limit = max(sizes["metrics.csv"] + 1, 64 << 10)
+    assert limit < sizes["report.html"] and limit < sizes["metrics.json"]
+
+    def limited() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a failed write, not a killed process
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    out = tmp_path / "reports" / "all"
+    cmd = [sys.executable, "-m", "fieldbank.cli", "report", "--db", batch["url"], "--out",
+           str(out), "--jobs", "1", "--no-date"]
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env, preexec_fn=limited,
+                       timeout=600)
+    assert r.returncode == 1, r.stderr
+    assert "No space left to write" in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists()
+    assert list(out.parent.iterdir()) == []  # no temporary directory left either
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    assert r.returncode == 0, r.stderr
+    for f in FILES:
+        assert (out / f).read_bytes() == (first / f).read_bytes(), f

@@ -9,6 +9,7 @@ is not "1" (CI sets it, so there a missing browser fails instead of skipping).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import re
 import time
@@ -16,6 +17,7 @@ import urllib.error
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 import pytest
@@ -119,8 +121,9 @@ def test_the_renderer_publishes_each_tick() -> None:
 
 
 # --- the server's locks -----------------------------------------------------------------------
-@pytest.fixture()
-def station(tmp_path: Path) -> Iterator[tuple[StationProcess, Renderer]]:
+@contextlib.contextmanager
+def _station(tmp_path: Path, stderr: IO[Any] | None = None
+             ) -> Iterator[tuple[StationProcess, Renderer]]:
     """A station process over a (not running) renderer's snapshot and control socket."""
     p = severe_shoulder()
     link = RobotLink.open(sim_url(p, "hold"))
@@ -129,7 +132,7 @@ def station(tmp_path: Path) -> Iterator[tuple[StationProcess, Renderer]]:
     snap = SnapshotWriter()
     rd.snapshot = snap
     server = ControlServer(rd, tmp_path / "run" / "h.sock").start()
-    proc = StationProcess(str(snap.path), str(server.path)).start()
+    proc = StationProcess(str(snap.path), str(server.path)).start(stderr=stderr)
     try:
         yield proc, rd
     finally:
@@ -137,6 +140,12 @@ def station(tmp_path: Path) -> Iterator[tuple[StationProcess, Renderer]]:
         server.close()
         snap.close()
         link.close()
+
+
+@pytest.fixture()
+def station(tmp_path: Path) -> Iterator[tuple[StationProcess, Renderer]]:
+    with _station(tmp_path) as s:
+        yield s
 
 
 def _get(url: str, headers: dict[str, str] | None = None) -> tuple[int, str, dict[str, str]]:
@@ -217,6 +226,56 @@ def test_the_station_websocket_locks(station) -> None:  # type: ignore[no-untype
     assert rd.pair.blend.end == 1.0  # the switch reached the renderer
     assert out["big"] in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED,
                           aiohttp.WSMsgType.CLOSING, aiohttp.WSMsgType.ERROR)
+
+
+def test_a_flood_of_refused_requests_logs_a_line_a_second_with_counts(tmp_path: Path) -> None:
+    import aiohttp
+
+    n, origin_n = 2500, 40
+    log_path = tmp_path / "station.log"
+    with log_path.open("w") as log, _station(tmp_path, stderr=log) as (proc, _rd):
+        base = f"http://127.0.0.1:{proc.port}"
+        token = proc.config.token
+
+        async def flood() -> list[int]:
+            paths = ("/", "/ws", "/stats?token=x", "/?token=wrong", "/%0aforged line")
+            codes: list[int] = []
+            async with aiohttp.ClientSession() as s:
+                async def one(k: int) -> None:
+                    async with s.get(base + paths[k % len(paths)]) as r:
+                        codes.append(r.status)
+
+                for start in range(0, n, 50):
+                    await asyncio.gather(*(one(k) for k in range(start, min(n, start + 50))))
+                for _ in range(origin_n):
+                    try:
+                        async with s.ws_connect(f"{base}/ws?token={token}",
+                                                headers={"Origin": "http://evil.example"}):
+                            codes.append(101)
+                    except aiohttp.WSServerHandshakeError as exc:
+                        codes.append(exc.status)
+            return codes
+
+        t0 = time.monotonic()
+        codes = asyncio.run(flood())
+        proc.stop()  # what is still held is written as it stops
+        elapsed = time.monotonic() - t0
+    assert codes == [403] * (n + origin_n)
+    lines = log_path.read_text().splitlines()
+    token_lines = [ln for ln in lines if "without a valid token refused" in ln]
+    origin_lines = [ln for ln in lines if "from another origin refused" in ln]
+    assert proc.config.token not in log_path.read_text()
+
+    def counted(rows: list[str]) -> int:
+        return sum(int(m.group(1).replace(",", "")) if (m := re.search(
+            r"refused ([\d,]+) more times? in", ln)) else 1 for ln in rows)
+
+    # every refusal counted once; at most a line a second per reason (the first, then one
+    # per second of the flood, then what was held when the station stopped)
+    assert counted(token_lines) == n and counted(origin_lines) == origin_n
+    assert 1 < len(token_lines) <= elapsed / 1.0 + 2
+    assert 1 <= len(origin_lines) <= elapsed / 1.0 + 2
+    assert not any("forged line" in ln and not ln.startswith("station ") for ln in lines)
 
 
 def test_the_station_binds_locally_unless_told(tmp_path: Path) -> None:

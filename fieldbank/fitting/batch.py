@@ -29,6 +29,7 @@ from fieldbank.fitting.dbstore import DatabaseFitStore
 from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.fitting.records import fit_key, fit_patient
 from fieldbank.model import MODEL_VERSION
+from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
 
@@ -97,7 +98,8 @@ def fit_session(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
 
 
 def fit_all(db: Database, options: Mapping[str, Any], *, patients: Sequence[str] = (),
-            older_than: int | None = None, scheduler: str | None = None, jobs: int = 1,
+            older_than: int | None = None, scheduler: Scheduler | str | None = None,
+            jobs: int = 1,
             progress: Progress | None = None,
             say: Callable[[str], None] | None = None) -> BatchResult:
     """Fit every chosen session (:func:`fit_tasks`) with ``options`` (ArmFitter keyword

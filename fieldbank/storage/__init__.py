@@ -40,8 +40,9 @@ leave this package)::
     db.list_traces(haptic_session_id) / db.get_trace_array(trace_id) / db.trace_attrs(id)
     # batch runs and their jobs; documents derived from a fit                   jobs.py
     db.start_run(kind, engine, args, [(key, patient, session)]) -> JobRunRecord
-    db.start_job(run_id, key, worker) / db.finish_job(run_id, key, state, result, error,
-                 payload) -> JobRecord
+    db.start_job(run_id, key, worker) -> JobRecord
+    db.finish_job(run_id, key, state, result, error, payload, attempt=n) -> (JobRecord, written)
+    db.give_up_job(run_id, key, error) -> JobRecord      # failed, unless it ended meanwhile
     db.get_run(id) / db.run_by_token(token) / db.list_runs(kind=None, limit=None)
     db.list_jobs(run_id, states=None) / db.job_payloads(run_id) / db.clear_payloads(run_id)
     db.finish_run(run_id)

@@ -5,10 +5,11 @@ A **run** is one batch command spread over workers (``fieldbank fit --all``, ``r
 pending, one per unit of work (a session to fit, a group of report cases, a patient's plans to
 check), keyed uniquely within the run. The worker that runs a job marks it started
 (:meth:`Jobs.start_job`: ``attempts`` + 1, which worker, when) and finished
-(:meth:`Jobs.finish_job`: done, skipped or failed, with its result or error); a job whose
-worker died stays ``running`` until the engine runs it again. ``fieldbank jobs`` reads them:
-what ran, what failed, what is left. The run's random ``token`` lets a worker check that it
-writes into the database the run was started on.
+(:meth:`Jobs.finish_job`: done, skipped or failed, with its result or error) - only while
+that attempt is the job's live one; a job whose worker died stays ``running`` until the engine
+runs it again, or gives it up (:meth:`Jobs.give_up_job`: failed, unless it ended
+meanwhile). ``fieldbank jobs`` reads them: what ran, what failed, what is left. The run's
+random ``token`` lets a worker check that it writes into the database the run was started on.
 
 Derived documents of a fit (``fit_intervals``): the prediction intervals of one plan over the
 fit's parameter samples, stored under a key of everything they depend on
@@ -25,12 +26,14 @@ from __future__ import annotations
 import json
 import secrets
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import delete, func, select, update
+from sqlalchemy import CursorResult, delete, func, select, update
+from sqlalchemy import exc as sa_exc
 from sqlalchemy.orm import Session
 
 from fieldbank.errors import ParameterError, StorageError
+from fieldbank.storage.config import db_failure
 from fieldbank.storage.core import DatabaseCore, now, to_utc, to_utc_opt
 from fieldbank.storage.orm import FitIntervalRow, FitRow, JobRow, JobRunRow
 from fieldbank.stored.records import JOB_KINDS, JOB_STATES, JobRecord, JobRunRecord
@@ -40,7 +43,19 @@ from fieldbank.stored.words import no_run
 FINAL_STATES = ("done", "skipped", "failed")
 
 
-def _job(r: JobRow) -> JobRecord:
+#: A job row's columns, as an UPDATE ... RETURNING gives them back.
+_COLUMNS = tuple(JobRow.__table__.c)
+
+
+def _ended(state: str, error: str | None, result: Mapping[str, Any] | None,
+           payload: bytes | None) -> dict[str, Any]:
+    """The columns a job's end sets."""
+    return {"state": state, "finished_at": now(), "error": error, "payload": payload,
+            "result_json": None if result is None else json.dumps(dict(result), sort_keys=True)}
+
+
+def _job(r: Any) -> JobRecord:
+    """A job row (ORM or a returned row: the same column names) as its record."""
     return JobRecord(r.id, r.run_id, r.key, r.patient_code, r.session_label, r.state,
                      r.attempts, r.worker, to_utc_opt(r.started_at), to_utc_opt(r.finished_at),
                      r.error, None if r.result_json is None else json.loads(r.result_json))
@@ -131,33 +146,79 @@ class Jobs(DatabaseCore):
     def start_job(self, run_id: int, key: str, worker: str) -> JobRecord:
         """Mark a job started by ``worker`` (one more attempt); returns it as it was before
         when it had already finished (a task run twice finds its own result)."""
-        with self._write() as s:
-            r = self._job_row(s, run_id, key)
-            if r.state in FINAL_STATES:
-                return _job(r)
-            r.state, r.worker, r.started_at = "running", worker[:255], now()
-            r.attempts += 1
-            r.finished_at = None
-            return _job(r)
+        row = self._mark(update(JobRow).where(
+            JobRow.run_id == run_id, JobRow.key == key, JobRow.state.not_in(FINAL_STATES)
+        ).values(state="running", worker=worker[:255], started_at=now(), finished_at=None,
+                 attempts=JobRow.attempts + 1).returning(*_COLUMNS))
+        if row is not None:
+            return _job(row)
+        with self._read() as s:  # ended already (or no such job: the storage error)
+            return _job(self._job_row(s, run_id, key))
 
     def finish_job(self, run_id: int, key: str, state: str,
                    result: Mapping[str, Any] | None = None, error: str | None = None,
-                   payload: bytes | None = None) -> JobRecord:
-        """Record how a job ended: 'done', 'skipped' (nothing to do: found already) or
-        'failed' (``error`` says why); ``result`` a small JSON document, ``payload`` what the
-        run's own process reads back (:meth:`job_payloads`)."""
+                   payload: bytes | None = None, *, attempt: int) -> tuple[JobRecord, bool]:
+        """Record how attempt ``attempt`` of a job ended: 'done', 'skipped' (nothing to do:
+        found already) or 'failed' (``error`` says why); ``result`` a small JSON document,
+        ``payload`` what the run's own process reads back (:meth:`job_payloads`).
+
+        Only a live attempt ends its job: the job is written only while it is running under
+        that attempt. A job that another attempt ended, or that the run's process gave up on
+        (:meth:`give_up_job`), keeps what it holds. Returns the job as the database holds it
+        and whether this call wrote it."""
         if state not in FINAL_STATES:
             raise ParameterError(f"a job ends as one of {', '.join(FINAL_STATES)}; got "
                                  f"{state!r}.")
+        live = [JobRow.state == "running", JobRow.attempts == attempt]
+        if state == "failed":  # audited with it: a transaction of its own
+            return self._end_job(run_id, key, live, state, error, result, payload)
+        row = self._mark(update(JobRow).where(JobRow.run_id == run_id, JobRow.key == key, *live)
+                         .values(_ended(state, error, result, payload)).returning(*_COLUMNS))
+        if row is not None:
+            return _job(row), True
+        with self._read() as s:
+            return _job(self._job_row(s, run_id, key)), False
+
+    def give_up_job(self, run_id: int, key: str, error: str) -> JobRecord:
+        """Record as failed a job the run's process lost (its workers kept dying, the
+        scheduler went away) unless it has ended already; returns the job as the database
+        holds it, so that what the command reports is what is stored. A worker still running
+        it can no longer end it (:meth:`finish_job`)."""
+        return self._end_job(run_id, key, [JobRow.state.not_in(FINAL_STATES)], "failed",
+                             error)[0]
+
+    def _end_job(self, run_id: int, key: str, only_if: list[Any], state: str,
+                 error: str | None, result: Mapping[str, Any] | None = None,
+                 payload: bytes | None = None) -> tuple[JobRecord, bool]:
+        """One conditional UPDATE (the database decides between racing writers: a worker
+        ending its attempt and the run's process giving up), then the job as it is."""
         with self._write() as s:
             r = self._job_row(s, run_id, key)
-            r.state, r.finished_at, r.error = state, now(), error
-            r.result_json = None if result is None else json.dumps(dict(result), sort_keys=True)
-            r.payload = payload
-            if state == "failed":
+            written = cast(CursorResult[Any], s.execute(
+                update(JobRow).where(JobRow.id == r.id, *only_if).values(
+                    _ended(state, error, result, payload)),
+                execution_options={"synchronize_session": False})).rowcount > 0
+            if written and state == "failed":
                 self._audit(s, "fail", "job", r.id, {"run": run_id, "key": key,
                                                      "error": (error or "")[:500]})
-            return _job(r)
+            s.flush()
+            s.refresh(r)
+            return _job(r), written
+
+    def _mark(self, stmt: Any) -> Any:
+        """Run one statement that marks a job (an UPDATE ... RETURNING, atomic by itself) and
+        return its row, or None. A worker sends two per task, so they cost one round trip
+        each on a server: in autocommit, with no BEGIN and no COMMIT around them (on a busy
+        worker machine each round trip waits for the server's process to get a core). SQLite
+        runs in this process: its write transaction, one sync either way."""
+        if self.engine.dialect.name == "sqlite":
+            with self._write() as s:
+                return s.execute(stmt).one_or_none()
+        try:
+            with self.engine.connect().execution_options(isolation_level="AUTOCOMMIT") as c:
+                return c.execute(stmt).one_or_none()
+        except sa_exc.DBAPIError as exc:
+            raise StorageError(db_failure("Marking a job in", self.engine.url, exc)) from None
 
     def job_payloads(self, run_id: int) -> dict[str, bytes]:
         """Each finished job's payload by job key (jobs without one are left out)."""

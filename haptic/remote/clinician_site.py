@@ -3,25 +3,31 @@
 ``fieldbank haptic remote clinician --robot URL --peer HOST:PORT --key FILE`` runs
 :func:`serve_clinician`:
 
-1. says HELLO to the patient's site (authenticated with the session key, repeated until a
-   WELCOME or a refusal arrives): rate, clock mode, this machine's time; the WELCOME brings the
-   patient's arm geometry (to draw it, never its muscles) and where the patient's hand rests;
+1. shakes hands with the patient's site (:mod:`haptic.remote.handshake`: the same HELLO,
+   sealed under the key, repeated until a WELCOME or a refusal arrives; rate, clock mode, this
+   machine's time). The WELCOME, sealed under the session's keys, brings the patient's arm
+   geometry (to draw it, never its muscles) and where the patient's hand rests; a WELCOME at
+   another rate or clock mode is refused (BYE) before either site engages;
 2. runs an ordinary rendering session (:func:`haptic.session.serve`: the clinician's robot, its
    safety layer, the control channel, the station, the trace file and the database record)
    whose virtual arms are the link (:mod:`haptic.remote.environment`): the handle goes to the
-   patient's site, the patient's force comes back through the passivity controller;
+   patient's site, the patient's force comes back through the passivity controller. The
+   CONFIRM that proves this site holds the key goes with the loop's first tick, so the
+   patient's site arms its robot and starts its loop when this one starts;
 3. with a station, serves the remote panels (:mod:`haptic.remote.station`): the link's figures
    and the supervised assessment, which reads the patient's side from the link's tap
    (:mod:`haptic.remote.tap`) and logs the posterior after each probe and the clinician's
    answers to a file beside the trace;
-4. at the end says BYE, writes the link's log (every tick: both ports' energies, the passivity
-   controller, the round trip, the patient's side as received) as ``<trace>.link.h5``, and with a
-   database records the link (:meth:`Database.add_remote_link`), its per-tick columns as traces
-   of the session (``link.<column>``) and every posterior with the answer beside it
+4. at its planned end ramps the force out and says BYE; then says what happened (the account of
+   :mod:`haptic.remote.account`), writes the link's log (every tick: both ports' energies, the
+   passivity controller, the round trip, the patient's side as received) as
+   ``<trace>.link.h5``, and with a database records the link
+   (:meth:`Database.add_remote_link`), its per-tick columns as traces of the session
+   (``link.<column>``) and every posterior with the answer beside it
    (:meth:`Database.add_assessments`).
 
 A lost link ramps the clinician's force to zero (the port's watchdog); the patient's BYE, or
-its silence in lockstep, ends the session.
+its silence in lockstep, ramps it out and ends the session.
 """
 
 from __future__ import annotations
@@ -43,12 +49,15 @@ from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.dbsink import SESSION_PREFIX, HapticStore
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.modelinfo import ModelInfo
-from fieldbank.haptic.remote.channel import Endpoint, UdpTransport
+from fieldbank.haptic.remote.account import Account, account
+from fieldbank.haptic.remote.channel import Endpoint, UdpTransport, same_address
+from fieldbank.haptic.remote.config import SiteConfig
 from fieldbank.haptic.remote.environment import remote_environment
-from fieldbank.haptic.remote.patient_site import SiteConfig
-from fieldbank.haptic.remote.ports import CLINICIAN_COLUMNS, ClinicianPort
+from fieldbank.haptic.remote.handshake import Initiator
+from fieldbank.haptic.remote.linklog import CLINICIAN_COLUMNS
+from fieldbank.haptic.remote.ports import ClinicianPort
 from fieldbank.haptic.remote.tap import TapWriter
-from fieldbank.haptic.remote.wire import Authenticator, Kind, Role, key_fingerprint
+from fieldbank.haptic.remote.wire import Kind, SessionCipher, key_fingerprint
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.session import SessionResult, serve
@@ -117,6 +126,7 @@ class ClinicianResult:
     session: SessionResult
     link_file: str | None
     link_summary: dict[str, Any]
+    account: Account
     assessments: list[dict[str, Any]] = field(default_factory=list)
 
 
@@ -131,19 +141,39 @@ def default_bind(peer: tuple[str, int]) -> tuple[str, int]:
     return ("127.0.0.1" if ip.is_loopback else "0.0.0.0", 0)
 
 
-def _hello(endpoint: Endpoint, cfg: SiteConfig, wait_s: float, say: Say) -> dict[str, Any]:
-    """HELLO until a WELCOME (returned) or a refusal (raised)."""
+def _hello(transport: UdpTransport, key: bytes, session: int, cfg: SiteConfig, wait_s: float,
+           say: Say) -> tuple[SessionCipher, dict[str, Any]]:
+    """HELLO (the same bytes, every HELLO_EVERY_S) until the patient's site answers: the
+    session's cipher and the WELCOME (:mod:`haptic.remote.handshake`), or its refusal
+    (raised). The CONFIRM that proves this site holds the key goes with the first tick
+    (:attr:`ClinicianPort.greeting`): the patient's site arms its robot only then."""
+    ini = Initiator(key, session, {**cfg.hello(), "wall_time_s": time.time(),
+                                   "site": "clinician"})
     deadline = time.monotonic() + wait_s
-    msg = {**cfg.hello(), "wall_time_s": time.time(), "site": "clinician"}
     while True:
-        endpoint.send_message(Kind.HELLO, msg, 0.0)
-        d = endpoint.wait_message((Kind.WELCOME, Kind.BYE), HELLO_EVERY_S)
-        if d is not None:
-            m = dict(d.message or {})
-            if d.kind == Kind.BYE:
-                raise HapticError(f"the patient's site refused the session: "
-                                  f"{m.get('reason', 'no reason given')}")
-            return m
+        transport.send(ini.hello)
+        until = time.monotonic() + HELLO_EVERY_S
+        while (left := until - time.monotonic()) > 0 and transport.wait_readable(left):
+            for data, addr in transport.receive():
+                if not same_address(addr, transport.peer):
+                    ini.refused["address"] = ini.refused.get("address", 0) + 1
+                    continue
+                got = ini.answer(data)
+                if isinstance(got, str):
+                    raise HapticError(f"the patient's site refused the session: {got}")
+                if got is not None:
+                    cipher, d = got
+                    welcome = dict(d.message or {})
+                    if (welcome.get("rate_hz") != cfg.rate_hz
+                            or bool(welcome.get("lockstep")) != cfg.lockstep):
+                        why = (f"the patient's site runs at {welcome.get('rate_hz')} Hz, "
+                               f"lockstep {welcome.get('lockstep')}; this site at "
+                               f"{cfg.rate_hz} Hz, lockstep {cfg.lockstep}")
+                        transport.send(cipher.seal_json(Kind.BYE, {"reason": why}))
+                        raise HapticError(why)
+                    for reason, n in ini.refused.items():
+                        cipher.refused[reason] = cipher.refused.get(reason, 0) + n
+                    return cipher, welcome
         if time.monotonic() > deadline:
             raise HapticError(f"no answer from the patient's site within {wait_s:g} s (is it "
                               "listening, on that address, with the same session key?)")
@@ -235,18 +265,13 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
                           "lockstep too: sim://?mode=lockstep&…")
     transport = UdpTransport(bind or default_bind(peer), peer)
     session_id = secrets.randbits(63)
-    endpoint = Endpoint(transport, Authenticator(key, Role.CLINICIAN, session_id),
-                        cfg.impairment, cfg.lockstep, dt)
     tap: TapWriter | None = None
     tmp: tempfile.TemporaryDirectory[str] | None = None
     try:
         say(f"saying HELLO to the patient's site at {peer[0]}:{peer[1]} (key "
             f"{key_fingerprint(key)})")
-        welcome = _hello(endpoint, cfg, wait_s, say)
-        if welcome.get("rate_hz") != cfg.rate_hz or bool(welcome.get("lockstep")) != cfg.lockstep:
-            raise HapticError(f"the patient's site runs at {welcome.get('rate_hz')} Hz, "
-                              f"lockstep {welcome.get('lockstep')}; this site at {cfg.rate_hz} "
-                              f"Hz, lockstep {cfg.lockstep}")
+        cipher, welcome = _hello(transport, key, session_id, cfg, wait_s, say)
+        endpoint = Endpoint(transport, cipher, cfg.impairment, cfg.lockstep, dt)
         drawing = ArmParams.from_dict(welcome.get("drawing") or {},
                                       where="the patient's site's WELCOME")
         rest = welcome.get("rest_hand_m") or [0.0, 0.3]
@@ -258,7 +283,8 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
             q.setdefault("x0_m", f"{rest[0] + shoulder_offset_m[0]:.6f}")
             q.setdefault("y0_m", f"{rest[1] + shoulder_offset_m[1]:.6f}")
             robot = "sim://?" + urllib.parse.urlencode(q)
-        port = ClinicianPort(endpoint, cfg.link, dt)
+        port = ClinicianPort.for_site(endpoint, cfg, shoulder_offset_m)
+        port.greeting = Initiator.confirm(cipher)
         name = trace_name or ("remote-" + time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()))
         log_dir = Path(trace_dir) if trace_dir is not None else None
         if log_dir is None:
@@ -283,14 +309,19 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
         def prepare(rd: Renderer) -> None:
             if cfg.lockstep:
                 rd.clock = VirtualClock()
-            port.armed = lambda: rd.safety.mode == Mode.ARMED
+            port.robot_ok = lambda: rd.safety.mode == Mode.ARMED
+            port.latched = lambda: rd.safety.latched
+            late = rd.times
+            port.late_s = lambda: late.late_ns[-1] * 1e-9 if late.late_ns else 0.0
             port.commanded = lambda: (rd.fx, rd.fy)
             port.on_end = rd.request_stop
             rd.metadata["remote"] = remote_meta
 
+        if duration_s is not None:  # the port ends it, the force ramped out by then
+            port.plan_end(max(1, round(duration_s * cfg.rate_hz)), f"{duration_s:g} s passed")
         label = f"the patient at {peer[0]}:{peer[1]} (remote; drawn with its geometry only)"
         info = {"A": ModelInfo.describe(label), "B": ModelInfo.describe(label)}
-        result = serve(robot, drawing, drawing, model_info=info, duration_s=duration_s,
+        result = serve(robot, drawing, drawing, model_info=info, duration_s=None,
                        config=RendererConfig(rate_hz=cfg.rate_hz,
                                              shoulder_offset_m=shoulder_offset_m,
                                              state_wait_s=cfg.state_wait_s if cfg.lockstep
@@ -301,12 +332,19 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
                        patient_code=patient_code, patient_note=patient_note, say=say,
                        environment=remote_environment(port, drawing), on_renderer=prepare)
         port.finish()
-        try:
-            endpoint.send_message(Kind.BYE, {"reason": "the clinician ended the session"},
-                                  port.now())
-        except HapticError:
-            pass
-        summary = port.summary() | {"remote": remote_meta}
+        if port.ended:
+            ended, asked = f"the patient's site ended the session ({port.ended})", False
+        elif port.closed:
+            ended, asked = port.end_reason, True
+        else:
+            ended, asked = "stopped by the clinician", True
+        port.say_bye(f"the clinician's session ended: {ended}")
+        cols = port.log.arrays()
+        acc = account(cols["t_s"], cols["gain"], port.events, ended=ended, asked=asked,
+                      peer_name=port.peer_name)
+        for line in acc.lines():
+            say(line)
+        summary = port.summary() | {"remote": remote_meta, "account": acc.to_dict()}
         say(f"link: round trip {summary['link']['rtt_ms']} ms, "
             f"{summary['link']['loss_fraction']:.1%} lost, passivity controller on "
             f"{port.pc.active_ticks} of {port.tick_n} ticks "
@@ -323,7 +361,7 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
         if db is not None and result.database is not None:
             sid = int(result.database.removeprefix(SESSION_PREFIX))
             _record(db, sid, port, summary, remote_meta, rows)
-        return ClinicianResult(result, link_file, summary, rows)
+        return ClinicianResult(result, link_file, summary, acc, rows)
     finally:
         transport.close()
         if tap is not None:

@@ -5,18 +5,23 @@
 
 1. opens the robot, shakes hands at the loop's rate and asks for its force sensor (a robot
    without one cannot tell the clinician what the arm does: refused);
-2. listens on UDP for the clinician's HELLO (authenticated with the session key; nothing else
-   is answered), checks the rate and clock mode, answers WELCOME with what the clinician's
-   station needs to draw the arm — its segment lengths, side and range of motion, never its
-   muscles — and where the hand rests;
-3. arms the robot and runs the loop: each tick reads the robot (every safety check of
-   :mod:`haptic.remote.guard`), hands the patient's handle and the force the hand puts on it
-   to the :class:`~haptic.remote.ports.PatientPort`, which answers the servo force, and sends
-   that through the site's own limits (:mod:`haptic.safety`, the passivity controller of the
-   handle port off: the link's is in the port);
-4. ends on the clinician's BYE, after ``duration_s``, when the peer falls silent in lockstep, or
-   on Ctrl-C; commands zero and disarms; writes its log (every tick: the patient's handle and
-   force, the reference, the servo force, the energies at its port) as an HDF5 file.
+2. listens on UDP for the clinician's HELLO (:mod:`haptic.remote.handshake`: one that does not
+   open under the key is not answered), checks the rate, the clock mode and the time, answers
+   WELCOME — encrypted under the new session's keys — with what the clinician's station needs
+   to draw the arm (its segment lengths, side and range of motion, never its muscles) and where
+   the hand rests, and waits for the clinician to prove the key over this site's fresh nonce;
+   then the clinician's address is pinned for the session;
+3. arms the robot — inside the real-time context, right before the first tick, so nothing
+   stands between the ARM frame and the first FORCE (the device's watchdog is 20 ms; preparing
+   the process, a full garbage collection, took 0.2–1.6 s) — and runs the loop: each tick reads
+   the robot (every safety check of :mod:`haptic.remote.guard`), hands the patient's handle and
+   the force the hand puts on it to the :class:`~haptic.remote.ports.PatientPort`, which
+   answers the servo force, and sends that through the site's own limits (:mod:`haptic.safety`,
+   the passivity controller of the handle port off: the link's is in the port);
+4. ends after ``duration_s``, on Ctrl-C, or once the force has ramped out after the
+   clinician's BYE or (lockstep) silence; commands zero and disarms; says what happened (the
+   account of :mod:`haptic.remote.account`); writes its log (every tick: the patient's handle
+   and force, the reference, the servo force, the energies at its port) as an HDF5 file.
 
 A fault of the patient's robot latches (zero force, disarmed, its port stops following); the
 clinician's station shows it. The link being lost ramps the servo force to zero; the robot
@@ -28,29 +33,32 @@ from __future__ import annotations
 import time
 import urllib.parse
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from fieldbank.errors import ParameterError
 from fieldbank.files import write_new
-from fieldbank.haptic.clock import Clock, RealClock, VirtualClock, realtime
+from fieldbank.haptic.clock import Clock, RealClock, VirtualClock, cpu_plan, realtime
 from fieldbank.haptic.errors import HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.patient import resolve_patient
 from fieldbank.haptic.protocol import FaultCode
-from fieldbank.haptic.remote.channel import Endpoint, Impairment, UdpTransport
+from fieldbank.haptic.remote.account import Account, account
+from fieldbank.haptic.remote.channel import Address, Endpoint, UdpTransport
+from fieldbank.haptic.remote.config import SiteConfig
 from fieldbank.haptic.remote.guard import RobotGuard
-from fieldbank.haptic.remote.ports import LinkConfig, PatientPort
-from fieldbank.haptic.remote.wire import Authenticator, Kind, Role, key_fingerprint
-from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
+from fieldbank.haptic.remote.handshake import Responder
+from fieldbank.haptic.remote.ports import PatientPort
+from fieldbank.haptic.remote.wire import Datagram, Kind, SessionCipher, key_fingerprint, peek_kind
+from fieldbank.haptic.safety import Mode, Safety
 from fieldbank.haptic.simrobot import SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.redact import mask_url
 
-#: HELLOs whose wall-clock time differs from this machine's by more than this are refused
-#: (an old HELLO replayed to an idle site), s.
+#: HELLOs whose wall-clock time differs from this machine's by more than this are refused,
+#: s (an old HELLO replayed to an idle site is refused before any key is drawn for it).
 HELLO_MAX_SKEW_S = 120.0
 #: Device watchdog asked of the patient's robot, ms.
 WATCHDOG_MS = 20
@@ -59,46 +67,6 @@ Say = Callable[[str], None]
 
 def _quiet(msg: str) -> None:
     del msg
-
-
-@dataclass(frozen=True)
-class SiteConfig:
-    """Settings of either site's loop.
-
-    Attributes
-    ----------
-    rate_hz : int, Hz
-        The loop's rate (both sites must agree).
-    lockstep : bool
-        Virtual clocks advancing together (both sites simulated; faster than real time).
-    link : LinkConfig
-    impairment : Impairment
-        What this site does to the STATE datagrams it receives (tests and benchmarks).
-    safety : SafetyConfig
-        The limits of this site's robot (the handle port's passivity controller is off: the
-        link's controller is in the port).
-    state_wait_s : float, s
-        Lockstep robots: how long to wait for each STATE.
-    """
-
-    rate_hz: int = 1000
-    lockstep: bool = False
-    link: LinkConfig = field(default_factory=LinkConfig)
-    impairment: Impairment = field(default_factory=Impairment)
-    safety: SafetyConfig = field(default_factory=lambda: SafetyConfig(passivity=False))
-    state_wait_s: float = 0.05
-
-    def __post_init__(self) -> None:
-        if not (isinstance(self.rate_hz, int) and 250 <= self.rate_hz <= 4000):
-            raise ParameterError(f"The 'rate_hz' remote site setting must be an integer from "
-                                 f"250 to 4000 Hz; got {self.rate_hz!r} instead.")
-        if self.safety.passivity:
-            raise ParameterError("a remote site's robot runs without the handle port's "
-                                 "passivity controller (the link's controller replaces it): "
-                                 "give SafetyConfig(passivity=False)")
-
-    def hello(self) -> dict[str, Any]:
-        return {"rate_hz": self.rate_hz, "lockstep": self.lockstep}
 
 
 def sim_patient(robot: str) -> tuple[str, ArmParams, tuple[float, float], str]:
@@ -122,12 +90,13 @@ def sim_patient(robot: str) -> tuple[str, ArmParams, tuple[float, float], str]:
 
 @dataclass(frozen=True)
 class PatientResult:
-    """What the patient's site leaves behind: its log file and its figures."""
+    """What the patient's site leaves behind: its log file, its figures, its account."""
 
     ticks: int
     summary: dict[str, Any]
     log_file: str | None
     faults: list[dict[str, Any]]
+    account: Account
 
 
 class PatientSite:
@@ -151,22 +120,32 @@ class PatientSite:
         self.shoulder = shoulder_m
         self.safety = Safety(config.safety, self.dt)
         self.guard = RobotGuard(link, self.safety, self.dt)
-        self.port = PatientPort(endpoint, config.link, self.dt)
+        #: how late the present tick woke, s (the loop keeping time, for engaging)
+        self.late_s = 0.0
+        self.port = PatientPort.for_site(endpoint, config, shoulder_m)
         self.port.robot_ok = lambda: self.safety.mode == Mode.ARMED
+        self.port.latched = lambda: self.safety.latched
+        self.port.late_s = lambda: self.late_s
+        self.armed = False
         self._awaiting = False
         self._down = False
         self.stop = False
         self.reason = ""
+        #: the session ended as asked (its duration, the clinician's BYE, this site's Ctrl-C)
+        self.asked = False
 
     def arm(self) -> None:
+        """Arm the robot: the first FORCE must follow at once (the device's watchdog is a few
+        ticks), so a real-time loop arms inside :func:`haptic.clock.realtime`, right before
+        its first tick (:meth:`run`)."""
         link = self.link
         self.safety.rearm((link.x, link.y, link.vx, link.vy))
         self.guard.forgive()
         link.arm()
+        self.armed = True
 
     def _trip(self, code: int, message: str) -> None:
         self.safety.trip(code, self.port.now(), message)
-        self.port.fault = True
         if not self._down:
             try:
                 self.link.disarm()
@@ -202,25 +181,34 @@ class PatientSite:
             except LinkDown as exc:
                 self._down = True
                 self._trip(FaultCode.DISCONNECT, str(exc))
-        if self.port.ended:
+        if self.port.closed and not self.stop:
             self.stop = True
-            self.reason = f"the clinician's site: {self.port.ended}"
+            if self.port.ended:
+                self.reason = f"the clinician's site ended the session ({self.port.ended})"
+                self.asked = self.port.bye
+            else:
+                self.reason, self.asked = self.port.end_reason, True
 
     def run(self, duration_s: float | None, clock: Clock) -> None:
+        """Arm (when not yet) and tick until the port closes — its planned end after
+        ``duration_s``, or the clinician's end, the force ramped out either way — or
+        :attr:`stop`; a tick woken a whole period late skips the ticks it missed instead of
+        bursting through them."""
+        if not self.armed:
+            self.arm()
         period = round(1e9 / self.config.rate_hz)
-        end = None if duration_s is None else round(duration_s * self.config.rate_hz)
+        if duration_s is not None:
+            self.port.plan_end(max(1, round(duration_s * self.config.rate_hz)),
+                               f"{duration_s:g} s passed")
         deadline = clock.now_ns()
-        n = 0
-        while not self.stop and (end is None or n < end):
+        while not self.stop:
             clock.sleep_until(deadline)
-            self.tick()
-            n += 1
-            deadline += period
             now = clock.now_ns()
-            if now > deadline + period:
-                deadline = now  # far behind (suspended): never burst through missed ticks
-        if end is not None and n >= end and not self.reason:
-            self.reason = f"{duration_s:g} s passed"
+            self.late_s = (now - deadline) * 1e-9
+            self.tick()
+            deadline += period
+            if now >= deadline:
+                deadline += ((now - deadline) // period + 1) * period
 
     def finish(self) -> None:
         try:
@@ -229,6 +217,13 @@ class PatientSite:
                 self.link.disarm()
         except LinkDown:
             self._down = True
+
+    def account(self) -> Account:
+        """The session in words (:mod:`haptic.remote.account`)."""
+        cols = self.port.log.arrays()
+        return account(cols["t_s"], cols["gain"], self.port.events,
+                       ended=self.reason or "the loop stopped", asked=self.asked,
+                       peer_name=self.port.peer_name)
 
 
 def _await_sensor(link: RobotLink, robot: str) -> None:
@@ -259,6 +254,45 @@ def _check_hello(msg: dict[str, Any], cfg: SiteConfig) -> str:
     return ""
 
 
+def _handshake(transport: UdpTransport, key: bytes, cfg: SiteConfig, welcome: dict[str, Any],
+               wait_s: float, say: Say
+               ) -> tuple[SessionCipher, Datagram, Address, list[tuple[bytes, Address]]]:
+    """Answer HELLOs until a clinician proves the key over this site's fresh nonce: the
+    session's cipher, the datagram that proved it, the clinician's address, and what was read
+    after it (:mod:`haptic.remote.handshake`)."""
+    resp = Responder(key)
+    told: set[tuple[Any, str]] = set()
+    deadline = time.monotonic() + wait_s
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise HapticError(f"no clinician's site completed the handshake within {wait_s:g} s")
+        if not transport.wait_readable(min(left, 0.5)):
+            continue
+        batch = transport.receive()
+        answered: set[tuple[Any, bytes]] = set()  # a HELLO repeated while this site was busy
+        for i, (data, addr) in enumerate(batch):
+            if peek_kind(data) != Kind.HELLO:
+                got = resp.confirm(data, addr)
+                if got is not None:
+                    return got[0], got[1], addr, batch[i + 1:]
+                continue
+            hello = resp.open_hello(data)
+            if hello is None or (addr, hello.nonce) in answered:
+                continue
+            answered.add((addr, hello.nonce))
+            why = _check_hello(dict(hello.message), cfg)
+            if why:
+                transport.send_to(resp.refusal(hello, f"refused: {why}"), addr)
+                if (addr, why) not in told:
+                    told.add((addr, why))
+                    say(f"refused a HELLO from {addr[0]}:{addr[1]}: {why}")
+                continue
+            reply = resp.welcome(hello, addr, welcome)
+            if reply:
+                transport.send_to(reply, addr)
+
+
 def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmParams,
                   shoulder_m: tuple[float, float], *, config: SiteConfig | None = None,
                   duration_s: float | None = None, wait_s: float = 600.0,
@@ -283,7 +317,7 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
     duration_s : float, s, optional
         End after this long (None: at the clinician's BYE or Ctrl-C).
     wait_s : float, s
-        How long to wait for the clinician's HELLO.
+        How long to wait for a clinician to complete the handshake.
     log_dir : str or Path, optional
         Where the site's log goes (None: not written).
     name : str, optional
@@ -304,29 +338,10 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
         say(f"patient's robot {dev.device_id!r}: force sensor on, device limit "
             f"{dev.force_limit_n:g} N")
         transport = UdpTransport(bind)
-        endpoint = Endpoint(transport, Authenticator(key, Role.PATIENT), cfg.impairment,
-                            cfg.lockstep, dt)
-        endpoint.learn_peer = True
         host, port = transport.address
         say(f"listening for the clinician on {host}:{port} (UDP; key {key_fingerprint(key)})")
         if ready is not None:
             ready((host, port))
-        hello = None
-        deadline = time.monotonic() + wait_s
-        while hello is None:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise HapticError(f"no clinician's HELLO within {wait_s:g} s")
-            d = endpoint.wait_message((Kind.HELLO,), min(left, 1.0))
-            if d is None:
-                continue
-            why = _check_hello(dict(d.message or {}), cfg)
-            if why:
-                endpoint.send_message(Kind.BYE, {"reason": f"refused: {why}"}, 0.0)
-                say(f"refused a HELLO: {why}")
-                endpoint.auth.session = None
-                continue
-            hello = d
         sx, sy = shoulder_m
         rest = (link.x - sx, link.y - sy)
         geo = Arm.from_params(drawing)
@@ -335,30 +350,36 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
                    "rest_hand_m": [rest[0], rest[1]], "device": dev.device_id,
                    "force_limit_n": cfg.safety.force_limit_n,
                    "reach_m": float(geo.l1 + geo.l2)}
-        endpoint.send_message(Kind.WELCOME, welcome, 0.0)
-        say(f"clinician connected from {transport.peer}; session "
-            f"{endpoint.auth.session:016x}")
-        site = PatientSite(link, endpoint, cfg, shoulder_m)
-        site.arm()
         clock: Clock = VirtualClock() if cfg.lockstep else RealClock()
-        started = time.time()
-        try:
-            with realtime(not cfg.lockstep):
-                site.run(duration_s, clock)
-        except KeyboardInterrupt:
-            site.reason = "interrupted"
-        finally:
-            site.finish()
-        try:
-            endpoint.send_message(Kind.BYE, {"reason": site.reason or "the patient's site "
-                                             "ended"}, site.port.now())
-        except HapticError:
-            pass
-        say(f"session over: {site.reason}")
+        # the process is prepared for the loop (a full collection, SCHED_FIFO) while it waits
+        # for the clinician, so the loop starts the moment the clinician's does; pinned to
+        # the core the clinician's loop would not take were both sites on one machine
+        with realtime(not cfg.lockstep, cpu=cpu_plan()[1]) as grant:
+            cipher, first, peer, after = _handshake(transport, key, cfg, welcome, wait_s, say)
+            transport.set_peer(peer)  # pinned for the session: nothing from elsewhere is read
+            endpoint = Endpoint(transport, cipher, cfg.impairment, cfg.lockstep, dt, peer=peer)
+            site = PatientSite(link, endpoint, cfg, shoulder_m)
+            endpoint.deliver(first, 0.0)
+            endpoint.backlog = after
+            say(f"clinician confirmed from {peer[0]}:{peer[1]}; session "
+                f"{cipher.session:016x}")
+            started = time.time()
+            try:
+                site.run(duration_s, clock)  # it arms the robot right before its first tick
+            except KeyboardInterrupt:
+                site.reason, site.asked = "interrupted at this site", True
+            finally:
+                site.finish()
+        site.port.say_bye(site.reason or "the patient's site ended")
+        acc = site.account()
+        for line in acc.lines():
+            say(line)
         summary = site.port.summary() | {
-            "reason": site.reason, "robot": mask_url(robot), "device": dev.device_id,
+            "reason": site.reason, "realtime": grant.to_dict(), "robot": mask_url(robot),
+            "device": dev.device_id,
             "started_at_unix_s": started, "shoulder_m": list(shoulder_m),
             "key_fingerprint": key_fingerprint(key), "description": description,
+            "account": acc.to_dict(),
             "config": {"rate_hz": cfg.rate_hz, "lockstep": cfg.lockstep,
                        "link": cfg.link.to_dict(), "impairment": cfg.impairment.to_dict()}}
         faults = [r.to_dict() for r in site.safety.log_records]
@@ -372,11 +393,11 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
                                                    "dt_s": dt}))
             say(f"log: {path}")
         return PatientResult(site.port.tick_n, summary, None if path is None else str(path),
-                             faults)
+                             faults, acc)
     finally:
         if transport is not None:
             transport.close()
         link.close()
 
 
-__all__ = ["PatientResult", "PatientSite", "SiteConfig", "serve_patient", "sim_patient"]
+__all__ = ["PatientResult", "PatientSite", "serve_patient", "sim_patient"]

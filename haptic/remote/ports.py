@@ -12,13 +12,17 @@ offset (the clinician's robot sits wherever it sits). When a side engages (the c
 or the link comes back) the clinician's port takes a *clutch* offset so that the patient's
 robot starts from where the patient's hand is, never with a jump.
 
-Each port keeps its own safety: a **watchdog** (no STATE from the peer for ``watchdog_s`` → the
-link is lost: the force ramps to zero over ``ramp_s``, raised cosine, and the patient's robot
-stops following; when STATEs have flowed again for ``resume_s`` it ramps back in; the first
-link-up engages as soon as STATEs flow), the
+Each port keeps its own safety (:class:`~haptic.remote.supervision.LinkPort`): it engages only
+once its robot has been ready and its loop on time for ``ready_s``; it uses only the peer's
+STATEs that :mod:`haptic.remote.plausible` accepts (the first it refuses is a fault of the link:
+the force ramps to zero and stays there); a **watchdog** (no STATE from the peer for
+``watchdog_s`` → the link is lost: the force ramps to zero over ``ramp_s``, raised cosine, and
+the patient's robot stops following; when STATEs have flowed again for ``resume_s`` it ramps
+back in); the peer's BYE or silence ramps the force to zero before the session ends. Then the
 **passivity** controller of :mod:`haptic.remote.passivity` (an energy tank per port, topped up
-by what the other port hands over), and — in the site that owns the robot — the robot's own limits
-(:mod:`haptic.safety`). Every tick is one row of a :class:`LinkLog` (energy per tick included).
+by what the other port hands over), and — in the site that owns the robot — the robot's own
+limits (:mod:`haptic.safety`). Every tick is one row of a
+:class:`~haptic.remote.linklog.LinkLog` (energy per tick included).
 
 The patient's side (:class:`PatientPort`) turns the clinician's position into the motion of
 the patient's robot: the nominal velocity is the clinician's, plus a pull back toward the
@@ -32,186 +36,17 @@ once, and that is what hands the patient's energy back.
 
 from __future__ import annotations
 
-import array
-import io
 import math
-import time
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
 
-import numpy as np
-
-from fieldbank.files import to_json
-from fieldbank.haptic.pair import Ramp
 from fieldbank.haptic.remote.channel import Endpoint
-from fieldbank.haptic.remote.passivity import DEFAULT_RESERVE_J, ForcePort, VelocityPort
+from fieldbank.haptic.remote.config import LinkConfig
+from fieldbank.haptic.remote.linklog import CLINICIAN_COLUMNS, PATIENT_COLUMNS
+from fieldbank.haptic.remote.passivity import ForcePort, VelocityPort
+from fieldbank.haptic.remote.plausible import Plausibility
+from fieldbank.haptic.remote.supervision import LinkPort
 from fieldbank.haptic.remote.tap import TapWriter
-from fieldbank.haptic.remote.wire import FLAG_ARMED, FLAG_FAULT, FLAG_LINK_LOST, Kind, State
-from fieldbank.validation import Interval, check_fields
-
-#: Allowed range of every numeric field of :class:`LinkConfig`.
-LINK_BOUNDS: dict[str, Interval] = {
-    "watchdog_s": Interval(0.005, 2.0, "s"),
-    "resume_s": Interval(0.0, 10.0, "s"),
-    "ramp_s": Interval(0.01, 2.0, "s"),
-    "lockstep_wait_s": Interval(0.01, 60.0, "s"),
-    "start_wait_s": Interval(0.01, 3600.0, "s"),
-    "drift_time_s": Interval(0.01, 5.0, "s"),
-    "extrapolate_s": Interval(0.0, 0.2, "s"),
-    "servo_k_n_per_m": Interval(100.0, 50000.0, "N/m"),
-    "servo_b_n_s_per_m": Interval(0.0, 2000.0, "N·s/m"),
-    "servo_ff": Interval(0.0, 1.0, "1"),
-    "reserve_j": Interval(0.0, 1.0, "J"),
-    "patient_reserve_j": Interval(0.0, 1.0, "J"),
-    "damping_n_s_per_m": Interval(0.0, 200.0, "N·s/m"),
-    "force_filter_hz": Interval(0.0, 500.0, "Hz"),
-}
-#: Passivity modes: the time-domain controller of :mod:`haptic.remote.passivity`, or none
-#: (observer only: for measuring what the link would create).
-PASSIVITY_MODES = ("tdpa", "off")
-
-
-@dataclass(frozen=True)
-class LinkConfig:
-    """Settings of a port (ranges in :data:`LINK_BOUNDS`); both sites should agree.
-
-    Attributes
-    ----------
-    watchdog_s : float, s
-        No STATE from the peer for this long: the link is lost.
-    resume_s : float, s
-        STATEs must flow this long again before the force ramps back in.
-    ramp_s : float, s
-        Raised-cosine ramp of the force out (link lost) and in (engaged, resumed).
-    lockstep_wait_s : float, s
-        Lockstep: longest wall-clock wait for the peer's previous tick.
-    start_wait_s : float, s
-        Lockstep: longest wait for the peer's first STATE (its loop may start later: a station
-        to launch, a robot to arm).
-    drift_time_s : float, s
-        Patient's side: time constant of the pull of the robot's reference back to the
-        clinician's position.
-    extrapolate_s : float, s
-        Patient's side: the clinician's position is carried forward at its last velocity for
-        at most this long after the newest STATE (lost datagrams).
-    servo_k_n_per_m, servo_b_n_s_per_m : float
-        Patient's side: the servo that moves the patient's robot (assumption: stiff enough
-        that a hypertonic arm moves it ≤ 2 mm, damped enough for ≈ 3 kg of handle and arm).
-    servo_ff : float
-        Patient's side: fraction of the patient's measured force the servo compensates.
-    reserve_j : float, J
-        Energy the clinician's port keeps in its tank before handing the rest to the
-        patient's (:mod:`haptic.remote.passivity`): it pays the small give of a hand holding
-        still against a force without waiting a round trip. The patient's port keeps none: it
-        hands back at once whatever the patient returns.
-    damping_n_s_per_m : float, N·s/m
-        Clinician's side: a damper added to what is displayed (0: none).
-    force_filter_hz : float, Hz
-        Patient's side: cut-off of the low-pass filter (second-order Butterworth) on the
-        patient's measured force before it is used and sent (0: none). A hand gripping a
-        handle through a stiff grip rings at a few hundred hertz, and the force sensor reads
-        it; nobody feels it at the hand, but it would shake the clinician's handle.
-    passivity : str
-        'tdpa' (time-domain passivity controller) or 'off' (observer only).
-    """
-
-    watchdog_s: float = 0.1
-    resume_s: float = 0.5
-    ramp_s: float = 0.2
-    lockstep_wait_s: float = 5.0
-    start_wait_s: float = 120.0
-    drift_time_s: float = 0.2
-    extrapolate_s: float = 0.02
-    servo_k_n_per_m: float = 8000.0
-    servo_b_n_s_per_m: float = 120.0
-    servo_ff: float = 0.0
-    reserve_j: float = DEFAULT_RESERVE_J
-    patient_reserve_j: float = 0.0
-    damping_n_s_per_m: float = 0.0
-    force_filter_hz: float = 80.0
-    passivity: str = "tdpa"
-
-    def __post_init__(self) -> None:
-        check_fields(self, LINK_BOUNDS, what="remote link setting")
-        if self.passivity not in PASSIVITY_MODES:
-            raise ValueError(f"passivity must be one of {', '.join(PASSIVITY_MODES)}; got "
-                             f"{self.passivity!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
-
-
-class LinkLog:
-    """Per-tick rows of named float64 columns with units (grows in chunks, never copies)."""
-
-    def __init__(self, columns: tuple[tuple[str, str], ...]) -> None:
-        self.columns = columns
-        self._cols = [array.array("d") for _ in columns]
-        self.n = 0
-
-    def add(self, row: tuple[float, ...]) -> None:
-        for c, v in zip(self._cols, row, strict=True):
-            c.append(v)
-        self.n += 1
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {name: np.frombuffer(c, dtype=np.float64).copy()
-                for (name, _), c in zip(self.columns, self._cols, strict=True)}
-
-    def last(self, name: str) -> float:
-        i = [c for c, _ in self.columns].index(name)
-        return self._cols[i][-1] if self.n else math.nan
-
-    @property
-    def units(self) -> dict[str, str]:
-        return dict(self.columns)
-
-    def to_hdf5(self, attrs: dict[str, Any]) -> bytes:
-        """The log as an HDF5 image: one dataset per column with its ``unit``; ``attrs`` (JSON)
-        on the file."""
-        import h5py  # heavy: loaded only when a session's log is written
-
-        bio = io.BytesIO()
-        with h5py.File(bio, "w") as f:
-            for name, data in self.arrays().items():
-                d = f.create_dataset(name, data=data, compression="gzip", fletcher32=True)
-                d.attrs["unit"] = self.units[name]
-            for k, v in attrs.items():
-                f.attrs[k] = to_json(v)
-        return bio.getvalue()
-
-
-CLINICIAN_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("t_s", "s"), ("tick", "1"),
-    ("x_m", "m"), ("y_m", "m"), ("vx_m_per_s", "m/s"), ("vy_m_per_s", "m/s"),  # port (sent)
-    ("want_fx_n", "N"), ("want_fy_n", "N"),          # received patient force × ramp gain
-    ("fx_n", "N"), ("fy_n", "N"),                    # displayed (booked: what was commanded)
-    ("e_in_j", "J"), ("e_out_j", "J"),               # this port's observer
-    ("e_sent_j", "J"), ("e_received_j", "J"),        # its tank's hand-overs
-    ("peer_e_in_j", "J"), ("peer_e_out_j", "J"),     # the patient port, as last received
-    ("alpha_n_s_per_m", "N·s/m"),                    # passivity controller's damping
-    ("gain", "1"), ("link_ok", "1"), ("engaged", "1"), ("rtt_s", "s"),
-    ("peer_x_m", "m"), ("peer_y_m", "m"), ("peer_vx_m_per_s", "m/s"),
-    ("peer_vy_m_per_s", "m/s"), ("peer_fx_n", "N"), ("peer_fy_n", "N"),
-    ("peer_tick", "1"), ("peer_flags", "1"), ("new_state", "1"), ("lost", "1"),
-    ("dissipated_j", "J"),
-)
-PATIENT_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("t_s", "s"), ("tick", "1"),
-    ("x_m", "m"), ("y_m", "m"), ("vx_m_per_s", "m/s"), ("vy_m_per_s", "m/s"),  # patient handle
-    ("hand_fx_n", "N"), ("hand_fy_n", "N"),          # the patient's force on the handle
-    ("target_x_m", "m"), ("target_y_m", "m"),        # the clinician's position (received)
-    ("cmd_x_m", "m"), ("cmd_y_m", "m"),              # the robot's reference
-    ("cmd_vx_m_per_s", "m/s"), ("cmd_vy_m_per_s", "m/s"),
-    ("servo_fx_n", "N"), ("servo_fy_n", "N"),        # commanded to the patient's robot
-    ("e_in_j", "J"), ("e_out_j", "J"),
-    ("e_sent_j", "J"), ("e_received_j", "J"),
-    ("peer_e_in_j", "J"), ("peer_e_out_j", "J"),
-    ("beta_m_per_n_s", "m/(N·s)"),
-    ("gain", "1"), ("link_ok", "1"), ("engaged", "1"), ("rtt_s", "s"),
-    ("new_state", "1"), ("lost", "1"),
-)
+from fieldbank.haptic.remote.wire import FLAG_ARMED, State
 
 
 class LowPass:
@@ -245,125 +80,22 @@ class LowPass:
         return y
 
 
-class _Watchdog:
-    """Link lost when nothing was heard for ``watchdog_s``; back when heard for ``resume_s``."""
-
-    __slots__ = ("lost_once", "ok", "resume_s", "since", "timeout_s")
-
-    def __init__(self, cfg: LinkConfig) -> None:
-        self.timeout_s = cfg.watchdog_s
-        self.resume_s = cfg.resume_s
-        self.ok = False
-        self.lost_once = False     # the first link-up needs no wait; coming back after a loss does
-        self.since = math.inf      # when STATEs started flowing again
-
-    def update(self, now: float, last_heard: float) -> bool:
-        fresh = now - last_heard <= self.timeout_s
-        if not fresh:
-            if self.ok:
-                self.lost_once = True
-            self.ok = False
-            self.since = math.inf
-        elif not self.ok:
-            if self.since == math.inf:
-                self.since = now
-            if not self.lost_once or now - self.since >= self.resume_s:
-                self.ok = True
-        return self.ok
-
-
-class _Port:
-    """What both ends share: the endpoint, the clock, the watchdog, the ramp, the log."""
-
-    def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float,
-                 columns: tuple[tuple[str, str], ...]) -> None:
-        self.endpoint = endpoint
-        self.config = config
-        self.dt = dt_s
-        self.tick_n = 0
-        self.watchdog = _Watchdog(config)
-        self.ramp = Ramp(0.0)
-        self._ramp_ticks = max(1, round(config.ramp_s / dt_s))
-        self.log = LinkLog(columns)
-        self.peer: State | None = None
-        self.peer_flags = 0
-        self.new_state = False
-        self.events: list[dict[str, Any]] = []
-        self._t0 = time.monotonic()
-        self.link_ok = False
-        self.fault = False
-        #: why the peer ended the session ('' while it goes on): its BYE, or its silence in
-        #: lockstep; ``on_end`` is called once when it does
-        self.ended = ""
-        self.on_end: Callable[[], None] | None = None
-
-    def now(self) -> float:
-        """Session time, s: the tick's virtual time in lockstep, else the wall clock."""
-        if self.endpoint.lockstep:
-            return self.tick_n * self.dt
-        return time.monotonic() - self._t0
-
-    def _event(self, kind: str, t: float, **data: Any) -> None:
-        self.events.append({"t_s": round(t, 6), "event": kind, **data})
-
-    def _receive(self, t: float) -> None:
-        ep = self.endpoint
-        if ep.lockstep:
-            ep.wait_peer_tick(self.tick_n - 1, t, self.config.lockstep_wait_s
-                              if ep.peer_tick >= 0 else self.config.start_wait_s)
-        st = ep.receive(t)
-        while ep.messages:
-            d = ep.messages.popleft()
-            if d.kind == Kind.BYE and not self.ended:
-                self.ended = str((d.message or {}).get("reason") or "the peer said BYE")
-        if ep.lockstep and ep.peer_silent and not self.ended:
-            self.ended = "the peer fell silent"
-        if self.ended and self.on_end is not None:
-            self._event("peer_ended", t, reason=self.ended)
-            end, self.on_end = self.on_end, None
-            end()
-        self.new_state = st is not None
-        if st is not None:
-            self.peer = st
-            self.peer_flags = ep.peer_flags
-        was = self.link_ok
-        self.link_ok = self.watchdog.update(t, ep.last_heard_s) and self.peer is not None
-        if was and not self.link_ok:
-            self._event("link_lost", t, silent_s=round(t - ep.last_heard_s, 6))
-        elif self.link_ok and not was:
-            self._event("link_up", t, rtt_ms=ep.stats()["rtt_ms"])
-
-    def _set_ramp(self, on: bool) -> float:
-        target = 1.0 if on else 0.0
-        if self.ramp.end != target:
-            self.ramp.go(target, self._ramp_ticks)
-        return self.ramp.step()
-
-    def _flags(self, engaged: bool) -> int:
-        return ((FLAG_ARMED if engaged else 0) | (0 if self.link_ok else FLAG_LINK_LOST)
-                | (FLAG_FAULT if self.fault else 0))
-
-    @property
-    def rtt_s(self) -> float:
-        return self.endpoint.counters.rtt_s
-
-    def summary(self) -> dict[str, Any]:
-        """The link's figures and the passivity controller's activity (JSON-able)."""
-        raise NotImplementedError
-
-
-class ClinicianPort(_Port):
+class ClinicianPort(LinkPort):
     """The clinician's end: handle in, force out (shoulder frame of the patient).
 
-    ``armed``: whether the clinician's robot renders (the session tells the port); ``commanded``:
-    the force the robot was actually commanded on the previous tick (after the site's limits),
-    booked by the observer in place of what the port asked for.
+    ``commanded``: the force the robot was actually commanded on the previous tick (after the
+    site's limits), booked by the observer in place of what the port asked for.
     """
 
-    def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float) -> None:
-        super().__init__(endpoint, config, dt_s, CLINICIAN_COLUMNS)
+    role = "clinician"
+    peer_name = "the patient's site"
+    displays_peer_force = True
+    columns = CLINICIAN_COLUMNS
+
+    def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float,
+                 plausibility: Plausibility | None = None) -> None:
+        super().__init__(endpoint, config, dt_s, plausibility)
         self.pc = ForcePort(dt_s, config.reserve_j)
-        self.armed: Callable[[], bool] = lambda: True
         self.commanded: Callable[[], tuple[float, float]] | None = None
         self.offset = (0.0, 0.0)
         self.engaged = False
@@ -371,6 +103,9 @@ class ClinicianPort(_Port):
         self.fx = self.fy = 0.0
         #: mirrors every log row for another process (the station), when set
         self.tap: TapWriter | None = None
+        #: sent before the first STATE: the CONFIRM of the handshake, so that the patient's
+        #: site starts its loop (and arms its robot) when this one starts
+        self.greeting: bytes | None = None
 
     def tick(self, x: float, y: float, vx: float, vy: float) -> tuple[float, float]:
         """One tick with the clinician's handle at (x, y) moving at (vx, vy) (shoulder frame);
@@ -382,26 +117,29 @@ class ClinicianPort(_Port):
                 fx0, fy0 = self.commanded()
             pc.book(fx0, fy0, vx0, vy0)
         t = self.now()
+        if self.greeting is not None:
+            self.endpoint.transport.send(self.greeting)
+            self.greeting = None
+        self._local(t)
         self._receive(t)
         peer = self.peer
-        armed = self.armed()
-        engaged = armed and self.link_ok and peer is not None
+        engaged = (self.may_render(self.engaged) and self.link_ok and peer is not None
+                   and not self.link_fault and not self.closing)
         if engaged and not self.engaged:
             assert peer is not None
             self.offset = (peer.x - x, peer.y - y)  # the clutch: start where the patient is
-            self._event("engaged", t, clutch_m=[round(v, 6) for v in self.offset])
+            self._event("engaged", t, f"engaged at t = {t:.2f} s: the patient's hand is felt",
+                        clutch_m=[round(v, 6) for v in self.offset])
         elif self.engaged and not engaged:
-            self._event("disengaged", t, link_ok=self.link_ok, armed=armed)
+            self._event("disengaged", t, link_ok=self.link_ok, fit=self.fit)
         self.engaged = engaged
-        peer_engaged = bool(self.peer_flags & FLAG_ARMED)
-        g = self._set_ramp(engaged and peer_engaged)
+        g = self._gain(engaged and bool(self.peer_flags & FLAG_ARMED), t)
         wx = wy = 0.0
         if peer is not None:
             b = self.config.damping_n_s_per_m
             wx, wy = g * (peer.fx - b * vx), g * (peer.fy - b * vy)
-        fx, fy = wx, wy
-        if peer is not None:
             pc.energy.receive(peer.e_sent)
+        fx, fy = wx, wy
         if self.config.passivity == "tdpa":
             fx, fy = pc.correct(wx, wy, vx, vy)
         self._pending = (fx, fy, vx, vy)
@@ -434,27 +172,18 @@ class ClinicianPort(_Port):
             self.pc.book(fx0, fy0, vx0, vy0)
             self._pending = None
 
-    def summary(self) -> dict[str, Any]:
-        pc = self.pc
-        return {"role": "clinician", "ticks": self.tick_n,
-                "passivity": self.config.passivity,
-                "e_in_j": pc.energy.e_in, "e_out_j": pc.energy.e_out,
-                "passivity_active_ticks": pc.active_ticks,
-                "passivity_dissipated_j": pc.dissipated_j,
-                "link": self.endpoint.stats(), "events": list(self.events)}
 
+class PatientPort(LinkPort):
+    """The patient's end: the patient's handle and its force in, the servo force out."""
 
-class PatientPort(_Port):
-    """The patient's end: the patient's handle and its force in, the servo force out.
+    role = "patient"
+    peer_name = "the clinician's site"
+    columns = PATIENT_COLUMNS
 
-    ``robot_ok``: whether the patient's robot is armed and free of faults (the site tells the
-    port).
-    """
-
-    def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float) -> None:
-        super().__init__(endpoint, config, dt_s, PATIENT_COLUMNS)
+    def __init__(self, endpoint: Endpoint, config: LinkConfig, dt_s: float,
+                 plausibility: Plausibility | None = None) -> None:
+        super().__init__(endpoint, config, dt_s, plausibility)
         self.pc = VelocityPort(dt_s, config.patient_reserve_j)
-        self.robot_ok: Callable[[], bool] = lambda: True
         self.engaged = False
         self.cmd = (math.nan, math.nan)
         self._peer_at = 0.0
@@ -476,20 +205,23 @@ class PatientPort(_Port):
                 lp.reset((hand_fx, hand_fy))
                 self._filter_primed = True
             hand_fx, hand_fy = lp(0, hand_fx), lp(1, hand_fy)
+        self._local(t)
         self._receive(t)
         if self.new_state:
             self._peer_at = t
         peer = self.peer
-        want = (self.link_ok and peer is not None and bool(self.peer_flags & FLAG_ARMED)
-                and self.robot_ok())
+        want = (self.may_render(self.engaged) and self.link_ok and peer is not None
+                and bool(self.peer_flags & FLAG_ARMED) and not self.link_fault
+                and not self.closing)
         if want and not self.engaged:
             self.cmd = (x, y)
-            self._event("engaged", t)
+            self._event("engaged", t, f"engaged at t = {t:.2f} s: the robot follows the "
+                        "clinician's hand")
         elif self.engaged and not want:
-            self._event("disengaged", t, link_ok=self.link_ok)
+            self._event("disengaged", t, link_ok=self.link_ok, fit=self.fit)
         if want:
             self.engaged = True
-        g = self._set_ramp(want)
+        g = self._gain(want, t)
         if not want and g == 0.0:
             self.engaged = False
         tx = ty = tvx = tvy = math.nan
@@ -537,11 +269,3 @@ class PatientPort(_Port):
                       float(self.new_state), float(self.endpoint.counters.lost)))
         self.tick_n += 1
         return fx, fy
-
-    def summary(self) -> dict[str, Any]:
-        pc = self.pc
-        return {"role": "patient", "ticks": self.tick_n, "passivity": self.config.passivity,
-                "e_in_j": pc.energy.e_in, "e_out_j": pc.energy.e_out,
-                "passivity_active_ticks": pc.active_ticks,
-                "passivity_dissipated_j": pc.dissipated_j,
-                "link": self.endpoint.stats(), "events": list(self.events)}

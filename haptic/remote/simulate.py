@@ -3,10 +3,11 @@
 :func:`run_link` joins the clinician's site (the renderer with the link as its environment, the
 simulated clinician's robot following a script) and the patient's site (a simulated patient's
 robot with the arm as its virtual patient) through an in-memory transport, with the same
-authentication, impairment, ports, passivity controllers and safety layers as two processes
-over UDP, on virtual clocks advancing together. The benchmark (``benchmarks/bench_remote.py``)
-and the simulated trainee through a link use it; the two-process version is
-:mod:`haptic.remote.clinician_site` and :mod:`haptic.remote.patient_site`.
+handshake, sealed datagrams, impairment, ports, passivity controllers and safety layers as
+two processes over UDP, on virtual clocks advancing together. The benchmark
+(``benchmarks/bench_remote.py``) and the simulated trainee through a link use it; the
+two-process version is :mod:`haptic.remote.clinician_site` and
+:mod:`haptic.remote.patient_site`.
 
 :func:`stretch_script` is the scripted probing: slow and fast stretches of the arm along a
 direction from its resting hand, each held and released. :func:`transparency` reads a run: the
@@ -29,16 +30,19 @@ import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.haptic.clock import VirtualClock
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import LEAD_IN_S, format_path
 from fieldbank.haptic.pair import Environment
 from fieldbank.haptic.patient import PatientPlacement, VirtualPatient
 from fieldbank.haptic.recording import Trace
 from fieldbank.haptic.remote.channel import Endpoint, Impairment, MemoryTransport
+from fieldbank.haptic.remote.config import SiteConfig
 from fieldbank.haptic.remote.environment import Follower, RemoteArm, remote_environment
-from fieldbank.haptic.remote.patient_site import WATCHDOG_MS, PatientSite, SiteConfig
+from fieldbank.haptic.remote.handshake import Initiator, Responder
+from fieldbank.haptic.remote.patient_site import WATCHDOG_MS, PatientSite
 from fieldbank.haptic.remote.ports import ClinicianPort
-from fieldbank.haptic.remote.wire import Authenticator, Role, new_key
+from fieldbank.haptic.remote.wire import SessionCipher, new_key
 from fieldbank.haptic.renderer import Renderer, RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import SimDevice
@@ -187,16 +191,30 @@ def clinician_robot(hand_m: tuple[float, float], rate_hz: int,
     return link
 
 
+def handshake_in_memory(key: bytes, rate_hz: int) -> tuple[SessionCipher, SessionCipher]:
+    """The clinician's and the patient's ciphers of one session, from the handshake the two
+    sites run over UDP (:mod:`haptic.remote.handshake`), its datagrams handed over here."""
+    hello = {"rate_hz": rate_hz, "lockstep": True}
+    ini = Initiator(key, secrets.randbits(63), hello)
+    resp = Responder(key)
+    opened = resp.open_hello(ini.hello)
+    got = None if opened is None else ini.answer(resp.welcome(opened, "memory", hello))
+    if not isinstance(got, tuple):
+        raise HapticError(f"the in-memory handshake failed: {got!r}")
+    confirmed = resp.confirm(ini.confirm(got[0]), "memory")
+    if confirmed is None:
+        raise HapticError("the in-memory handshake was not confirmed")
+    return got[0], confirmed[0]
+
+
 def linked_endpoints(impairment: Impairment, tick_s: float, key: bytes | None = None
                      ) -> tuple[Endpoint, Endpoint]:
-    """The clinician's and the patient's endpoints of an in-memory link (lockstep), each
-    impairing what it receives (the patient's side with the next seed)."""
-    key = key or new_key()
-    session = secrets.randbits(63)
+    """The clinician's and the patient's endpoints of an in-memory link (lockstep) after the
+    handshake, each impairing what it receives (the patient's side with the next seed)."""
+    c, p = handshake_in_memory(key or new_key(), round(1.0 / tick_s))
     a, b = MemoryTransport.pair()
-    ce = Endpoint(a, Authenticator(key, Role.CLINICIAN, session), impairment, True, tick_s)
-    pe = Endpoint(b, Authenticator(key, Role.PATIENT, session),
-                  replace(impairment, seed=impairment.seed + 1), True, tick_s)
+    ce = Endpoint(a, c, impairment, True, tick_s)
+    pe = Endpoint(b, p, replace(impairment, seed=impairment.seed + 1), True, tick_s)
     return ce, pe
 
 
@@ -224,7 +242,7 @@ class Pair:
                                    force_noise_n=force_noise_n)
         self.patient = PatientSite(self.plink, pe, config, (0.0, 0.0))
         self.patient.arm()
-        self.port = ClinicianPort(ce, config.link, dt)
+        self.port = ClinicianPort.for_site(ce, config, (0.0, 0.0))
         drawing = patient.with_unimpaired_muscles()
         self.link = clinician_link
         rd = Renderer(clinician_link, drawing, drawing,
@@ -233,7 +251,8 @@ class Pair:
                       safety=config.safety, clock=VirtualClock(),
                       environment=remote_environment(self.port, drawing))
         self.renderer = rd
-        self.port.armed = lambda: rd.safety.mode == Mode.ARMED
+        self.port.robot_ok = lambda: rd.safety.mode == Mode.ARMED
+        self.port.latched = lambda: rd.safety.latched
         self.port.commanded = lambda: (rd.fx, rd.fy)
         rd.start()
 
@@ -261,8 +280,9 @@ class LinkChain:
         ce, pe = linked_endpoints(replace(config.impairment, seed=config.impairment.seed + seed),
                                   dt_s)
         self.dt_s = dt_s
-        self.port = ClinicianPort(ce, config.link, dt_s)
-        self.plink = patient_robot(params, round(1.0 / dt_s), seed=seed)
+        config = replace(config, rate_hz=round(1.0 / dt_s))
+        self.port = ClinicianPort.for_site(ce, config, (0.0, 0.0))
+        self.plink = patient_robot(params, config.rate_hz, seed=seed)
         self.site = PatientSite(self.plink, pe, config, (0.0, 0.0))
         self.site.arm()
         self.current: ArmParams = params

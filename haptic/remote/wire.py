@@ -1,23 +1,23 @@
-"""The remote link's datagrams: fixed layout, sequence numbers, timestamps, a MAC on each.
+"""The remote link's datagrams: fixed layout, sequence numbers, every byte after the handshake
+encrypted and authenticated (AES-256-GCM), the replay window; the session key file.
 
-Every datagram is one UDP payload::
+Every datagram is one UDP payload, all little-endian::
 
-    header  magic "FBR1" | version u8 | kind u8 | role u8 | flags u8 | session u64 | seq u64
-            | t_us i64 (sender's clock) | echo_us i64 (newest peer t_us received, −1: none)
-            | hold_us i64 (how long ago, when sending, that datagram arrived)
-    body    kind-specific (below)
-    tag     16 bytes: HMAC-SHA256(key, "fieldbank-remote-1" ‖ header ‖ body), first 16 bytes
+    header  magic "FBR2" | kind u8 | role u8 | session u64 | seq u64       (22 bytes, in clear,
+                                                                             authenticated)
+    sealed  AEAD(key of the sender's direction, nonce = role u8 ‖ 3 zero bytes ‖ seq u64,
+                 plaintext = flags u8 | t_us i64 | echo_us i64 | hold_us i64 | body,
+                 associated data = header)                                 (+ 16-byte tag)
 
-All little-endian. ``role`` is the sender's site (1 clinician, 2 patient): a site accepts only
-the other role, so a datagram reflected back to its sender is refused. ``seq`` counts every
-datagram a site sends (64 bits: it never wraps); ``session`` is drawn at random by the
-clinician's HELLO and carried by every later datagram of the session.
+``role`` is the sender's site (1 clinician, 2 patient); each direction has its own key and
+``seq`` counts every datagram a site seals (64 bits: it never wraps), so no (key, nonce) pair is
+ever used twice. ``session`` is drawn by the clinician and carried by every datagram of the
+session. ``t_us`` is the sender's clock, ``echo_us`` the newest peer ``t_us`` it had received
+(−1: none) and ``hold_us`` how long before sending that one arrived (the round trip).
 
-Kinds and bodies:
+Bodies by kind:
 
-* HELLO (clinician → patient), WELCOME (patient → clinician), BYE (either): a UTF-8 JSON
-  object of at most :data:`MAX_JSON_BYTES` (what each site tells the other: rate, clock mode,
-  the patient's arm geometry and rest hand, …);
+* WELCOME, CONFIRM, BYE: a UTF-8 JSON object of at most :data:`MAX_JSON_BYTES`;
 * STATE (either, every tick): ``tick u64``, then float64 ``x, y, vx, vy`` (the sender's port
   position and velocity, shoulder frame of the patient, m and m/s), ``fx, fy`` (the force at
   the sender's port, N: the clinician's displayed force, or the force the patient's hand puts
@@ -25,17 +25,22 @@ Kinds and bodies:
   link at the sender's port since the session began, and what the sender's energy tank has
   handed to the other side, J: :mod:`haptic.remote.passivity`).
 
-Authentication (:class:`Authenticator`): the MAC is checked in constant time before anything
-else is read; then the role, the session, and the replay window: a datagram whose ``seq`` was
-seen, or is more than :data:`REPLAY_WINDOW` behind the newest, is refused (a copy sent again by
-anyone is dropped; a late one under jitter is counted). Refusals are counted by reason and
-never raise into the loop.
+HELLO and REFUSE precede the session keys; their layout and the key schedule are in
+:mod:`haptic.remote.handshake`.
+
+Opening (:meth:`SessionCipher.open`): the header is read first (length, magic, role: a site
+accepts only the other role; session; kind: a handshake kind is refused once the session is
+keyed), then the replay window is consulted without changing it (a sequence number already
+accepted, or more than :data:`REPLAY_WINDOW` behind the newest, is refused unopened), then the
+AEAD tag is checked and the plaintext decoded — lengths, finite numbers, JSON — and only a
+datagram that passed all of it marks its sequence number as seen. A refused datagram (forged,
+garbled, NaN) therefore never consumes the number of a genuine one. Refusals are counted by
+reason and never raise into the loop.
 """
 
 from __future__ import annotations
 
 import hashlib
-import hmac
 import json
 import math
 import os
@@ -47,23 +52,25 @@ from enum import IntEnum
 from pathlib import Path
 from typing import Any
 
+from cryptography.exceptions import InvalidTag
+from cryptography.hazmat.primitives.ciphers.aead import AESGCM
+
 from fieldbank.haptic.errors import HapticError
 
-MAGIC = b"FBR1"
-VERSION = 1
-#: Bytes of the truncated HMAC-SHA256 tag (128 bits; RFC 2104 allows truncation to half).
+MAGIC = b"FBR2"
+#: Bytes of the AEAD tag (GCM's full 128 bits).
 TAG_BYTES = 16
-#: Bytes of a session key.
+#: Bytes of a session key (the shared key file) and of each derived key.
 KEY_BYTES = 32
-#: Domain separation of the MAC (a key reused elsewhere cannot forge these datagrams).
-_MAC_LABEL = b"fieldbank-remote-1"
 #: Datagrams this far behind the newest are refused outright; nearer ones once each.
 REPLAY_WINDOW = 64
-#: Largest JSON body of HELLO, WELCOME and BYE.
+#: Largest JSON body of WELCOME, CONFIRM, BYE (and of HELLO and REFUSE).
 MAX_JSON_BYTES = 4096
 
-HEADER = struct.Struct("<4sBBBBQQqqq")
+HEADER = struct.Struct("<4sBBQQ")
+INNER = struct.Struct("<Bqqq")
 STATE = struct.Struct("<Q9d")
+_NONCE = struct.Struct("<B3xQ")
 
 
 class Kind(IntEnum):
@@ -71,6 +78,12 @@ class Kind(IntEnum):
     WELCOME = 2
     STATE = 3
     BYE = 4
+    CONFIRM = 5
+    REFUSE = 6
+
+
+#: Kinds that belong to the handshake, before the session keys: refused once a session is keyed.
+HANDSHAKE_KINDS = frozenset({Kind.HELLO, Kind.REFUSE})
 
 
 class Role(IntEnum):
@@ -83,7 +96,7 @@ class Role(IntEnum):
 
 
 #: STATE flag bits.
-FLAG_ARMED = 0x01      # the sender's robot is armed and its side engaged
+FLAG_ARMED = 0x01      # the sender's robot is ready (armed, fault-free, on time) and engaged
 FLAG_LINK_LOST = 0x02  # the sender has not heard from its peer for its watchdog time
 FLAG_FAULT = 0x04      # the sender's safety layer holds a fault
 
@@ -106,7 +119,7 @@ class State:
 
 @dataclass(frozen=True)
 class Datagram:
-    """A datagram that passed authentication."""
+    """A datagram that was opened: authentic, of this session, not a replay, well formed."""
 
     kind: Kind
     role: Role
@@ -172,25 +185,54 @@ def key_fingerprint(key: bytes) -> str:
     return hashlib.sha256(b"fieldbank-remote-fingerprint" + key).hexdigest()[:16]
 
 
-class Authenticator:
-    """Signs this site's datagrams and checks the peer's.
+def json_body(kind: Kind, message: Mapping[str, Any]) -> bytes:
+    """``message`` as the JSON body of a ``kind`` datagram (refused above MAX_JSON_BYTES)."""
+    body = json.dumps(message, separators=(",", ":"), allow_nan=False).encode()
+    if len(body) > MAX_JSON_BYTES:
+        raise HapticError(f"a {kind.name} message is at most {MAX_JSON_BYTES} bytes; "
+                          f"this one is {len(body)}")
+    return body
+
+
+def parse_json(payload: bytes) -> dict[str, Any] | None:
+    """The JSON object in ``payload`` (None: not one)."""
+    if len(payload) > MAX_JSON_BYTES:
+        return None
+    try:
+        obj = json.loads(payload.decode()) if payload else {}
+    except (UnicodeDecodeError, ValueError):
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+def peek_kind(data: bytes) -> int:
+    """The kind byte of a datagram's header (0: not one of ours), without opening it."""
+    if len(data) < HEADER.size or data[:4] != MAGIC:
+        return 0
+    return data[4]
+
+
+class SessionCipher:
+    """Seals this site's datagrams and opens the peer's, under the session's two keys.
 
     Parameters
     ----------
-    key : bytes
-        The shared session key (:data:`KEY_BYTES`).
     role : Role
         This site's role.
-    session : int, optional
-        The session id (the clinician draws it; the patient learns it from a HELLO).
+    session : int
+        The session id.
+    send_key, receive_key : bytes
+        The keys of this site's direction and of the peer's (:mod:`haptic.remote.handshake`
+        derives them; :data:`KEY_BYTES` each).
     """
 
-    def __init__(self, key: bytes, role: Role, session: int | None = None) -> None:
-        if len(key) != KEY_BYTES:
-            raise HapticError(f"a session key is {KEY_BYTES} bytes; got {len(key)}")
-        self._key = key
+    def __init__(self, role: Role, session: int, send_key: bytes, receive_key: bytes) -> None:
+        if len(send_key) != KEY_BYTES or len(receive_key) != KEY_BYTES:
+            raise HapticError(f"a session's keys are {KEY_BYTES} bytes each")
         self.role = role
         self.session = session
+        self._send = AESGCM(send_key)
+        self._receive = AESGCM(receive_key)
         self.seq = 0
         self.newest = -1          # newest peer seq accepted
         self._seen = 0            # bitmap: bit k = seq (newest - k) was accepted
@@ -199,110 +241,105 @@ class Authenticator:
         self.accepted = 0
         self.late = 0             # accepted but older than the newest (reordered)
 
-    def _mac(self, data: bytes) -> bytes:
-        return hmac.new(self._key, _MAC_LABEL + data, hashlib.sha256).digest()[:TAG_BYTES]
-
     # --- sending ------------------------------------------------------------------------------
-    def seal(self, kind: Kind, body: bytes, *, flags: int = 0, t_us: int = 0, echo_us: int = -1,
-             hold_us: int = 0, session: int | None = None) -> bytes:
-        """One datagram of ``kind`` with ``body``, numbered and tagged."""
-        sess = self.session if session is None else session
-        if sess is None:
-            raise HapticError("no session yet: a patient site answers only after a HELLO")
+    def header(self, kind: Kind) -> bytes:
+        """The next datagram's header (takes its sequence number)."""
         self.seq += 1
-        head = HEADER.pack(MAGIC, VERSION, int(kind), int(self.role), flags & 0xFF, sess,
-                           self.seq, t_us, echo_us, hold_us)
-        data = head + body
-        return data + self._mac(data)
+        return HEADER.pack(MAGIC, int(kind), int(self.role), self.session, self.seq)
 
-    def seal_state(self, st: State, **kw: int) -> bytes:
+    def seal(self, kind: Kind, body: bytes, *, flags: int = 0, t_us: int = 0, echo_us: int = -1,
+             hold_us: int = 0, prefix: bytes = b"") -> bytes:
+        """One datagram of ``kind`` with ``body``, numbered, encrypted and tagged; ``prefix``
+        (clear, authenticated) goes between the header and the ciphertext."""
+        head = self.header(kind) + prefix
+        plain = INNER.pack(flags & 0xFF, t_us, echo_us, hold_us) + body
+        return head + self._send.encrypt(_NONCE.pack(int(self.role), self.seq), plain, head)
+
+    def seal_state(self, st: State, *, flags: int = 0, t_us: int = 0, echo_us: int = -1,
+                   hold_us: int = 0) -> bytes:
         return self.seal(Kind.STATE, STATE.pack(st.tick, st.x, st.y, st.vx, st.vy, st.fx, st.fy,
-                                                st.e_in, st.e_out, st.e_sent), **kw)
+                                                st.e_in, st.e_out, st.e_sent),
+                         flags=flags, t_us=t_us, echo_us=echo_us, hold_us=hold_us)
 
-    def seal_json(self, kind: Kind, message: Mapping[str, Any], **kw: int) -> bytes:
-        body = json.dumps(message, separators=(",", ":"), allow_nan=False).encode()
-        if len(body) > MAX_JSON_BYTES:
-            raise HapticError(f"a {kind.name} message is at most {MAX_JSON_BYTES} bytes; "
-                              f"this one is {len(body)}")
-        return self.seal(kind, body, **kw)
+    def seal_json(self, kind: Kind, message: Mapping[str, Any], **kw: Any) -> bytes:
+        return self.seal(kind, json_body(kind, message), **kw)
 
     # --- receiving ----------------------------------------------------------------------------
-    def _refuse(self, reason: str) -> None:
+    def refuse(self, reason: str) -> None:
+        """Count a refusal (also for refusals decided outside: the endpoint's address check)."""
         self.refused[reason] = self.refused.get(reason, 0) + 1
 
-    def open(self, data: bytes, accept_hello: bool = False) -> Datagram | None:
-        """The datagram in ``data`` if it is authentic, from the peer role, of this session
-        (a HELLO opens one when ``accept_hello``) and not a replay; None otherwise (counted in
-        :attr:`refused`)."""
-        if len(data) < HEADER.size + TAG_BYTES:
-            self._refuse("short")
+    def open(self, data: bytes, prefix_bytes: int = 0) -> Datagram | None:
+        """The datagram in ``data`` if it opens (module docstring); None otherwise, counted in
+        :attr:`refused`. ``prefix_bytes``: clear bytes after the header (a WELCOME's)."""
+        if len(data) < HEADER.size + prefix_bytes + INNER.size + TAG_BYTES:
+            self.refuse("short")
             return None
-        body, tag = data[:-TAG_BYTES], data[-TAG_BYTES:]
-        if not hmac.compare_digest(self._mac(body), tag):
-            self._refuse("mac")
-            return None
-        (magic, version, kind, role, flags, session, seq, t_us, echo_us,
-         hold_us) = HEADER.unpack_from(body)
-        if magic != MAGIC or version != VERSION:
-            self._refuse("version")
+        magic, kind, role, session, seq = HEADER.unpack_from(data)
+        if magic != MAGIC:
+            self.refuse("version")
             return None
         if role != self.role.peer:
-            self._refuse("role")
+            self.refuse("role")
+            return None
+        if session != self.session:
+            self.refuse("session")
             return None
         try:
             k = Kind(kind)
         except ValueError:
-            self._refuse("kind")
+            self.refuse("kind")
             return None
-        if session != self.session:
-            if not (accept_hello and k == Kind.HELLO):
-                self._refuse("session")
-                return None
-            self.session = session  # a new session: its numbering starts afresh
-            self.newest = -1
-            self._seen = 0
-        if not self._fresh(seq):
+        if k in HANDSHAKE_KINDS:
+            self.refuse("handshake")  # a HELLO into a keyed session: never a new session
             return None
-        payload = body[HEADER.size:]
+        why = self._window(seq)
+        if why:
+            self.refuse(why)
+            return None
+        split = HEADER.size + prefix_bytes
+        try:
+            plain = self._receive.decrypt(_NONCE.pack(role, seq), data[split:], data[:split])
+        except InvalidTag:
+            self.refuse("aead")
+            return None
+        flags, t_us, echo_us, hold_us = INNER.unpack_from(plain)
+        payload = plain[INNER.size:]
         st = None
         msg: Mapping[str, Any] | None = None
         if k == Kind.STATE:
             if len(payload) != STATE.size:
-                self._refuse("length")
+                self.refuse("length")
                 return None
             tick, *vals = STATE.unpack(payload)
             if not all(math.isfinite(v) for v in vals):
-                self._refuse("nan")
+                self.refuse("nan")
                 return None
             st = State(tick, *vals)
         else:
-            try:
-                obj = json.loads(payload.decode()) if payload else {}
-            except (UnicodeDecodeError, ValueError):
-                obj = None
-            if not isinstance(obj, dict):
-                self._refuse("json")
+            msg = parse_json(payload)
+            if msg is None:
+                self.refuse("json")
                 return None
-            msg = obj
+        self._mark(seq)  # only now: a refused datagram never takes a genuine one's number
         self.accepted += 1
         return Datagram(k, Role(role), flags, session, seq, t_us, echo_us, hold_us, st, msg)
 
-    def _fresh(self, seq: int) -> bool:
-        """Replay window: accept each seq once, and none more than REPLAY_WINDOW behind."""
+    def _window(self, seq: int) -> str:
+        """Why ``seq`` cannot be accepted ('' when it can), the window unchanged."""
+        if seq > self.newest:
+            return ""
+        back = self.newest - seq
+        if back >= REPLAY_WINDOW:
+            return "old"
+        return "replay" if self._seen & (1 << back) else ""
+
+    def _mark(self, seq: int) -> None:
         if seq > self.newest:
             shift = seq - self.newest
             self._seen = ((self._seen << shift) | 1) & ((1 << REPLAY_WINDOW) - 1) \
                 if self.newest >= 0 and shift < REPLAY_WINDOW else 1
             self.newest = seq
-            return True
-        back = self.newest - seq
-        if back >= REPLAY_WINDOW:
-            self._refuse("old")
-            return False
-        bit = 1 << back
-        if self._seen & bit:
-            self._refuse("replay")
-            return False
-        self._seen |= bit
+            return
+        self._seen |= 1 << (self.newest - seq)
         self.late += 1
-        return True

@@ -114,12 +114,16 @@ class StationProcess:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}/?token={self.config.token}"
 
-    def start(self, timeout_s: float = START_TIMEOUT_S) -> StationProcess:
+    def start(self, timeout_s: float = START_TIMEOUT_S,
+              stderr: IO[Any] | None = None) -> StationProcess:
+        """Start the process and wait until it listens; its log goes to ``stderr`` (default:
+        this process's)."""
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
         proc = subprocess.Popen([sys.executable, "-m", "fieldbank.haptic.station"],
-                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr,
+                                env=env)
         self._proc = proc
         assert proc.stdin is not None and proc.stdout is not None
         proc.stdin.write((json.dumps(self.config.to_dict()) + "\n").encode())

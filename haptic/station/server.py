@@ -57,8 +57,10 @@ from fieldbank.haptic.safety import FaultCode, Mode
 from fieldbank.haptic.snapshot import SnapshotReader
 from fieldbank.haptic.station.config import StationConfig
 from fieldbank.haptic.training import TrainingProtocol
+from fieldbank.logthrottle import ThrottledLog
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.sanitize import printable
 
 log = logging.getLogger("fieldbank.haptic.station")
 
@@ -74,6 +76,8 @@ MAX_PAGE_MESSAGE = 4096
 MAX_PAGES = 8
 #: How often the info is fetched even when nothing changed, s.
 INFO_REFRESH_S = 2.0
+#: Refused requests are logged at most this often per reason, with counts, s.
+REFUSED_LOG_INTERVAL_S = 1.0
 #: Commands a remote assessment's page sends to the station itself (not to the renderer).
 DESK_COMMANDS = ("prior", "assess_answer")
 #: How often a remote station reads the link's tap, s, and sends the link's figures.
@@ -412,13 +416,17 @@ def make_app(station: Station) -> web.Application:
     """The aiohttp application of ``station`` (routes in the module docstring)."""
     cfg = station.config
 
+    # a flood of refused requests gives a line a second per reason, with counts
+    refused = ThrottledLog(log, REFUSED_LOG_INTERVAL_S, schedule=lambda delay, fn: (
+        asyncio.get_running_loop().call_later(delay, fn)))
+
     @web.middleware
     async def guard(request: web.Request, handler: Handler) -> web.StreamResponse:
         if request.path == "/favicon.ico":  # browsers ask without the token; nothing to give
             return web.Response(status=404)
         if not _authorised(request, cfg.token):
-            log.warning("station request without a valid token refused: %s %s", request.method,
-                        request.path)
+            refused.note("station request without a valid token refused",
+                         f"{request.method} {printable(request.path)[:200]}")
             return web.Response(status=403, text=_REFUSED, content_type="text/html")
         resp = await handler(request)
         resp.headers["Referrer-Policy"] = "no-referrer"
@@ -441,7 +449,8 @@ def make_app(station: Station) -> web.Application:
     async def socket(request: web.Request) -> web.StreamResponse:
         origin = request.headers.get("Origin")
         if origin is not None and origin != f"http://{request.host}":
-            log.warning("station WebSocket from origin %s refused", origin)
+            refused.note("station WebSocket from another origin refused",
+                         printable(origin)[:200])
             return web.Response(status=403, text="cross-origin WebSocket refused")
         if len(station.pages) >= MAX_PAGES:
             return web.Response(status=503, text="too many station pages open")
@@ -485,6 +494,7 @@ def make_app(station: Station) -> web.Application:
             app["desk"] = asyncio.create_task(station.produce_desk())
 
     async def stop_producer(app: web.Application) -> None:
+        refused.flush()
         app["producer"].cancel()
         if "desk" in app:
             app["desk"].cancel()

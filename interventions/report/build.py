@@ -8,8 +8,10 @@ order whatever the number of workers, figures carry no dates, and the page state
 leaves it out only when asked, so that reruns can be byte-identical).
 The database's URL is never embedded (a report travels; the URL may carry a host, a user or a
 password). Text cells of ``metrics.csv`` are neutralised against formula injection
-(:func:`fieldbank.sanitize.csv_cell`). Each file is written to a temporary name and renamed,
-so a failed run leaves no half-written file.
+(:func:`fieldbank.sanitize.csv_cell`). The files are written together into a temporary
+directory beside ``--out`` and renamed into place once all are complete
+(:func:`fieldbank.files.write_directory`), so a failed run - a full disk - leaves nothing
+behind and its rerun is not refused.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from typing import Any
 from fieldbank.engine import progress_bar
 from fieldbank.errors import FileRefused
 from fieldbank.figures import svg
-from fieldbank.files import write_atomic
+from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, write_directory
 from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.compute import ALL_COLUMNS, CaseResult, compute_case
 from fieldbank.interventions.report.figures.cohort import (
@@ -45,6 +47,7 @@ from fieldbank.interventions.report.trust import (
     with_known_intervals,
 )
 from fieldbank.sanitize import csv_cell
+from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
 SCHEMA = "fieldbank.report"
@@ -207,7 +210,7 @@ def page_inputs(cases: list[CaseSpec], selection: Selection, title: str | None,
 def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: int = 1,
                  progress: bool = False, stamp: str | None = None,
                  title: str | None = None, accept_poor_fit: bool = False,
-                 force: bool = False, scheduler: str | None = None,
+                 force: bool = False, scheduler: Scheduler | str | None = None,
                  say: Callable[[str], None] | None = None) -> ReportOutput:
     """Select, compute and write the report; raises SelectionError for an empty selection,
     and for cases whose model comes from a poor fit unless ``accept_poor_fit`` (then each such
@@ -239,10 +242,16 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
         keep_intervals(db, cases, [r.intervals for r in results])
     inputs = page_inputs(cases, selection, title, stamp)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = [out / f for f in FILES]
     json_inputs = {**inputs, "selection": selection.to_dict()}
-    write_atomic(paths[1], metrics_csv(results).encode("utf-8"))
-    write_atomic(paths[2], metrics_json(results, json_inputs).encode("utf-8"))
-    write_atomic(paths[0], render(results, inputs, cohort_figures(results)).encode("utf-8"))
+    files = {FILES[1]: metrics_csv(results), FILES[2]: metrics_json(results, json_inputs),
+             FILES[0]: render(results, inputs, cohort_figures(results))}
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_directory(out, files)
+    except OSError as exc:
+        if exc.errno in DISK_FULL_ERRNOS:
+            raise FileRefused(disk_full_message(out, exc)) from None
+        raise FileRefused(f"cannot write the report into {out}: {exc.strerror or exc}; "
+                          "nothing was written.") from None
     return ReportOutput(out, paths[0], paths[1], paths[2], len(cases), used)

@@ -26,6 +26,7 @@ from fieldbank.interventions.report.compute import CaseResult, Figure, compute_c
 from fieldbank.interventions.report.figures.cohort import CheckPoint
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
 from fieldbank.interventions.report.trust import keep_intervals, with_known_intervals
+from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
 #: Plans per task: enough that a task (≈ 0.1 s per case) outweighs its scheduling, few enough
@@ -62,7 +63,7 @@ def report_cases(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
                 json.dumps(doc, ensure_ascii=False).encode("utf-8"))
 
 
-def compute_on_cluster(db: Database, cases: list[CaseSpec], scheduler: str, *,
+def compute_on_cluster(db: Database, cases: list[CaseSpec], scheduler: Scheduler | str, *,
                        accept_poor_fit: bool = False, progress: Progress | None = None,
                        say: Callable[[str], None] | None = None) -> list[CaseResult]:
     """Every case computed on the cluster, in order, read back from the database.
