@@ -4,8 +4,9 @@
 store, the integrity check - and the one place that writes. This package is what can be known
 or read without loading any of that, for the commands that must start at once:
 
-    records.py     the frozen records the database returns (PatientInfo, StoredMap, ...;
-                   fieldbank.storage returns these too), the job kinds and states
+    records.py     the records the list commands read (PatientInfo, StoredMap, ModelEntry,
+                   PlanRecord, JobRunRecord, JobRecord; fieldbank.storage returns them too),
+                   the job kinds and states
     revisions.py   the schema revisions this program knows, read from the migration files
     location.py    where the database is: the URL in force and where it came from, a SQLite
                    file, a PostgreSQL URL's connection arguments as SQLAlchemy makes them, the
