@@ -39,11 +39,10 @@ from fieldbank.evaluate.design import (
     seed_probes,
     severity_candidates,
 )
+from fieldbank.evaluate.reliability import ReliabilityBin, calibration_error
 from fieldbank.haptic.identify import (
-    ReliabilityBin,
     Trial,
     between_patients,
-    calibration_error,
     designed_vs_seed,
     flexor_patients,
     grid_patients,

@@ -11,7 +11,7 @@ from __future__ import annotations
 # fieldbank.fitting (ALGORITHMS, DEFAULT_ALGORITHM), .space, .uncertainty
 FIT_ALGORITHMS: tuple[str, ...] = ("mlsl+lbfgs", "crs2+bobyqa", "direct+lbfgs", "dual_annealing")
 FIT_DEFAULT_ALGORITHM = "mlsl+lbfgs"
-FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest")
+FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest", "slack")
 # fieldbank.model.MODEL_VERSION: the model version fits are made under (fit --older-than)
 MODEL_VERSION = 1
 FIT_DEFAULT_PRIOR_WEIGHT = 1.0
@@ -48,12 +48,10 @@ PROBE_FORCE_LIMIT_N = 40.0
 
 # fieldbank.measure.protocol: ProtocolConfig() defaults, in the units the options show
 MEASURE_PARTS: tuple[str, ...] = ("postural", "stiffness", "stretch")
-MEASURE_SPACING_MM = 40.0
-MEASURE_CENTRE = "0,0.50"
 MEASURE_DIRECTIONS = 8
 MEASURE_DISPLACEMENT_MM = 6.0
 MEASURE_HOLD_S = 0.6
-MEASURE_STRETCH_SPEED_M_PER_S = 1.0
+MEASURE_STRETCH_SPEED_M_PER_S = 1.2
 # the robot's force limit while measuring (SafetyConfig's default)
 MEASURE_FORCE_LIMIT_N = 40.0
 

@@ -273,7 +273,8 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
                    err=True)
     if out.fitter.status_ == "poor":
         click.echo("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons) + "). It is "
-                   "stored, but what-ifs and reports refuse it unless given --accept-poor-fit.",
+                   "stored, but what-ifs and reports refuse it unless given --accept-poor-fit. "
+                   "A contracture needs its slack length fitted: --fit km,alpha,beta,slack.",
                    err=True)
 
 
@@ -339,10 +340,10 @@ def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | 
     m = detail.model
     p = m.params
     click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}")
-    click.echo("  group                        Km N/m    alpha N    beta")
+    click.echo("  group                        Km N/m    alpha N    beta  slack mm")
     for i, g in enumerate(GROUPS):
         click.echo(f"  {g} {GROUP_NAMES[g]:<24}{p.km_n_per_m[i]:>10.1f} {p.alpha_n[i]:>10.1f} "
-                   f"{p.beta[i]:>7.3f}")
+                   f"{p.beta[i]:>7.3f} {1000 * p.slack_offset_m[i]:>+9.1f}")
     q = [math.degrees(v) for v in p.q_rest_rad]
     click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
     if detail.lineage:

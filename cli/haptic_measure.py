@@ -32,10 +32,11 @@ def _grid(text: str) -> tuple[int, int]:
 @click.option("--protocol", "parts", multiple=True, type=click.Choice(ch.MEASURE_PARTS),
               help="Part(s) to measure (repeatable; default all three).")
 @click.option("--grid", default="5x5", show_default=True, help="Postures, COLUMNSxROWS.")
-@click.option("--spacing-mm", type=float, default=ch.MEASURE_SPACING_MM, show_default=True,
-              help="Distance between postures.")
-@click.option("--centre", default=ch.MEASURE_CENTRE, show_default=True,
-              help="Grid centre X,Y in m, shoulder frame.")
+@click.option("--spacing-mm", type=float, default=None,
+              help="Distance between postures (default: 7% of the patient's arm length).")
+@click.option("--centre", default=None,
+              help="Grid centre X,Y in m, shoulder frame (default: the patient's hand at "
+                   "shoulder 40°, elbow 80°).")
 @click.option("--directions", type=int, default=ch.MEASURE_DIRECTIONS, show_default=True,
               help="Displacement directions per posture (stiffness).")
 @click.option("--displacement-mm", type=float, default=ch.MEASURE_DISPLACEMENT_MM,
@@ -51,12 +52,16 @@ def _grid(text: str) -> tuple[int, int]:
 @click.option("--raw", "raw_out", type=click.Path(dir_okay=False, path_type=Path),
               help="Where to write the raw recording (NWB); default: the data directory.")
 @click.option("--force", is_flag=True, help="Replace an existing --raw file.")
+@click.option("--must-see", "must_see", default=None, metavar="GROUPS",
+              help="Refuse, before the robot moves, a protocol that would not see these muscle "
+                   "groups' passive force and stretch reflex (e.g. ef,bf; 'all').")
 @json_option
 def measure(db_url: str | None, url: str, patient_code: str, session_label: str,
             session_date: date | None, parts: tuple[str, ...], grid: str,
-            spacing_mm: float, centre: str, directions: int, displacement_mm: float,
-            hold_s: float, stretch_speed: float, shoulder: str, force_limit_n: float,
-            raw_out: Path | None, force: bool, as_json: bool) -> None:
+            spacing_mm: float | None, centre: str | None, directions: int,
+            displacement_mm: float, hold_s: float, stretch_speed: float, shoulder: str,
+            force_limit_n: float, raw_out: Path | None, force: bool, must_see: str | None,
+            as_json: bool) -> None:
     """Measure PATIENT's postural and stiffness maps on the robot and store them.
 
     The robot holds the relaxed hand at each posture of the grid (postural), displaces it a
@@ -68,18 +73,22 @@ def measure(db_url: str | None, url: str, patient_code: str, session_label: str,
     from fieldbank.haptic.measure import MeasureConfig, measure_session
     from fieldbank.haptic.safety import SafetyConfig
     from fieldbank.measure.protocol import PARTS, ProtocolConfig
+    from fieldbank.measure.visibility import parse_groups
 
     protocol = ProtocolConfig(parts=parts or PARTS, grid=_grid(grid),
-                              spacing_m=spacing_mm / 1000, centre_m=xy_metres(centre, "--centre"),
+                              spacing_m=None if spacing_mm is None else spacing_mm / 1000,
+                              centre_m=None if centre is None else xy_metres(centre, "--centre"),
                               displacement_m=displacement_mm / 1000, directions=directions,
                               hold_s=hold_s, stretch_speed_m_per_s=stretch_speed)
     cfg = MeasureConfig(shoulder_offset_m=xy_metres(shoulder, "--shoulder"),
                         safety=SafetyConfig(force_limit_n=force_limit_n, passivity=False))
     with open_db(db_url) as db:
         res = measure_session(db, url, patient_code, session_label, protocol, cfg, raw_out,
-                              session_date, force)
+                              session_date, force, parse_groups(must_see) if must_see else (),
+                              say)
     if as_json:
         emit_json({"robot_time_s": res.robot_time_s, "raw_file": res.raw_file,
+                   "visibility": res.sight.to_dict() if res.sight else None,
                    "raw_sha256": res.raw_sha256, "trials": res.trials,
                    "trials_dropped": list(res.trials_dropped), **res.report.to_json_dict()})
     maps = sum(o.n_maps for o in res.report.outcomes)

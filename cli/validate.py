@@ -4,7 +4,8 @@ Without ``--loo``: every stored plan that was carried out (``whatif --save --giv
 against the maps its patient had measured after it
 (:func:`fieldbank.interventions.validate.validate_plans`); the verdict's rules and numbers are
 printed under the check (:class:`fieldbank.interventions.realised.Rules`). Exit status 1 when a
-plan's prediction is contradicted (failed, or a partial effect), else 0.
+plan's prediction is contradicted (failed, stronger than predicted, or a partial effect),
+else 0.
 
 With ``--loo``: each map of a patient's latest fit (or ``--model``'s) left out in turn and
 predicted by the others (:func:`fieldbank.fitting.crossval.cross_validate`): a check of the fit,
@@ -64,7 +65,7 @@ def plans_text(rep: ValidationReport) -> str:
 
 
 _SHORT = {"prediction confirmed": "confirmed", "partial effect": "partial",
-          "prediction failed": "failed"}
+          "prediction failed": "failed", "stronger than predicted": "stronger"}
 
 
 def overall(rep: ValidationReport) -> str:
@@ -172,8 +173,9 @@ def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int,
              scheduler: SchedulerFlags | None, db_url: str | None, as_json: bool) -> None:
     """Check given plans against maps measured after them; --loo: does the fit generalise.
 
-    Exit status 1 when a plan's prediction is contradicted (failed or partial effect), or with
-    --loo when the fit does not generalise to a map the others should predict; with
+    Exit status 1 when a plan's prediction is contradicted (failed, stronger than predicted or
+    partial effect), or with --loo when the fit does not generalise to a map the others should
+    predict; with
     --scheduler, also when a task failed (its plans were not checked).
     """
     # the checks and their numerics: when the command runs

@@ -121,6 +121,9 @@ def _rests_on(g: Guesses | None, warnings: Sequence[str]) -> list[str]:
         text += ", ".join(held) + (" (held at the unimpaired value)" if held else "")
         text += ("; " if held and other else "") + ", ".join(other)
         out += _wrap(text)
+    for n in (g.notes if g is not None else ()):  # a sentence, or 'ef: how to see it'
+        each = n[2:4] == ": "
+        out += _wrap(n if each else n[0].upper() + n[1:], indent="    " if each else "  ")
     for w in warnings:
         out += _wrap(f"WARNING: {w}", first="  ", indent="  ")
     return out

@@ -51,6 +51,7 @@ from fieldbank.evaluate.design import (
 )
 from fieldbank.evaluate.observation import with_force_noise
 from fieldbank.evaluate.probing import ProbeMotion
+from fieldbank.evaluate.reliability import ReliabilityBin, reliability_bins
 from fieldbank.evaluate.severity import (
     group_name,
     level_name,
@@ -286,51 +287,15 @@ RELIABILITY_BINS: tuple[tuple[float, float], ...] = (
     (0.0, 0.6), (0.6, 0.8), (0.8, 0.9), (0.9, 0.99), (0.99, 1.0))
 
 
-@dataclass(frozen=True)
-class ReliabilityBin:
-    """Answers stated with a probability in [low, high): how many, the mean stated
-    probability, the fraction right and its binomial SE."""
-
-    low: float
-    high: float
-    n: int
-    stated: float
-    observed: float
-
-    @property
-    def gap(self) -> float:
-        """Observed accuracy minus stated probability (negative: over-confident)."""
-        return self.observed - self.stated
-
-    @property
-    def se(self) -> float:
-        return math.sqrt(max(self.stated * (1 - self.stated), 1e-4) / self.n) if self.n \
-            else math.nan
-
-
 def reliability(trials: Sequence[Trial], raw: bool = False,
                 bins: Sequence[tuple[float, float]] = RELIABILITY_BINS
                 ) -> tuple[ReliabilityBin, ...]:
     """Stated group probability against observed accuracy, per bin of the stated probability
-    (``raw``: the posterior of the stated likelihood, before the classifier's correction)."""
-    stated = np.array([t.raw_group_probability if raw else t.group_probability
-                       for t in trials])
-    right = np.array([(t.raw_answer_group if raw else t.answer_group) == t.group
-                      for t in trials])
-    out = []
-    for k, (lo, hi) in enumerate(bins):
-        top = k == len(bins) - 1
-        m = (stated >= lo) & ((stated <= hi) if top else (stated < hi))
-        n = int(m.sum())
-        out.append(ReliabilityBin(lo, hi, n, float(stated[m].mean()) if n else math.nan,
-                                  float(right[m].mean()) if n else math.nan))
-    return tuple(out)
-
-
-def calibration_error(bins: Sequence[ReliabilityBin]) -> float:
-    """Expected calibration error: the trial-weighted mean |observed − stated| over bins."""
-    n = sum(b.n for b in bins)
-    return sum(b.n * abs(b.gap) for b in bins if b.n) / n if n else math.nan
+    (``raw``: the posterior of the stated likelihood, before the classifier's correction;
+    :func:`fieldbank.evaluate.reliability.reliability_bins`)."""
+    return reliability_bins(
+        [t.raw_group_probability if raw else t.group_probability for t in trials],
+        [(t.raw_answer_group if raw else t.answer_group) == t.group for t in trials], bins)
 
 
 def designed_vs_seed(candidates: Sequence[Candidate], *, groups: Sequence[str],

@@ -28,6 +28,11 @@ recording so far so nothing measured is lost.
 The samples (time, handle position and velocity, force sensor, commanded force) are kept at the
 loop rate, in the shoulder frame (robot frame − ``shoulder_offset_m``), with the force as the arm
 exerts it on the handle (the sensor's reading).
+
+Before the robot moves, :func:`measure_session` says per muscle group whether the planned
+postures and passes reach its slack length and its reflex threshold
+(:mod:`fieldbank.measure.visibility`), and refuses - with the change that would - when a group
+the operator must see would not be seen.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ import hashlib
 import json
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, date, datetime
 from pathlib import Path
@@ -54,6 +60,7 @@ from fieldbank.ingest import IngestReport, ingest_data
 from fieldbank.measure.nwbraw import RecordingInfo, write_recording
 from fieldbank.measure.protocol import Plan, ProtocolConfig, Segment, plan
 from fieldbank.measure.recording import Recording, Trial
+from fieldbank.measure.visibility import ProtocolSight, check_must_see, sight
 from fieldbank.model import Arm
 from fieldbank.redact import mask_url
 from fieldbank.sanitize import file_component
@@ -256,12 +263,15 @@ class MeasureResult:
     trials: int
     trials_dropped: tuple[str, ...]
     notes: tuple[str, ...] = ()
+    #: What the protocol could see per muscle group (:mod:`fieldbank.measure.visibility`).
+    sight: ProtocolSight | None = None
 
 
 def measure_session(db: Database, url: str, patient_code: str, session_label: str,
                     protocol: ProtocolConfig, config: MeasureConfig | None = None,
                     raw_out: str | Path | None = None, session_date: date | None = None,
-                    force: bool = False) -> MeasureResult:
+                    force: bool = False, must_see: Sequence[str] = (),
+                    report: Callable[[str], None] | None = None) -> MeasureResult:
     """Measure a patient on the robot and store the maps (raw recording kept).
 
     The raw recording is written as NWB (:mod:`fieldbank.measure.nwbraw`) to ``raw_out``
@@ -270,19 +280,28 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
     are stored with the same provenance and the raw file is kept unchanged in the database.
     When a fault stops the measurement, the raw file is still written (every sample taken)
     and :class:`MeasurementAborted` is raised; no map is stored.
+
+    Before the robot moves, what the protocol sees of each muscle group goes to ``report``
+    line by line; a group of ``must_see`` it would not see refuses the measurement
+    (:class:`fieldbank.measure.visibility.ProtocolBlind`, with a suggestion).
     """
     cfg = config or MeasureConfig()
     patient = db.get_patient(patient_code)
     arm = Arm.from_params(patient.arm_params())
     the_plan = plan(protocol, arm)
     check_plan_fits(the_plan, cfg)
+    seen = sight(the_plan, arm)
+    if report is not None:
+        for line in seen.table():
+            report(line)
+    check_must_see(the_plan, arm, must_see, lambda p: _fits(p, cfg), seen)
     started = datetime.now(UTC)
     stamp = started.strftime("%Y%m%dT%H%M%SZ")
     out = Path(raw_out) if raw_out is not None else (
         data_home() / "measurements"
         / f"{file_component(patient_code)}_{file_component(session_label)}_{stamp}.nwb")
     info = RecordingInfo(patient_code, session_label, f"robot {mask_url(url)}",
-                         start_time=started, protocol_json=json.dumps(asdict(protocol)))
+                         start_time=started, protocol_json=json.dumps(asdict(the_plan.config)))
     if out.exists() and not force:  # before the robot moves, not after
         raise HapticError(f"{out}: exists; give another --raw file or --force")
     try:
@@ -296,10 +315,18 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
         raise
     data = write_recording(rec, info, commanded, the_plan.postures_m)
     _write_raw(out, data, force)
-    report = ingest_data(db, [(str(out), data)], patient_code, session_label, session_date)
+    ingested = ingest_data(db, [(str(out), data)], patient_code, session_label, session_date)
     dropped = tuple(t.label + ": " + t.status for t in rec.trials if t.status)
     return MeasureResult(the_plan.duration_s, str(out), hashlib.sha256(data).hexdigest(),
-                         report, len(rec.trials), dropped, the_plan.notes)
+                         ingested, len(rec.trials), dropped, the_plan.notes, seen)
+
+
+def _fits(p: Plan, cfg: MeasureConfig) -> bool:
+    try:
+        check_plan_fits(p, cfg)
+    except ParameterError:
+        return False
+    return True
 
 
 def _write_raw(path: Path, data: bytes, force: bool) -> None:

@@ -11,6 +11,10 @@ what-if must say:
 * **the guesses** (:func:`guesses`): every parameter the fit did not identify, with the fit's
   reason (held at the unimpaired value, or left near the prior). The result lists them all: each
   enters the predicted fields;
+* **reflexes the maps did not see** (:func:`unseen_reflexes`): for every group whose stretch
+  reflex the fit held at the unimpaired value, a sentence saying that the maps cannot tell a
+  normal reflex from a severe one (or, where the maps limit the range, from one at the level
+  they still allow) and which stretch or moving map would;
 * **warnings** (:func:`plan_warnings`): a plan step that acts on a guessed parameter - botulinum
   toxin, rhizotomy or baclofen into a group whose reflex (α, β) was never identified, surgery or
   casting on a group whose passive stiffness (Km) was not - predicts a change that rests on the
@@ -35,7 +39,7 @@ what-if must say:
 Which parameters a step acts on follows from the catalogue's public contract (``targets()``
 and ``EFFECTS``): a change of α or β scales the group's reflex force, which rests on both α
 and β of the group; a change of Km or of the slack length moves its passive force, which rests
-on Km.
+on Km and (when the fit fitted it) the slack length.
 """
 
 from __future__ import annotations
@@ -50,12 +54,14 @@ import numpy as np
 
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions
+from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, SCALE, ratio_of_score
 from fieldbank.fitting.prior import PRIOR_VERSION, GuessRange, Prior, draw, ranges_from_report
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.samplemetrics import SampleMetrics, sample_metrics
-from fieldbank.model import MODEL_VERSION, FloatArray
+from fieldbank.interventions.suggest import reflex_test
+from fieldbank.model import MODEL_VERSION, Arm, FloatArray
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import ArmParams
 
@@ -71,8 +77,9 @@ GUESS_WIDENING = 1.25
 #: Changed parameter (catalogue ``EFFECTS`` key) -> what the change scales and the fitted
 #: parameters that size it.
 _FORCE_OF = {"alpha_n": ("reflex", ("alpha", "beta")), "beta": ("reflex", ("alpha", "beta")),
-             "km_n_per_m": ("passive", ("km",)), "slack_offset_m": ("passive", ("km",))}
-_WHAT = {"reflex": "stretch reflex (α, β)", "passive": "passive stiffness (Km)"}
+             "km_n_per_m": ("passive", ("km", "slack")),
+             "slack_offset_m": ("passive", ("km", "slack"))}
+_WHAT = {"reflex": "stretch reflex (α, β)", "passive": "passive force (Km, slack length)"}
 
 
 class PoorFitError(InterventionError):
@@ -187,6 +194,7 @@ class Guesses:
     interval_note: str = ""
     n_samples: int = 0
     accepted_poor_fit: bool = False
+    #: What the maps could not tell about the held reflexes (:func:`unseen_reflexes`).
     notes: tuple[str, ...] = field(default_factory=tuple)
     #: 95% bands of the fast-stretch torque curves (:func:`prediction_intervals`), for
     #: figures; not part of the JSON (the intervals of their peaks are).
@@ -205,6 +213,7 @@ class Guesses:
         ``intervals``."""
         return {"fit": self.fit_dict(),
                 "unidentified": [g.to_dict() for g in self.guesses],
+                "unseen_reflexes": list(self.notes),
                 "warnings": list(self.warnings),
                 "intervals": {"level": 0.95, "samples": self.n_samples,
                               "note": self.interval_note,
@@ -226,9 +235,42 @@ def check_fit(basis: FitBasis | None, accept_poor_fit: bool = False) -> str | No
         raise PoorFitError(
             f"the model comes from fit {basis.fit_id}, a poor fit ({why}); a prediction from "
             "it would not describe this patient. Refit (other maps, 'fieldbank fit --fit "
-            "km,alpha,beta,q_rest'), or give --accept-poor-fit to run it anyway (recorded in "
+            "km,alpha,beta,q_rest', or with a contracture's slack length: '--fit "
+            "km,alpha,beta,slack'), or give --accept-poor-fit to run it anyway (recorded in "
             "the output).")
     return f"poor fit accepted by the user (--accept-poor-fit): fit {basis.fit_id}: {why}"
+
+
+def unseen_reflexes(basis: FitBasis | None, arm: Arm) -> tuple[str, ...]:
+    """One sentence per group whose stretch reflex the fit held at the unimpaired value: what
+    the maps cannot tell apart, and which measurement would (module docstring). ``arm``: the
+    model before (its geometry sets the stretch and the direction named)."""
+    if basis is None:
+        return ()
+    held = [r for r in basis.ranges if r.component == "dynamic"]
+    if not held:
+        return ()
+    prior = Prior.for_arm(arm)
+    free, limited = [], []
+    for r in held:
+        level = SCALE.level(ratio_of_score(prior.high(r), "dynamic"), "dynamic")
+        if not r.limited_by_maps:
+            free.append(r.group)
+        elif level != "unimpaired":  # else the maps rule out any felt reflex
+            limited.append((r.group, level))
+    out = []
+    if free:
+        names = ", ".join(f"{MUSCLE_GROUP_NAMES[g]} ({g})" for g in free)
+        out.append(f"the maps cannot tell a normal stretch reflex from a severe one in the "
+                   f"{names}: no measured movement stretched {'it' if len(free) == 1 else 'them'}"
+                   " fast where the reflex fires. What would show it:")
+    for g, level in limited:
+        out.append(f"the maps rule out a stretch reflex of the {MUSCLE_GROUP_NAMES[g]} ({g}) "
+                   f"above {level}, but cannot tell a normal one from a {level} one. What would "
+                   "show it:")
+    for g in free + [g for g, _ in limited]:
+        out.append(f"{g}: {reflex_test(arm, g)}")
+    return tuple(out)
 
 
 def acted_on(plan: Plan) -> list[tuple[int, str, str, tuple[str, ...]]]:
@@ -478,12 +520,14 @@ def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: C
     if note:
         warn.insert(0, note)
     return Guesses(basis, guesses(basis, before), tuple(warn), iv.intervals, iv.note,
-                   iv.n_samples, note is not None, bands=iv.bands)
+                   iv.n_samples, note is not None, unseen_reflexes(basis, arms(before)),
+                   bands=iv.bands)
 
 
 def _values(params: ArmParams) -> dict[str, float]:
     out = {}
-    for kind, attr in (("km", "km_n_per_m"), ("alpha", "alpha_n"), ("beta", "beta")):
+    for kind, attr in (("km", "km_n_per_m"), ("alpha", "alpha_n"), ("beta", "beta"),
+                       ("slack", "slack_offset_m")):
         for g, v in zip(("sf", "se", "ef", "ee", "bf", "be"), getattr(params, attr),
                         strict=True):
             out[f"{kind}_{g}"] = float(v)
@@ -506,6 +550,7 @@ def summary_lines(g: Guesses) -> Sequence[str]:
                      "depends on them):")
         lines += [f"  {x.name} = {x.value:.4g}" + (" (held at unimpaired)" if x.held else "")
                   for x in g.guesses]
+    lines += [f"    {n}" if n[2:4] == ": " else f"  {n[0].upper()}{n[1:]}" for n in g.notes]
     for w in g.warnings:
         lines.append(f"WARNING: {w}")
     if g.intervals:

@@ -38,6 +38,14 @@ When the maps that see the change still differ from the model before + f × the 
 than the noise and the fit's spread explain (χ²/dof > 1), the SE is multiplied by √(χ²/dof)
 (:func:`misfit_scale`, a Birge ratio), as a fit's residual scale widens its intervals.
 
+**Never below what the noise allows.** The model before was fitted to the first session's
+maps: along the direction of the predicted change it cannot be known better than those maps'
+noise allows, 1/S₀ with S₀ the predicted change's whitened size on them (the first session's
+own sd). A fit's samples can claim less - parameters held at a guess or pinned by the prior do
+not vary in them - so the fit part of the SE is at least 1/S₀
+(:func:`fieldbank.interventions.spread.first_session_se`), and the SE is never below
+√(1/S² + 1/S₀²), the two sessions' noise alone.
+
 ``tests/test_validate_calibration.py`` checks the result on a seeded cohort with realised
 effects between 0 and 1.2 (the truth within 2 SE in ≥ 90% of decided cases);
 ``benchmarks/bench_validate.py`` measures the verdicts' false-alarm rate.
@@ -52,21 +60,27 @@ The verdict (:class:`Rules`, every number a documented default)
 ---------------------------------------------------------------
 With SE ≤ :data:`MAX_CHANGE_SE` and the interval f ± 2 SE = [lo, hi]:
 
-* **prediction confirmed**: lo ≥ :data:`CONFIRM_FLOOR` (0.5) and hi ≥ 1 − tolerance (0.8): at
-  least half the predicted change came, and the maps are consistent with all of it;
+* **prediction confirmed**: lo ≥ :data:`CONFIRM_FLOOR` (0.5), hi ≥ 1 − tolerance (0.8) and
+  f ≤ 1 + tolerance (1.2): at least half the predicted change came, the maps are consistent
+  with all of it, and the best estimate is not beyond the tolerance;
+* **stronger than predicted** (an over-effect): f > 1 + tolerance and lo > 1: clearly more
+  than predicted, best estimated beyond the tolerance (1.44 ± 0.15 was "confirmed" before: its
+  interval reached the tolerance, its estimate was far past it);
 * **partial effect**: 0 < lo and hi < 1 − tolerance: clearly some change, clearly less than
   predicted;
 * **prediction failed**: hi < 1 − tolerance and lo ≤ 0 (no change distinguishable from none;
-  an opposite change when hi < 0), or lo > 1 + tolerance (clearly stronger than predicted);
+  an opposite change when hi < 0);
   also, whatever f, when a map differs from the model before plus f × the predicted change by
   more than its noise and the fit's uncertainty explain (its χ²/n above the limit of
   :mod:`fieldbank.fitting.quality`): the maps changed in a way the plan does not predict;
 * **inconclusive** otherwise: the change is not observable (S < 4 sd), rests on a guess, its
   SE exceeds 0.25, or the interval reaches both below 0.5 and up to 0.8 (partial or as
-  predicted: the maps cannot tell). A misfit as above is not laid on the plan either where the
-  fit used no map measured like the misfitting one (:class:`Footprint`: the model may not
-  describe the arm there) or where a change of a group the fit held at the unimpaired value
-  explains it (:func:`guesses_explain`).
+  predicted: the maps cannot tell), or the estimate is beyond the tolerance but the interval
+  reaches 1 (as predicted or stronger: the maps cannot tell). A misfit as above is not laid on
+  the plan either where the fit used no map measured like the misfitting one
+  (:class:`~fieldbank.interventions.spread.Footprint`: the model may not describe the arm
+  there) or where a change of a group the fit held at the unimpaired value explains it
+  (:func:`guesses_explain`).
 
 With a calibrated SE a change that came as predicted is called failed or partial only when f
 falls more than 2 SE + 0.2 below 1 or above 1.2: well under 5% of such cases.
@@ -75,9 +89,8 @@ falls more than 2 SE + 0.2 below 1 or above 1.2: well under 5% of such cases.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -85,7 +98,7 @@ from fieldbank.errors import ParameterError
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, synthesize
 from fieldbank.fitting.problem import map_sd
 from fieldbank.fitting.quality import MapFit, Thresholds, map_fit
-from fieldbank.fitting.uncertainty import FitSamples
+from fieldbank.interventions.spread import arm_like
 from fieldbank.maps import FieldMap, model_map_like
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import BOUNDS, GROUPS, ArmParams
@@ -93,11 +106,12 @@ from fieldbank.params import BOUNDS, GROUPS, ArmParams
 #: Verdicts of a session, a plan and a whole check.
 CONFIRMED = "prediction confirmed"
 PARTIAL = "partial effect"
+OVER = "stronger than predicted"
 FAILED = "prediction failed"
 INCONCLUSIVE = "inconclusive"
 NOT_CHECKED = "not checked"
 #: Verdicts that contradict a prediction (``fieldbank validate`` exits with status 1).
-CONTRADICTED = (FAILED, PARTIAL)
+CONTRADICTED = (FAILED, OVER, PARTIAL)
 
 #: Width of the interval the verdict reads, in SE (≈ 95%).
 Z = 2.0
@@ -146,103 +160,25 @@ class Rules:
         z, t, lo, hi = self.z, self.tolerance, self.confirm_floor, 1.0 - self.tolerance
         return [
             "f = measured ÷ predicted change (1 as predicted, 0 none); SE from the later maps' "
-            "noise and the fit's samples; interval f ± "
-            f"{z:g} SE. Decided only when the predicted change moves the maps by ≥ "
-            f"{self.min_sensitivity:g} sd and SE ≤ {self.max_se:g}.",
-            f"  {CONFIRMED}: interval ≥ {lo:g} and reaching {hi:g} (at least half the "
-            "change, consistent with all of it)",
+            "noise and the fit's samples, never below what the two sessions' noise allows; "
+            f"interval f ± {z:g} SE. Decided only when the predicted change moves the maps by "
+            f"≥ {self.min_sensitivity:g} sd and SE ≤ {self.max_se:g}.",
+            f"  {CONFIRMED}: interval ≥ {lo:g} and reaching {hi:g}, f ≤ {1 + t:g} (at least "
+            "half the change, consistent with all of it, not beyond the tolerance)",
+            f"  {OVER}: f > {1 + t:g} and interval above 1: clearly more than predicted",
             f"  {PARTIAL}: interval inside (0, {hi:g}): clearly some change, clearly less "
             "than predicted",
-            f"  {FAILED}: interval below {hi:g} and reaching 0 (no change), or above "
-            f"{1 + t:g} (stronger); or a map changed in a way the plan does not predict "
-            "(χ²/n above its limit at the realised fraction, fit uncertainty allowed for)",
+            f"  {FAILED}: interval below {hi:g} and reaching 0 (no change); or a map changed "
+            "in a way the plan does not predict (χ²/n above its limit at the realised "
+            "fraction, fit uncertainty allowed for)",
             f"  {INCONCLUSIVE}: the maps cannot see the change, it rests on a guess, SE > "
-            f"{self.max_se:g}, or the interval spans below {lo:g} and up to {hi:g}; or the "
-            "maps differ from the model where the fit saw no map like them, or in a way a "
-            "parameter the fit guessed explains",
+            f"{self.max_se:g}, the interval spans below {lo:g} and up to {hi:g}, or f > "
+            f"{1 + t:g} with the interval reaching 1; or the maps differ from the model where "
+            "the fit saw no map like them, or in a way a parameter the fit guessed explains",
         ]
 
 
 DEFAULT_RULES = Rules()
-
-
-# --- what is known about the model before ------------------------------------------------------
-#: A later map is "like" a map the fit used when it has the same kind, a hand velocity within
-#: this much (m/s) and every position within :data:`COVER_DISTANCE_M` of one of its positions.
-COVER_SPEED_M_PER_S = 0.05
-COVER_DISTANCE_M = 0.01
-
-
-@dataclass(frozen=True, eq=False)
-class Footprint:
-    """Where and how a map the fit used was measured: kind, hand velocity (m/s), positions
-    (N, 2) m."""
-
-    kind: str
-    velocity_m_per_s: tuple[float, float]
-    positions_m: FloatArray
-
-    @classmethod
-    def of(cls, m: FieldMap) -> Footprint:
-        return cls(m.kind, m.velocity_m_per_s, np.asarray(m.positions_m, dtype=float))
-
-    def covers(self, m: FieldMap) -> bool:
-        """``m`` was measured like this map: same kind and velocity, positions among its."""
-        if m.kind != self.kind or math.dist(m.velocity_m_per_s,
-                                            self.velocity_m_per_s) > COVER_SPEED_M_PER_S:
-            return False
-        d = np.linalg.norm(m.positions_m[:, None, :] - self.positions_m[None, :, :], axis=2)
-        return bool(np.all(d.min(axis=1) <= COVER_DISTANCE_M))
-
-
-@dataclass(frozen=True, eq=False)
-class FitSpread:
-    """How sure the model before is: the fit's parameter samples written into it, the
-    parameters the fit did not identify, and why samples are missing when they are.
-
-    ``samples`` empty: the SE counts the later maps' noise only (``note`` says why).
-    """
-
-    fit_id: int | None = None
-    samples: tuple[ArmParams, ...] = ()
-    unidentified: tuple[str, ...] = ()
-    varied: frozenset[str] = frozenset()
-    held: tuple[str, ...] = ()
-    note: str = "the model before is not a fitted model: no fit uncertainty to carry"
-    #: The maps the fit used (None: no fit lies behind the model, which is taken as it is).
-    footprints: tuple[Footprint, ...] | None = None
-
-    def covers(self, m: FieldMap) -> bool:
-        """The model before was fitted to a map measured like ``m`` (always, without a fit):
-        where it was not, a misfit may be the model's, not a change."""
-        return self.footprints is None or any(f.covers(m) for f in self.footprints)
-
-    @classmethod
-    def from_report(cls, fit_id: int, report: Mapping[str, Any], before: ArmParams,
-                    same_model: bool, fitted_model_id: int | None = None,
-                    fit_maps: Sequence[FieldMap] = ()) -> FitSpread:
-        """From a stored fit report (:meth:`fieldbank.fitting.ArmFitter.report`) and the maps
-        the fit used (none given: no later map counts as measured like them)."""
-        unid = tuple(str(u.get("name")) for u in report.get("unidentified", [])
-                     if isinstance(u, Mapping))
-        held = tuple(str(h) for h in report.get("held_at_unimpaired", []) or [])
-        prints = tuple(Footprint.of(m.as_arm_on_handle()) for m in fit_maps)
-        found = FitSamples.from_report(report)
-        if found is None:
-            return cls(fit_id, (), unid, frozenset(), held,
-                       f"fit {fit_id} stored no parameter samples (refit to get them): the SE "
-                       "counts the later maps' noise only", prints)
-        if not same_model:
-            return cls(fit_id, (), unid, frozenset(), held,
-                       f"the model before is derived from fitted model {fitted_model_id} by "
-                       "earlier plans: the SE counts the later maps' noise only")
-        spread = np.ptp(found.values, axis=0) if found.values.size else np.zeros(0)
-        varied = frozenset(n for n, s in zip(found.names, spread, strict=True) if s > 0)
-        return cls(fit_id, tuple(found.params(before)), unid, varied, held,
-                   f"{found.values.shape[0]} parameter samples of fit {fit_id}", prints)
-
-
-NO_FIT = FitSpread()
 
 
 # --- one map: its values before, after, measured, at the fit and at each sample ----------------
@@ -296,13 +232,6 @@ class MapChange:
         sd = np.sqrt(self.sd**2 + self.spread_of(fraction) ** 2)
         return map_fit(0, self.measured, pred.reshape(self.measured.values.shape),
                        sd.reshape(self.measured.values.shape), thresholds, label=label)
-
-
-def arm_like(compiled: Arm, p: ArmParams) -> Arm:
-    try:  # a sample or a plan changes muscle values only: the geometry is compiled once
-        return compiled.with_muscles(p)
-    except ParameterError:
-        return Arm.from_params(p)
 
 
 def map_changes(before: ArmParams, after: ArmParams, maps: Sequence[tuple[int, FieldMap]],
@@ -361,12 +290,22 @@ class Fraction:
     #: √(χ²/dof) of the maps that see the change against the model before + f × the change
     #: (sd widened by the fit's spread), when above 1: misfit neither explains widens the SE.
     misfit: float = 1.0
+    #: 1/S₀: what the first session's noise allows along the predicted change (a floor of the
+    #: fit part, module docstring); None: not known.
+    first_se: float | None = None
+
+    @property
+    def fit_part(self) -> float | None:
+        """The fit part of the SE: the samples' spread, at least :attr:`first_se`."""
+        if self.fit_se is None and self.first_se is None:
+            return None
+        return max(self.fit_se or 0.0, self.first_se or 0.0)
 
     @property
     def se(self) -> float | None:
         if self.noise_se is None:
             return None
-        return math.hypot(self.noise_se, self.fit_se or 0.0) * self.misfit
+        return math.hypot(self.noise_se, self.fit_part or 0.0) * self.misfit
 
 
 def fraction_of(changes: Sequence[MapChange]) -> Fraction:
@@ -451,7 +390,7 @@ class Treated:
 def treated(before: ArmParams, after: ArmParams) -> tuple[Treated, ...]:
     """The groups and forces the change from ``before`` to ``after`` acts on, in model order.
     A change of α or β moves the reflex force, which rests on both; of Km or the slack
-    length, the passive force, which rests on Km."""
+    length, the passive force, which rests on Km and the slack length."""
     out = []
     for k, g in enumerate(GROUPS):
         changed = [f for f in _FIELDS if getattr(before, f)[k] != getattr(after, f)[k]]
@@ -460,7 +399,7 @@ def treated(before: ArmParams, after: ArmParams) -> tuple[Treated, ...]:
         if any(f in _REFLEX_FIELDS for f in changed):
             out.append(Treated(g, "reflex", (f"alpha_{g}", f"beta_{g}")))
         if any(f not in _REFLEX_FIELDS for f in changed):
-            out.append(Treated(g, "passive", (f"km_{g}",)))
+            out.append(Treated(g, "passive", (f"km_{g}", f"slack_{g}")))
     return tuple(out)
 
 
@@ -516,17 +455,6 @@ def guesses_explain(changes: Sequence[MapChange], before: ArmParams, held: Seque
     return tuple(n for n, x in zip(names, coef, strict=True) if abs(x) > 1e-9)
 
 
-def _whitened(arm_b: Arm, arm_x: Arm, maps: Sequence[FieldMap]) -> float:
-    """Whitened size (sd, each map's own sd) of the change from ``arm_b`` to ``arm_x``."""
-    total = 0.0
-    for raw in maps:
-        m = raw.as_arm_on_handle()
-        sd = map_sd(m).reshape(m.values.shape)
-        d = model_map_like(arm_x, m).values - model_map_like(arm_b, m).values
-        total += float(np.sum((d / sd) ** 2))
-    return math.sqrt(total)
-
-
 def positions_of(changes: Sequence[MapChange]) -> FloatArray:
     """The positions a suggestion is evaluated at: the later stiffness maps', else any map's."""
     stiff = [c.measured.positions_m for c in changes if c.measured.kind == "stiffness"]
@@ -542,9 +470,13 @@ def decide(f: float, se: float, rules: Rules = DEFAULT_RULES) -> tuple[str, str]
     lo, hi = f - rules.z * se, f + rules.z * se
     top = 1.0 - rules.tolerance
     span = f"{lo:.2f} to {hi:.2f} at {rules.z:g} SE"
-    if lo > 1.0 + rules.tolerance:
-        return FAILED, (f"the change is stronger than predicted: {span}, above "
-                        f"{1 + rules.tolerance:g}")
+    if f > 1.0 + rules.tolerance:
+        if lo > 1.0:
+            return OVER, (f"the change is stronger than predicted: {f:.2f}, beyond "
+                          f"{1 + rules.tolerance:g}, and {span}, above 1")
+        return INCONCLUSIVE, (f"the maps leave open whether the change came as predicted or "
+                              f"stronger: {f:.2f}, beyond {1 + rules.tolerance:g}, but {span} "
+                              "reaches 1")
     if hi < top:
         if hi < 0:
             return FAILED, f"the maps changed the opposite way to the prediction: {span}"

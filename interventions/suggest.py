@@ -17,9 +17,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from fieldbank.evaluate.probing import STRETCH_SPEED_RAD_S, lengthening_direction
-from fieldbank.evaluate.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES
+from fieldbank.evaluate.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES, POSITIONED_STRETCH
 from fieldbank.fitting.problem import DEFAULT_RELATIVE_SD, map_sd
-from fieldbank.interventions.realised import Treated, arm_like
+from fieldbank.interventions.realised import Treated
+from fieldbank.interventions.spread import arm_like
 from fieldbank.maps import FieldMap, model_map_like, postural_map, stiffness_map
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
@@ -35,6 +36,20 @@ def _sensitivity(arm_b: Arm, arm_a: Arm, m: FieldMap) -> float:
     ya = model_map_like(arm_a, m).values
     sd = map_sd(yb).reshape(yb.values.shape)
     return float(np.sqrt(np.sum(((ya - yb.values) / sd) ** 2)))
+
+
+def reflex_test(arm: Arm, group: str) -> str:
+    """In words, the measurement that would show ``group``'s stretch reflex: a fast stretch of
+    the joint it is graded on (a bi-articular group with the shoulder placed to lengthen it,
+    :mod:`fieldbank.evaluate.tone`), or a stiffness map measured while the hand moves along the
+    direction that lengthens it."""
+    joint, direction = GRADED_STRETCH[group]
+    placed = f" with the {POSITIONED_STRETCH[group]}" if group in POSITIONED_STRETCH else ""
+    d = lengthening_direction(arm, group)
+    return (f"a fast stretch of the {joint} into {direction}{placed} "
+            f"(≈ {math.degrees(STRETCH_SPEED_RAD_S):.0f}°/s), or a stiffness map measured while "
+            f"the hand moves at {SUGGESTED_SPEED_M_PER_S:g} m/s along ({d[0]:+.2f}, {d[1]:+.2f}) "
+            "(shoulder frame)")
 
 
 def suggestion(before: ArmParams, after: ArmParams, positions_m: FloatArray,

@@ -8,7 +8,7 @@ reflex alone (a dynamic-only, spastic group) - at a severity level of the one sc
 its own (55-95 kg, 1.55-1.90 m, right or left arm), and was given botulinum toxin A into that
 group (100-200 onabotulinumtoxinA units, seen 3-8 weeks later). Its first session is measured
 with one of :data:`MAP_SETS`, the model before is fitted to it (the fit's parameter samples
-travel with it, :class:`~fieldbank.interventions.realised.FitSpread`), and a later session is
+travel with it, :class:`~fieldbank.interventions.spread.FitSpread`), and a later session is
 measured from the truth with a chosen fraction of the toxin's predicted effect (the catalogue's
 ``emax`` scaled, so the force change is exactly that fraction), with the same map set at the
 same positions (the protocol repeated) or at new ones, and new noise. Noise: each value's sd
@@ -34,7 +34,7 @@ from fieldbank.fitting.problem import relative_scale
 from fieldbank.fitting.synthetic import MOVE_DIRECTION, scattered_positions
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.plan import Plan
-from fieldbank.interventions.realised import FitSpread
+from fieldbank.interventions.spread import FitSpread
 from fieldbank.interventions.validate import LaterSession, SessionCheck, check_session
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm, FloatArray
@@ -103,9 +103,11 @@ class CheckPatient:
         return Plan(steps).apply(self.truth)
 
 
-def cohort(n: int, seed: int = COHORT_SEED) -> tuple[CheckPatient, ...]:
+def cohort(n: int, seed: int = COHORT_SEED,
+           contracture: bool = False) -> tuple[CheckPatient, ...]:
     """``n`` patients: the six groups in turn, each severity level, every fourth one with a
-    reflex-only (dynamic) impairment."""
+    reflex-only (dynamic) impairment. ``contracture``: the hypertonic group is also 5-15 mm
+    short (its slack length, drawn uniform; the rest of the cohort as without it)."""
     out = []
     for i in range(n):
         rng = np.random.default_rng([seed, i])
@@ -115,10 +117,14 @@ def cohort(n: int, seed: int = COHORT_SEED) -> tuple[CheckPatient, ...]:
         base = ArmParams.from_anthropometry(float(rng.uniform(55.0, 95.0)),
                                             float(rng.uniform(1.55, 1.90)),
                                             "left" if rng.uniform() < 0.3 else "right")
-        out.append(CheckPatient(f"CHK-{i:03d}", g, target, level,
-                                synthesize({target: level}, base), base,
-                                float(np.round(rng.uniform(100.0, 200.0), 0)),
-                                float(np.round(rng.uniform(3.0, 8.0), 1)), seed + 97 * i))
+        truth = synthesize({target: level}, base)
+        units = float(np.round(rng.uniform(100.0, 200.0), 0))
+        weeks = float(np.round(rng.uniform(3.0, 8.0), 1))
+        if contracture:
+            short = float(np.random.default_rng([seed, i, 5]).uniform(0.005, 0.015))
+            truth = truth.with_group(g, slack_offset_m=-short)
+        out.append(CheckPatient(f"CHK-{i:03d}", g, target, level, truth, base, units, weeks,
+                                seed + 97 * i))
     return tuple(out)
 
 
@@ -157,11 +163,14 @@ class Fitted:
 
 
 def fit_first_session(p: CheckPatient, map_set: str, noise: float,
-                      replicates: int = 40) -> Fitted:
-    """Measure the first session with ``map_set`` and fit the model before to it."""
+                      replicates: int = 40,
+                      fit_kinds: tuple[str, ...] = ("km", "alpha", "beta")) -> Fitted:
+    """Measure the first session with ``map_set`` and fit the model before to it (the
+    parameter kinds ``fit_kinds``)."""
     rng = np.random.default_rng([p.seed, 1, round(noise * 1000), _key(map_set)])
     maps = measure(p.truth, MAP_SETS[map_set], noise, rng)
-    fit = ArmFitter(seed=p.seed % 10_000, replicates=replicates).fit(maps, p.base)
+    fit = ArmFitter(seed=p.seed % 10_000, replicates=replicates,
+                    fit=fit_kinds).fit(maps, p.base)
     spread = FitSpread.from_report(1, fit.report(), fit.params_, True, 1, maps)
     return Fitted(p, map_set, noise, fit.params_, spread, fit.status_,
                   (maps[0].positions_m, maps[1].positions_m))

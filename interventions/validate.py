@@ -56,10 +56,9 @@ from fieldbank.interventions.realised import (
     INCONCLUSIVE,
     MAX_CHANGE_SE,
     MAX_REPORTED_SE,
-    NO_FIT,
     NOT_CHECKED,
+    OVER,
     PARTIAL,
-    FitSpread,
     Fraction,
     MapChange,
     Rules,
@@ -71,6 +70,7 @@ from fieldbank.interventions.realised import (
     positions_of,
     treated,
 )
+from fieldbank.interventions.spread import NO_FIT, FitSpread, first_session_se
 from fieldbank.interventions.suggest import suggestion
 from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
@@ -79,7 +79,7 @@ from fieldbank.storage import Database, PlanRecord
 
 __all__ = [
     "CHANGE_TOLERANCE", "CONFIRMED", "CONTRADICTED", "FAILED", "INCONCLUSIVE",
-    "MAX_CHANGE_SE", "NOT_CHECKED", "PARTIAL", "LaterSession", "MapCheck", "PlanInputs",
+    "MAX_CHANGE_SE", "NOT_CHECKED", "OVER", "PARTIAL", "LaterSession", "MapCheck", "PlanInputs",
     "PlanValidation", "SessionCheck", "ValidationReport", "check_plan", "check_session",
     "given_on", "predicted_after", "read_plan_inputs", "validate_plans",
 ]
@@ -198,7 +198,7 @@ def plan_verdict(verdicts: Sequence[str]) -> str:
     """A plan's verdict from its sessions': failed before partial before confirmed (by one
     session, contradicted by none) before inconclusive; not checked without sessions."""
     found = set(verdicts)
-    for v in (FAILED, PARTIAL, CONFIRMED):
+    for v in (FAILED, OVER, PARTIAL, CONFIRMED):
         if v in found:
             return v
     return INCONCLUSIVE if found else NOT_CHECKED
@@ -254,7 +254,7 @@ class ValidationReport:
 
     @property
     def counts(self) -> dict[str, int]:
-        out = dict.fromkeys((CONFIRMED, PARTIAL, FAILED, INCONCLUSIVE, NOT_CHECKED), 0)
+        out = dict.fromkeys((CONFIRMED, OVER, PARTIAL, FAILED, INCONCLUSIVE, NOT_CHECKED), 0)
         for p in self.plans:
             out[p.verdict] += 1
         return out
@@ -347,13 +347,14 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
         note = "the plan document could not be read: the SE counts the later maps' noise only"
     changes, reasons = map_changes(before, after, later.maps, pairs)
     what = treated(before, after)
+    floor = first_session_se(spread, before, after)
     treated_names = [n for t in what for n in t.names]
     guessed = tuple(n for n in treated_names
                     if n in spread.unidentified and n not in spread.varied)
     # the prediction rests on guesses alone when every treated group's change is guessed
     all_guessed = bool(what) and all(any(n in guessed for n in t.names) for t in what)
     limits = physical_range(before, after)
-    f = fraction_of(changes)
+    f = dataclasses.replace(fraction_of(changes), first_se=floor)
     blocked = guessed if all_guessed else ()
     shown = _reportable(f, rules, blocked, limits)
     checks = tuple(_map_check(c, rules, thresholds, blocked, limits) for c in changes)
@@ -420,11 +421,11 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
                        f"measure the guess, not the plan; {advice} and refit to decide")
     elif se is None or se > rules.max_se:
         verdict = INCONCLUSIVE
-        parts = f"noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)}" + _misfit(f)
+        parts = f"noise {_f2(f.noise_se)}, fit {_f2(f.fit_part)}" + _misfit(f)
         value = (f"{f.value:.2f} ± {_f2(se)}" if shown else
                  f"not known to better than ± {_f2(se)}")
         bigger = ("the fit before the plan is too uncertain about the " + words
-                  if (f.fit_se or 0.0) > (f.noise_se or 0.0) else
+                  if (f.fit_part or 0.0) > (f.noise_se or 0.0) else
                   "the later maps are too noisy for this change")
         reasons.append(f"the realised fraction is {value} ({parts}): SE above "
                        f"{rules.max_se:g}, {bigger}")
@@ -441,12 +442,12 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
             why = (f"the measured change along the predicted one is beyond what the plan can "
                    f"produce (a fraction outside {lo:.2f} to {hi:.2f})")
         reasons.append(f"realised fraction {_f2(f.value) if shown else 'not reported'}"
-                       + (f" ± {se:.2f} (noise {_f2(f.noise_se)}, fit {_f2(f.fit_se)}"
+                       + (f" ± {se:.2f} (noise {_f2(f.noise_se)}, fit {_f2(f.fit_part)}"
                           f"{_misfit(f)})" if shown else "") + f": {why}")
     return SessionCheck(later.label, later.session_date.isoformat(), weeks, retimed, checks,
                         f.value if shown else None, se if shown else None, verdict,
                         tuple(reasons), _num(f.noise_se) if seen else None,
-                        _num(f.fit_se) if seen else None, f.sensitivity_sd,
+                        _num(f.fit_part) if seen else None, f.sensitivity_sd,
                         interval, limits, tuple(t.words for t in what), guessed, advice, note,
                         rules, decided)
 

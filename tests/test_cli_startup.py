@@ -226,9 +226,8 @@ def test_the_options_show_the_library_s_choices_and_defaults() -> None:
     assert ch.PASSIVITY_MODES == PASSIVITY_MODES
     assert ch.REMOTE_RATE_HZ == (RATE_BOUNDS.low, RATE_BOUNDS.high)
     assert ch.MODEL_VERSION == MODEL_VERSION
-    assert (ch.MEASURE_SPACING_MM, ch.MEASURE_DISPLACEMENT_MM) == pytest.approx(
-        (pc.spacing_m * 1000, pc.displacement_m * 1000))
-    assert tuple(float(v) for v in ch.MEASURE_CENTRE.split(",")) == pc.centre_m
+    assert ch.MEASURE_DISPLACEMENT_MM == pytest.approx(pc.displacement_m * 1000)
+    assert pc.spacing_m is None and pc.centre_m is None  # the grid follows the patient's arm
     assert (ch.MEASURE_DIRECTIONS, ch.MEASURE_HOLD_S, ch.MEASURE_STRETCH_SPEED_M_PER_S) == (
         pc.directions, pc.hold_s, pc.stretch_speed_m_per_s)
     assert ch.MEASURE_FORCE_LIMIT_N == SafetyConfig().force_limit_n

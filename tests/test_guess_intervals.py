@@ -11,6 +11,7 @@ import pytest
 
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions
+from fieldbank.evaluate.probing import standard_stretches
 from fieldbank.evaluate.severity import classify, synthesize
 from fieldbank.fitting import ArmFitter
 from fieldbank.fitting.prior import (
@@ -93,13 +94,17 @@ def test_draws_replace_only_the_held_parameters_and_run_through_the_vectorised_p
     for k, n in enumerate(names):
         col = drawn.values[:, k]
         if n in held:  # one draw in each twentieth of the range: from its bottom slice to
-            # its top slice, past the scale's severe arm
+            # its top slice - past the scale's severe arm, for a bi-articular reflex up to
+            # where it adds as much to a joint stretch as a severe mono-articular one
             g, comp = n[-2:], "passive" if n.startswith("km") else "dynamic"
-            edges = prior.values(g, comp, np.array([SCORE_HIGH / 20, 4.0]))[n]
-            severe = synthesize({f"{g}:{comp}": "severe"})
-            field = {"km": "km_n_per_m", "alpha": "alpha_n", "beta": "beta"}[n[:-3]]
+            top = prior.top(g, comp)
+            edges = prior.values(g, comp, np.array([top / 20, 0.95 * top]))[n]
             assert col.min() <= edges[0] + 1e-9, n
-            assert col.max() >= getattr(severe, field)[GROUPS.index(g)] * (1 - 1e-3), n
+            assert col.max() >= edges[1] * (1 - 1e-9), n
+            if g != "bf":
+                severe = synthesize({f"{g}:{comp}": "severe"})
+                field = {"km": "km_n_per_m", "alpha": "alpha_n", "beta": "beta"}[n[:-3]]
+                assert col.max() >= getattr(severe, field)[GROUPS.index(g)] * (1 - 1e-3), n
         else:  # the fit's samples, cycled
             np.testing.assert_array_equal(col, values[np.arange(20) % 8, k])
     assert draw(samples, ranges, Prior.for_arm(arm), 20, seed=4).values.tolist() == \
@@ -196,3 +201,38 @@ def test_an_identified_reflex_keeps_its_samples(
     k = names.index("km_ef")
     np.testing.assert_array_equal(drawn.values[:, drawn.names.index("km_ef")], values[:, k])
     assert isinstance(ranges_from_report(report)[0], GuessRange)
+
+
+def test_a_held_reflex_is_drawn_jointly_and_never_beyond_a_severe_joint() -> None:
+    """Every held reflex is drawn with α and β together on the scale's path, from unimpaired
+    to the top of severe: never beyond it on the group's own grade, and never adding more
+    reflex torque to a joint stretch than the top of severe of the stretch's mono-articular
+    group (a bi-articular group's own top of severe added 11 N·m to a fast elbow flexion,
+    three times a severe elbow's reflex)."""
+    arm = Arm.from_params(BASE)
+    prior = Prior.for_arm(arm)
+    ranges = tuple(GuessRange(g, "dynamic", (f"alpha_{g}", f"beta_{g}"), score_top=prior.top(
+        g, "dynamic")) for g in GROUPS)
+    drawn = draw(FitSamples((), np.zeros((1, 0))), ranges, prior, 40, seed=3)
+    cap = {}
+    for g in ("sf", "se", "ef", "ee"):  # the mono-articular groups at the top of severe
+        top = prior.values(g, "dynamic", np.array([SCORE_HIGH]))
+        trial = BASE.with_group(g, alpha_n=float(top[f"alpha_{g}"][0]),
+                                beta=float(top[f"beta_{g}"][0]))
+        for s in standard_stretches(Arm.from_params(trial)):
+            cap[s.name] = max(cap.get(s.name, 0.0), s.reflex_torque_n_m)
+    reached = dict.fromkeys(GROUPS, 0.0)
+    for row in drawn.values:
+        for g in GROUPS:
+            a = float(row[drawn.names.index(f"alpha_{g}")])
+            b = float(row[drawn.names.index(f"beta_{g}")])
+            # α and β on the path: β follows from α (0.1 at 100 N, 1 from 1,000 N)
+            assert b == pytest.approx(min(1.0, 0.1 * (a / 100.0)), rel=1e-6)
+            one = Arm.from_params(BASE.with_group(g, alpha_n=a, beta=b))
+            grade = classify(one)[g].dynamic
+            assert not grade.beyond_scale
+            reached[g] = max(reached[g], grade.score)
+            for s in standard_stretches(one):
+                assert s.reflex_torque_n_m <= cap[s.name] * 1.001, (g, s.name, a, b)
+    assert min(reached[g] for g in ("sf", "se", "ef", "ee")) > 4.0  # severe reached
+    assert min(reached.values()) > 2.0  # every group's range reaches past mild

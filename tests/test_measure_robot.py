@@ -186,7 +186,8 @@ def test_a_fault_ends_the_measurement_with_every_sample_kept() -> None:
     from fieldbank.haptic.safety import SafetyConfig
 
     arm = Arm.from_params(resolve_patient("elbow=mild").params)
-    pl = plan(ProtocolConfig(parts=("postural",), grid=(2, 1)), arm)
+    pl = plan(ProtocolConfig(parts=("postural",), grid=(2, 1), centre_m=(0.0, 0.50),
+                             spacing_m=0.04), arm)
     assert pl.postures_m[0][0] < 0.0 < pl.postures_m[1][0]  # x −0.02 m, then +0.02 m
     box = (-0.6, 0.01, 0.05, 0.8)  # the start and the first posture inside, the second not
     cfg = MeasureConfig(safety=SafetyConfig(passivity=False, workspace_m=box))

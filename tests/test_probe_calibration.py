@@ -24,10 +24,10 @@ from fieldbank.evaluate.design import (
     severity_candidates,
 )
 from fieldbank.evaluate.observation import Observation, with_force_noise
+from fieldbank.evaluate.reliability import calibration_error
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.identify import (
     Trial,
-    calibration_error,
     flexor_patients,
     reliability,
     run_trials,

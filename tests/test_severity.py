@@ -424,3 +424,43 @@ def test_with_muscles_shares_the_geometry_and_equals_a_compilation():
         np.testing.assert_array_equal(a, b)
     with pytest.raises(ParameterError, match="q_rest_rad"):
         arm.with_muscles(q.replace(q_rest_rad=(0.8, 1.3)))
+
+
+@pytest.mark.parametrize(("change", "felt"), [({"alpha_n": 1000.0}, True),
+                                              ({"beta": 0.5}, True),
+                                              ({"km_n_per_m": 720.0}, True),
+                                              ({"slack_offset_m": -0.005}, True),
+                                              ({"alpha_n": 200.0}, False),
+                                              ({"beta": 0.2}, False)])
+def test_every_group_is_graded_alike_when_one_parameter_leaves_unimpaired(change, felt):
+    """A parameter changed alone reads the same in every group: the bi-articular groups are
+    graded on their own stretch too (the elbow stretch with the shoulder placed to lengthen
+    them), where their reflex fires as a mono-articular group's does at the end of its range.
+    On the clinic's elbow stretch alone a tenfold α of be added 7 % and read unimpaired."""
+    comp = "passive" if set(change) & {"km_n_per_m", "slack_offset_m"} else "dynamic"
+    ratios = {}
+    for g in GROUPS:
+        grade = _grades(BASE.with_group(g, **change))[g]
+        got = grade.component(comp)
+        assert (got.level != "unimpaired") == felt, (g, change, got)
+        assert grade.component("passive" if comp == "dynamic" else "dynamic").level \
+            == "unimpaired"
+        ratios[g] = got.ratio
+    # alike: the groups' ratios differ by less than half of what the change adds
+    spread = max(ratios.values()) - min(ratios.values())
+    assert spread < 0.5 * (max(ratios.values()) - 1.0) + 0.01, ratios
+
+
+def test_a_biarticular_reflex_is_graded_on_its_own_stretch():
+    p = BASE.with_group("be", alpha_n=1000.0)
+    sev = _grades(p)["be"]
+    assert sev.dynamic.level == "very mild"
+    assert sev.tone.dynamic_stretch == "elbow flexion, shoulder flexed"
+    # the clinic's stretch with the shoulder at rest alone would not feel it
+    at_rest = stretch_profile(Arm.from_params(p), "elbow", "flexion")
+    ref = stretch_profile(Arm.from_params(BASE), "elbow", "flexion")
+    i = GROUP_INDEX["be"]
+    added = (at_rest.velocity_dependent_n_m[:, i] - ref.velocity_dependent_n_m[:, i]).max()
+    peak = (ref.passive_n_m[:, i] + ref.velocity_dependent_n_m[:, i]).max()
+    assert 1.0 + added / peak < 1.1
+    assert sev.to_dict()["dynamic"]["stretch"] == "elbow flexion, shoulder flexed"

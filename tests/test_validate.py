@@ -111,6 +111,60 @@ def test_half_the_effect_is_a_partial_effect_with_its_interval() -> None:
     assert c.fit_se is None and "no fit uncertainty" in c.fit_uncertainty  # an exact model
 
 
+@pytest.mark.parametrize(("f", "se", "verdict"), [
+    (1.44, 0.15, "stronger than predicted"),  # was "confirmed": its interval reached 1.2
+    (1.29, 0.05, "stronger than predicted"),
+    (1.33, 0.24, "inconclusive"),  # beyond the tolerance, but the interval reaches 1
+    (1.10, 0.05, "prediction confirmed"),
+    (0.95, 0.10, "prediction confirmed"),
+    (0.45, 0.05, "partial effect"),
+])
+def test_an_effect_beyond_the_tolerance_is_an_over_effect_not_a_confirmation(
+        f: float, se: float, verdict: str) -> None:
+    from fieldbank.interventions.realised import CONTRADICTED, decide
+
+    got, why = decide(f, se)
+    assert got == verdict, why
+    assert (got in CONTRADICTED) == (verdict in ("stronger than predicted", "partial effect"))
+
+
+def test_a_stronger_effect_than_predicted_is_said_on_the_maps() -> None:
+    from fieldbank.interventions import Botulinum, Plan
+    from fieldbank.interventions.validate import OVER, check_session
+
+    before = synthesize({"elbow": "severe"})
+    plan = Plan.of(Botulinum({"ef": 150.0}, weeks_since=6.0))
+    stronger = Plan.of(Botulinum({"ef": 150.0}, weeks_since=6.0, emax=0.95)).apply(before)
+    c = check_session(before, plan, plan.apply(before), date(2024, 1, 10),
+                      _later(stronger, [(0.0, 0.0), (0.0, 1.0), (0.0, -1.0)], 7))
+    assert c.verdict == OVER, c.reasons
+    assert c.realised_fraction is not None and c.realised_fraction > 1.2
+    assert c.interval is not None and c.interval[0] > 1.0
+
+
+def test_the_se_is_never_below_what_the_two_sessions_noise_allows() -> None:
+    """A fit whose samples do not vary (every parameter pinned) claims no uncertainty; the
+    first session's own noise still bounds what the model before knows along the change."""
+    from fieldbank.interventions import Botulinum, Plan
+    from fieldbank.interventions.spread import FitSpread, Footprint, first_session_se
+    from fieldbank.interventions.validate import check_session
+
+    before = synthesize({"elbow": "severe"})
+    plan = Plan.of(Botulinum({"ef": 150.0}, weeks_since=6.0))
+    first = _later(before, [(0.0, 0.0), (0.0, 1.0), (0.0, -1.0)], 8)
+    pinned = FitSpread(1, (before,) * 8, (), frozenset(), (), "8 samples, all alike",
+                       tuple(Footprint.of(m) for _, m in first.maps))
+    later = _later(plan.apply(before), [(0.0, 0.0), (0.0, 1.0), (0.0, -1.0)], 9)
+    c = check_session(before, plan, plan.apply(before), date(2024, 1, 10), later,
+                      spread=pinned)
+    floor = first_session_se(pinned, before, plan.apply(before))
+    assert floor is not None and floor > 0
+    assert c.realised_se is not None and c.noise_se is not None and c.fit_se is not None
+    assert c.fit_se == pytest.approx(floor)  # the samples alone would say 0
+    assert c.realised_se >= np.hypot(c.noise_se, floor) * (1 - 1e-12)
+    assert c.verdict == "prediction confirmed", c.reasons
+
+
 def test_a_change_the_maps_cannot_see_is_inconclusive_and_says_what_would_see_it() -> None:
     """Static maps cannot see a change of the stretch reflex: no number, the group named, and
     a measurement that would see it proposed."""
@@ -208,7 +262,8 @@ def test_validate_on_the_samples_reports_per_map_figures(samples_db: dict[str, A
     assert text.stdout.rstrip().splitlines()[-1].startswith("Overall: prediction failed - plan")
     rules = " ".join(text.stdout[text.stdout.index("How the verdicts are read:"):].split())
     for needle in ("≥ 4 sd", "SE ≤ 0.25", "interval ≥ 0.5 and reaching 0.8", "inside (0, 0.8)",
-                   "above 1.2", "partial effect", "inconclusive"):
+                   "f > 1.2 and interval above 1", "stronger than predicted",
+                   "partial effect", "inconclusive"):
         assert needle in rules, needle
     assert max(len(line) for line in text.stdout.splitlines()) <= 100
     one = run_cli("validate", "SYN-001", "--db", url)

@@ -166,3 +166,22 @@ def test_intervals_show_a_drop_where_the_fit_identified_the_reflex(tmp_path: Pat
     assert hi < 0 and lo < hi
     assert lo <= reflex["change"] <= hi or np.isclose(reflex["change"], lo, rtol=0.05) \
         or np.isclose(reflex["change"], hi, rtol=0.05)
+
+
+def test_the_whatif_says_the_maps_cannot_tell_a_normal_reflex_from_a_severe_one(
+        postural_only: str) -> None:
+    """A postural map never moves the arm: every reflex is held. The what-if says, in words,
+    that the maps cannot tell a normal reflex from a severe one, and which stretch would."""
+    res = run_cli("whatif", "POST-1", "--db", postural_only, "--botox", "ef=150U",
+                  "--interval-samples", "6")
+    assert res.exit_code == 0, res.output
+    flat = " ".join(res.stdout.split())
+    said = "cannot tell a normal stretch reflex from a severe one in the"
+    assert said in flat and "elbow flexors (ef)" in flat[flat.index(said):]
+    assert "ef: a fast stretch of the elbow into extension" in flat
+    # the bi-articular groups are tested with the shoulder placed to lengthen them
+    assert "be: a fast stretch of the elbow into flexion with the shoulder flexed" in flat
+    doc = json.loads(run_cli("whatif", "POST-1", "--db", postural_only, "--botox", "ef=150U",
+                             "--json", "--interval-samples", "6").stdout)
+    unseen = doc["unseen_reflexes"]
+    assert len(unseen) == 7 and said in unseen[0]  # the sentence, then one test per group

@@ -59,9 +59,11 @@ class StretchTorques:
 def stretch_torques(batch: ArmBatch, joint: str, direction: str,
                     fast_speed_rad_s: float = STRETCH_SPEED_RAD_S,
                     slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S,
-                    samples: int = STRETCH_SAMPLES) -> StretchTorques:
+                    samples: int = STRETCH_SAMPLES,
+                    hold_rad: float | None = None) -> StretchTorques:
     """:func:`fieldbank.evaluate.probing.stretch_profile` of every set: ``joint`` swept
-    through its range in ``direction``, the other joint held at each set's rest posture."""
+    through its range in ``direction``, the other joint held at ``hold_rad`` (default: each
+    set's rest posture)."""
     if joint not in JOINTS:
         raise ValueError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
     if direction not in DIRECTION_SIGN:
@@ -73,6 +75,8 @@ def stretch_torques(batch: ArmBatch, joint: str, direction: str,
     angles = np.linspace(lo, hi, samples) if sign > 0 else np.linspace(hi, lo, samples)
     q = np.repeat(batch.q_rest[:, None, :], samples, axis=1)
     q[:, :, j] = angles
+    if hold_rad is not None:
+        q[:, :, 1 - j] = hold_rad
     lam = batch.muscle_lengths(q)
     lever = sign * geo.jl[:, j]
 

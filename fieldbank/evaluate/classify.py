@@ -234,6 +234,14 @@ class Classification:
         return next(iter(self.group_posterior))
 
     @property
+    def answer(self) -> tuple[str, float]:
+        """The most probable impaired group (or set of groups, ``ef+bf``) with its
+        probability."""
+        gp = self.group_posterior
+        g = next(iter(gp))
+        return g, gp[g]
+
+    @property
     def log10_likelihood_ratio(self) -> float:
         """log₁₀ of the likelihood of the best candidate over the runner-up."""
         ll = np.sort(self.log_likelihood)[::-1]

@@ -262,8 +262,10 @@ class StretchProfile:
 def stretch_profile(arm: Arm, joint: str, direction: str,
                     fast_speed_rad_s: float = STRETCH_SPEED_RAD_S,
                     slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S,
-                    samples: int = STRETCH_SAMPLES) -> StretchProfile:
-    """Sweep ``joint`` of ``arm`` through its range in ``direction`` (the other at rest).
+                    samples: int = STRETCH_SAMPLES,
+                    hold_rad: float | None = None) -> StretchProfile:
+    """Sweep ``joint`` of ``arm`` through its range in ``direction``, the other joint held at
+    ``hold_rad`` (rad; default: at rest).
 
     The torque muscle i exerts against the motion is s · J_λ[i, j] · f_i (s = +1 for flexion,
     -1 for extension; τ = -J_λᵀ f): positive for a muscle the motion lengthens.
@@ -278,6 +280,8 @@ def stretch_profile(arm: Arm, joint: str, direction: str,
     angles = np.linspace(lo, hi, samples) if sign > 0 else np.linspace(hi, lo, samples)
     q = np.tile(arm.q_rest, (samples, 1))
     q[:, j] = angles
+    if hold_rad is not None:
+        q[:, 1 - j] = hold_rad
     lam = arm.muscle_lengths(q)
     lever = sign * arm.jl[:, j]  # (6,) torque per newton against the motion
 

@@ -75,13 +75,14 @@ D reaches the level (a one-dimensional root). Targets (:func:`parse_severity_opt
     elbow:dynamic=mild           both directions of the joint, reflex only
 
 Read-outs of a fitted model name the parameters behind each grade that the maps did not
-identify (``unidentified``): Km of the group for the passive grade, α and β for the dynamic one.
+identify (``unidentified``): Km (and the slack length, when fitted) of the group for the passive
+grade, α and β for the dynamic one.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,10 +98,13 @@ from fieldbank.evaluate.probing import (
 from fieldbank.evaluate.tone import (
     FELT_FRACTION,
     GRADED_STRETCH,
+    POSITIONED_STRETCH,
     Added,
     GroupTone,
     dynamic_ratio,
     group_tone,
+    positioned_hold_rad,
+    positioned_profiles,
 )
 from fieldbank.model import Arm
 from fieldbank.params import (
@@ -121,7 +125,7 @@ COMPONENTS: tuple[str, ...] = ("passive", "dynamic")
 
 MUSCLE_GROUP_NAMES: dict[str, str] = GROUP_NAMES
 #: The fitted parameters each component rests on, per group.
-COMPONENT_PARAMETERS: dict[str, tuple[str, ...]] = {"passive": ("km",),
+COMPONENT_PARAMETERS: dict[str, tuple[str, ...]] = {"passive": ("km", "slack"),
                                                     "dynamic": ("alpha", "beta")}
 
 _ALIASES = {
@@ -361,11 +365,11 @@ class GroupSeverity:
         t = self.tone
         return {
             "group": self.group, "name": self.name, "graded_on": self.stretch,
-            "passive": {**self.passive.to_dict(),
+            "passive": {**self.passive.to_dict(), "stretch": t.passive_stretch,
                         "peak_torque_n_m": t.passive_n_m,
                         "unimpaired_peak_torque_n_m": t.passive_ref_n_m,
                         **t.passive_added.to_dict()},
-            "dynamic": {**self.dynamic.to_dict(),
+            "dynamic": {**self.dynamic.to_dict(), "stretch": t.dynamic_stretch,
                         "velocity_dependent_torque_n_m": t.velocity_dependent_n_m,
                         "unimpaired_velocity_dependent_torque_n_m":
                             t.velocity_dependent_ref_n_m,
@@ -381,7 +385,9 @@ def _grade(ratio: float, component: str, scale: SeverityScale,
 
 def classify(arm: Arm, unidentified: Collection[str] = (), reference: Arm | None = None,
              scale: SeverityScale = SCALE, profiles: Profiles | None = None,
-             reference_profiles: Profiles | None = None) -> dict[str, GroupSeverity]:
+             reference_profiles: Profiles | None = None,
+             reference_positioned: dict[str, StretchProfile] | None = None
+             ) -> dict[str, GroupSeverity]:
     """Grade every muscle group of ``arm``: passive and dynamic level (module docstring).
 
     Parameters
@@ -395,11 +401,15 @@ def classify(arm: Arm, unidentified: Collection[str] = (), reference: Arm | None
     scale : SeverityScale
     profiles, reference_profiles : optional
         Stretch profiles of ``arm`` and of the reference, when already computed.
+    reference_positioned : optional
+        The reference's bi-articular groups' own stretches
+        (:func:`fieldbank.evaluate.tone.positioned_profiles`), when already computed.
     """
     flagged = set(unidentified)
     out: dict[str, GroupSeverity] = {}
     for g, t in group_tone(arm, reference, profiles, reference_profiles,
-                           scale.felt_fraction).items():
+                           scale.felt_fraction,
+                           reference_positioned=reference_positioned).items():
         grades = {}
         for comp, ratio in (("passive", t.passive_ratio), ("dynamic", t.dynamic_ratio)):
             names = tuple(f"{k}_{g}" for k in COMPONENT_PARAMETERS[comp]
@@ -458,18 +468,26 @@ def ratio_of_score(score: float, component: str = "passive",
     return float(vm * (1.0 + scale.weber_fraction) ** (score - 1.0))
 
 
-def _solve_dynamic(arm: Arm, ref_prof: StretchProfile, group: str, target: float) -> float:
-    """Path parameter s at which ``group``'s dynamic ratio reaches ``target`` (≥ 1)."""
+def _solve_dynamic(arm: Arm, ref_profs: Sequence[StretchProfile], group: str,
+                   target: float) -> float:
+    """Path parameter s at which ``group``'s dynamic ratio - the larger over its graded
+    stretches ``ref_profs`` (the reference's: the clinic's, and a bi-articular group's own,
+    :mod:`fieldbank.evaluate.tone`) - reaches ``target`` (≥ 1)."""
     i = GROUP_INDEX[group]
     joint, direction = GRADED_STRETCH[group]
-    p_ref = ref_prof.passive_n_m[:, i]
-    v_ref = ref_prof.velocity_dependent_n_m[:, i]
+    holds = [None] + ([positioned_hold_rad(arm, group)] if group in POSITIONED_STRETCH else [])
 
     def ratio(s: float) -> float:
         a, b = _reflex_path(s)
         trial = arm.with_muscles(arm.params.with_group(group, alpha_n=a, beta=b))
-        v = stretch_profile(trial, joint, direction).velocity_dependent_n_m[:, i]
-        return dynamic_ratio(v, p_ref, v_ref, ref_prof.angles_rad)[0]
+        best = 0.0
+        for rp, hold in zip(ref_profs, holds, strict=True):
+            v = stretch_profile(trial, joint, direction,
+                                hold_rad=hold).velocity_dependent_n_m[:, i]
+            best = max(best, dynamic_ratio(v, rp.passive_n_m[:, i],
+                                           rp.velocity_dependent_n_m[:, i],
+                                           rp.angles_rad)[0])
+        return best
 
     if target <= ratio(0.0) * (1 + 1e-12):
         return 0.0
@@ -523,7 +541,9 @@ def _synthesize(wanted: Mapping[tuple[str, str], float], base: ArmParams | None,
     alpha = np.array(p.alpha_n)
     beta = np.array(p.beta)
     base_arm = Arm.from_params(p)  # the one compilation: the variants share its geometry
-    ref_prof = stretch_profiles(unimpaired_reference(base_arm))
+    ref_arm = unimpaired_reference(base_arm)
+    ref_prof = stretch_profiles(ref_arm)
+    ref_own = positioned_profiles(ref_arm)
     if any(c == "passive" for _, c in wanted):
         unit = stretch_profiles(base_arm.with_muscles(p.replace(km_n_per_m=(1.0,) * 6)))
     for (g, comp), ratio in wanted.items():
@@ -533,7 +553,8 @@ def _synthesize(wanted: Mapping[tuple[str, str], float], base: ArmParams | None,
             per_newton_per_m = float(unit[GRADED_STRETCH[g]].passive_n_m[:, i].max())
             km[i] = ratio * float(rp.passive_n_m[:, i].max()) / per_newton_per_m
         else:
-            alpha[i], beta[i] = _reflex_path(_solve_dynamic(base_arm, rp, g, ratio))
+            own = [ref_own[g]] if g in ref_own else []
+            alpha[i], beta[i] = _reflex_path(_solve_dynamic(base_arm, [rp, *own], g, ratio))
     return p.replace(km_n_per_m=tuple(km.tolist()), alpha_n=tuple(alpha.tolist()),
                      beta=tuple(beta.tolist()))
 
@@ -545,6 +566,7 @@ __all__ = [
     "LEVELS",
     "LEVEL_RATIO",
     "MUSCLE_GROUP_NAMES",
+    "POSITIONED_STRETCH",
     "REFLEX_PATH_MAX",
     "SCALE",
     "Added",
@@ -557,6 +579,8 @@ __all__ = [
     "group_tone",
     "level_name",
     "parse_severity_options",
+    "positioned_hold_rad",
+    "positioned_profiles",
     "ratio_of_score",
     "reflex_path",
     "severity_dict",

@@ -73,9 +73,10 @@ def chi2_of(problem: FitProblem, theta: FloatArray) -> float:
 
 
 def hold_units(names: Sequence[str]) -> list[tuple[str, ...]]:
-    """The units a hold is tested by: a group's Km, its reflex (α and β), each rest angle."""
+    """The units a hold is tested by: a group's Km, its reflex (α and β), its slack length,
+    each rest angle."""
     out = list(units(names).values())
-    out += [(n,) for n in names if n.startswith("q_rest_")]
+    out += [(n,) for n in names if n.startswith(("q_rest_", "slack_"))]
     return out
 
 

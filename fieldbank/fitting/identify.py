@@ -80,6 +80,11 @@ def _zero_cause(problem: FitProblem, theta: FloatArray, k: int) -> str:
         g = GROUPS[k]
         return (f"Km of {g} not identifiable: {g} is slack (shorter than its rest length) at "
                 "every measured position, so its passive force is zero there")
+    if kind == "slack":
+        g = s.names[k].rpartition("_")[2]
+        return (f"slack length of {g} not identifiable: {g} is slack at every measured "
+                "position (or its Km is 0), so no measured value shows where its passive "
+                "force starts; postures that stretch it would")
     return f"{s.names[k]} not identifiable: no measured value depends on it"
 
 

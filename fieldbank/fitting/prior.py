@@ -12,10 +12,26 @@ the held parameters from a stated prior range instead of keeping them at the hel
   10 · √1.6 ≈ 12.6). A severe group lies inside the range, not on its edge;
 * **passive** (Km of the group): Km = Km_unimpaired · r, r the passive ratio (for Km alone the
   passive ratio is the Km ratio: 600 to 7,590 N/m on the default arm);
-* **dynamic** (α and β of the group): the point of the scale's synthesis path (α = 100 N ·
-  10^s, β rising from 0.1 to 1) at which the group's dynamic ratio is r - on the default arm
-  the elbow flexors run from α 100 N, β 0.1 to α ≈ 1,300 N, β 1. When only one of α and β is
-  held the other keeps its fitted samples;
+* **dynamic** (α and β of the group, drawn together - never α at the top of its range with β
+  at the top of its own): the point of the scale's synthesis path (α = 100 N · 10^s, β rising
+  from 0.1 to 1) at which the group's dynamic ratio is r - on the default arm the elbow
+  flexors run from α 100 N, β 0.1 to α ≈ 1,570 N, β 1. When only one of α and β is held the
+  other keeps its fitted samples. **Not beyond severe at the joint**: a group's ratio is taken
+  against its own unimpaired resistance, which for a bi-articular group is 2.3 × a
+  mono-articular one's at the elbow (its longer moment arm and excursion: 0.95 against 0.41
+  N·m for the elbow flexion's), so the top of its own severe band added 11 N·m of reflex to a
+  fast elbow flexion where the top of the elbow extensors' adds 4.7 N·m - three times a severe
+  elbow's reflex. A bi-articular group's reflex range therefore ends where it adds as much
+  reflex torque to any standard joint stretch as the top of severe of the mono-articular group
+  graded on that stretch (:attr:`Prior.dynamic_top`; the elbow flexors' for elbow extension,
+  the extensors' for flexion, the shoulder groups' for the shoulder): on the default arm bf
+  and be end near their own moderate level, every stretch's reflex within the scale's severe
+  band;
+* **contracture** (the slack offset of the group, when the fit fits it): from no contracture
+  (0) to the brief's shortest slack (:data:`fieldbank.fitting.space.SLACK_RANGE_M`, -20 mm),
+  linear in the place in the range - the severity scale does not reach a contracture's
+  grade (20 mm shorter makes the elbow's passive torque ≈ 1.7 × unimpaired), so its range is
+  the brief's, on the same [0, top] place as the others (:func:`contracture_slack`);
 * **draws**: the severity score uniform on [0, top] - each level equally likely - stratified
   (one draw in each of n equal slices, in a seeded random order), so 40 samples reach both
   ends of the range. The held units of one sample share their place in their ranges (the
@@ -49,22 +65,32 @@ import numpy as np
 from fieldbank.armbatch import ArmBatch
 from fieldbank.errors import FitError
 from fieldbank.evaluate.batch import stretch_torques
-from fieldbank.evaluate.probing import stretch_profile, unimpaired_reference
+from fieldbank.evaluate.probing import (
+    DIRECTION_SIGN,
+    JOINTS,
+    STRETCHES,
+    stretch_profile,
+    unimpaired_reference,
+)
 from fieldbank.evaluate.severity import (
     GRADED_STRETCH,
+    POSITIONED_STRETCH,
     REFLEX_PATH_MAX,
     SCALE,
     SeverityScale,
+    positioned_hold_rad,
     ratio_of_score,
     reflex_path,
 )
 from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.space import SLACK_RANGE_M
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUP_INDEX, GROUPS
 
 #: Version of the prior's definition (range, path, draws). Raise it when any of them changes.
-PRIOR_VERSION = 1
+#: 2: bi-articular reflexes not beyond a severe joint (:attr:`Prior.dynamic_top`); slack ranges.
+PRIOR_VERSION = 2
 #: Top of every range on the severity score: the severe band's upper edge (4 + 1/2 step).
 SCORE_HIGH = 4.5
 #: The maps allow the top of a range while Δχ² stays within this χ² quantile.
@@ -75,8 +101,17 @@ RANGE_BISECTIONS = 12
 #: path's own top when a group's reflex needs more to reach the top of the severe band.
 PATH_POINTS = 65
 PATH_TOP = 1.6
-#: Kind of each fitted parameter -> the component of the severity grade it sizes.
-COMPONENT_OF: dict[str, str] = {"km": "passive", "alpha": "dynamic", "beta": "dynamic"}
+#: Kind of each fitted parameter -> the component of its prior range: the severity grade it
+#: sizes, or the contracture (the slack offset).
+COMPONENT_OF: dict[str, str] = {"km": "passive", "alpha": "dynamic", "beta": "dynamic",
+                                "slack": "contracture"}
+
+
+def contracture_slack(scores: FloatArray) -> FloatArray:
+    """The slack offset (m) at places ``scores`` (0 … :data:`SCORE_HIGH`) of a contracture's
+    range: linear from 0 to the brief's shortest slack (module docstring)."""
+    return np.asarray(np.asarray(scores, dtype=float) / SCORE_HIGH * SLACK_RANGE_M[0],
+                      dtype=float)
 
 
 def unit_of(name: str) -> tuple[str, str]:
@@ -89,8 +124,8 @@ def unit_of(name: str) -> tuple[str, str]:
     """
     kind, _, group = name.rpartition("_")
     if kind not in COMPONENT_OF or group not in GROUP_INDEX:
-        raise FitError(f"{name!r} has no prior range on the severity scale (only Km, α and β "
-                       "of a muscle group do).")
+        raise FitError(f"{name!r} has no prior range on the severity scale (only Km, α, β and "
+                       "the slack length of a muscle group do).")
     return group, COMPONENT_OF[kind]
 
 
@@ -98,7 +133,7 @@ def units(names: Collection[str]) -> dict[tuple[str, str], tuple[str, ...]]:
     """The names grouped by (group, component), in the fit's order (Km, α, β per group);
     names without a range (q_rest) are left out."""
     out: dict[tuple[str, str], list[str]] = {}
-    for kind in ("km", "alpha", "beta"):
+    for kind in ("km", "alpha", "beta", "slack"):
         for g in GROUPS:
             name = f"{kind}_{g}"
             if name in names:
@@ -110,9 +145,9 @@ def units(names: Collection[str]) -> dict[tuple[str, str], tuple[str, ...]]:
 class GuessRange:
     """The prior range of one held unit (a group's Km, or its α and β).
 
-    ``score_high``: top of the range on the severity score (:data:`SCORE_HIGH` unless the maps
-    lowered it); ``delta_chi2_at_top``: what the maps say about the full range's top (None when
-    not checked).
+    ``score_top``: the prior's top of the range on the severity score (:meth:`Prior.top`);
+    ``score_high``: the top the maps allow (``score_top`` unless the maps lowered it);
+    ``delta_chi2_at_top``: what the maps say about the prior's top (None when not checked).
     """
 
     group: str
@@ -121,19 +156,23 @@ class GuessRange:
     score_high: float = SCORE_HIGH
     delta_chi2_at_top: float | None = None
     threshold: float | None = None
+    score_top: float = SCORE_HIGH
 
     @property
     def limited_by_maps(self) -> bool:
-        return self.score_high < SCORE_HIGH
+        return self.score_high < self.score_top - 1e-12
 
     @property
-    def ratio_high(self) -> float:
+    def ratio_high(self) -> float | None:
+        """The severity ratio at the top (None for a contracture: its range is in mm)."""
+        if self.component == "contracture":
+            return None
         return ratio_of_score(self.score_high, self.component)
 
     def to_dict(self) -> dict[str, Any]:
         return {"group": self.group, "component": self.component, "names": list(self.names),
                 "score_high": self.score_high, "ratio_high": self.ratio_high,
-                "limited_by_maps": self.limited_by_maps,
+                "score_top": self.score_top, "limited_by_maps": self.limited_by_maps,
                 "delta_chi2_at_top": self.delta_chi2_at_top, "threshold": self.threshold}
 
     @classmethod
@@ -149,8 +188,12 @@ class GuessRange:
                            f"[0, {SCORE_HIGH}]; got {high!r}.")
         d = doc.get("delta_chi2_at_top")
         t = doc.get("threshold")
+        top = float(doc.get("score_top", SCORE_HIGH))
+        if not high <= top <= SCORE_HIGH:
+            raise FitError(f"prior range of {group} {component}: score_top must lie in "
+                           f"[score_high, {SCORE_HIGH}]; got {top!r}.")
         return cls(group, component, names, high, None if d is None else float(d),
-                   None if t is None else float(t))
+                   None if t is None else float(t), top)
 
 
 def full_ranges(held: Collection[str]) -> tuple[GuessRange, ...]:
@@ -172,13 +215,17 @@ class Prior:
     """The severity scale's parameter values for one arm geometry (module docstring).
 
     ``reference``: the arm with unimpaired muscles; ``path_s`` (K,) the tabulated path
-    parameters; ``path_ratio`` (6, K) each group's dynamic ratio along the path.
+    parameters; ``path_ratio`` (6, K) each group's dynamic ratio along the path;
+    ``dynamic_top`` (6,) the top of each group's reflex range on its severity score
+    (:data:`SCORE_HIGH`, lower for a group whose top of severe would add more reflex torque to
+    a joint stretch than that stretch's severe mono-articular group: module docstring).
     """
 
     reference: Arm
     scale: SeverityScale
     path_s: FloatArray
     path_ratio: FloatArray
+    dynamic_top: FloatArray
 
     @classmethod
     def for_arm(cls, arm: Arm, scale: SeverityScale = SCALE) -> Prior:
@@ -197,20 +244,43 @@ class Prior:
         p0 = ref.params
         alpha, beta = reflex_path(s)
         ratio = np.ones((len(GROUPS), s.size))
-        for stretch in dict.fromkeys(GRADED_STRETCH.values()):
-            graded = [g for g in GROUPS if GRADED_STRETCH[g] == stretch]
+        # every standard stretch with each group it lengthens along the path (the groups
+        # graded on it and a bi-articular group crossing its joint), then each bi-articular
+        # group's own stretch (fieldbank.evaluate.tone): a group's ratio is the larger of its
+        # graded stretches', as its grade; the reflex torque each group adds to each standard
+        # stretch sets the joint cap (module docstring)
+        stretches: list[tuple[tuple[str, str], float | None, list[str]]] = []
+        for stretch in STRETCHES:
+            j = JOINTS.index(stretch[0])
+            lever = DIRECTION_SIGN[stretch[1]] * ref.jl[:, j]
+            stretches.append((stretch, None, [g for g in GROUPS if lever[GROUP_INDEX[g]] > 0]))
+        stretches += [(GRADED_STRETCH[g], positioned_hold_rad(ref, g), [g])
+                      for g in POSITIONED_STRETCH]
+        added_on: dict[tuple[str, tuple[str, str]], FloatArray] = {}
+        for stretch, hold, moved in stretches:
             sets = [p0] + [p0.with_group(g, alpha_n=float(a), beta=float(b))
-                           for g in graded for a, b in zip(alpha, beta, strict=True)]
-            st = stretch_torques(ArmBatch.from_params(sets, ref), *stretch)
+                           for g in moved for a, b in zip(alpha, beta, strict=True)]
+            st = stretch_torques(ArmBatch.from_params(sets, ref), *stretch, hold_rad=hold)
             v_all = st.fast_n_m - st.slow_n_m
-            prof = stretch_profile(ref, *stretch)
-            for k, g in enumerate(graded):
+            prof = stretch_profile(ref, *stretch, hold_rad=hold)
+            for k, g in enumerate(moved):
                 i = GROUP_INDEX[g]
                 rows = slice(1 + k * s.size, 1 + (k + 1) * s.size)
-                added = (v_all[rows] - v_all[0]).max(axis=1)  # only g differs from set 0
+                added = np.maximum((v_all[rows] - v_all[0]).max(axis=1), 0.0)  # only g differs
+                if hold is None:
+                    added_on[(g, stretch)] = added
+                if GRADED_STRETCH[g] != stretch:
+                    continue
                 peak = float((prof.passive_n_m[:, i] + prof.velocity_dependent_n_m[:, i]).max())
-                ratio[i] = 1.0 + np.maximum(added, 0.0) / peak
-        return cls(ref, scale, s, ratio)
+                ratio[i] = np.maximum(ratio[i], 1.0 + added / peak)
+        return cls(ref, scale, s, ratio, _joint_tops(scale, s, ratio, added_on))
+
+    def top(self, group: str, component: str) -> float:
+        """The top of ``group``'s ``component`` range on the score, before the maps:
+        :data:`SCORE_HIGH`, or :attr:`dynamic_top` for a reflex."""
+        if component == "dynamic":
+            return float(self.dynamic_top[GROUP_INDEX[group]])
+        return SCORE_HIGH
 
     def path_at(self, group: str, ratio: FloatArray) -> tuple[FloatArray, FloatArray]:
         """α (N) and β on the path where ``group``'s dynamic ratio is ``ratio`` (any shape)."""
@@ -228,6 +298,8 @@ class Prior:
                ) -> dict[str, FloatArray]:
         """The parameters of ``group``'s ``component`` at severity scores (n,): {name: (n,)}."""
         sc = np.atleast_1d(np.asarray(scores, dtype=float))
+        if component == "contracture":
+            return {f"slack_{group}": contracture_slack(sc)}
         ratio = np.array([ratio_of_score(float(x), component, self.scale) for x in sc])
         i = GROUP_INDEX[group]
         if component == "passive":
@@ -238,8 +310,41 @@ class Prior:
     def interval(self, rng: GuessRange) -> dict[str, tuple[float, float]]:
         """Each name's values at the bottom and the top of ``rng``: {name: (low, high)}."""
         lo = self.values(rng.group, rng.component, np.array([0.0]))
-        hi = self.values(rng.group, rng.component, np.array([rng.score_high]))
+        hi = self.values(rng.group, rng.component, np.array([self.high(rng)]))
         return {n: (float(lo[n][0]), float(hi[n][0])) for n in rng.names}
+
+    def high(self, rng: GuessRange) -> float:
+        """The top of ``rng`` on the score: what the maps allow, never above the prior's own
+        top (:meth:`top`; a range kept by an older fit may not know it)."""
+        return min(rng.score_high, self.top(rng.group, rng.component))
+
+
+def _joint_tops(scale: SeverityScale, s: FloatArray, ratio: FloatArray,
+                added_on: Mapping[tuple[str, tuple[str, str]], FloatArray]) -> FloatArray:
+    """Top of each group's reflex range (score): :data:`SCORE_HIGH`, or lower where the
+    group would add more reflex torque to a standard stretch than the top of severe of the
+    stretch's mono-articular group (module docstring)."""
+    top_ratio = ratio_of_score(SCORE_HIGH, "dynamic", scale)
+    cap: dict[tuple[str, str], float] = {}
+    for (g, stretch), added in added_on.items():
+        if g in POSITIONED_STRETCH or GRADED_STRETCH[g] != stretch:
+            continue
+        i = GROUP_INDEX[g]
+        at_top = float(np.interp(np.log(top_ratio), np.maximum.accumulate(np.log(ratio[i]))
+                                 + 1e-12 * np.arange(s.size), added))
+        cap[stretch] = max(cap.get(stretch, 0.0), at_top)
+    out = np.full(len(GROUPS), SCORE_HIGH)
+    for g in POSITIONED_STRETCH:
+        i = GROUP_INDEX[g]
+        ok = np.ones(s.size, dtype=bool)
+        for (h, stretch), added in added_on.items():
+            if h == g and stretch in cap:
+                ok &= added <= cap[stretch]
+        # the last path point of the leading run within every cap, and its score
+        last = int(np.argmin(ok)) - 1 if not ok.all() else s.size - 1
+        r = float(ratio[i, max(last, 0)])
+        out[i] = min(SCORE_HIGH, scale.score(r, "dynamic"))
+    return out
 
 
 def stratified_scores(n: int, high: float, rng: np.random.Generator) -> FloatArray:
@@ -264,7 +369,7 @@ def draw(samples: FitSamples, ranges: Sequence[GuessRange], prior: Prior, n: int
     # one position in the range per sample, shared by every held unit
     where = stratified_scores(size, 1.0, np.random.default_rng(seed))
     for r in ranges:
-        drawn = prior.values(r.group, r.component, where * r.score_high)
+        drawn = prior.values(r.group, r.component, where * prior.high(r))
         for name in r.names:
             if name not in cols:
                 names.append(name)
@@ -298,10 +403,11 @@ def fit_ranges(problem: FitProblem, theta: FloatArray, held: Collection[str], pr
     for (g, c), names in units(held).items():
         rng = GuessRange(g, c, names)
         limit = float(chi2.ppf(RANGE_TEST_LEVEL, len(names)))
-        top = delta(rng, SCORE_HIGH)
-        high = SCORE_HIGH
+        ceiling = prior.top(g, c)
+        top = delta(rng, ceiling)
+        high = ceiling
         if top > limit:
-            lo, hi = 0.0, SCORE_HIGH
+            lo, hi = 0.0, ceiling
             for _ in range(RANGE_BISECTIONS):
                 mid = 0.5 * (lo + hi)
                 if delta(rng, mid) > limit:
@@ -309,7 +415,7 @@ def fit_ranges(problem: FitProblem, theta: FloatArray, held: Collection[str], pr
                 else:
                     lo = mid
             high = lo
-        out.append(GuessRange(g, c, names, high, top, limit))
+        out.append(GuessRange(g, c, names, high, top, limit, ceiling))
     return tuple(out)
 
 
@@ -321,7 +427,9 @@ def prior_dict(ranges: Sequence[GuessRange], prior: Prior) -> dict[str, Any]:
         "description": ("held parameters are drawn, for prediction intervals, from the "
                         "severity scale between unimpaired (score 0) and the top of its "
                         f"severe band (score {SCORE_HIGH:g}, {ratio_of_score(SCORE_HIGH):.3g} "
-                        "× unimpaired), uniform in the score, unless the maps allow less"),
+                        "× unimpaired), uniform in the score, unless the maps allow less; "
+                        "a held slack length from none to the brief's shortest "
+                        f"({1000 * SLACK_RANGE_M[0]:g} mm)"),
         "score_high": SCORE_HIGH,
         "ranges": [{**r.to_dict(), "values": {n: list(v) for n, v in
                                               prior.interval(r).items()}} for r in ranges],

@@ -2,7 +2,8 @@
 
 Design
 ------
-Only Km, α, β (and optionally q_rest) change during a fit; the measured positions and
+Only Km, α, β (and optionally q_rest and the slack offsets) change during a fit; the measured
+positions and
 velocities do not. So the inverse kinematics, the endpoint Jacobian J and J⁻¹, the joint
 velocities q̇ = J⁻¹v, J_λq and λ̇ = J_λq̇ are computed once per measured point
 (:meth:`FitProblem.from_maps`).
@@ -18,13 +19,16 @@ point, the muscle tension f_i and its derivatives f_λ,i = ∂f_i/∂λ_i and f_
 
 with Q = -J⁻¹(∂J/∂q_k)q̇ and G(F)[:, k] = (∂J/∂q_k)ᵀF. The tension is linear in Km and in α:
 f_i = Km_i·P_i(λ) + α_i·R_i(λ, λ̇; β_i), so the predicted values are ``X(β, q_rest) @ [Km; α]``
-with a design matrix X of 12 columns. The cost is the whitened χ² of all measured values plus
+with a design matrix X of 12 columns. The passive columns P_i depend on the slack offset δ_i
+of the group (the passive force acts on λ - λ_rest - δ): a contracture (δ < 0) moves the onset of
+the passive force earlier in the range. The cost is the whitened χ² of all measured values plus
 the prior (see :mod:`fieldbank.fitting.space`).
 
-Variable projection: for given β and q_rest the best Km and α solve a small bounded linear
-least-squares problem (12 unknowns), so the global search runs over β (and q_rest) only. The
-gradient of the projected cost follows from the envelope theorem, -2 rᵀ W (∂X/∂φ) θ_lin; ∂X/∂φ
-comes from central differences of X alone (no extra solves; column i depends only on β_i).
+Variable projection: for given β, q_rest and δ the best Km and α solve a small bounded linear
+least-squares problem (12 unknowns), so the global search runs over β (and q_rest and δ) only.
+The gradient of the projected cost follows from the envelope theorem, -2 rᵀ W (∂X/∂φ) θ_lin;
+∂X/∂φ comes from central differences of X alone (no extra solves; the reflex column i depends
+only on β_i, the passive column i only on δ_i).
 
 Noise: each value is whitened by its map's sd; where a map has no sd, by
 :data:`DEFAULT_RELATIVE_SD` (5%, an assumption) × the size of the measured force or stiffness at
@@ -80,9 +84,10 @@ def map_sd(m: FieldMap) -> FloatArray:
     return np.asarray(np.maximum(sd, SD_FLOOR_FRACTION * rms), dtype=float)
 
 
-#: Central-difference steps of the search's gradient (β, dimensionless; q_rest, rad).
+#: Central-difference steps of the search's gradient (β, dimensionless; q_rest, rad; slack, m).
 _H_BETA = 1e-6
 _H_Q = 1e-6
+_H_SLACK = 1e-7
 
 
 @dataclass(frozen=True)
@@ -224,9 +229,9 @@ class FitProblem:
     def w(self) -> FloatArray:
         return 1.0 / self.sd
 
-    def _passive_basis(self, q_rest: FloatArray) -> FloatArray:
+    def _passive_basis(self, q_rest: FloatArray, slack: FloatArray) -> FloatArray:
         arm = self.arm
-        d = self.lq - q_rest @ arm.jl.T
+        d = self.lq - q_rest @ arm.jl.T - slack
         wd = arm.w
         z = d / wd
         soft = np.logaddexp(0.0, z)
@@ -256,26 +261,41 @@ class FitProblem:
         rd = np.where(on, dh_du * beta * self.dc, 0.0)[self.row_pt]
         return self.cf * rf + self.cl * rl + self.cd * rd
 
-    def design(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
-        """X(β, q_rest), shape (M, 12): predicted values per unit Km (cols 0-5) and α (6-11)."""
-        if self.space.fit_q_rest or self._xkm_cache is None:
-            xkm = self._passive_basis(q_rest)
-            if not self.space.fit_q_rest:
+    def design(self, beta: FloatArray, q_rest: FloatArray,
+               slack: FloatArray | None = None) -> FloatArray:
+        """X(β, q_rest, δ), shape (M, 12): predicted values per unit Km (cols 0-5) and α
+        (6-11); δ the slack offsets (default: the base model's)."""
+        varies = self.space.fit_q_rest or self.space.fit_slack
+        if varies or self._xkm_cache is None:
+            xkm = self._passive_basis(q_rest, self.base_slack if slack is None else slack)
+            if not varies:
                 self._xkm_cache = xkm
         else:
             xkm = self._xkm_cache
         return np.hstack([xkm, self._reflex_basis(beta, q_rest)])
 
     # --- parameter vector helpers -------------------------------------------------------------
-    def split(self, theta: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """(θ_lin = [Km; α] (12,), β (6,), q_rest (2,)) from a full vector."""
-        q_rest = theta[18:20] if self.space.fit_q_rest else self.arm.q_rest
-        return theta[:12], theta[12:18], np.asarray(q_rest, dtype=float)
+    @property
+    def base_slack(self) -> FloatArray:
+        """The base model's slack offsets (6,), m: held when the slack is not fitted."""
+        return np.asarray(self.arm.lam_slack - self.arm.lam_rest, dtype=float)
+
+    def split(self, theta: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """(θ_lin = [Km; α] (12,), β (6,), q_rest (2,), slack offsets (6,)) from a full
+        vector."""
+        s = self.space
+        q_rest = theta[18:20] if s.fit_q_rest else self.arm.q_rest
+        if s.fit_slack:
+            k = 20 if s.fit_q_rest else 18
+            slack = np.asarray(theta[k:k + 6], dtype=float)
+        else:
+            slack = self.base_slack
+        return theta[:12], theta[12:18], np.asarray(q_rest, dtype=float), slack
 
     def predict(self, theta: FloatArray) -> FloatArray:
         """Predicted values, shape (M,), for a full parameter vector."""
-        lin, beta, q_rest = self.split(theta)
-        return self.design(beta, q_rest) @ lin
+        lin, beta, q_rest, slack = self.split(theta)
+        return self.design(beta, q_rest, slack) @ lin
 
     def residuals(self, theta: FloatArray) -> FloatArray:
         """Whitened data residuals (y - ŷ)/sd, shape (M,)."""
@@ -308,9 +328,9 @@ class FitProblem:
         ignored except where not fitted)."""
         self.n_evals += 1
         s = self.space
-        lin, beta, q_rest = self.split(theta_nl)
+        lin, beta, q_rest, slack = self.split(theta_nl)
         if x is None:
-            x = self.design(beta, q_rest)
+            x = self.design(beta, q_rest, slack)
         free = s.fitted[:12]
         w = self.w
         lin = lin.copy()
@@ -352,14 +372,17 @@ class FitProblem:
                            step: float | None = None) -> dict[int, FloatArray]:
         """∂X/∂θ_k for each fitted nonlinear entry k (central differences inside the bounds).
 
-        ``step`` replaces the default steps (1e-6 in β and in q_rest, rad): a larger step gives
-        the secant slope over that range, which the uncertainty estimate compares with the
-        local one to find kinks and jumps of the model (:mod:`fieldbank.fitting.uncertainty`).
+        ``step`` replaces the default steps (1e-6 in β and in q_rest, rad; 1e-7 m in the slack
+        offsets): a larger step gives the secant slope over that range, which the uncertainty
+        estimate compares with the local one to find kinks and jumps of the model
+        (:mod:`fieldbank.fitting.uncertainty`); the slack's secant step is a tenth of it (m:
+        1e-3 in β is 1e-4 m = 0.1 mm of slack).
         """
         s = self.space
-        _, beta, q_rest = self.split(theta)
+        _, beta, q_rest, slack = self.split(theta)
         h_beta = _H_BETA if step is None else step
         h_q = _H_Q if step is None else step
+        h_d = _H_SLACK if step is None else 0.1 * step
         out: dict[int, FloatArray] = {}
         bidx = [i for i in range(12, 18) if s.fitted[i]]
         if bidx:
@@ -379,9 +402,22 @@ class FitProblem:
                 qm = q_rest.copy()
                 qp[j] = min(q_rest[j] + h_q, s.upper[k])
                 qm[j] = max(q_rest[j] - h_q, s.lower[k])
-                xp = np.hstack([self._passive_basis(qp), self._reflex_basis(beta, qp)])
-                xm = np.hstack([self._passive_basis(qm), self._reflex_basis(beta, qm)])
+                xp = np.hstack([self._passive_basis(qp, slack), self._reflex_basis(beta, qp)])
+                xm = np.hstack([self._passive_basis(qm, slack), self._reflex_basis(beta, qm)])
                 out[k] = (xp - xm) / (qp[j] - qm[j])
+        if s.fit_slack:
+            first = 20 if s.fit_q_rest else 18
+            sidx = [k for k in range(first, first + 6) if s.fitted[k]]
+            if sidx:
+                lo, hi = s.lower[first:first + 6], s.upper[first:first + 6]
+                dp = np.minimum(slack + h_d, hi)
+                dm = np.maximum(slack - h_d, lo)
+                diff = (self._passive_basis(q_rest, dp) - self._passive_basis(q_rest, dm)) \
+                    / (dp - dm)
+                for k in sidx:
+                    col = np.zeros((self.y.size, 12))
+                    col[:, k - first] = diff[:, k - first]
+                    out[k] = col
         return out
 
     def projected_cost_grad(self, phi: FloatArray) -> tuple[float, FloatArray, Projection]:
@@ -405,8 +441,8 @@ class FitProblem:
 
         ``step``: the difference step of the nonlinear entries (:meth:`design_derivatives`).
         """
-        lin, beta, q_rest = self.split(theta)
-        x = self.design(beta, q_rest)
+        lin, beta, q_rest, slack = self.split(theta)
+        x = self.design(beta, q_rest, slack)
         w = self.w
         jac = np.zeros((self.y.size, self.space.size))
         jac[:, :12] = -x * w[:, None]

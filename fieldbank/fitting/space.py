@@ -5,15 +5,24 @@ Fitted parameters, in this order in every vector the fitter builds:
 * ``km``     Km per muscle group (6), N/m - enters the forces linearly;
 * ``alpha``  α per muscle group (6), N - enters the forces linearly;
 * ``beta``   β per muscle group (6), dimensionless - nonlinear;
-* ``q_rest`` rest posture (2), rad - nonlinear, optional.
+* ``q_rest`` rest posture (2), rad - nonlinear, optional;
+* ``slack``  slack offset per muscle group (6), m - nonlinear, optional: the length the group
+  takes up before its passive force starts, relative to its rest length (``slack_offset_m``
+  of :class:`~fieldbank.params.ArmParams`). A contracture is negative: the passive force
+  starts earlier in the range.
 
 Bounds are physiological (:data:`FIT_BOUNDS`); q_rest is bounded by the arm's range of motion.
+The slack offset is bounded by the brief's range (:data:`SLACK_RANGE_M`): a contracture
+shortens the optimal fibre length to 0.80-0.95 of normal (PredSim's contracture scaling), 5-20
+mm of the 10 cm fibre the lengthening default assumes, so no shorter than -20 mm; a tendon
+lengthening adds 1-2 cm (Delp & Zajac 1992), so no longer than +20 mm.
 
 Prior. The cost adds ``prior_weight · Σ ((θ - θ0)/σ)²`` to the data's χ². θ0 is the unimpaired
 value for the patient (``ArmParams.from_anthropometry`` with the patient's mass, height and side:
 Km 600 N/m, α 100 N, β 0.1) and the base's rest posture for q_rest. σ is wide
-(:data:`PRIOR_SD`: 10× the unimpaired value for Km and α, 0.5 for β, 20° for q_rest), so the prior
-decides only what the maps leave open; ``prior_weight`` (default 1) scales it.
+(:data:`PRIOR_SD`: 10× the unimpaired value for Km and α, 0.5 for β, 20° for q_rest, 10 mm - half
+the contracture range - for the slack offset, whose unimpaired value is 0), so the prior decides
+only what the maps leave open; ``prior_weight`` (default 1) scales it.
 """
 
 from __future__ import annotations
@@ -29,19 +38,30 @@ from fieldbank.model import FloatArray
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.validation import Interval
 
-FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest")
+FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest", "slack")
 #: ArmParams field behind each fitted kind.
 PARAM_FIELD: dict[str, str] = {
     "km": "km_n_per_m",
     "alpha": "alpha_n",
     "beta": "beta",
     "q_rest": "q_rest_rad",
+    "slack": "slack_offset_m",
 }
+#: The per-group kinds, in the order of the fitted vector.
+GROUP_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "slack")
+
+
 def named_values(params: ArmParams) -> dict[str, float]:
     """Every muscle parameter a fit may fit, by its name in fit reports (``km_ef``,
-    ``alpha_ef``, ``beta_ef``, ...), SI units."""
-    return {f"{kind}_{g}": float(v) for kind in ("km", "alpha", "beta")
+    ``alpha_ef``, ``beta_ef``, ``slack_ef``, ...), SI units."""
+    return {f"{kind}_{g}": float(v) for kind in GROUP_KINDS
             for g, v in zip(GROUPS, getattr(params, PARAM_FIELD[kind]), strict=True)}
+
+
+#: The brief's range of the slack offset, m (module docstring): a contracture of at most 20 mm
+#: (optimal fibre length 0.80 of a 10 cm fibre, PredSim), a lengthening of at most 2 cm (Delp
+#: & Zajac 1992).
+SLACK_RANGE_M = (-0.020, 0.020)
 
 
 #: Physiological bounds of the fitted parameters (q_rest: the range of motion, see below).
@@ -49,10 +69,11 @@ FIT_BOUNDS: dict[str, Interval] = {
     "km": Interval(50.0, 50_000.0, "N/m"),
     "alpha": Interval(0.0, 50_000.0, "N"),
     "beta": Interval(0.0, 1.0, ""),
+    "slack": Interval(SLACK_RANGE_M[0], SLACK_RANGE_M[1], "m"),
 }
 #: Prior standard deviations: a factor of the unimpaired value (km, alpha) or absolute.
 PRIOR_SD_FACTOR: dict[str, float] = {"km": 10.0, "alpha": 10.0}
-PRIOR_SD: dict[str, float] = {"beta": 0.5, "q_rest": math.radians(20.0)}
+PRIOR_SD: dict[str, float] = {"beta": 0.5, "q_rest": math.radians(20.0), "slack": 0.010}
 DEFAULT_PRIOR_WEIGHT = 1.0
 
 
@@ -63,9 +84,10 @@ class ParamSpace:
     Attributes
     ----------
     names : tuple of str
-        ``km_sf``, …, ``alpha_be``, ``beta_sf``, …, ``q_rest_shoulder``, ``q_rest_elbow``.
+        ``km_sf``, …, ``alpha_be``, ``beta_sf``, …, ``q_rest_shoulder``, ``q_rest_elbow``,
+        ``slack_sf``, …, ``slack_be`` (q_rest and slack only when fitted).
     kinds : tuple of str
-        The kind of each entry (``km``, ``alpha``, ``beta``, ``q_rest``).
+        The kind of each entry (``km``, ``alpha``, ``beta``, ``q_rest``, ``slack``).
     fitted : ndarray of bool, shape (P,)
         False for entries held at the base value (kinds not fitted).
     lower, upper : ndarray, shape (P,)
@@ -86,6 +108,7 @@ class ParamSpace:
     prior_weight: float
     base: FloatArray
     fit_q_rest: bool
+    fit_slack: bool = False
 
     @classmethod
     def build(
@@ -97,8 +120,8 @@ class ParamSpace:
     ) -> ParamSpace:
         """The space for fitting ``fit`` kinds around ``base``, with optional bound overrides.
 
-        ``bounds`` maps a kind (``km``, ``alpha``, ``beta``, ``q_rest``) or a single name
-        (``km_ef``) to (low, high) in SI units.
+        ``bounds`` maps a kind (``km``, ``alpha``, ``beta``, ``q_rest``, ``slack``) or a single
+        name (``km_ef``) to (low, high) in SI units.
         """
         unknown = sorted(set(fit) - set(FIT_KINDS))
         if unknown or not fit:
@@ -138,6 +161,16 @@ class ParamSpace:
                 mean.append(float(base.q_rest_rad[j]))
                 sd.append(PRIOR_SD["q_rest"])
                 start.append(float(base.q_rest_rad[j]))
+        if "slack" in fit:
+            iv = FIT_BOUNDS["slack"]
+            for i, g in enumerate(GROUPS):
+                names.append(f"slack_{g}")
+                kinds.append("slack")
+                lo.append(float(iv.low if iv.low is not None else -np.inf))
+                hi.append(float(iv.high if iv.high is not None else np.inf))
+                mean.append(float(unimpaired.slack_offset_m[i]))
+                sd.append(PRIOR_SD["slack"])
+                start.append(float(base.slack_offset_m[i]))
         lower = np.array(lo)
         upper = np.array(hi)
         for key, pair in (bounds or {}).items():
@@ -166,6 +199,7 @@ class ParamSpace:
             prior_weight=float(prior_weight),
             base=start_a,
             fit_q_rest="q_rest" in fit,
+            fit_slack="slack" in fit,
         )
 
     @property
@@ -179,7 +213,7 @@ class ParamSpace:
     def to_params(self, theta: FloatArray, base: ArmParams) -> ArmParams:
         """An ArmParams with the fitted values of ``theta`` written into ``base``."""
         changes: dict[str, tuple[float, ...]] = {}
-        for kind in ("km", "alpha", "beta", "q_rest"):
+        for kind in ("km", "alpha", "beta", "q_rest", "slack"):
             idx = self.index(kind)
             if idx.size:
                 changes[PARAM_FIELD[kind]] = tuple(float(v) for v in theta[idx])

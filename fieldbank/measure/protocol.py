@@ -10,7 +10,7 @@ Three parts, any of them (Mussa-Ivaldi, Hogan & Bizzi 1985 for the first two; BR
   transient give ΔF = −K Δx (:mod:`fieldbank.measure.estimate`); the return holds give the
   postural force as well.
 * **stretch** — the robot moves the hand through the postures of each column of the grid at
-  ``stretch_speed_m_per_s`` (1 m/s: the seed's reflex fires only on a fast stretch; 180°/s at
+  ``stretch_speed_m_per_s`` (1.2 m/s: the seed's reflex fires only on a fast stretch; 180°/s at
   the elbow is ≈ 1.1 m/s at the hand), toward and away from the body, on the column and at
   ±``stretch_offset_m`` beside it; the velocity rises and falls as a raised cosine over
   ``ramp_s``, and the plateau covers every posture of the column with ``pass_margin_m`` to
@@ -22,27 +22,37 @@ settles for ``settle_s``. Every choice is a documented, overridable default; the
 plan is :attr:`Plan.duration_s` (the driver adds nothing but the first approach).
 
 The grid is ``grid`` = (columns, rows) postures ``spacing_m`` apart, centred on ``centre_m``
-(shoulder frame; default (0, 0.50) m: about the relaxed hand of an adult arm, so that the grid
-stretches the flexors and the extensors of both joints — a grid nearer the body leaves the
-elbow flexors slack everywhere and their stiffness unidentified). :func:`plan` refuses a grid
-the patient's arm cannot reach, naming the posture; a stretch stroke that would leave the reach
-(they run 10 cm past the grid to reach speed) leaves out the far postures of that stroke,
-said in :attr:`Plan.notes`.
+(shoulder frame). By default both follow the patient's arm (:meth:`ProtocolConfig.resolved`):
+the centre is the hand with the shoulder at 40° and the elbow at 80°
+(:data:`DEFAULT_CENTRE_POSTURE_DEG`), the spacing 7 % of the arm's length (4.8 cm at 1.75 m),
+and the passes run at 1.2 m/s - the protocol that, over bodies of 1.55-1.90 m, left and right,
+stretches every group past its slack length at ≥ 4 postures and fires a mild reflex of every
+group at ≥ 4 pass points (:mod:`fieldbank.measure.visibility`; the earlier fixed grid around
+(0, 0.50) m at 1 m/s never fired the shoulder extensors' mild reflex, stretched the
+bi-articular flexors at one posture, and on a 1.90 m arm left the elbow flexors slack
+everywhere). :func:`plan` refuses a grid the patient's arm cannot reach, naming the posture; a
+stretch stroke that would leave the reach (they run 10 cm past the grid to reach speed) leaves
+out the far postures of that stroke, said in :attr:`Plan.notes`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray
+from fieldbank.params import ArmParams
 from fieldbank.validation import Interval, check_number
 
 PARTS = ("postural", "stiffness", "stretch")
+#: The posture (shoulder, elbow), degrees, whose hand position centres the default grid.
+DEFAULT_CENTRE_POSTURE_DEG = (40.0, 80.0)
+#: The default spacing of the grid, as a fraction of the arm's length (upper arm + forearm).
+DEFAULT_SPACING_FRACTION = 0.07
 
 #: Allowed range of every numeric setting of :class:`ProtocolConfig`.
 PROTOCOL_BOUNDS: dict[str, Interval] = {
@@ -68,8 +78,10 @@ class ProtocolConfig:
 
     parts: tuple[str, ...] = PARTS
     grid: tuple[int, int] = (5, 5)
-    spacing_m: float = 0.04
-    centre_m: tuple[float, float] = (0.0, 0.50)
+    #: None: 7 % of the patient's arm length (:meth:`resolved`)
+    spacing_m: float | None = None
+    #: None: the patient's hand at :data:`DEFAULT_CENTRE_POSTURE_DEG` (:meth:`resolved`)
+    centre_m: tuple[float, float] | None = None
     displacement_m: float = 0.006
     directions: int = 8
     hold_s: float = 0.6
@@ -78,7 +90,7 @@ class ProtocolConfig:
     postural_hold_s: float = 1.0
     transfer_speed_m_per_s: float = 0.2
     settle_s: float = 0.25
-    stretch_speed_m_per_s: float = 1.0
+    stretch_speed_m_per_s: float = 1.2
     stretch_offset_m: float = 0.008
     ramp_s: float = 0.2
     pass_margin_m: float = 0.015
@@ -92,10 +104,41 @@ class ProtocolConfig:
         if not (1 <= nx <= 15 and 1 <= ny <= 15):
             raise ParameterError(f"grid must be 1–15 by 1–15 postures; got {nx}×{ny}")
         for name, interval in PROTOCOL_BOUNDS.items():
-            check_number(name, getattr(self, name), interval, what="protocol setting")
+            if getattr(self, name) is not None:
+                check_number(name, getattr(self, name), interval, what="protocol setting")
         if self.transient_s >= min(self.hold_s, self.postural_hold_s):
             raise ParameterError(f"transient_s ({self.transient_s:g} s) must be shorter than "
                                  "the holds it is cut from")
+
+    def resolved(self, arm: Arm | None = None) -> ProtocolConfig:
+        """This configuration with the grid's centre and spacing set for ``arm`` where they
+        are left to the default (the adult default arm when no arm is given): the hand at
+        :data:`DEFAULT_CENTRE_POSTURE_DEG`, 7 % of the arm's length apart."""
+        if self.centre_m is not None and self.spacing_m is not None:
+            return self
+        a = arm if arm is not None else Arm.from_params(ArmParams.from_anthropometry())
+        hand = a.fk(np.radians(np.array([DEFAULT_CENTRE_POSTURE_DEG])))[0]
+        centre = self.centre_m if self.centre_m is not None else (
+            round(float(hand[0]), 3), round(float(hand[1]), 3))
+        spacing = self.spacing_m if self.spacing_m is not None else round(
+            DEFAULT_SPACING_FRACTION * (a.l1 + a.l2), 3)
+        return replace(self, centre_m=centre, spacing_m=spacing)
+
+    @property
+    def centre(self) -> tuple[float, float]:
+        """The grid's centre, m (a resolved configuration's; :meth:`resolved`)."""
+        if self.centre_m is None:
+            raise ParameterError("the protocol's grid centre follows the patient's arm: "
+                                 "resolve it first (ProtocolConfig.resolved)")
+        return self.centre_m
+
+    @property
+    def spacing(self) -> float:
+        """The grid's spacing, m (a resolved configuration's; :meth:`resolved`)."""
+        if self.spacing_m is None:
+            raise ParameterError("the protocol's grid spacing follows the patient's arm: "
+                                 "resolve it first (ProtocolConfig.resolved)")
+        return self.spacing_m
 
 
 @dataclass(frozen=True)
@@ -188,10 +231,11 @@ class Plan:
 
 def grid_postures(config: ProtocolConfig) -> FloatArray:
     """Posture positions of the grid, shape (nx·ny, 2), m; row by row from the body outward."""
-    nx, ny = config.grid
-    cx, cy = config.centre_m
-    xs = cx + config.spacing_m * (np.arange(nx) - (nx - 1) / 2)
-    ys = cy + config.spacing_m * (np.arange(ny) - (ny - 1) / 2)
+    c = config.resolved()
+    nx, ny = c.grid
+    cx, cy = c.centre
+    xs = cx + c.spacing * (np.arange(nx) - (nx - 1) / 2)
+    ys = cy + c.spacing * (np.arange(ny) - (ny - 1) / 2)
     return np.array([[x, y] for y in ys for x in xs], dtype=float)
 
 
@@ -248,9 +292,10 @@ class _Builder:
 
 def plan(config: ProtocolConfig, arm: Arm | None = None,
          start_m: Sequence[float] | None = None) -> Plan:
-    """The plan of ``config`` for a patient's ``arm`` (reachability checked when given),
-    starting with the hand at ``start_m`` (default: the first posture)."""
-    c = config
+    """The plan of ``config`` for a patient's ``arm`` (reachability checked when given; the
+    grid's centre and spacing resolved for it, :meth:`ProtocolConfig.resolved`), starting with
+    the hand at ``start_m`` (default: the first posture)."""
+    c = config.resolved(arm)
     postures = grid_postures(c)
     if arm is not None:
         bad = np.flatnonzero(~arm.reachable(postures))

@@ -27,6 +27,7 @@ from fieldbank.evaluate.design.candidates import (
     check_candidates,
     check_prior,
     equilibrium,
+    open_candidates,
     severity_candidates,
 )
 from fieldbank.evaluate.design.config import CRITERIA, TARGETS, NoiseModel, Perception, ProbeLimits
@@ -91,6 +92,7 @@ __all__ = [
     "feasible",
     "felt_jnd",
     "information_bits",
+    "open_candidates",
     "pair_error",
     "paradigms",
     "path_accelerations",

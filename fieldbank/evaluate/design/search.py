@@ -36,6 +36,7 @@ from fieldbank.evaluate.design.config import (
     Perception,
     ProbeLimits,
 )
+from fieldbank.evaluate.design.coverage import coverage_strokes
 from fieldbank.evaluate.design.paths import FAMILIES, Path, _Family
 from fieldbank.evaluate.design.perception import _combine, _pair_mask, _score, _separated
 from fieldbank.evaluate.design.predict import _execute, _execution_deltas, feasible
@@ -188,7 +189,8 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
            perception: Perception | None = None, noise: NoiseModel | None = None,
            limits: ProbeLimits | None = None, start_m: Sequence[float] | None = None,
            stop_when_separated: bool = True, polish_starts: int = POLISH_STARTS,
-           polish_evals: int = POLISH_EVALS, names: Sequence[str] | None = None) -> ProbeDesign:
+           polish_evals: int = POLISH_EVALS, names: Sequence[str] | None = None,
+           cover: bool = False) -> ProbeDesign:
     """The set of at most ``max_probes`` (default n − 1) paths that best separates the candidates.
 
     Parameters
@@ -211,6 +213,11 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
         Grid points polished with nlopt and the evaluations each may use.
     names : sequence of str, optional
         Names of the probes (default "stroke 1", "stroke 2", …).
+    cover : bool
+        Start the set with a stroke along the direction that lengthens each group in which the
+        candidates differ (:func:`fieldbank.evaluate.design.coverage.coverage_strokes`), so
+        that no difference goes unstretched; the search adds strokes after them up to
+        ``max_probes`` (strokes only).
     """
     t0 = time.perf_counter()
     cands = check_candidates(candidates, 2)
@@ -232,6 +239,15 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
     chosen: list[FloatArray] = []
     prev: tuple[dict[str, FloatArray], FloatArray] | None = None
     last = -np.inf
+    if cover and family == "stroke":
+        for s in coverage_strokes(cands, ctx.limits, noise, (float(start[0]), float(start[1]))):
+            cv = np.array(s.values, dtype=float)
+            chosen.append(cv)
+            pos, vel, t = fam.make(start, cv[None], DESIGN_SAMPLES)
+            sep, kl = ctx.evaluate(pos, vel, t, fam.closed, robust=True)
+            sep, kl = _combine(sep, kl, prev)
+            prev = ({k: x[:, 0] for k, x in sep.items()}, kl[:, 0])
+        limit = max(limit, len(chosen))
     while len(chosen) < limit:
         v, val = _search_one(ctx, fam, start, prev, polish_starts, polish_evals)
         if v is None or (chosen and val < last + MIN_GAIN):

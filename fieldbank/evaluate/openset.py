@@ -1,0 +1,372 @@
+"""Which groups a recorded trace says are impaired, over every state the groups can be in, and
+when no state explains it.
+
+A classifier that chooses among a dozen joint-group arms on the scale's steps is confidently
+wrong on an arm that is none of them: an elbow-extensor reflex alone was called unimpaired with
+p = 1.000, and arms between severities or with two groups impaired were named with p ≥ 0.95 in
+one answer of six. Here the arm is described group by group (:class:`OpenSet`):
+
+* each muscle group is **unimpaired** or in one of :data:`STATES_PER_GROUP` states - its passive
+  stiffness, its reflex or both at a severity score of 0.5, 1, …, 4.5 (half Weber steps, from
+  below very mild to the top of severe; :func:`fieldbank.evaluate.severity.synthesize_ratios`),
+  or a contracture (its slack length 5, 10, 15 or 20 mm short: the brief's range);
+* an arm is **none, one or two** groups in such states; the prior takes each group to be
+  impaired with probability :data:`GROUP_PRIOR` (0.3, independently; three or more groups left
+  out: with them an off-grid severity of one group was "explained" by a third group's state,
+  with p = 1), and an impaired group equally likely in each of its states;
+* the answer is the set of impaired groups ("ef", "ef+bf", "unimpaired"), its probability the
+  posterior mass of every arm with that set: a posterior over the groups' states themselves.
+
+Every one-group arm is replayed on the recorded motion through the virtual coupling
+(:func:`fieldbank.evaluate.replay.replay_forces`); an arm of several groups has its force first
+taken as the sum of its groups' changes (the muscles' forces add at the hand; for two severe
+groups the sum is mostly within 0.25 N of the replay, up to 1.6 N), which ranks all ≈ 14,600
+arms at once through the Gram matrix of the one-group changes; the :data:`EXACT_TOP` most
+probable (and the best of each leading answer) are then replayed themselves and their
+likelihood made exact. The likelihood, its model-error temperature and the fit test are the
+classifier's (:mod:`fieldbank.evaluate.classify`).
+
+**None of them.** When the best arm's residual is beyond what the noise explains (its p-value
+below :data:`fieldbank.evaluate.classify.FIT_LEVEL`: three groups at once, a group beyond
+severe, a contracture with a reflex in one group, a rest posture other than assumed), the
+answer is "none of the candidates", with probability 1 − p/level: the residual says how sure.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from fieldbank.errors import ParameterError
+from fieldbank.evaluate.classify import (
+    FIT_LEVEL,
+    _correlated_weight_sum,
+    _fit_p_value,
+    _model_error_ratio,
+)
+from fieldbank.evaluate.design import NoiseModel, saturate
+from fieldbank.evaluate.observation import Observation
+from fieldbank.evaluate.replay import replay_forces
+from fieldbank.evaluate.severity import ratio_of_score, synthesize_ratios
+from fieldbank.model import Arm, FloatArray
+from fieldbank.params import GROUPS, ArmParams
+
+#: Severity scores of a group's passive, reflex or both states (half Weber steps).
+SCORES: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5)
+#: A group's contractures: its slack length this much short, m.
+CONTRACTURES_M: tuple[float, ...] = (0.005, 0.010, 0.015, 0.020)
+COMPONENTS: tuple[str, ...] = ("passive", "dynamic", "both")
+STATES_PER_GROUP = len(COMPONENTS) * len(SCORES) + len(CONTRACTURES_M)
+#: Prior probability that a group is impaired (each group independently; assumption).
+GROUP_PRIOR = 0.3
+#: Most impaired groups an arm of the set has.
+MAX_GROUPS = 2
+#: Arms whose likelihood is made exact by their own replay, the most probable first.
+EXACT_TOP = 16
+#: The answer when no arm of the set explains the recording.
+NONE_OF_THEM = "none of the candidates"
+#: The likelihood reads the recorded force every this many seconds (the replay still ticks
+#: at the recording's rate): ten samples per correlation time of the noise, each weighted by
+#: the time it stands for, so the evidence is the same and the sums five times cheaper.
+LIKELIHOOD_STEP_S = 0.005
+
+
+@dataclass(frozen=True)
+class GroupState:
+    """One impaired state of one group: ``component`` 'passive', 'dynamic', 'both' at
+    ``score``, or 'contracture' of ``slack_m`` (m short)."""
+
+    group: str
+    component: str
+    score: float = 0.0
+    slack_m: float = 0.0
+
+    @property
+    def name(self) -> str:
+        if self.component == "contracture":
+            return f"{self.group} contracture {self.slack_m * 1000:g} mm"
+        return f"{self.group} {self.component} {self.score:g}"
+
+
+@dataclass(frozen=True, eq=False)
+class OpenSet:
+    """Every state of every group of one patient's arm (module docstring)."""
+
+    base: ArmParams
+    states: tuple[GroupState, ...]
+    params: tuple[ArmParams, ...]  # one-group arm of each state
+    unimpaired: Arm
+    arms: tuple[Arm, ...]  # compiled, sharing the unimpaired arm's geometry
+    combos: _Combos  # every arm of up to MAX_GROUPS groups in these states, with its prior
+
+    @classmethod
+    def for_arm(cls, base: ArmParams) -> OpenSet:
+        """The open set on ``base``'s body (its muscles unimpaired first)."""
+        p0 = base.with_unimpaired_muscles()
+        ref = Arm.from_params(p0)
+        states, params = [], []
+        for g in GROUPS:
+            dyn = {s: synthesize_ratios({f"{g}:dynamic": ratio_of_score(s, "dynamic")}, p0)
+                   for s in SCORES}
+            for comp in COMPONENTS:
+                for s in SCORES:
+                    p = p0
+                    if comp in ("passive", "both"):
+                        p = p.with_group(g, km_n_per_m=p0.group_value("km_n_per_m", g)
+                                         * ratio_of_score(s, "passive"))
+                    if comp in ("dynamic", "both"):
+                        p = p.with_group(g, alpha_n=dyn[s].group_value("alpha_n", g),
+                                         beta=dyn[s].group_value("beta", g))
+                    states.append(GroupState(g, comp, s))
+                    params.append(p)
+            for d in CONTRACTURES_M:
+                states.append(GroupState(g, "contracture", slack_m=d))
+                params.append(p0.with_group(g, slack_offset_m=-d))
+        return cls(p0, tuple(states), tuple(params), ref,
+                   tuple(ref.with_muscles(p) for p in params), _Combos.of(states))
+
+    def combined(self, picks: Sequence[int]) -> ArmParams:
+        """The arm with the states ``picks`` (indices into :attr:`states`, distinct groups)."""
+        p = self.base
+        for k in picks:
+            g = self.states[k].group
+            src = self.params[k]
+            for f in ("km_n_per_m", "alpha_n", "beta", "slack_offset_m"):
+                p = p.with_group(g, **{f: src.group_value(f, g)})
+        return p
+
+
+@dataclass(frozen=True, eq=False)
+class OpenClassification:
+    """What a recorded trace says about the groups (module docstring).
+
+    ``labels`` / ``label_probability``: every set of impaired groups with its posterior
+    probability (most probable first); ``group_probability``: each group's probability of
+    being impaired; ``best``: the most probable arm's states; ``fit_p_value``: the fit test
+    of the best arm; ``temperature``: the model-error correction of the likelihoods.
+    """
+
+    labels: tuple[str, ...]
+    label_probability: FloatArray
+    group_probability: dict[str, float]
+    best: tuple[str, ...]
+    fit_statistic: float
+    fit_expected: float
+    fit_p_value: float
+    temperature: float
+
+    @property
+    def explains(self) -> bool:
+        return bool(self.fit_p_value >= FIT_LEVEL)
+
+    @property
+    def answer(self) -> tuple[str, float]:
+        """The most probable set of impaired groups with its probability, or
+        :data:`NONE_OF_THEM` with 1 − p/level when no arm explains the recording."""
+        if not self.explains:
+            return NONE_OF_THEM, 1.0 - self.fit_p_value / FIT_LEVEL
+        return self.labels[0], float(self.label_probability[0])
+
+    def to_dict(self) -> dict[str, object]:
+        answer, p = self.answer
+        return {"answer": answer, "probability": p,
+                "labels": {lab: float(f"{q:.6g}") for lab, q in
+                           zip(self.labels[:10], self.label_probability[:10], strict=False)},
+                "groups_impaired": {g: round(v, 6) for g, v in self.group_probability.items()},
+                "best": list(self.best), "explains_recording": self.explains,
+                "fit_test": {"statistic": round(self.fit_statistic, 3),
+                             "expected": round(self.fit_expected, 3),
+                             "p_value": float(f"{self.fit_p_value:.4g}"), "level": FIT_LEVEL},
+                "temperature": round(self.temperature, 4)}
+
+
+def predict(arms: Sequence[Arm], obs: Observation) -> FloatArray:
+    """Each arm's force (n, T, 2) for the recorded motion of ``obs``, replayed through the
+    coupling from rest (``obs.reset_m`` or its first position), with the renderer's gain and
+    saturation when the observation has them."""
+    dt = np.diff(obs.times_s)
+    period = float(np.median(dt))
+    if np.any(np.abs(dt - period) > 0.25 * period):
+        raise ParameterError(f"{obs.source or obs.name}: the open-set classifier replays the "
+                             "motion and needs evenly spaced samples.")
+    start = obs.reset_m if obs.reset_m is not None else (float(obs.positions_m[0, 0]),
+                                                         float(obs.positions_m[0, 1]))
+    f = replay_forces(arms, obs.positions_m, obs.velocities_m_per_s, period, start)
+    if obs.output_gain is not None:
+        f = f * obs.output_gain[None, :, None]
+    return f if obs.force_limit_n is None else saturate(f, obs.force_limit_n)
+
+
+@dataclass(frozen=True, eq=False)
+class _Combos:
+    """Every arm of at most :data:`MAX_GROUPS` impaired groups, as state indices (-1: no
+    state), (A, MAX_GROUPS), with its prior (A,)."""
+
+    picks: np.ndarray
+    prior: FloatArray
+    mask: np.ndarray  # the impaired groups of each arm as a bit mask (bit i: GROUPS[i])
+
+    @classmethod
+    def of(cls, states: Sequence[GroupState]) -> _Combos:
+        by_group = {g: [k for k, s in enumerate(states) if s.group == g] for g in GROUPS}
+        blocks = [np.full((1, MAX_GROUPS), -1)]
+        g0 = (1.0 - GROUP_PRIOR) ** len(GROUPS)
+        priors = [np.array([g0])]
+        for n in range(1, MAX_GROUPS + 1):
+            rows = [np.array(list(itertools.product(*(by_group[g] for g in gs))))
+                    for gs in itertools.combinations(GROUPS, n)]
+            block = np.concatenate(rows)
+            blocks.append(np.hstack([block, np.full((len(block), MAX_GROUPS - n), -1)]))
+            # n given groups impaired, the others not, each impaired group in one state
+            each = (GROUP_PRIOR ** n * (1.0 - GROUP_PRIOR) ** (len(GROUPS) - n)
+                    / np.prod([len(by_group[g]) for g in GROUPS[:n]]))
+            priors.append(np.full(len(block), each))
+        picks = np.concatenate(blocks)
+        bit = np.array([1 << GROUPS.index(s.group) for s in states] + [0])
+        mask = bit[np.where(picks < 0, len(states), picks)].sum(axis=1)
+        return cls(picks, np.concatenate(priors), mask)
+
+    def states_of(self, j: int) -> tuple[int, ...]:
+        return tuple(int(k) for k in self.picks[j] if k >= 0)
+
+
+@dataclass(frozen=True, eq=False)
+class OpenTrace:
+    """What the recorded motions of a trace give every arm of an open set, whatever force was
+    recorded: each one-group arm's replayed force (the unimpaired arm first), the weighted Gram
+    matrix of their changes, and the fit test's mean and variance. One per executed motion,
+    reused for every noise draw or recording of it."""
+
+    openset: OpenSet
+    noise: NoiseModel
+    observations: tuple[Observation, ...]
+    predictions: tuple[FloatArray, ...]
+    gram: FloatArray
+    expected: float
+    variance: float
+    n_eff: float
+
+    @classmethod
+    def of(cls, observations: Sequence[Observation], openset: OpenSet,
+           noise: NoiseModel | None = None) -> OpenTrace:
+        nz = noise or NoiseModel()
+        obs = tuple(observations)
+        if not obs:
+            raise ParameterError("Give at least one recorded observation to classify.")
+        arms = (openset.unimpaired, *openset.arms)
+        preds = tuple(predict(arms, o)[:, _read(o)] for o in obs)
+        n = len(openset.states)
+        gram = np.zeros((n, n))
+        expected = variance = n_eff = 0.0
+        for o, f in zip(obs, preds, strict=True):
+            w = _weights(o, nz)
+            d = f[1:] - f[0][None]
+            gram += np.einsum("stk,utk->su", d * (w / nz.force_sd_n ** 2)[None, :, None], d)
+            n_eff += float(w.sum())
+            expected += 2.0 * float(w.sum())
+            variance += 4.0 * _correlated_weight_sum(o.times_s[_read(o)], w,
+                                                     4.0 / nz.correlation_s)
+        return cls(openset, nz, obs, preds, gram, expected, variance, n_eff)
+
+
+def _read(o: Observation) -> slice:
+    """The samples the likelihood reads (:data:`LIKELIHOOD_STEP_S`)."""
+    period = float(np.median(np.diff(o.times_s)))
+    return slice(0, None, max(1, round(LIKELIHOOD_STEP_S / period)))
+
+
+def _weights(o: Observation, noise: NoiseModel) -> FloatArray:
+    """Δt/τ of each sample read (trapezoid over the samples read; counted ones only)."""
+    k = _read(o)
+    t = o.times_s[k]
+    dt = np.diff(t)
+    w = np.zeros(t.shape)
+    w[1:] += 0.5 * dt
+    w[:-1] += 0.5 * dt
+    if o.counted is not None:
+        w = np.where(o.counted[k], w, 0.0)
+    return np.asarray(w / noise.correlation_s, dtype=float)
+
+
+def classify_open(observations: Sequence[Observation], openset: OpenSet,
+                  noise: NoiseModel | None = None,
+                  trace: OpenTrace | None = None) -> OpenClassification:
+    """The posterior over the impaired groups of the arm that made ``observations``.
+
+    ``trace``: the replays of these motions (:class:`OpenTrace`), when already made (the same
+    motions met with other recorded forces).
+    """
+    obs = tuple(observations)
+    tr = trace if trace is not None else OpenTrace.of(obs, openset, noise)
+    nz = tr.noise
+    cb = openset.combos
+    wr, b = 0.0, np.zeros(len(openset.states))
+    for o, f in zip(obs, tr.predictions, strict=True):
+        w = _weights(o, nz) / nz.force_sd_n ** 2
+        r = o.force_n[_read(o)] - f[0]
+        wr += float(np.sum(w[:, None] * r * r))
+        b += np.einsum("stk,tk->s", (f[1:] - f[0][None]) * w[None, :, None], r)
+    gram = tr.gram
+    expected, variance, n_eff = tr.expected, tr.variance, tr.n_eff
+    n = len(openset.states)
+    # a padding state n with no change: the arms of fewer than three groups
+    bp = np.append(b, 0.0)
+    dp = np.append(np.diag(gram), 0.0)
+    gp = np.zeros((n + 1, n + 1))
+    gp[:n, :n] = gram
+    s = np.where(cb.picks < 0, n, cb.picks)
+    chi2 = wr - 2.0 * bp[s].sum(axis=1) + dp[s].sum(axis=1)
+    for a, c in itertools.combinations(range(s.shape[1]), 2):
+        chi2 += 2.0 * gp[s[:, a], s[:, c]]
+    # the most probable arms of several groups replayed themselves: their likelihood exact
+    logpost = np.log(cb.prior) - 0.5 * chi2
+    # the EXACT_TOP most probable, and the most probable of each of the leading labels
+    lead = np.argpartition(-logpost, EXACT_TOP)[:EXACT_TOP]
+    by_label: dict[int, int] = {}
+    for j in np.argsort(-logpost)[:20 * EXACT_TOP]:
+        by_label.setdefault(int(cb.mask[j]), int(j))
+    top = [j for j in dict.fromkeys([int(j) for j in lead] + list(by_label.values()))
+           if len(cb.states_of(j)) >= 2]
+    if top:
+        chi2[top] = _chi2(obs, [openset.unimpaired.with_muscles(
+            openset.combined(cb.states_of(j))) for j in top], nz)
+    q = float(chi2.min())
+    p_fit = _fit_p_value(q, expected, variance)
+    temperature = 1.0 + _model_error_ratio(q, expected, variance) * n_eff
+    logpost = np.log(cb.prior) - 0.5 * chi2 / temperature
+    post = np.exp(logpost - logpost.max())
+    post /= post.sum()
+    by_mask = np.bincount(cb.mask, weights=post, minlength=1 << len(GROUPS))
+    labels = {_label(m): float(v) for m, v in enumerate(by_mask) if v > 0.0}
+    groups = {g: float(by_mask[[m for m in range(by_mask.size) if m >> i & 1]].sum())
+              for i, g in enumerate(GROUPS)}
+    order = sorted(labels, key=lambda x: -labels[x])
+    best = tuple(openset.states[i].name for i in cb.states_of(int(np.argmax(post)))) or (
+        "unimpaired",)
+    return OpenClassification(tuple(order), np.array([labels[x] for x in order]), groups,
+                              best, q, expected, p_fit, temperature)
+
+
+def _label(mask: int) -> str:
+    """The set of groups of a bit mask ('ef+bf'; 'unimpaired' for none)."""
+    return "+".join(g for i, g in enumerate(GROUPS) if mask >> i & 1) or "unimpaired"
+
+
+def _chi2(obs: Sequence[Observation], arms: Sequence[Arm], noise: NoiseModel) -> FloatArray:
+    """Whitened χ² of each arm's replayed force against the recorded one, (n,)."""
+    out = np.zeros(len(arms))
+    for o in obs:
+        w = _weights(o, noise) / noise.force_sd_n ** 2
+        k = _read(o)
+        r = o.force_n[None, k] - predict(arms, o)[:, k]
+        out += np.einsum("t,ntk->n", w, r * r)
+    return out
+
+
+__all__ = ["COMPONENTS", "CONTRACTURES_M", "EXACT_TOP", "GROUP_PRIOR", "MAX_GROUPS",
+           "NONE_OF_THEM",
+           "SCORES", "STATES_PER_GROUP", "GroupState", "OpenClassification", "OpenSet",
+           "OpenTrace", "classify_open", "predict"]

@@ -1,0 +1,285 @@
+"""Are the classifier's probabilities right? Seeded arm families, simulated probes, and the
+stated probability against how often the answer was right.
+
+Families of arms (:func:`family_arms`), each arm a body of its own (45-100 kg, 1.50-1.95 m,
+either side), none of them on the candidates' steps:
+
+* **between severities** - one muscle group, passive, reflex or both, at a severity score
+  uniform in [0.5, 4.5] (between and around the scale's steps);
+* **two groups** - two groups at once, each with its own component and score in [1, 4.5];
+* **reflex only** - one group's reflex: along the scale's path at a score in [0.5, 4.5], or α
+  alone raised 6-20 fold at the unimpaired gain, or β alone raised to 0.5-1;
+* **contracture only** - one group's slack length 4-20 mm short, Km unimpaired;
+* **outside the candidates** - three groups at once, one group beyond severe (score 5-6.5), one
+  group with a contracture of 10-20 mm and a moderate to severe reflex, or a rest posture
+  10-20° from the one assumed with a group impaired.
+
+The truth of an arm is the set of groups whose grade is not unimpaired
+(:func:`truth_label`, :func:`fieldbank.evaluate.severity.classify`): a change a hand would not
+feel is not an impairment to name. A trial (:func:`run_trials`): each probe performed with the
+operator's motion noise (:func:`fieldbank.evaluate.design.draw_execution`), sampled at 1 kHz,
+the true arm's force through the virtual coupling for the executed motion
+(:func:`fieldbank.evaluate.replay.replay_forces`, the force a renderer would send), sensor
+noise drawn (:func:`fieldbank.evaluate.observation.with_force_noise`), and the classifier's
+answer - the most probable set of impaired groups, or none of the candidates - with the
+probability it states. :func:`reliability_bins` sets the stated probability against how often
+such answers were right; :func:`calibration_error` is the trial-weighted mean gap.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from fieldbank.evaluate.classify import classify
+from fieldbank.evaluate.design import NoiseModel, draw_execution, severity_candidates
+from fieldbank.evaluate.design.coverage import stretch_noise, stretch_set
+from fieldbank.evaluate.observation import Observation, with_force_noise
+from fieldbank.evaluate.openset import NONE_OF_THEM, OpenSet, OpenTrace, classify_open, predict
+from fieldbank.evaluate.replay import replay_forces
+from fieldbank.evaluate.severity import LEVELS, ratio_of_score, synthesize_ratios
+from fieldbank.evaluate.severity import classify as grade
+from fieldbank.model import Arm
+from fieldbank.params import GROUPS, JOINT_GROUPS, ArmParams
+
+FAMILIES: tuple[str, ...] = ("between severities", "two groups", "reflex only",
+                             "contracture only", "outside the candidates")
+#: Sample period of the simulated recordings, s (the renderer's 1 kHz).
+SAMPLE_S = 1e-3
+#: Bins of the stated probability (the last closed at 1).
+BINS: tuple[tuple[float, float], ...] = ((0.0, 0.6), (0.6, 0.8), (0.8, 0.9), (0.9, 0.95),
+                                         (0.95, 0.99), (0.99, 1.0))
+
+Progress = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class TrialArm:
+    """One simulated patient: its family, how it was made, its parameters and its truth."""
+
+    family: str
+    name: str
+    params: ArmParams
+    truth: str
+
+
+def truth_label(params: ArmParams) -> str:
+    """The groups whose passive or dynamic grade is not unimpaired, 'ef+bf' style in the
+    model's order, or 'unimpaired'."""
+    graded = grade(Arm.from_params(params))
+    hit = [g for g in GROUPS if graded[g].passive.level != "unimpaired"
+           or graded[g].dynamic.level != "unimpaired"]
+    return "+".join(hit) if hit else "unimpaired"
+
+
+def _body(rng: np.random.Generator) -> ArmParams:
+    return ArmParams.from_anthropometry(float(rng.uniform(45.0, 100.0)),
+                                        float(rng.uniform(1.50, 1.95)),
+                                        "left" if rng.uniform() < 0.4 else "right")
+
+
+def _one(family: str, rng: np.random.Generator) -> tuple[str, ArmParams]:
+    base = _body(rng)
+    comps = ("passive", "dynamic")
+    if family == "between severities":
+        g = GROUPS[int(rng.integers(6))]
+        comp = ("passive", "dynamic", "both")[int(rng.integers(3))]
+        s = float(rng.uniform(0.5, 4.5))
+        targets = {f"{g}:{c}": ratio_of_score(s, c) for c in comps if comp in (c, "both")}
+        return f"{g} {comp} score {s:.2f}", synthesize_ratios(targets, base)
+    if family == "two groups":
+        a, b = (GROUPS[int(k)] for k in rng.choice(6, 2, replace=False))
+        targets, words = {}, []
+        for g in (a, b):
+            comp = ("passive", "dynamic", "both")[int(rng.integers(3))]
+            s = float(rng.uniform(1.0, 4.5))
+            targets.update({f"{g}:{c}": ratio_of_score(s, c) for c in comps
+                            if comp in (c, "both")})
+            words.append(f"{g} {comp} {s:.2f}")
+        return " + ".join(words), synthesize_ratios(targets, base)
+    if family == "reflex only":
+        g = GROUPS[int(rng.integers(6))]
+        kind = int(rng.integers(3))
+        if kind == 0:
+            s = float(rng.uniform(0.5, 4.5))
+            return f"{g} reflex score {s:.2f}", synthesize_ratios(
+                {f"{g}:dynamic": ratio_of_score(s, "dynamic")}, base)
+        if kind == 1:
+            k = float(rng.uniform(6.0, 20.0))
+            return f"{g} α ×{k:.1f}", base.with_group(g, alpha_n=k * base.group_value(
+                "alpha_n", g))
+        gain = float(rng.uniform(0.5, 1.0))
+        return f"{g} β {gain:.2f}", base.with_group(g, beta=gain)
+    if family == "contracture only":
+        g = GROUPS[int(rng.integers(6))]
+        d = float(rng.uniform(0.004, 0.020))
+        return f"{g} {d * 1000:.0f} mm short", base.with_group(g, slack_offset_m=-d)
+    if family == "outside the candidates":
+        kind = int(rng.integers(4))
+        if kind == 0:
+            gs = [GROUPS[int(k)] for k in rng.choice(6, 3, replace=False)]
+            s = float(rng.uniform(2.0, 4.5))
+            return f"{'+'.join(gs)} {s:.2f}", synthesize_ratios(
+                {g: ratio_of_score(s, "passive") for g in gs}, base)
+        g = GROUPS[int(rng.integers(6))]
+        if kind == 1:
+            s = float(rng.uniform(5.0, 6.5))
+            return f"{g} beyond severe {s:.2f}", synthesize_ratios(
+                {g: ratio_of_score(s, "passive")}, base)
+        if kind == 2:
+            d = float(rng.uniform(0.010, 0.020))
+            s = float(rng.uniform(3.0, 4.5))
+            p = synthesize_ratios({f"{g}:dynamic": ratio_of_score(s, "dynamic")}, base)
+            return f"{g} {d * 1000:.0f} mm short, reflex {s:.2f}", p.with_group(
+                g, slack_offset_m=-d)
+        shift = np.radians(rng.uniform(10.0, 20.0, 2) * rng.choice([-1.0, 1.0], 2))
+        s = float(rng.uniform(2.0, 4.5))
+        moved = base.replace(q_rest_rad=tuple(float(v) for v in np.array(base.q_rest_rad)
+                                              + shift))
+        return (f"{g} {s:.2f}, rest posture {np.degrees(shift[0]):+.0f}°, "
+                f"{np.degrees(shift[1]):+.0f}°"), synthesize_ratios(
+            {g: ratio_of_score(s, "passive")}, moved)
+    raise ValueError(f"unknown family {family!r}; known: {', '.join(FAMILIES)}")
+
+
+def family_arms(family: str, n: int, seed: int) -> tuple[TrialArm, ...]:
+    """``n`` arms of ``family`` (module docstring), seeded."""
+    out = []
+    for k in range(n):
+        rng = np.random.default_rng([seed, FAMILIES.index(family), k])
+        name, params = _one(family, rng)
+        out.append(TrialArm(family, name, params, truth_label(params)))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One trial: the arm, what the classifier answered and with what probability."""
+
+    family: str
+    arm: str
+    truth: str
+    answer: str
+    probability: float
+    explains: bool
+    fit_p_value: float
+    #: The joint-group classifier's answer on the same trace (the baseline), and whether it
+    #: names a joint group holding every impaired group.
+    baseline_answer: str = ""
+    baseline_probability: float = float("nan")
+    baseline_right: bool = False
+
+    @property
+    def right(self) -> bool:
+        """The impaired groups named; for an arm outside the candidates, also "none of the
+        candidates"."""
+        return self.answer == self.truth or (self.family == "outside the candidates"
+                                             and self.answer == NONE_OF_THEM)
+
+
+def run_trials(arms: Sequence[TrialArm], noise: NoiseModel, draws: int = 4, seed: int = 0,
+               progress: Progress | None = None, baseline: bool = False) -> list[Outcome]:
+    """Every arm probed with the clinic's fast stretch of each group from where the arm
+    rests (:func:`~fieldbank.evaluate.design.coverage.stretch_set`, performed with the
+    operator's scatter) and classified among every state of its groups
+    (:func:`~fieldbank.evaluate.openset.classify_open` on the arm's body), ``draws``
+    sensor-noise draws per execution (module docstring). ``baseline``: also the joint-group
+    classifier (:func:`fieldbank.evaluate.classify.classify` among the twelve severity
+    candidates and the unimpaired arm) on the same traces."""
+    out: list[Outcome] = []
+    scatter = stretch_noise(noise)
+    for k, arm in enumerate(arms):
+        rng = np.random.default_rng([seed, k, 7])
+        # the clinic knows the body (its anthropometry), not the muscles nor the rest posture
+        p = arm.params
+        openset = OpenSet.for_arm(ArmParams.from_anthropometry(p.body_mass_kg, p.height_m,
+                                                               p.side))
+        true_arm = Arm.from_params(arm.params)
+        obs = []
+        for m in stretch_set(openset.unimpaired, noise=noise):
+            # sampled at 1 kHz; the executed speed scales the times (0.8-1.25 ms a sample)
+            run = draw_execution(m, scatter, rng)
+            dt = float(run.times_s[1] - run.times_s[0])
+            start = (float(run.positions_m[0, 0]), float(run.positions_m[0, 1]))
+            force = replay_forces([true_arm], run.positions_m, run.velocities_m_per_s, dt,
+                                  start)[0]
+            obs.append(Observation.from_arrays(run.name, run.times_s, run.positions_m, force,
+                                               run.velocities_m_per_s, reset_m=start))
+        trace = OpenTrace.of(obs, openset, noise)
+        joint = severity_candidates(levels=LEVELS[1:], unimpaired=True,
+                                    base=openset.base) if baseline else ()
+        jpreds = [predict([c.arm for c in joint], o) for o in obs] if baseline else []
+        for _ in range(draws):
+            noisy = [with_force_noise(o, noise, rng) for o in obs]
+            c = classify_open(noisy, openset, trace=trace)
+            answer, stated = c.answer
+            extra: dict[str, object] = {}
+            if baseline:
+                b = classify(noisy, joint, noise=noise, next_probe=False, predictions=jpreds)
+                held = set(JOINT_GROUPS.get(b.group, ())) if b.group != "unimpaired" else set()
+                truth = set(arm.truth.split("+")) if arm.truth != "unimpaired" else set()
+                extra = {"baseline_answer": b.group,
+                         "baseline_probability": b.group_posterior[b.group],
+                         "baseline_right": truth <= held and bool(held) == bool(truth)}
+            out.append(Outcome(arm.family, arm.name, arm.truth, answer, stated, c.explains,
+                               c.fit_p_value, **extra))  # type: ignore[arg-type]
+        if progress is not None:
+            progress(k + 1, len(arms))
+    return out
+
+
+@dataclass(frozen=True)
+class ReliabilityBin:
+    """Answers stated with a probability in [low, high): how many, their mean stated
+    probability and the fraction right, with its binomial SE."""
+
+    low: float
+    high: float
+    n: int
+    stated: float
+    observed: float
+
+    @property
+    def gap(self) -> float:
+        """Observed accuracy minus stated probability (negative: over-confident)."""
+        return self.observed - self.stated
+
+    @property
+    def se(self) -> float:
+        return math.sqrt(max(self.stated * (1 - self.stated), 1e-4) / self.n) if self.n \
+            else math.nan
+
+
+def reliability_bins(stated: Sequence[float], right: Sequence[bool],
+                     bins: Sequence[tuple[float, float]] = BINS) -> tuple[ReliabilityBin, ...]:
+    """Stated probability against observed accuracy, per bin of the stated probability."""
+    s = np.asarray(stated, dtype=float)
+    r = np.asarray(right, dtype=bool)
+    out = []
+    for k, (lo, hi) in enumerate(bins):
+        top = k == len(bins) - 1
+        m = (s >= lo) & ((s <= hi) if top else (s < hi))
+        n = int(m.sum())
+        out.append(ReliabilityBin(lo, hi, n, float(s[m].mean()) if n else math.nan,
+                                  float(r[m].mean()) if n else math.nan))
+    return tuple(out)
+
+
+def calibration_error(bins: Sequence[ReliabilityBin]) -> float:
+    """Expected calibration error: the trial-weighted mean |observed − stated| over bins."""
+    n = sum(b.n for b in bins)
+    return sum(b.n * abs(b.gap) for b in bins if b.n) / n if n else math.nan
+
+
+def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[int, int]:
+    """(wrong answers, answers) among those stated with a probability ≥ ``level``."""
+    sure = [o for o in outcomes if o.probability >= level]
+    return sum(not o.right for o in sure), len(sure)
+
+
+__all__ = ["BINS", "FAMILIES", "NONE_OF_THEM", "Outcome", "ReliabilityBin", "TrialArm",
+           "calibration_error", "family_arms", "reliability_bins", "run_trials",
+           "truth_label", "wrong_when_sure"]

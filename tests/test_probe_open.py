@@ -1,0 +1,151 @@
+"""The open-set classifier: every group's states, a stretch for every group, and "none of the
+candidates" when the residual says so.
+
+Cheap on purpose: noise-free and lightly noisy traces of a handful of arms on one body (the
+reliability over seeded families of their own is ``benchmarks/bench_probe_open.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fieldbank.evaluate.design import NoiseModel, open_candidates
+from fieldbank.evaluate.design.coverage import differing_groups, stretch_set
+from fieldbank.evaluate.observation import Observation, with_force_noise
+from fieldbank.evaluate.openset import NONE_OF_THEM, OpenSet, OpenTrace, classify_open
+from fieldbank.evaluate.reliability import (
+    calibration_error,
+    family_arms,
+    reliability_bins,
+    truth_label,
+)
+from fieldbank.evaluate.replay import replay_forces
+from fieldbank.evaluate.severity import synthesize, synthesize_ratios
+from fieldbank.model import Arm
+from fieldbank.params import GROUPS, ArmParams
+from fieldbank.sim import ArmSim
+
+BODY = ArmParams.from_anthropometry(68.0, 1.71, "left")
+
+
+def test_the_batch_replay_is_the_arm_by_arm_replay() -> None:
+    """Every candidate ticked together gives what one ArmSim per candidate gives."""
+    arms = [Arm.from_params(p) for p in (
+        BODY, synthesize({"elbow": "severe"}, BODY), BODY.with_group("ef", slack_offset_m=-0.01),
+        synthesize({"be:dynamic": "moderate"}, BODY))]
+    m = stretch_set(arms[0])[2]  # the elbow flexors' stretch
+    m = type(m)(m.name, m.times_s[:800], m.positions_m[:800], m.velocities_m_per_s[:800],
+                m.description)
+    dt = float(m.times_s[1] - m.times_s[0])
+    start = (float(m.positions_m[0, 0]), float(m.positions_m[0, 1]))
+    batch = replay_forces(arms, m.positions_m, m.velocities_m_per_s, dt, start)
+    for a, got in zip(arms, batch, strict=True):
+        sim = ArmSim(a, dt_s=dt)
+        sim.reset_at_hand(*start)
+        want = np.array([sim.tick(p[0], p[1], v[0], v[1]) for p, v in
+                         zip(m.positions_m.tolist(), m.velocities_m_per_s.tolist(),
+                             strict=True)])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
+    assert np.abs(batch[1] - batch[0]).max() > 1.0  # the arms differ
+
+
+def test_the_open_set_spans_groups_components_levels_pairs_and_contractures() -> None:
+    cands = open_candidates(BODY)
+    labels = {c.label for c in cands}
+    assert {"unimpaired", *GROUPS} <= labels and "ef+bf" in labels
+    assert any("contracture" in c.name for c in cands)
+    assert len(cands) == 1 + 6 * 3 * 4 + 6 * 3 + 15 * 4
+    assert differing_groups(cands) == GROUPS
+    # a stretch for every group: each lengthens its group fast into the end of its range
+    arm = cands[0].arm
+    stretches = stretch_set(arm)
+    assert [m.name for m in stretches] == [f"stretch {g}" for g in GROUPS]
+    for g, m in zip(GROUPS, stretches, strict=True):
+        q = arm.ik(m.positions_m)
+        rate = (np.gradient(q, m.times_s, axis=0) @ arm.jl.T)[:, GROUPS.index(g)]
+        assert rate.max() > 0.3 * arm.ldot_max[GROUPS.index(g)] / 2  # fast
+        lam = arm.muscle_lengths(q)[:, GROUPS.index(g)]
+        assert (lam.max() - arm.lam_min[GROUPS.index(g)]) / arm.excursion[
+            GROUPS.index(g)] > 0.7  # into the long end of its range
+
+
+@pytest.fixture(scope="module")
+def openset() -> OpenSet:
+    return OpenSet.for_arm(BODY)
+
+
+def _trace(params: ArmParams, openset: OpenSet) -> list[Observation]:
+    true = Arm.from_params(params)
+    out = []
+    for m in stretch_set(openset.unimpaired):
+        dt = float(m.times_s[1] - m.times_s[0])
+        start = (float(m.positions_m[0, 0]), float(m.positions_m[0, 1]))
+        f = replay_forces([true], m.positions_m, m.velocities_m_per_s, dt, start)[0]
+        out.append(Observation.from_arrays(m.name, m.times_s, m.positions_m, f,
+                                           m.velocities_m_per_s, reset_m=start))
+    return out
+
+
+@pytest.mark.slow
+def test_groups_between_the_steps_are_named_and_an_arm_outside_is_flagged(
+        openset: OpenSet) -> None:
+    """An elbow-extensor reflex alone and two groups at scores off the grid are named with
+    their groups; three severe groups at once are none of the candidates - at 2 N of
+    noise."""
+    rng = np.random.default_rng(3)
+    noise = NoiseModel(force_sd_n=2.0)
+    arms = {
+        "ee": synthesize_ratios({"ee:dynamic": 9.0}, BODY),
+        "ef+be": synthesize_ratios({"ef": 3.3, "be:passive": 7.0}, BODY),
+    }
+    for truth, params in arms.items():
+        assert truth_label(params) == truth
+        obs = _trace(params, openset)
+        c = classify_open([with_force_noise(o, noise, rng) for o in obs], openset,
+                          trace=OpenTrace.of(obs, openset, noise))
+        answer, p = c.answer
+        assert answer == truth and p > 0.5, (truth, c.to_dict())
+        assert c.explains
+    outside = synthesize({"sf": "severe", "ee": "severe", "bf": "severe"}, BODY)
+    c = classify_open([with_force_noise(o, noise, rng) for o in _trace(outside, openset)],
+                      openset, noise)
+    answer, p = c.answer
+    assert answer == NONE_OF_THEM and p > 0.99 and not c.explains, c.to_dict()
+
+
+def test_the_reliability_figures() -> None:
+    """Bins, calibration error and the families' truths, on numbers worked by hand."""
+    bins = reliability_bins([0.5, 0.55, 0.97, 0.99, 1.0], [True, False, True, True, False])
+    got = {(b.low, b.high): (b.n, b.stated, b.observed) for b in bins if b.n}
+    assert got[(0.0, 0.6)] == (2, pytest.approx(0.525), 0.5)
+    assert got[(0.95, 0.99)] == (1, pytest.approx(0.97), 1.0)
+    assert got[(0.99, 1.0)] == (2, pytest.approx(0.995), 0.5)
+    # |0.5 - 0.525| × 2 + |1 - 0.97| + |0.5 - 0.995| × 2, over 5
+    assert calibration_error(bins) == pytest.approx((0.05 + 0.03 + 0.99) / 5)
+    arms = family_arms("reflex only", 6, seed=99)
+    assert family_arms("reflex only", 6, seed=99) == arms  # seeded
+    for a in arms:  # one group's reflex, felt: the truth is that group
+        assert a.truth in GROUPS, a
+        g = a.truth
+        assert a.params.group_value("km_n_per_m", g) == pytest.approx(600.0)
+
+
+def test_a_design_that_covers_stretches_every_group_the_candidates_differ_in() -> None:
+    """The two strokes designed for three joint groups never stretched the directions in which
+    an elbow-extensor reflex differs; with ``cover`` the set starts with a stroke along each
+    group's lengthening direction."""
+    import math
+
+    from fieldbank.evaluate.design import design, severity_candidates
+    from fieldbank.evaluate.probing import lengthening_direction
+
+    cands = severity_candidates(("elbow",), ("severe",), unimpaired=True, base=BODY)
+    d = design(cands, max_probes=2, polish_evals=0, cover=True)
+    assert differing_groups(cands) == ("ef", "ee")
+    arm = cands[0].arm
+    for g in ("ef", "ee"):
+        want = lengthening_direction(arm, g)
+        angle = math.degrees(math.atan2(want[1], want[0]))
+        assert any(abs((p.direction_deg - angle + 180.0) % 360.0 - 180.0) <= 30.0
+                   for p in d.paths), (g, [p.direction_deg for p in d.paths])
