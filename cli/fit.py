@@ -17,16 +17,6 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from fieldbank.cli.choices import (
-    FIT_ALGORITHMS,
-    FIT_DEFAULT_ALGORITHM,
-    FIT_DEFAULT_PRIOR_WEIGHT,
-    FIT_KINDS,
-    MODEL_VERSION,
-    UNCERTAINTY_DEFAULT_METHOD,
-    UNCERTAINTY_DEFAULT_REPLICATES,
-    UNCERTAINTY_METHODS,
-)
 from fieldbank.cli.options import (
     db_option,
     emit_json,
@@ -36,6 +26,16 @@ from fieldbank.cli.options import (
     read_db,
     say,
     scheduler_option,
+)
+from fieldbank.fitchoices import (
+    ALGORITHMS,
+    DEFAULT_ALGORITHM,
+    DEFAULT_PRIOR_WEIGHT,
+    DEFAULT_REPLICATES,
+    DEFAULT_UNCERTAINTY,
+    FIT_KINDS,
+    MODEL_VERSION,
+    UNCERTAINTY_METHODS,
 )
 from fieldbank.params import GROUP_NAMES, GROUPS, ArmParams
 from fieldbank.sanitize import printable
@@ -184,19 +184,19 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="With --all and no scheduler: worker processes (default: the cores "
                    "available).")
-@click.option("--algorithm", type=click.Choice(list(FIT_ALGORITHMS)), default=FIT_DEFAULT_ALGORITHM,
+@click.option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
               show_default=True, help="nlopt global+local, or the dual annealing baseline.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--fit", "fit_kinds", default="km,alpha,beta", show_default=True,
               help=f"Comma-separated parameter kinds to fit ({', '.join(FIT_KINDS)}).")
-@click.option("--prior-weight", type=float, default=FIT_DEFAULT_PRIOR_WEIGHT, show_default=True)
+@click.option("--prior-weight", type=float, default=DEFAULT_PRIOR_WEIGHT, show_default=True)
 @click.option("--max-evals", type=click.IntRange(min=10), default=None)
 @click.option("--uncertainty", type=click.Choice(list(UNCERTAINTY_METHODS)),
-              default=UNCERTAINTY_DEFAULT_METHOD,
+              default=DEFAULT_UNCERTAINTY,
               show_default=True,
               help="Gauss-Newton where it holds else a parametric bootstrap ('auto'), or one "
                    "of the two always.")
-@click.option("--replicates", type=click.IntRange(min=2), default=UNCERTAINTY_DEFAULT_REPLICATES,
+@click.option("--replicates", type=click.IntRange(min=2), default=DEFAULT_REPLICATES,
               show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               callback=figure_path,

@@ -11,9 +11,9 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.choices import JOB_KINDS
 from fieldbank.cli.options import db_option, emit_json, json_option, read_db
 from fieldbank.sanitize import printable
+from fieldbank.stored.records import JOB_KINDS
 
 if TYPE_CHECKING:  # typing only: the storage layer loads when the command runs
     from fieldbank.stored.records import JobRecord, JobRunRecord

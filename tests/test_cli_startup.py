@@ -10,13 +10,17 @@
   SQLite file; on PostgreSQL psycopg and still no SQLAlchemy or numpy. A database behind head
   is opened through the storage layer (which migrates it) - the light path is not taken
   blindly;
-* the choices and defaults the options show (``fieldbank.cli.choices``) are the library's.
+* the choices and defaults the options show are the library's own, kept in leaf modules that
+  import nothing (``fieldbank.fitchoices``, ``.probechoices``, ``.measurechoices``,
+  ``fieldbank.interventions.whatifchoices``), which the library's configurations and the
+  commands both read: no copy to keep equal.
 
 ``benchmarks/bench_cli_startup.py`` measures the times, as ratios to ``import click``.
 """
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import subprocess
@@ -171,63 +175,28 @@ def test_a_database_behind_head_is_opened_through_the_storage_layer(tmp_path: Pa
     assert {"sqlalchemy", "alembic"} <= set(loaded)  # migrated to head, then listed
 
 
-def test_the_options_show_the_library_s_choices_and_defaults() -> None:
-    from fieldbank.cli import choices as ch
-    from fieldbank.evaluate.classify import PREDICTORS
-    from fieldbank.evaluate.design import (
-        CRITERIA,
-        FAMILIES,
-        TARGETS,
-        NoiseModel,
-        Perception,
-        ProbeLimits,
-    )
-    from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM
-    from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
-    from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
-    from fieldbank.haptic.remote.config import PASSIVITY_MODES, RATE_BOUNDS
-    from fieldbank.haptic.safety import SafetyConfig
-    from fieldbank.interventions.defaults import DOSE_UNIT, value
-    from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
-    from fieldbank.interventions.realised import CHANGE_TOLERANCE, MAX_CHANGE_SE
-    from fieldbank.measure.protocol import PARTS, ProtocolConfig
-    from fieldbank.model import MODEL_VERSION
-    from fieldbank.stored.records import JOB_KINDS
+#: The library's leaf modules that own the choices and defaults the options show.
+CHOICE_LEAVES = ("fieldbank/fitchoices.py", "fieldbank/probechoices.py",
+                 "fieldbank/measurechoices.py", "interventions/whatifchoices.py")
 
-    assert ch.FIT_ALGORITHMS == tuple(ALGORITHMS)
-    assert ch.FIT_DEFAULT_ALGORITHM == DEFAULT_ALGORITHM
-    assert ch.FIT_KINDS == tuple(FIT_KINDS)
-    assert ch.FIT_DEFAULT_PRIOR_WEIGHT == DEFAULT_PRIOR_WEIGHT
-    assert ch.UNCERTAINTY_METHODS == tuple(METHODS)
-    assert ch.UNCERTAINTY_DEFAULT_METHOD == DEFAULT_METHOD
-    assert ch.UNCERTAINTY_DEFAULT_REPLICATES == DEFAULT_REPLICATES
-    assert ch.PROBE_CRITERIA == tuple(CRITERIA)
-    assert ch.PROBE_FAMILIES == tuple(FAMILIES)
-    assert ch.PROBE_TARGETS == tuple(TARGETS)
-    assert ch.CLASSIFY_PREDICTORS == tuple(PREDICTORS)
-    assert ch.DOSE_UNIT == DOSE_UNIT
-    assert ch.BOTULINUM_SESSION_WARNING_UNITS == value("botulinum.session_warning_units")
-    assert ch.BOTULINUM_WEEKS_SINCE == value("botulinum.weeks_since")
-    assert ch.CASTING_DELTA_M == value("casting.delta_m")
-    assert ch.WHATIF_INTERVAL_SAMPLES == DEFAULT_INTERVAL_SAMPLES
-    n, p, lim = NoiseModel(), Perception(), ProbeLimits()
-    assert (ch.NOISE_FORCE_SD_N, ch.NOISE_CORRELATION_S, ch.NOISE_DIRECTION_SD_DEG,
-            ch.NOISE_LENGTH_SD, ch.NOISE_SPEED_SD) == (
-        n.force_sd_n, n.correlation_s, n.direction_sd_deg, n.length_sd, n.speed_sd)
-    assert (ch.PERCEPTION_FORCE_JND, ch.PERCEPTION_DIRECTION_JND_DEG) == (
-        p.force_jnd, p.direction_jnd_deg)
-    assert (ch.PROBE_MAX_SPEED_M_PER_S, ch.PROBE_FORCE_LIMIT_N) == (
-        lim.max_speed_m_per_s, lim.force_limit_n)
-    pc = ProtocolConfig()
-    assert ch.MEASURE_PARTS == PARTS
-    assert ch.JOB_KINDS == JOB_KINDS
-    assert (ch.VALIDATE_CHANGE_TOLERANCE, ch.VALIDATE_MAX_CHANGE_SE) == (
-        CHANGE_TOLERANCE, MAX_CHANGE_SE)
-    assert ch.PASSIVITY_MODES == PASSIVITY_MODES
-    assert ch.REMOTE_RATE_HZ == (RATE_BOUNDS.low, RATE_BOUNDS.high)
-    assert ch.MODEL_VERSION == MODEL_VERSION
-    assert ch.MEASURE_DISPLACEMENT_MM == pytest.approx(pc.displacement_m * 1000)
-    assert pc.spacing_m is None and pc.centre_m is None  # the grid follows the patient's arm
-    assert (ch.MEASURE_DIRECTIONS, ch.MEASURE_HOLD_S, ch.MEASURE_STRETCH_SPEED_M_PER_S) == (
-        pc.directions, pc.hold_s, pc.stretch_speed_m_per_s)
-    assert ch.MEASURE_FORCE_LIMIT_N == SafetyConfig().force_limit_n
+
+@pytest.mark.parametrize("leaf", CHOICE_LEAVES)
+def test_the_choices_leaves_import_nothing(leaf: str) -> None:
+    tree = ast.parse((ROOT / leaf).read_text(encoding="utf-8"))
+    imports = [n for n in ast.walk(tree) if isinstance(n, ast.Import | ast.ImportFrom)]
+    assert [ast.unparse(n) for n in imports] == ["from __future__ import annotations"]
+
+
+def test_no_command_keeps_a_copy_of_the_library_s_choices() -> None:
+    assert not (ROOT / "cli" / "choices.py").exists()
+    for path in sorted((ROOT / "cli").glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        modules = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+        assert "fieldbank.cli.choices" not in modules, path.name
+
+
+def test_every_path_family_offered_is_one_the_search_knows() -> None:
+    from fieldbank.evaluate.design.paths import FAMILIES
+    from fieldbank.probechoices import PATH_FAMILIES
+
+    assert tuple(FAMILIES) == PATH_FAMILIES

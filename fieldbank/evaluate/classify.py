@@ -87,9 +87,9 @@ from fieldbank.evaluate.design import (
 )
 from fieldbank.evaluate.observation import Observation
 from fieldbank.model import Arm, FloatArray
+from fieldbank.probechoices import PREDICTORS
 from fieldbank.sim import ArmSim
 
-PREDICTORS = ("replay", "rigid", "static")
 #: Window of the Savitzky-Golay derivative giving the ``rigid`` predictor's accelerations, s.
 ACCELERATION_WINDOW_S = 0.025
 #: Stop suggesting probes when the most probable candidate has at least this probability.
@@ -448,5 +448,5 @@ def _fit_p_value(q: float, expected: float, variance: float) -> float:
     return float(chi2.sf(q / scale, dof))
 
 
-__all__ = ["FIT_LEVEL", "PREDICTORS", "TEMPERATURE", "Classification", "classify",
+__all__ = ["FIT_LEVEL", "TEMPERATURE", "Classification", "classify",
            "predict_all", "predict_observation", "recorded_accelerations"]

@@ -30,9 +30,9 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from fieldbank.errors import FitError
+from fieldbank.fitchoices import MODEL_VERSION
 from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.maps import FieldMap
-from fieldbank.model import MODEL_VERSION
 from fieldbank.params import ArmParams
 from fieldbank.storage.records import StoredModel
 from fieldbank.stored.records import model_summary
@@ -87,7 +87,7 @@ def fit_key(patient: str, session: str | None, map_ids: Sequence[int | str],
     """SHA-256 of what a fit is made from: the patient and the session asked for, the maps
     (stored maps never change, so their ids stand for their contents), the patient's base
     parameters, the fitter's options (:meth:`ArmFitter.options`) and
-    :data:`fieldbank.model.MODEL_VERSION`. The same key means the same fit would result."""
+    :data:`fieldbank.fitchoices.MODEL_VERSION`. The same key means the same fit would result."""
     doc = {"patient": patient, "session": session, "maps": sorted(str(m) for m in map_ids),
            "base": base.to_dict(), "options": dict(options), "model_version": MODEL_VERSION}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode("utf-8")).hexdigest()

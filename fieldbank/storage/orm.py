@@ -214,7 +214,7 @@ class FitRow(Base):
     # per key, so a batch refit that dies and runs again stores nothing twice (None: a fit
     # stored before keys were kept)
     fit_key: Mapped[str | None] = mapped_column(SHA, nullable=True, unique=True)
-    # fieldbank.model.MODEL_VERSION the fit was made under (None: not recorded)
+    # fieldbank.fitchoices.MODEL_VERSION the fit was made under (None: not recorded)
     model_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
     # the session whose maps were fitted (None: every session of the patient)
     session_id: Mapped[int | None] = mapped_column(ForeignKey("sessions.id"), nullable=True,

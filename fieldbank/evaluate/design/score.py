@@ -12,7 +12,7 @@ import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design.candidates import Candidate, check_candidates, check_prior
-from fieldbank.evaluate.design.config import TARGETS, NoiseModel, Perception, ProbeLimits
+from fieldbank.evaluate.design.config import NoiseModel, Perception, ProbeLimits
 from fieldbank.evaluate.design.paths import Circle, Path
 from fieldbank.evaluate.design.perception import (
     _arc_fraction,
@@ -37,6 +37,7 @@ from fieldbank.evaluate.design.predict import (
 )
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.model import FloatArray
+from fieldbank.probechoices import TARGETS
 
 
 @dataclass

@@ -26,7 +26,6 @@ from fieldbank.evaluate.design.candidates import (
     equilibrium,
 )
 from fieldbank.evaluate.design.config import (
-    CRITERIA,
     DESIGN_SAMPLES,
     LIMIT_SAMPLES,
     MIN_GAIN,
@@ -43,6 +42,7 @@ from fieldbank.evaluate.design.predict import _execute, _execution_deltas, feasi
 from fieldbank.evaluate.design.score import ProbeSetScore, _Context, score_probes, target_labels
 from fieldbank.evaluate.probing import PROBE_SAMPLES, ProbeMotion
 from fieldbank.model import FloatArray
+from fieldbank.probechoices import CRITERIA
 
 
 @dataclass(frozen=True, eq=False)
