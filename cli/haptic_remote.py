@@ -50,6 +50,10 @@ def _address(text: str, name: str) -> tuple[str, int]:
     return host, n
 
 
+def _whole(bound: float | None) -> int | None:
+    return None if bound is None else int(bound)
+
+
 #: The loop's rate: the renderer's range (the clinician's site is a rendering session).
 _RATE = RENDERER_BOUNDS["rate_hz"]
 
@@ -58,7 +62,8 @@ link_options = option_group(
                  type=click.Path(dir_okay=False, path_type=Path),
                  help="The key both sites share ('fieldbank haptic remote key'); each "
                       "session's own keys are drawn from it and both sites' fresh values."),
-    click.option("--rate-hz", type=click.IntRange(_RATE.low, _RATE.high), default=1000,
+    click.option("--rate-hz", type=click.IntRange(_whole(_RATE.low), _whole(_RATE.high)),
+                 default=1000,
                  show_default=True, help="Loop and link rate (both sites the same: the "
                                          "handshake refuses a difference)."),
     click.option("--lockstep", is_flag=True,
