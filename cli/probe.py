@@ -229,12 +229,14 @@ def probe() -> None:
 
 @probe.command("design")
 @candidate_options
-@click.option("--criterion", type=click.Choice(pc.CRITERIA), default="feel", show_default=True,
+@click.option("--criterion", type=click.Choice(pc.CRITERIA), default=pc.DEFAULT_CRITERION,
+              show_default=True,
               help="feel: felt differences in JNDs; information: bits; orientation / minmax: "
                    "the seed's paradigms alone.")
 @click.option("--family", type=click.Choice(pc.PATH_FAMILIES), default=None,
               help="stroke (default) or circle (default for --criterion minmax).")
-@click.option("--target", type=click.Choice(pc.TARGETS), default="candidate", show_default=True,
+@click.option("--target", type=click.Choice(pc.TARGETS), default=pc.DEFAULT_TARGET,
+              show_default=True,
               help="Tell every candidate apart, or only the impaired groups.")
 @click.option("--max-probes", type=click.IntRange(min=1), default=None,
               help="At most this many probes (default: number of candidates - 1).")
@@ -337,7 +339,7 @@ def _classification_text(cl: Classification) -> str:
 @candidate_options
 @noise_options
 @limit_options
-@click.option("--predictor", type=click.Choice(pc.PREDICTORS), default="replay",
+@click.option("--predictor", type=click.Choice(pc.PREDICTORS), default=pc.DEFAULT_PREDICTOR,
               show_default=True,
               help="replay: the recorded motion drives each candidate's virtual arm (rendered "
                    "traces); rigid: muscles and inertia of a rigidly held arm (measured "

@@ -14,12 +14,15 @@ from __future__ import annotations
 #: What a design maximises: what a hand feels apart, the information of a recording, or the
 #: seed's orientation and min-max paradigms.
 CRITERIA: tuple[str, ...] = ("feel", "information", "orientation", "minmax")
+DEFAULT_CRITERION = "feel"
 #: Tell the candidates apart one by one, or only which muscle group is impaired.
 TARGETS: tuple[str, ...] = ("candidate", "group")
+DEFAULT_TARGET = "candidate"
 #: The path families a design searches (:data:`fieldbank.evaluate.design.paths.FAMILIES`).
 PATH_FAMILIES: tuple[str, ...] = ("stroke", "circle")
 #: How a recorded probe's forces are predicted for each candidate.
 PREDICTORS: tuple[str, ...] = ("replay", "rigid", "static")
+DEFAULT_PREDICTOR = "replay"
 
 #: Weber fraction of force magnitude: 7 % for matched forces (Jones 1989), 5-15 % for actively
 #: felt forces (Pang, Tan & Durlach 1991); the upper end of 7-10 %.

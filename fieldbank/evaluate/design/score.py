@@ -37,7 +37,7 @@ from fieldbank.evaluate.design.predict import (
 )
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.model import FloatArray
-from fieldbank.probechoices import TARGETS
+from fieldbank.probechoices import DEFAULT_TARGET, TARGETS
 
 
 @dataclass
@@ -162,7 +162,7 @@ class ProbeSetScore:
     perception: Perception
     noise: NoiseModel
     labels: tuple[str, ...]
-    target: str = "candidate"
+    target: str = DEFAULT_TARGET
 
     def matrix(self, what: str) -> FloatArray:
         """(n, n): 'feel', 'orientation', 'minmax' (max over probes) or 'kl' (sum)."""
@@ -309,7 +309,7 @@ def score_probes(candidates: Sequence[Candidate], motions: Sequence[ProbeMotion]
                  perception: Perception | None = None, noise: NoiseModel | None = None,
                  limits: ProbeLimits | None = None,
                  closed: Sequence[bool] | None = None,
-                 target: str = "candidate") -> ProbeSetScore:
+                 target: str = DEFAULT_TARGET) -> ProbeSetScore:
     """Score given probes (e.g. the seed's pull and semi-ellipse) on the candidates."""
     cands = check_candidates(candidates, 2)
     p = check_prior(prior, len(cands))
