@@ -50,11 +50,6 @@ FloatArray = NDArray[np.float64]
 #: Four same-shaped arrays: the entries of a 2 × 2 matrix per point, row by row.
 Quad = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
-#: Version of the arm model and of how a fit estimates it: raised with every change of the
-#: equations, of the fitter or of its defaults that changes what a fit of the same maps gives.
-#: Every fit records it; ``fieldbank fit --all --older-than N`` refits what older versions made.
-MODEL_VERSION = 1
-
 #: Elbow angles closer than this to 0 or π make the endpoint Jacobian singular.
 SINGULAR_ELBOW_RAD = 0.02
 #: Gauss-Legendre segments (in units of the smoothing width w) for the potential's

@@ -100,6 +100,7 @@ from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, synthesize
 from fieldbank.fitting.problem import map_sd
 from fieldbank.fitting.quality import MapFit, Thresholds, map_fit
 from fieldbank.interventions.spread import arm_like
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.maps import FieldMap, model_map_like, model_map_values
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import BOUNDS, GROUPS, ArmParams
@@ -118,10 +119,6 @@ CONTRADICTED = (FAILED, OVER, PARTIAL)
 Z = 2.0
 #: Smallest whitened size of the predicted change (sd) at which the maps can see it.
 MIN_SENSITIVITY = 4.0
-#: The realised fraction decides a verdict only when its SE is at most this.
-MAX_CHANGE_SE = 0.25
-#: "As predicted" means within this fraction of the predicted change (80-120%).
-CHANGE_TOLERANCE = 0.2
 #: A confirmation needs at least this fraction of the predicted change, at 2 SE.
 CONFIRM_FLOOR = 0.5
 #: A realised fraction whose SE exceeds this is not printed: its 2-SE interval spans two whole
