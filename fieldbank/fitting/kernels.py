@@ -1,0 +1,187 @@
+"""The fit's inner evaluation compiled (numba): the reflex columns, the projection, the gradient.
+
+A fit evaluates the variable-projected cost (:meth:`fieldbank.fitting.problem.FitProblem.
+project`) some 5,000 times: the search, the hold of what the maps leave open, the bootstrap's
+40 refits. Each evaluation is small (≈ 160 measured values, 12 linear unknowns), so in numpy
+its cost was the interpreter's and numpy's fixed cost per call (≈ 300 µs over some 40 array
+operations), not arithmetic. Here the same formulas run as three compiled calls:
+
+* :func:`reflex_columns` - the reflex columns of the design matrix X (the α columns: the
+  tension per unit α at each measured value), :meth:`FitProblem._reflex_basis`'s formulas in
+  the same order;
+* :func:`solve_normal` - the whitened system and its normal equations with the prior (a
+  Cholesky factorisation of the 12×12 Gram matrix in place of ``np.linalg.solve``), the
+  residuals and the cost; it says when a bound is crossed, and the caller then solves the
+  bounded problem as before (NNLS, else BVLS: scipy);
+* :func:`reflex_gradient` - the projected cost's gradient over β by the envelope theorem,
+  from central differences of the reflex columns alone, as :meth:`FitProblem.
+  design_derivatives` takes them.
+
+The numpy formulas stay in :mod:`fieldbank.fitting.problem` as the reference
+(:func:`~fieldbank.fitting.problem.reference_kernels`); ``tests/test_fitting_kernels.py``
+holds the two together (columns and costs to 1e-12 relative, optima and intervals of whole
+fits to 1e-6). IEEE double without fast-math; the machine code is cached on disk like the
+haptic tick's (:mod:`fieldbank.armkernel`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def reflex_columns(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
+                   ell: np.ndarray, c: np.ndarray, dc: np.ndarray, row_pt: np.ndarray,
+                   cf: np.ndarray, cl: np.ndarray, cd: np.ndarray,
+                   out: np.ndarray, col0: int) -> None:
+    """Write the reflex columns for ``beta`` (6,) into ``out[:, col0:col0 + 6]``.
+
+    ``kk`` (6,) is λ_rest/λ_max at the fit's rest posture; ``lam_above_min``, ``c``, ``dc``
+    (N, 6) per measured point; ``cf``, ``cl``, ``cd`` (M, 6) per measured value and
+    ``row_pt`` (M,) its point (see :class:`~fieldbank.fitting.problem.FitProblem`).
+    """
+    n_pts = lam_above_min.shape[0]
+    rf = np.empty((n_pts, 6))
+    rl = np.empty((n_pts, 6))
+    rd = np.empty((n_pts, 6))
+    for n in range(n_pts):
+        for i in range(6):
+            u = beta[i] * c[n, i]
+            gam = lam_above_min[n, i] / ell[i] - kk[i] * (1.0 - u)
+            e = math.exp(-gam * gam)
+            h = u * gam * e
+            one = 1.0 - 2.0 * gam * gam
+            dh_dlam = u * e * one / ell[i]
+            dh_du = gam * e + u * e * one * kk[i]
+            on = (h > 0) or ((h == 0) and (dh_du > 0))
+            rf[n, i] = h if h > 0 else 0.0
+            rl[n, i] = dh_dlam if on else 0.0
+            rd[n, i] = dh_du * beta[i] * dc[n, i] if on else 0.0
+    for m in range(row_pt.shape[0]):
+        p = row_pt[m]
+        for i in range(6):
+            out[m, col0 + i] = cf[m, i] * rf[p, i] + cl[m, i] * rl[p, i] + cd[m, i] * rd[p, i]
+
+
+@njit(cache=True, nogil=True)
+def _cholesky_solve(g: np.ndarray, b: np.ndarray, out: np.ndarray) -> bool:
+    """Solve g x = b for a symmetric positive definite ``g`` (Cholesky); False when ``g`` is
+    not positive definite to working precision."""
+    k = g.shape[0]
+    low = np.zeros((k, k))
+    for j in range(k):
+        s = g[j, j]
+        for p in range(j):
+            s -= low[j, p] * low[j, p]
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        low[j, j] = d
+        for i in range(j + 1, k):
+            t = g[i, j]
+            for p in range(j):
+                t -= low[i, p] * low[j, p]
+            low[i, j] = t / d
+    z = np.empty(k)
+    for i in range(k):
+        t = b[i]
+        for p in range(i):
+            t -= low[i, p] * z[p]
+        z[i] = t / low[i, i]
+    for i in range(k - 1, -1, -1):
+        t = z[i]
+        for p in range(i + 1, k):
+            t -= low[p, i] * out[p]
+        out[i] = t / low[i, i]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
+                 lin: np.ndarray, pw: float, mu: np.ndarray, sdp: np.ndarray,
+                 lo: np.ndarray, hi: np.ndarray, a: np.ndarray, rhs: np.ndarray,
+                 r: np.ndarray) -> bool:
+    """The unbounded projection at a fixed design ``x`` (M, 12).
+
+    Fills ``a`` (M, F) = the whitened free columns and ``rhs`` (M,) = the whitened data less
+    the held linear terms; solves the normal equations with the prior (``mu``, ``sdp``: the
+    prior mean and SD of the F free entries, ``pw`` its weight) into ``lin[free]`` and the
+    whitened residuals into ``r``. Returns False - ``lin`` and ``r`` then unset - when the
+    Gram matrix is not positive definite or the solution leaves [``lo``, ``hi``]: the caller
+    solves the bounded problem from ``a`` and ``rhs``.
+    """
+    m_rows = x.shape[0]
+    nf = free.shape[0]
+    held = np.ones(12, dtype=np.bool_)
+    for j in range(nf):
+        held[free[j]] = False
+    for m in range(m_rows):
+        t = y[m]
+        for j in range(12):
+            if held[j]:
+                t -= x[m, j] * lin[j]
+        rhs[m] = t * w[m]
+        for j in range(nf):
+            a[m, j] = x[m, free[j]] * w[m]
+    if nf == 0:
+        for m in range(m_rows):
+            r[m] = rhs[m]
+        return True
+    gram = np.zeros((nf, nf))
+    bn = np.zeros(nf)
+    for m in range(m_rows):
+        for j in range(nf):
+            aj = a[m, j]
+            bn[j] += aj * rhs[m]
+            for k in range(j + 1):
+                gram[j, k] += aj * a[m, k]
+    for j in range(nf):
+        for k in range(j):
+            gram[k, j] = gram[j, k]
+        gram[j, j] += pw / (sdp[j] * sdp[j])
+        bn[j] += pw * mu[j] / (sdp[j] * sdp[j])
+    sol = np.empty(nf)
+    if not _cholesky_solve(gram, bn, sol):
+        return False
+    for j in range(nf):
+        if sol[j] < lo[j] or sol[j] > hi[j]:
+            return False
+    for j in range(nf):
+        lin[free[j]] = sol[j]
+    for m in range(m_rows):
+        t = rhs[m]
+        for j in range(nf):
+            t -= a[m, j] * sol[j]
+        r[m] = t
+    return True
+
+
+@njit(cache=True, nogil=True)
+def reflex_gradient(beta: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray, h: float,
+                    kk: np.ndarray, lam_above_min: np.ndarray, ell: np.ndarray, c: np.ndarray,
+                    dc: np.ndarray, row_pt: np.ndarray, cf: np.ndarray, cl: np.ndarray,
+                    cd: np.ndarray, alpha: np.ndarray, r: np.ndarray, w: np.ndarray,
+                    fitted: np.ndarray, grad: np.ndarray) -> None:
+    """-2 rᵀ W (∂X/∂β_i) θ_lin for each fitted β_i (``fitted``: indices 0-5), into ``grad``:
+    the data part of the projected cost's gradient, ∂X/∂β_i by central differences of step
+    ``h`` kept inside [``b_lo``, ``b_hi``]."""
+    m_rows = row_pt.shape[0]
+    bp = np.empty(6)
+    bm = np.empty(6)
+    for i in range(6):
+        bp[i] = min(beta[i] + h, b_hi[i])
+        bm[i] = max(beta[i] - h, b_lo[i])
+    xp = np.empty((m_rows, 6))
+    xm = np.empty((m_rows, 6))
+    reflex_columns(bp, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, xp, 0)
+    reflex_columns(bm, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, xm, 0)
+    for n in range(fitted.shape[0]):
+        i = fitted[n]
+        step = bp[i] - bm[i]
+        t = 0.0
+        for m in range(m_rows):
+            t += r[m] * ((xp[m, i] - xm[m, i]) / step * alpha[i] * w[m])
+        grad[n] = -2.0 * t
