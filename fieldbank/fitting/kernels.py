@@ -10,9 +10,10 @@ operations), not arithmetic. Here the same formulas run as three compiled calls:
   tension per unit α at each measured value), :meth:`FitProblem._reflex_basis`'s formulas in
   the same order;
 * :func:`solve_normal` - the whitened system and its normal equations with the prior (a
-  Cholesky factorisation of the 12×12 Gram matrix in place of ``np.linalg.solve``), the
-  residuals and the cost; it says when a bound is crossed, and the caller then solves the
-  bounded problem as before (NNLS, else BVLS: scipy);
+  Cholesky factorisation of the 12×12 Gram matrix in place of ``np.linalg.solve``) and the
+  residuals; where a bound binds (α ≥ 0 of a quiet group), the same strictly convex problem
+  by an active-set method on the Gram matrix already built (:func:`_box_qp`) in place of
+  scipy's NNLS/BVLS on the stacked least squares, which stay as its fallback;
 * :func:`reflex_gradient` - the projected cost's gradient over β by the envelope theorem,
   from central differences of the reflex columns alone, as :meth:`FitProblem.
   design_derivatives` takes them.
@@ -99,6 +100,106 @@ def _cholesky_solve(g: np.ndarray, b: np.ndarray, out: np.ndarray) -> bool:
     return True
 
 
+#: Iterations of :func:`_box_qp` before it gives up (each adds or frees one bound; 12 unknowns).
+BOX_QP_ITERATIONS = 100
+
+
+@njit(cache=True, nogil=True)
+def _box_qp(g: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+            x: np.ndarray) -> bool:
+    """Minimise ½ xᵀ g x − bᵀ x inside [lo, hi] for a positive definite ``g``; ``x`` holds the
+    unbounded minimiser on entry and the bounded one on return.
+
+    The primal active-set method for bound constraints (Nocedal & Wright, *Numerical
+    Optimization*, 2nd ed., §16.5): from the clipped point, solve for the free entries with
+    the bound ones fixed; step toward that solution as far as the bounds allow and fix the
+    entry that blocks, or, at the solution, free the bound entry whose multiplier has the
+    wrong sign (the largest). The problem is strictly convex, so its minimiser is unique: the
+    one scipy's NNLS/BVLS find on the same least squares. False when it has not finished in
+    :data:`BOX_QP_ITERATIONS` steps.
+    """
+    k = g.shape[0]
+    state = np.zeros(k, dtype=np.int64)  # 0 free, -1 at lo, +1 at hi
+    for j in range(k):
+        if x[j] <= lo[j]:
+            x[j] = lo[j]
+            state[j] = -1
+        elif x[j] >= hi[j]:
+            x[j] = hi[j]
+            state[j] = 1
+    for _ in range(BOX_QP_ITERATIONS):
+        nfree = 0
+        for j in range(k):
+            if state[j] == 0:
+                nfree += 1
+        cand = np.empty(k)
+        for j in range(k):
+            cand[j] = x[j]
+        if nfree > 0:
+            idx = np.empty(nfree, dtype=np.int64)
+            n = 0
+            for j in range(k):
+                if state[j] == 0:
+                    idx[n] = j
+                    n += 1
+            gf = np.empty((nfree, nfree))
+            bf = np.empty(nfree)
+            for p in range(nfree):
+                t = b[idx[p]]
+                for j in range(k):
+                    if state[j] != 0:
+                        t -= g[idx[p], j] * x[j]
+                bf[p] = t
+                for q in range(nfree):
+                    gf[p, q] = g[idx[p], idx[q]]
+            sf = np.empty(nfree)
+            if not _cholesky_solve(gf, bf, sf):
+                return False
+            for p in range(nfree):
+                cand[idx[p]] = sf[p]
+        # step toward the candidate as far as the bounds allow
+        step = 1.0
+        block = -1
+        for j in range(k):
+            if state[j] != 0:
+                continue
+            d = cand[j] - x[j]
+            if cand[j] < lo[j] and d < 0:
+                t = (lo[j] - x[j]) / d
+                if t < step:
+                    step, block = t, j
+            elif cand[j] > hi[j] and d > 0:
+                t = (hi[j] - x[j]) / d
+                if t < step:
+                    step, block = t, j
+        if block >= 0:
+            for j in range(k):
+                if state[j] == 0:
+                    x[j] += step * (cand[j] - x[j])
+            x[block] = lo[block] if cand[block] < lo[block] else hi[block]
+            state[block] = -1 if cand[block] < lo[block] else 1
+            continue
+        for j in range(k):
+            x[j] = cand[j]
+        # at the minimiser over the free entries: the multipliers of the bound ones
+        worst = 0.0
+        release = -1
+        for j in range(k):
+            if state[j] == 0:
+                continue
+            grad = -b[j]
+            for q in range(k):
+                grad += g[j, q] * x[q]
+            # at lo the gradient must not be negative, at hi not positive
+            viol = -grad if state[j] < 0 else grad
+            if viol > worst:
+                worst, release = viol, j
+        if release < 0:
+            return True
+        state[release] = 0
+    return False
+
+
 @njit(cache=True, nogil=True)
 def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
                  lin: np.ndarray, pw: float, mu: np.ndarray, sdp: np.ndarray,
@@ -108,10 +209,11 @@ def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
 
     Fills ``a`` (M, F) = the whitened free columns and ``rhs`` (M,) = the whitened data less
     the held linear terms; solves the normal equations with the prior (``mu``, ``sdp``: the
-    prior mean and SD of the F free entries, ``pw`` its weight) into ``lin[free]`` and the
+    prior mean and SD of the F free entries, ``pw`` its weight) inside [``lo``, ``hi``]
+    (:func:`_box_qp` when the unbounded solution leaves them) into ``lin[free]`` and the
     whitened residuals into ``r``. Returns False - ``lin`` and ``r`` then unset - when the
-    Gram matrix is not positive definite or the solution leaves [``lo``, ``hi``]: the caller
-    solves the bounded problem from ``a`` and ``rhs``.
+    Gram matrix is not positive definite or the bounded solve does not finish: the caller
+    solves the bounded problem from ``a`` and ``rhs`` (scipy).
     """
     m_rows = x.shape[0]
     nf = free.shape[0]
@@ -146,9 +248,12 @@ def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
     sol = np.empty(nf)
     if not _cholesky_solve(gram, bn, sol):
         return False
+    inside = True
     for j in range(nf):
         if sol[j] < lo[j] or sol[j] > hi[j]:
-            return False
+            inside = False
+    if not inside and not _box_qp(gram, bn, lo, hi, sol):
+        return False
     for j in range(nf):
         lin[free[j]] = sol[j]
     for m in range(m_rows):
