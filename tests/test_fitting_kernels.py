@@ -62,7 +62,7 @@ def test_design_and_projection_agree(kinds: tuple[str, ...]) -> None:
     branches = set()
     for _ in range(40):
         theta = _random_theta(ref, rng)
-        lin, beta, q_rest, slack = ref.split(theta)
+        _, beta, q_rest, slack = ref.split(theta)
         x_ref = ref.design(beta, q_rest, slack)
         x_new = new.design(beta, q_rest, slack)
         scale = np.maximum(np.abs(x_ref).max(axis=0), 1e-300)
