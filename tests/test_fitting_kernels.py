@@ -10,8 +10,11 @@ Two levels, each with its stated tolerance:
   follow evaluations that differ by rounding, so the optimiser's path can part at a kink of
   the cost; the fits must still land on the same optimum - the same cost to 1e-3 relative, the
   same parameters to 0.1 of their SD, the same held parameters, status and uncertainty method
-  - and the same intervals: ends within 0.1 of the interval's width and SDs within 15 %
-  (below the bootstrap's own Monte-Carlo error of its SD with 40 replicates, ≈ 11 % for one SD).
+  - and the same intervals: SDs within 15 % and interval ends within 0.2 of the interval's
+  width. Both are set by the bootstrap's own Monte-Carlo error with 40 replicates: ≈ 11 % for
+  an SD, and ≈ 0.11 of the width for a 2.5 or 97.5 percentile (≈ 0.15 for the difference of
+  two independent ones). The two paths draw the same noise, so most agree far closer; the
+  tolerance allows a replicate's refit to land elsewhere at a kink.
 """
 
 from __future__ import annotations
@@ -126,6 +129,6 @@ def test_default_fit_same_optimum_and_intervals(group: str, level: str, seed: in
         b = inew[name]
         width = a["high"] - a["low"]
         assert abs(b["value"] - a["value"]) <= 0.1 * a["sd"], name
-        assert abs(b["low"] - a["low"]) <= 0.1 * width, name
-        assert abs(b["high"] - a["high"]) <= 0.1 * width, name
+        assert abs(b["low"] - a["low"]) <= 0.2 * width, name
+        assert abs(b["high"] - a["high"]) <= 0.2 * width, name
         assert b["sd"] == pytest.approx(a["sd"], rel=0.15), name

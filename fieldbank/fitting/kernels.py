@@ -4,7 +4,7 @@ A fit evaluates the variable-projected cost (:meth:`fieldbank.fitting.problem.Fi
 project`) some 5,000 times: the search, the hold of what the maps leave open, the bootstrap's
 40 refits. Each evaluation is small (≈ 160 measured values, 12 linear unknowns), so in numpy
 its cost was the interpreter's and numpy's fixed cost per call (≈ 300 µs over some 40 array
-operations), not arithmetic. Here the same formulas run as three compiled calls:
+operations), not arithmetic. Here the same formulas run as compiled calls:
 
 * :func:`reflex_columns` - the reflex columns of the design matrix X (the α columns: the
   tension per unit α at each measured value), :meth:`FitProblem._reflex_basis`'s formulas in
@@ -22,18 +22,38 @@ The numpy formulas stay in :mod:`fieldbank.fitting.problem` as the reference
 (:func:`~fieldbank.fitting.problem.reference_kernels`); ``tests/test_fitting_kernels.py``
 holds the two together (columns and costs to 1e-12 relative, optima and intervals of whole
 fits to 1e-6). IEEE double without fast-math; the machine code is cached on disk like the
-haptic tick's (:mod:`fieldbank.armkernel`).
+haptic tick's (:mod:`fieldbank.armkernel`); numba loads and compiles at the first evaluation
+(:func:`load`), not on import.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
-from numba import njit
+
+#: The kernels, in the order numba compiles them (each calls only those before it).
+KERNELS = ("reflex_columns", "_cholesky_solve", "_box_qp", "solve_normal", "reflex_gradient",
+           "project_reflex")
+_LOADED: dict[str, Any] = {}
 
 
-@njit(cache=True, nogil=True)
+def load() -> dict[str, Any]:
+    """The compiled kernels by name, compiled (or loaded from numba's disk cache) at the first
+    call: numba's import costs ≈ 0.2 s CPU, which everything that imports the fitting package
+    without fitting (stored fits, reports, what-ifs) does not pay. The module's functions
+    become numba dispatchers, so a kernel calling another calls it compiled."""
+    if not _LOADED:
+        from numba import njit  # heavy: only when a fit evaluates
+
+        names = globals()
+        for name in KERNELS:
+            names[name] = njit(cache=True, nogil=True)(names[name])
+            _LOADED[name] = names[name]
+    return _LOADED
+
+
 def reflex_columns(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
                    ell: np.ndarray, c: np.ndarray, dc: np.ndarray, row_pt: np.ndarray,
                    cf: np.ndarray, cl: np.ndarray, cd: np.ndarray,
@@ -67,7 +87,6 @@ def reflex_columns(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
             out[m, col0 + i] = cf[m, i] * rf[p, i] + cl[m, i] * rl[p, i] + cd[m, i] * rd[p, i]
 
 
-@njit(cache=True, nogil=True)
 def _cholesky_solve(g: np.ndarray, b: np.ndarray, out: np.ndarray) -> bool:
     """Solve g x = b for a symmetric positive definite ``g`` (Cholesky); False when ``g`` is
     not positive definite to working precision."""
@@ -104,7 +123,6 @@ def _cholesky_solve(g: np.ndarray, b: np.ndarray, out: np.ndarray) -> bool:
 BOX_QP_ITERATIONS = 100
 
 
-@njit(cache=True, nogil=True)
 def _box_qp(g: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             x: np.ndarray) -> bool:
     """Minimise ½ xᵀ g x − bᵀ x inside [lo, hi] for a positive definite ``g``; ``x`` holds the
@@ -200,7 +218,6 @@ def _box_qp(g: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     return False
 
 
-@njit(cache=True, nogil=True)
 def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
                  lin: np.ndarray, pw: float, mu: np.ndarray, sdp: np.ndarray,
                  lo: np.ndarray, hi: np.ndarray, a: np.ndarray, rhs: np.ndarray,
@@ -264,7 +281,6 @@ def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
     return True
 
 
-@njit(cache=True, nogil=True)
 def reflex_gradient(beta: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray, h: float,
                     kk: np.ndarray, lam_above_min: np.ndarray, ell: np.ndarray, c: np.ndarray,
                     dc: np.ndarray, row_pt: np.ndarray, cf: np.ndarray, cl: np.ndarray,
@@ -290,3 +306,20 @@ def reflex_gradient(beta: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray, h: flo
         for m in range(m_rows):
             t += r[m] * ((xp[m, i] - xm[m, i]) / step * alpha[i] * w[m])
         grad[n] = -2.0 * t
+
+
+def project_reflex(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
+                   ell: np.ndarray, c: np.ndarray, dc: np.ndarray, row_pt: np.ndarray,
+                   cf: np.ndarray, cl: np.ndarray, cd: np.ndarray, xkm: np.ndarray,
+                   y: np.ndarray, w: np.ndarray, free: np.ndarray, lin: np.ndarray, pw: float,
+                   mu: np.ndarray, sdp: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   a: np.ndarray, rhs: np.ndarray, r: np.ndarray) -> bool:
+    """:func:`reflex_columns` beside the fixed passive columns ``xkm`` (M, 6), then
+    :func:`solve_normal`, in one call: the evaluation when only β varies (the default fit)."""
+    m_rows = row_pt.shape[0]
+    x = np.empty((m_rows, 12))
+    for m in range(m_rows):
+        for j in range(6):
+            x[m, j] = xkm[m, j]
+    reflex_columns(beta, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, x, 6)
+    return solve_normal(x, y, w, free, lin, pw, mu, sdp, lo, hi, a, rhs, r)

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fieldbank.fitting import kernels
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.maps import FieldMap
 from fieldbank.model import Arm, FloatArray
@@ -282,10 +283,9 @@ class FitProblem:
     def _reflex_into(self, beta: FloatArray, q_rest: FloatArray, out: FloatArray,
                      col0: int) -> None:
         """The compiled reflex columns for ``beta`` into ``out[:, col0:col0 + 6]``."""
-        from fieldbank.fitting.kernels import reflex_columns
-
         k = self.consts()
         kk = k["kk"] if not self.space.fit_q_rest else self._kk(q_rest)
+        reflex_columns = kernels.load()["reflex_columns"]
         reflex_columns(np.ascontiguousarray(beta, dtype=float), kk, self.lam_above_min,
                        k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl, self.cd, out,
                        col0)
@@ -440,13 +440,10 @@ class FitProblem:
     def _project_compiled(self, theta_nl: FloatArray, x: FloatArray | None) -> Projection:
         """:meth:`project` with the design and the normal equations compiled
         (:func:`fieldbank.fitting.kernels.solve_normal`); the bounded fallback as before."""
-        from fieldbank.fitting.kernels import solve_normal
-
+        kern = kernels.load()
         self.n_evals += 1
         k = self.consts()
-        lin, beta, q_rest, slack = self.split(theta_nl)
-        if x is None:
-            x = self.design(beta, q_rest, slack)
+        s = self.space
         theta = np.array(theta_nl, dtype=float)
         lin = theta[:12]  # a view: the solve writes the fitted Km and α into theta
         free = k["free"]
@@ -455,8 +452,22 @@ class FitProblem:
         rhs = np.empty(m)
         r = np.empty(m)
         pw = float(k["pw"])
-        if not solve_normal(np.ascontiguousarray(x), k["y"], k["w"], free, lin, pw, k["mu"],
-                            k["sdp"], k["lo"], k["hi"], a, rhs, r):
+        if x is None and not (s.fit_q_rest or s.fit_slack):
+            # only β varies: the design and the solve in one compiled call
+            if self._xkm_cache is None:
+                self._xkm_cache = self._passive_basis(
+                    np.asarray(self.arm.q_rest, dtype=float), self.base_slack)
+            ok = kern["project_reflex"](theta[12:18], k["kk"], self.lam_above_min, k["ell"], self.c,
+                                self.dc, k["row_pt"], self.cf, self.cl, self.cd,
+                                self._xkm_cache, k["y"], k["w"], free, lin, pw, k["mu"],
+                                k["sdp"], k["lo"], k["hi"], a, rhs, r)
+        else:
+            if x is None:
+                _, beta, q_rest, slack = self.split(theta)
+                x = self.design(beta, q_rest, slack)
+            ok = kern["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin, pw,
+                                      k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r)
+        if not ok:
             sol = _bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
             lin[free] = sol
             r = rhs - a @ sol
@@ -536,14 +547,13 @@ class FitProblem:
                                       ) -> tuple[float, FloatArray, Projection]:
         """:meth:`projected_cost_grad` over β alone, the derivative columns compiled
         (:func:`fieldbank.fitting.kernels.reflex_gradient`)."""
-        from fieldbank.fitting.kernels import reflex_gradient
-
         k = self.consts()
         pr = self.project(self.full_from_nonlinear(phi))
         s = self.space
         th = pr.theta
         fitted = k["beta_fitted"]
         grad = np.empty(fitted.size)
+        reflex_gradient = kernels.load()["reflex_gradient"]
         reflex_gradient(np.ascontiguousarray(th[12:18]), s.lower[12:18], s.upper[12:18],
                         _H_BETA, k["kk"], self.lam_above_min, k["ell"], self.c, self.dc,
                         k["row_pt"], self.cf, self.cl, self.cd, np.ascontiguousarray(th[6:12]),
