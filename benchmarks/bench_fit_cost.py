@@ -39,7 +39,8 @@ from collections.abc import Callable
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from timing import load_line
+import numpy as np
+from timing import load_line, per_call
 
 from fieldbank.fitting import ArmFitter
 from fieldbank.fitting import problem as problem_mod
@@ -86,6 +87,25 @@ def cases(maps: tuple[FieldMap, ...], base: ArmParams,
             "search alone": search}
 
 
+def per_evaluation(base: ArmParams) -> None:
+    """CPU µs of one projected evaluation, and of one with its gradient, on each path."""
+    maps = synthetic_patient(impaired_params("elbow", "severe", base), seed=0).maps
+    arm = Arm.from_params(base)
+    used = validate_maps(maps, arm)
+    with problem_mod.reference_kernels():
+        ref = FitProblem.from_maps(used, arm, ParamSpace.build(base))
+    new = FitProblem.from_maps(used, arm, ParamSpace.build(base))
+    phi = np.full(6, 0.5)
+    theta = new.full_from_nonlinear(phi)
+    got = {}
+    for name, p in (("reference", ref), ("compiled", new)):
+        got[name] = (per_call(lambda p=p: p.project(theta), 2000, 3)[1],
+                     per_call(lambda p=p: p.projected_cost_grad(phi), 1000, 3)[1])
+    (r1, r2), (c1, c2) = got["reference"], got["compiled"]
+    print(f"one evaluation (elbow severe, beta 0.5), CPU: project {r1:.0f} -> {c1:.0f} us "
+          f"({r1 / c1:.1f}x); with its gradient {r2:.0f} -> {c2:.0f} us ({r2 / c2:.1f}x)")
+
+
 def top10(fn: Callable[[], object]) -> str:
     prof = cProfile.Profile(time.process_time)  # CPU time: the machine is shared
     prof.enable()
@@ -109,9 +129,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--evaluation-only", action="store_true",
+                    help="only the cost of one evaluation on each path")
     args = ap.parse_args()
     base = ArmParams.from_anthropometry()
     print(load_line())
+    per_evaluation(base)
+    if args.evaluation_only:
+        return
     print(f"{'patient':<18} {'figure':<24} {'reference CPU':>13} {'compiled CPU':>12} "
           f"{'ratio':>6} {'ref wall':>8} {'wall':>6}  cost ref / compiled")
     worst = {"fit + uncertainty": 0.0, "search alone": 0.0}
