@@ -78,8 +78,7 @@ from fieldbank.params import ArmParams
 from fieldbank.storage import Database, PlanRecord
 
 __all__ = [
-    "CHANGE_TOLERANCE", "CONFIRMED", "CONTRADICTED", "FAILED", "INCONCLUSIVE",
-    "MAX_CHANGE_SE", "NOT_CHECKED", "OVER", "PARTIAL", "LaterSession", "MapCheck", "PlanInputs",
+    "LaterSession", "MapCheck", "PlanInputs",
     "PlanValidation", "SessionCheck", "ValidationReport", "check_plan", "check_session",
     "given_on", "predicted_after", "read_plan_inputs", "validate_plans",
 ]

@@ -18,9 +18,8 @@ from typing import Any
 import cattrs
 
 from fieldbank.engine import Done, Progress, Task, run_batch
+from fieldbank.interventions.realised import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.interventions.validate import (
-    CHANGE_TOLERANCE,
-    MAX_CHANGE_SE,
     PlanValidation,
     ValidationReport,
     check_rule_numbers,

@@ -280,6 +280,6 @@ def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[i
     return sum(not o.right for o in sure), len(sure)
 
 
-__all__ = ["BINS", "FAMILIES", "NONE_OF_THEM", "Outcome", "ReliabilityBin", "TrialArm",
+__all__ = ["BINS", "FAMILIES", "Outcome", "ReliabilityBin", "TrialArm",
            "calibration_error", "family_arms", "reliability_bins", "run_trials",
            "truth_label", "wrong_when_sure"]

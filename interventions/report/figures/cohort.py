@@ -20,8 +20,9 @@ from fieldbank.figures.style import (
     TEXT,
     limits,
 )
+from fieldbank.interventions.realised import CHANGE_TOLERANCE
 from fieldbank.interventions.report.figures.common import ACCENT_OK, WIDTH
-from fieldbank.interventions.validate import CHANGE_TOLERANCE, PlanValidation
+from fieldbank.interventions.validate import PlanValidation
 
 
 @dataclass(frozen=True)
