@@ -102,6 +102,7 @@ from fieldbank.interventions.spread import arm_like
 from fieldbank.maps import FieldMap, model_map_like
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import BOUNDS, GROUPS, ArmParams
+from fieldbank.validation import Interval, check_fields
 
 #: Verdicts of a session, a plan and a whole check.
 CONFIRMED = "prediction confirmed"
@@ -140,6 +141,16 @@ _FIELDS = {"alpha_n": "alpha", "beta": "beta", "km_n_per_m": "km", "slack_offset
 _REFLEX_FIELDS = ("alpha_n", "beta")
 
 
+#: The range of each threshold of :class:`Rules`.
+RULES_BOUNDS: dict[str, Interval] = {
+    "tolerance": Interval(0.0, 1.0, low_closed=False, high_closed=False),
+    "max_se": Interval(0.0, None, low_closed=False),
+    "confirm_floor": Interval(0.0, 1.0, high_closed=False),
+    "min_sensitivity": Interval(0.0, None, "sd", low_closed=False),
+    "z": Interval(0.0, None, low_closed=False),
+}
+
+
 @dataclass(frozen=True)
 class Rules:
     """The verdict's thresholds (module docstring); defaults: the module constants."""
@@ -149,6 +160,9 @@ class Rules:
     confirm_floor: float = CONFIRM_FLOOR
     min_sensitivity: float = MIN_SENSITIVITY
     z: float = Z
+
+    def __post_init__(self) -> None:
+        check_fields(self, RULES_BOUNDS, what="verdict threshold")
 
     def to_dict(self) -> dict[str, float]:
         return {"change_tolerance": self.tolerance, "max_change_se": self.max_se,

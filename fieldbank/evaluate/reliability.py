@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.classify import classify
 from fieldbank.evaluate.design import NoiseModel, draw_execution, severity_candidates
 from fieldbank.evaluate.design.coverage import stretch_noise, stretch_set
@@ -142,7 +143,7 @@ def _one(family: str, rng: np.random.Generator) -> tuple[str, ArmParams]:
         return (f"{g} {s:.2f}, rest posture {np.degrees(shift[0]):+.0f}°, "
                 f"{np.degrees(shift[1]):+.0f}°"), synthesize_ratios(
             {g: ratio_of_score(s, "passive")}, moved)
-    raise ValueError(f"unknown family {family!r}; known: {', '.join(FAMILIES)}")
+    raise ParameterError(f"unknown family {family!r}; known: {', '.join(FAMILIES)}")
 
 
 def family_arms(family: str, n: int, seed: int) -> tuple[TrialArm, ...]:

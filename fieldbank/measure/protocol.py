@@ -46,7 +46,7 @@ import numpy as np
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 PARTS = ("postural", "stiffness", "stretch")
 #: The posture (shoulder, elbow), degrees, whose hand position centres the default grid.
@@ -103,9 +103,8 @@ class ProtocolConfig:
         nx, ny = self.grid
         if not (1 <= nx <= 15 and 1 <= ny <= 15):
             raise ParameterError(f"grid must be 1–15 by 1–15 postures; got {nx}×{ny}")
-        for name, interval in PROTOCOL_BOUNDS.items():
-            if getattr(self, name) is not None:
-                check_number(name, getattr(self, name), interval, what="protocol setting")
+        check_fields(self, PROTOCOL_BOUNDS, what="protocol setting",
+                     names=[n for n in PROTOCOL_BOUNDS if getattr(self, n) is not None])
         if self.transient_s >= min(self.hold_s, self.postural_hold_s):
             raise ParameterError(f"transient_s ({self.transient_s:g} s) must be shorter than "
                                  "the holds it is cut from")
