@@ -68,7 +68,7 @@ PACKAGES = {"fieldbank": "fieldbank", "migrations": "fieldbank.migrations",
             "cli": "fieldbank.cli"}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _parse(source: str) -> ast.Module:
     """A module's tree, parsed once per text (the checks below read the same files often)."""
     return ast.parse(source)
@@ -367,3 +367,13 @@ def test_a_private_import_a_passed_on_name_and_a_cycle_are_caught(tmp_path: Path
     assert found == ["fieldbank.interventions: fieldbank.interventions.plot and "
                      "fieldbank.interventions.report import each other (directly or through "
                      "other parts): a cycle"], found
+
+
+def test_one_class_is_named_plan() -> None:
+    """A plan is a treatment (fieldbank.interventions.plan.Plan); the measuring protocol's
+    timetable is a ProtocolPlan."""
+    named = [str(path.relative_to(ROOT))
+             for path, _ in _library(ROOT).values()
+             for node in ast.walk(_tree(path))
+             if isinstance(node, ast.ClassDef) and node.name == "Plan"]
+    assert named == ["interventions/plan.py"], named
