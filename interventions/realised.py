@@ -479,29 +479,3 @@ def positions_of(changes: Sequence[MapChange]) -> FloatArray:
 
 
 # --- the verdict ------------------------------------------------------------------------------
-def decide(f: float, se: float, rules: Rules = DEFAULT_RULES) -> tuple[str, str]:
-    """Verdict and its reason from a decided realised fraction (SE ≤ ``rules.max_se``)."""
-    lo, hi = f - rules.z * se, f + rules.z * se
-    top = 1.0 - rules.tolerance
-    span = f"{lo:.2f} to {hi:.2f} at {rules.z:g} SE"
-    if f > 1.0 + rules.tolerance:
-        if lo > 1.0:
-            return OVER, (f"the change is stronger than predicted: {f:.2f}, beyond "
-                          f"{1 + rules.tolerance:g}, and {span}, above 1")
-        return INCONCLUSIVE, (f"the maps leave open whether the change came as predicted or "
-                              f"stronger: {f:.2f}, beyond {1 + rules.tolerance:g}, but {span} "
-                              "reaches 1")
-    if hi < top:
-        if hi < 0:
-            return FAILED, f"the maps changed the opposite way to the prediction: {span}"
-        if lo <= 0:
-            return FAILED, (f"no change distinguishable from none where the prediction "
-                            f"expected one: {span}, below {top:g} and reaching 0")
-        return PARTIAL, (f"part of the predicted change came: {span}, clearly above 0 and "
-                         f"below {top:g}")
-    if lo >= rules.confirm_floor:
-        return CONFIRMED, (f"the change came as predicted: {span}, at least "
-                           f"{rules.confirm_floor:g} and reaching {top:g}")
-    return INCONCLUSIVE, (f"the maps leave open whether all or only part of the change came: "
-                          f"{span}, reaching both below {rules.confirm_floor:g} and "
-                          f"{top:g}")

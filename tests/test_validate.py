@@ -123,7 +123,8 @@ def test_half_the_effect_is_a_partial_effect_with_its_interval() -> None:
 ])
 def test_an_effect_beyond_the_tolerance_is_an_over_effect_not_a_confirmation(
         f: float, se: float, verdict: str) -> None:
-    from fieldbank.interventions.realised import CONTRADICTED, decide
+    from fieldbank.interventions.realised import CONTRADICTED
+    from fieldbank.interventions.verdict import decide
 
     got, why = decide(f, se)
     assert got == verdict, why
