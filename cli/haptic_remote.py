@@ -117,8 +117,9 @@ def key_cmd(out: Path) -> None:
 
 @remote.command("patient")
 @click.option("--robot", required=True,
-              help="The patient's robot: a port, or sim://?patient=SPEC (a simulated patient: "
-                   "a stored model id, file:PATH or a severity such as elbow=severe).")
+              help="The patient's robot, with a force sensor at its handle: a port, an "
+                   "installed adapter's URL, or sim://?patient=SPEC (a simulated patient: a "
+                   "stored model id, file:PATH or a severity such as elbow=severe).")
 @click.option("--bind", default=f"127.0.0.1:{DEFAULT_PORT}", show_default=True,
               help="HOST:PORT to listen on (0.0.0.0:PORT for other machines).")
 @click.option("--shoulder", help="The patient's shoulder in robot coordinates X,Y, m (a "
