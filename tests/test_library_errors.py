@@ -54,7 +54,6 @@ CONFIG_NAME = re.compile(r"(Config|Options|Limits|Settings|Rules|Perception|Nois
 #: Frozen configurations not (yet) checked through check_fields, and why.
 CONFIG_ALLOWED = {
     "fieldbank.haptic.remote.clinician_site.AssessOptions": "the haptic wing's, to its rebuild",
-    "fieldbank.haptic.workspace.host.RobotSettings": "the haptic wing's, to its rebuild",
 }
 #: Number fields a configuration leaves out of its bounds table, and why.
 FIELDS_ALLOWED = {

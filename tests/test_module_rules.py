@@ -161,8 +161,8 @@ def _all(tree: ast.Module) -> list[str]:
     return []
 
 
-#: Names passed on that are still allowed, with why: the haptic wing's, until its rebuild
-#: around the robot port gives each caller the defining module (none elsewhere).
+#: Names passed on that are still allowed, with why: the haptic wing's, until each caller
+#: imports them from the module that defines them (none elsewhere).
 REEXPORT_ALLOWED: dict[tuple[str, str], str] = {
     ("fieldbank.evaluate.classify", "Observation"):
         "haptic/remote/desk.py imports it from classify rather than evaluate.observation",
@@ -171,8 +171,6 @@ REEXPORT_ALLOWED: dict[tuple[str, str], str] = {
     ("fieldbank.haptic.control", "data_home"): "control lists the client's names in __all__",
     ("fieldbank.haptic.control", "default_socket_path"): "control lists the client's names",
     ("fieldbank.haptic.control", "push_models"): "control lists the client's names in __all__",
-    ("fieldbank.haptic.renderer", "RendererConfig"):
-        "the remote sites import the renderer's configuration through renderer.py",
     ("fieldbank.haptic.safety", "FaultCode"): "station/server.py takes the protocol's fault "
                                               "codes from safety.py",
 }
@@ -214,16 +212,8 @@ def reexports(root: Path) -> list[str]:
     return out
 
 
-#: Package cycles still allowed, each a pair of parts, with why: the haptic wing's, until its
-#: rebuild around the robot port (none elsewhere).
-CYCLES_ALLOWED: dict[frozenset[str], str] = {
-    frozenset(("fieldbank.haptic.remote", "fieldbank.haptic.station")):
-        "the station serves the remote desk; the remote sites launch the station",
-    frozenset(("fieldbank.haptic.remote", "fieldbank.haptic.session")):
-        "the session runs remote trials; the remote sites run sessions",
-    frozenset(("fieldbank.haptic.session", "fieldbank.haptic.station")):
-        "through the remote package: station -> remote -> session -> station",
-}
+#: Package cycles allowed, each a pair of parts, with why (none).
+CYCLES_ALLOWED: dict[frozenset[str], str] = {}
 
 
 def package_cycles(root: Path) -> list[str]:
