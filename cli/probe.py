@@ -23,7 +23,7 @@ from fieldbank.cli.options import (
 )
 from fieldbank.errors import ParameterError
 from fieldbank.files import to_json, write_atomic
-from fieldbank.params import JOINT_GROUPS, ArmParams
+from fieldbank.params import JOINT_GROUPS
 from fieldbank.probepath import probes_document
 
 if TYPE_CHECKING:  # typing only: the library loads when a command runs
@@ -122,31 +122,10 @@ def build_candidates(groups: str, levels: str | None, unimpaired: bool,
                      param_files: tuple[Path, ...], model_ids: tuple[int, ...],
                      mass: float | None, height: float | None, side: str | None,
                      db_url: str | None) -> list[Candidate]:
-    from fieldbank import modelsource
-    from fieldbank.evaluate.arms import ArmCache
-    from fieldbank.evaluate.design import Candidate, check_candidates, severity_candidates
-    from fieldbank.evaluate.severity import group_name, level_name
+    from fieldbank.probeset import candidate_set
 
-    cache = ArmCache()
-    base = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
-    out: list[Candidate] = []
-    lv = levels if levels is not None else (None if param_files or model_ids else "severe")
-    if lv:
-        gs = _list(groups, group_name, tuple(JOINT_GROUPS))
-        ls = _list(lv, level_name, ALL_LEVELS)
-        out += severity_candidates(gs, ls, unimpaired=unimpaired, base=base, cache=cache)
-    elif unimpaired:
-        out.append(Candidate.from_severity(None, "unimpaired", base, cache))
-    for path in param_files:
-        out.append(Candidate(path.stem, cache(ArmParams.from_file(path))))
-    if model_ids:
-        with open_db(db_url) as db:
-            for mid in model_ids:
-                src = modelsource.stored(db, mid)
-                out.append(Candidate(f"model {mid}", cache(src.params),
-                                     notes=tuple(f"rests on a guess: {g}"
-                                                 for g in src.guesses)))
-    return list(check_candidates(out, 2))
+    return candidate_set(groups, levels, unimpaired, param_files, model_ids, mass, height,
+                         side, db_url)
 
 
 def build_noise(force_sd_n: float, correlation_s: float, direction_sd_deg: float,

@@ -70,7 +70,7 @@ _SHORT = {"prediction confirmed": "confirmed", "partial effect": "partial",
 
 def overall(rep: ValidationReport) -> str:
     """The one overall line: the verdict, the plans contradicted, the count of the others."""
-    from fieldbank.interventions.validate import CONTRADICTED
+    from fieldbank.interventions.realised import CONTRADICTED
 
     bad = [f"plan {p.plan_id} ({p.patient or 'no patient'}) {_SHORT[p.verdict]}"
            for p in rep.contradicted]
@@ -95,7 +95,7 @@ def _plan_lines(p: PlanValidation) -> list[str]:
 
 
 def _session_lines(s: SessionCheck) -> list[str]:
-    from fieldbank.interventions.validate import CONTRADICTED
+    from fieldbank.interventions.realised import CONTRADICTED
 
     timing = "botulinum re-timed" if s.retimed else "as stored"
     verdict = s.verdict.upper() if s.verdict in CONTRADICTED else s.verdict

@@ -34,9 +34,9 @@ import stat
 from collections.abc import Mapping
 from datetime import date, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Self
 
-from fieldbank.errors import FileRefused, Problem, ValidationError
+from fieldbank.errors import FieldbankError, FileRefused, Problem, ValidationError
 
 #: Largest JSON document (plan, parameters) read from a file, bytes.
 MAX_DOCUMENT_BYTES = 16 << 20
@@ -208,6 +208,40 @@ def read_json_document(path: str | Path, max_bytes: int = MAX_DOCUMENT_BYTES) ->
         Not UTF-8, not JSON, or nested too deeply; located at the file.
     """
     return parse_json_document(read_regular_file(path, max_bytes), os.fspath(path))
+
+
+class JsonDocument:
+    """A value kept as a JSON document (an arm's parameters, a plan): ``from_json`` and
+    ``from_file`` read the document the one way (:func:`parse_json_document`,
+    :func:`read_json_document`) and hand it to the class's ``from_dict``; a document that is
+    not one is raised as the class's ``document_error``, located."""
+
+    #: What the document is called in messages when no file names it.
+    document_name: ClassVar[str] = "document"
+    #: The error a document that cannot be read is raised as.
+    document_error: ClassVar[type[FieldbankError]] = FieldbankError
+
+    @classmethod
+    def from_dict(cls, data: Any, where: str) -> Self:
+        raise NotImplementedError
+
+    @classmethod
+    def from_json(cls, text: str, where: str | None = None) -> Self:
+        name = where or cls.document_name
+        try:
+            data = parse_json_document(text, name)
+        except ValidationError as exc:
+            raise cls.document_error(f"{exc}.") from None
+        return cls.from_dict(data, name)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Self:
+        p = Path(path)
+        try:
+            data = read_json_document(p)
+        except (FileRefused, ValidationError) as exc:
+            raise cls.document_error(f"{exc}.") from None
+        return cls.from_dict(data, str(p))
 
 
 class _NotANumber(ValueError):

@@ -67,10 +67,10 @@ def _as_points(x: ArrayLike, name: str = "positions") -> FloatArray:
     if a.ndim == 1:
         a = a.reshape(1, -1)
     if a.ndim != 2 or a.shape[1] != 2:
-        raise ValueError(f"{name} must have shape (N, 2); got {np.shape(x)}.")
+        raise ParameterError(f"{name} must have shape (N, 2); got {np.shape(x)}.")
     if not np.all(np.isfinite(a)):
         bad = int(np.argmax(~np.all(np.isfinite(a), axis=1)))
-        raise ValueError(f"{name}[{bad}] is not finite: {a[bad].tolist()}.")
+        raise ParameterError(f"{name}[{bad}] is not finite: {a[bad].tolist()}.")
     return a
 
 
@@ -363,7 +363,7 @@ class Arm:
         else:
             vm = np.broadcast_to(np.asarray(v, dtype=float), (n, 2)).copy()
             if not np.all(np.isfinite(vm)):
-                raise ValueError("velocity must be finite.")
+                raise ParameterError("velocity must be finite.")
             if self.mirror:
                 vm[:, 0] *= -1.0
         q = self._ik_model(xm)

@@ -20,11 +20,9 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import FileRefused, ValidationError
-from fieldbank.files import parse_json_document, read_json_document
+from fieldbank.files import JsonDocument
 from fieldbank.interventions.catalogue import Botulinum, Intervention
 from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.errors import InterventionError
@@ -43,7 +41,7 @@ def params_sha256(params: ArmParams) -> str:
 
 
 @dataclass(frozen=True)
-class Plan:
+class Plan(JsonDocument):
     """An ordered list of interventions.
 
     Parameters
@@ -52,6 +50,9 @@ class Plan:
     label : str
         Free text shown in reports.
     """
+
+    document_name = "plan"
+    document_error = InterventionError
 
     steps: tuple[Intervention, ...]
     label: str = ""
@@ -166,22 +167,6 @@ class Plan:
             raise InterventionError(f"{where}: {len(problems)} problems:\n{lines}")
         return cls(tuple(steps), label)
 
-    @classmethod
-    def from_json(cls, text: str, where: str = "plan") -> Plan:
-        try:
-            data = parse_json_document(text, where)
-        except ValidationError as exc:
-            raise InterventionError(f"{exc}.") from None
-        return cls.from_dict(data, where)
-
-    @classmethod
-    def from_file(cls, path: str | Path) -> Plan:
-        p = Path(path)
-        try:
-            data = read_json_document(p)
-        except (FileRefused, ValidationError) as exc:
-            raise InterventionError(f"{exc}.") from None
-        return cls.from_dict(data, str(p))
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from typing import Any
 import cattrs
 
 from fieldbank.engine import Done, Progress, Task, run_batch
+from fieldbank.interventions.realised import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.interventions.validate import (
     PlanValidation,
     ValidationReport,

@@ -258,7 +258,7 @@ class Classification:
     def model_error_n(self) -> float:
         """The residual the best-fitting candidate leaves beyond the noise, N RMS per axis
         (σ_m of the module docstring)."""
-        return float(self.noise.force_sd_n * math.sqrt(_model_error_ratio(
+        return float(self.noise.force_sd_n * math.sqrt(model_error_ratio(
             self.fit_statistic, self.fit_expected, self.fit_variance)))
 
     @property
@@ -386,10 +386,10 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
         count += int(used.sum())
         n_eff += float(w.sum())
         expected += 2.0 * float(w.sum())
-        variance += 4.0 * _correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
+        variance += 4.0 * correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
     q = float((-2.0 * ll).min())  # Σ w |r|² / σ² of the best-fitting candidate
-    p_fit = _fit_p_value(q, expected, variance)
-    temperature = TEMPERATURE * (1.0 + _model_error_ratio(q, expected, variance) * n_eff)
+    p_fit = p_of_fit(q, expected, variance)
+    temperature = TEMPERATURE * (1.0 + model_error_ratio(q, expected, variance) * n_eff)
     raw = _posterior(p0, ll)
     post = _posterior(p0, ll / temperature)
     rms = np.sqrt(sq / count)
@@ -413,7 +413,7 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
                           reason, raw, temperature, q, expected, variance, p_fit)
 
 
-def _model_error_ratio(q: float, expected: float, variance: float) -> float:
+def model_error_ratio(q: float, expected: float, variance: float) -> float:
     """σ_m²/σ² of the module docstring: the fit statistic's excess beyond
     :data:`MODEL_ERROR_SDS` of its SD, per unit of its mean."""
     if expected <= 0:
@@ -428,7 +428,7 @@ def _posterior(prior: FloatArray, log_likelihood: FloatArray) -> FloatArray:
     return np.asarray(post / post.sum(), dtype=float)
 
 
-def _correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> float:
+def correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> float:
     """Σ_k Σ_l w_k w_l e^(−rate |t_k − t_l|), by one pass of an exponential filter."""
     decay = np.exp(-rate * np.diff(times_s))
     total = 0.0
@@ -440,7 +440,7 @@ def _correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> f
     return total
 
 
-def _fit_p_value(q: float, expected: float, variance: float) -> float:
+def p_of_fit(q: float, expected: float, variance: float) -> float:
     """P(Q ≥ q) for Q of mean ``expected`` and ``variance``, as a scaled χ² (Satterthwaite)."""
     if expected <= 0 or variance <= 0:
         return 1.0

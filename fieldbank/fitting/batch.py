@@ -79,14 +79,14 @@ def fit_session(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
     store = DatabaseFitStore(db)
     fitter = ArmFitter(**dict(options))
     base = store.patient_params(task.patient)
-    ids = [m.id for m in db.list_maps(patient_code=task.patient, session_label=task.session)]
+    ids = store.map_ids(task.patient, task.session)
     if not ids:
         raise FitError("no maps to fit.")
-    found = db.fit_by_key(fit_key(task.patient, task.session, ids, base, fitter.options()))
+    found = store.fit_with_key(fit_key(task.patient, task.session, ids, base, fitter.options()))
     if found is not None:
-        return Done("skipped", f"fit {found.id} (model {found.model_id}) holds these maps "
+        return Done("skipped", f"fit {found.fit_id} (model {found.model_id}) holds these maps "
                     f"under model version {MODEL_VERSION} already",
-                    {"fit_id": found.id, "model_id": found.model_id, "found": True})
+                    {"fit_id": found.fit_id, "model_id": found.model_id, "found": True})
     out = fit_patient(store, task.patient, task.session, fitter)
     fid, mid = out.saved.fit_id, out.saved.model_id
     if not out.saved.created:
@@ -104,7 +104,7 @@ def fit_all(db: Database, options: Mapping[str, Any], *, patients: Sequence[str]
             say: Callable[[str], None] | None = None) -> BatchResult:
     """Fit every chosen session (:func:`fit_tasks`) with ``options`` (ArmFitter keyword
     arguments as plain values), on the scheduler's cluster or ``jobs`` local processes."""
-    ArmFitter(**dict(options))._check_options()  # bad options fail here, not on every worker
+    ArmFitter(**dict(options)).check_options()  # bad options fail here, not on every worker
     tasks = fit_tasks(db, patients, older_than)
     return run_batch(db, "fit", tasks, fit_session, options, scheduler=scheduler, jobs=jobs,
                      progress=progress, say=say,

@@ -232,7 +232,8 @@ class ArmFitter:
             raise FitError(f"ArmFitter has no result {name!r} yet: call fit(maps, base) first.")
         raise AttributeError(name)
 
-    def _check_options(self) -> None:
+    def check_options(self) -> None:
+        """Refuse options no fit can run with (FitError naming the option), before any work."""
         if self.algorithm not in ALGORITHMS:
             raise FitError(f"unknown algorithm {self.algorithm!r}; choose one of "
                            f"{', '.join(ALGORITHMS)}.")
@@ -266,7 +267,7 @@ class ArmFitter:
         patient : str, optional
             When given, maps whose metadata name another patient are refused.
         """
-        self._check_options()
+        self.check_options()
         if not isinstance(base, ArmParams):
             raise FitError(f"base must be ArmParams; got {type(base).__name__}.")
         t0 = time.perf_counter()

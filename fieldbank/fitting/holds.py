@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.evaluate.severity import GRADED_STRETCH, classify
+from fieldbank.evaluate.severity import classify
+from fieldbank.evaluate.tone import GRADED_STRETCH
 from fieldbank.fitchoices import ALGORITHMS, DEFAULT_ALGORITHM
 from fieldbank.fitting.identify import Unidentified
 from fieldbank.fitting.prior import GuessRange, Prior, draw, units

@@ -19,7 +19,7 @@ Three parts, any of them (Mussa-Ivaldi, Hogan & Bizzi 1985 for the first two; BR
 
 Between postures the hand moves on minimum-jerk paths at ``transfer_speed_m_per_s`` (peak) and
 settles for ``settle_s``. Every choice is a documented, overridable default; the robot time of a
-plan is :attr:`Plan.duration_s` (the driver adds nothing but the first approach); those the
+plan is :attr:`ProtocolPlan.duration_s` (the driver adds nothing but the first approach); those the
 command line shows are in :mod:`fieldbank.measurechoices`.
 
 The grid is ``grid`` = (columns, rows) postures ``spacing_m`` apart, centred on ``centre_m``
@@ -33,7 +33,7 @@ group at ≥ 4 pass points (:mod:`fieldbank.measure.visibility`; the earlier fix
 bi-articular flexors at one posture, and on a 1.90 m arm left the elbow flexors slack
 everywhere). :func:`plan` refuses a grid the patient's arm cannot reach, naming the posture; a
 stretch stroke that would leave the reach (they run 10 cm past the grid to reach speed) leaves
-out the far postures of that stroke, said in :attr:`Plan.notes`.
+out the far postures of that stroke, said in :attr:`ProtocolPlan.notes`.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ from fieldbank.measurechoices import (
 )
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.validation import Interval, check_number
+from fieldbank.validation import Interval, check_fields
 
 #: The posture (shoulder, elbow), degrees, whose hand position centres the default grid.
 DEFAULT_CENTRE_POSTURE_DEG = (40.0, 80.0)
@@ -110,9 +110,8 @@ class ProtocolConfig:
         nx, ny = self.grid
         if not (1 <= nx <= 15 and 1 <= ny <= 15):
             raise ParameterError(f"grid must be 1–15 by 1–15 postures; got {nx}×{ny}")
-        for name, interval in PROTOCOL_BOUNDS.items():
-            if getattr(self, name) is not None:
-                check_number(name, getattr(self, name), interval, what="protocol setting")
+        check_fields(self, PROTOCOL_BOUNDS, what="protocol setting",
+                     names=[n for n in PROTOCOL_BOUNDS if getattr(self, n) is not None])
         if self.transient_s >= min(self.hold_s, self.postural_hold_s):
             raise ParameterError(f"transient_s ({self.transient_s:g} s) must be shorter than "
                                  "the holds it is cut from")
@@ -213,7 +212,7 @@ class PlannedTrial:
 
 
 @dataclass(frozen=True)
-class Plan:
+class ProtocolPlan:
     """The whole protocol: segments in time order, trials, postures."""
 
     config: ProtocolConfig
@@ -298,7 +297,7 @@ class _Builder:
 
 
 def plan(config: ProtocolConfig, arm: Arm | None = None,
-         start_m: Sequence[float] | None = None) -> Plan:
+         start_m: Sequence[float] | None = None) -> ProtocolPlan:
     """The plan of ``config`` for a patient's ``arm`` (reachability checked when given; the
     grid's centre and spacing resolved for it, :meth:`ProtocolConfig.resolved`), starting with
     the hand at ``start_m`` (default: the first posture)."""
@@ -338,7 +337,7 @@ def plan(config: ProtocolConfig, arm: Arm | None = None,
         _stretch(b, postures, nx, ny, arm)
     if not b.segments:
         b.hold(c.settle_s)
-    return Plan(c, postures, tuple(b.segments), tuple(b.trials), first, tuple(b.notes))
+    return ProtocolPlan(c, postures, tuple(b.segments), tuple(b.trials), first, tuple(b.notes))
 
 
 def _stroke_ends(c: ProtocolConfig, x: float, y_lo: float, y_hi: float, direction: int

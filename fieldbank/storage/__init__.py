@@ -107,8 +107,7 @@ the driver alone, no SQLAlchemy; its reads are held equal to this class's by tes
 See ``docs/storage.md`` for the schema and the durability guarantees.
 """
 
-from fieldbank.redact import mask_url
-from fieldbank.storage.config import data_home, make_engine, resolve_url
+from fieldbank.storage.config import make_engine, resolve_url
 from fieldbank.storage.database import Database
 from fieldbank.storage.mapstore import IngestProgress
 from fieldbank.storage.records import (
@@ -149,8 +148,6 @@ __all__ = [
     "StoredModel",
     "TraceRecord",
     "UserRecord",
-    "data_home",
     "make_engine",
-    "mask_url",
     "resolve_url",
 ]

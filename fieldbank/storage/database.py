@@ -38,6 +38,7 @@ from sqlalchemy.engine import URL
 from fieldbank.arraystore import ArrayStore
 from fieldbank.errors import DatabaseMissing, ParameterError, StorageError
 from fieldbank.params import ArmParams
+from fieldbank.redact import mask_url
 from fieldbank.storage import migrate
 from fieldbank.storage.accounts import Accounts
 from fieldbank.storage.arrays import CollectReport
@@ -49,7 +50,6 @@ from fieldbank.storage.config import (
     is_read_only,
     is_sqlite,
     make_engine,
-    mask_url,
     resolve_url,
     sqlite_path,
 )
