@@ -47,11 +47,13 @@ import argparse
 import json
 import os
 import shlex
+import signal
 import socket
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -215,29 +217,24 @@ def _fit_command(url: str, addr: str, certs: Path, seed: int,
 
 
 def _follow(proc: subprocess.Popen[str], url: str, t0: float,
-            cpu: Callable[[], tuple[float, float, float]], every: float = 60.0) -> str:
+            cpu: Callable[[], tuple[float, float, float]], stop_after: float | None,
+            every: float = 60.0) -> bool:
     """Wait for the command, printing every ``every`` seconds how far the run is (jobs done,
-    the CPU so far): a long run that is stopped still leaves its figures. Returns its
-    stderr."""
-    import threading
-
-    err: list[str] = []
-    reader = threading.Thread(target=lambda: err.append(proc.stderr.read() if proc.stderr
-                                                        else ""), daemon=True)
-    reader.start()
+    the CPU so far). True when it is still running after ``stop_after`` seconds."""
     while True:
+        left = every if stop_after is None else min(every, t0 + stop_after - time.perf_counter())
         try:
-            proc.wait(every)
-            break
+            proc.wait(max(0.0, left))
+            return False
         except subprocess.TimeoutExpired:
+            if stop_after is not None and time.perf_counter() - t0 >= stop_after:
+                return True
             done = _done_jobs(url)
             w, n, s = cpu()
             print(f"  {time.perf_counter() - t0:6.0f} s: {done} done; CPU workers {w:.0f} s, "
                   f"nannies {n:.1f} s, scheduler {s:.1f} s"
                   + (f" = {done / (w + n):.3f} sessions per worker CPU-second" if done else "")
                   + f"; {load_line()}", flush=True)
-    reader.join()
-    return "".join(err)
 
 
 def _done_jobs(url: str) -> int:
@@ -252,16 +249,20 @@ def _done_jobs(url: str) -> int:
     return int(n or 0)
 
 
-def _jobs(url: str) -> tuple[list[float], list[float], list[float], int]:
-    """The latest fit run's job rows: each job's wall time, the fit's own wall and CPU time;
-    and how many jobs were not done."""
+def _jobs(url: str, first: int | None = None) -> tuple[list[float], list[float], list[float],
+                                                       int]:
+    """The latest fit run's job rows (the ``first`` to finish, when given): each job's wall
+    time, the fit's own wall and CPU time; and how many jobs were not done."""
     from sqlalchemy import create_engine, text
 
     eng = create_engine(url)
     with eng.connect() as c:
         run = c.scalar(text("SELECT max(id) FROM job_runs WHERE kind = 'fit'"))
         rows = c.execute(text("SELECT state, started_at, finished_at, result_json FROM jobs "
-                              "WHERE run_id = :r"), {"r": run}).all()
+                              "WHERE run_id = :r ORDER BY finished_at NULLS LAST"),
+                         {"r": run}).all()
+    if first is not None:
+        rows = [r for r in rows if r[0] == "done"][:first]
     eng.dispose()
     walls, fits, cpus, bad = [], [], [], 0
     for state, start, end, result in rows:
@@ -275,7 +276,8 @@ def _jobs(url: str) -> tuple[list[float], list[float], list[float], int]:
     return walls, fits, cpus, bad
 
 
-def measure(url: str, certs: Path, workers: int, log: Path) -> Run:
+def measure(url: str, certs: Path, workers: int, log: Path,
+            stop_after: float | None = None) -> Run:
     with cluster(certs, workers, log) as (addr, sched, worker_ps, nanny_ps):
         warm = subprocess.run(_fit_command(url, addr, certs, 1000 + workers, "R00000-0000"),
                               capture_output=True, text=True)
@@ -296,17 +298,32 @@ def measure(url: str, certs: Path, workers: int, log: Path) -> Run:
         t = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True)
-        err = _follow(proc, url, t, lambda: (_cpu(worker_ps) - w0, _cpu(nanny_ps) - n0,
-                                             _cpu([sched]) - s0))
+        err: list[str] = []
+        reader = threading.Thread(target=lambda: err.append(proc.stderr.read() if proc.stderr
+                                                            else ""), daemon=True)
+        reader.start()
+        stopped = _follow(proc, url, t, lambda: (_cpu(worker_ps) - w0, _cpu(nanny_ps) - n0,
+                                                 _cpu([sched]) - s0), stop_after)
         wall = time.perf_counter() - t
-        command_cpu = _children_cpu_delta()  # the command's, reaped
         w1, n1, s1 = _cpu(worker_ps), _cpu(nanny_ps), _cpu([sched])
         task1 = _task_cpu(addr, certs)
         load_end = load_line()
-        if proc.returncode != 0:
-            raise SystemExit(f"the refit failed ({proc.returncode}): {err[-2000:]}")
-    walls, fits, cpus, bad = _jobs(url)
-    if bad:
+        done = None
+        if stopped:  # the sessions done by now count; the command is stopped as Ctrl-C does
+            done = _done_jobs(url)
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(120)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            print(f"stopped after {wall:.0f} s with {done} sessions done", flush=True)
+        reader.join()
+        command_cpu = _children_cpu_delta()  # the command's, reaped
+        if not stopped and proc.returncode != 0:
+            raise SystemExit(f"the refit failed ({proc.returncode}): {''.join(err)[-2000:]}")
+    walls, fits, cpus, bad = _jobs(url, done)
+    if bad and not stopped:
         raise SystemExit(f"{bad} jobs not done")
     return Run(workers, len(cpus), wall, w1 - w0, n1 - n0, s1 - s0, command_cpu,
                task1 - task0, cpus, fits, walls, idle_w, idle_s, shown, load_start, load_end)
@@ -411,6 +428,9 @@ def main() -> int:
     ap.add_argument("--db", default=os.environ.get("FIELDBANK_TEST_PG_URL"),
                     help="PostgreSQL server URL")
     ap.add_argument("--log", default=None, help="file for the cluster's own output")
+    ap.add_argument("--stop-after", type=float, default=None, metavar="SECONDS",
+                    help="stop each refit after this long and count the sessions done by then "
+                         "(a run too long for the time at hand)")
     args = ap.parse_args()
     if not args.db:
         print("give --db or set FIELDBANK_TEST_PG_URL (scripts/pg-test-server starts a server)")
@@ -429,7 +449,7 @@ def main() -> int:
         log = Path(args.log) if args.log else Path(d) / "cluster.log"
         _children_cpu_delta()
         for w in args.workers:
-            runs.append(measure(url, certs, w, log))
+            runs.append(measure(url, certs, w, log, args.stop_after))
             r = runs[-1]
             print(f"{w} worker(s): {r.sessions} sessions in {r.wall_s:.0f} s, workers' CPU "
                   f"{r.worker_cpu_s:.0f} s, {load_line()}", flush=True)
