@@ -57,8 +57,8 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -72,8 +72,7 @@ IDLE_S = 20.0
 BIN = Path(sys.executable).parent
 
 
-@dataclass(frozen=True)
-class Run:
+class Run(NamedTuple):
     workers: int
     sessions: int
     wall_s: float
