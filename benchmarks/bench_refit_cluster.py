@@ -34,8 +34,9 @@ and from the scheduler Dask's own count of the CPU of the threads that ran the t
 * the overhead per task: a worker's CPU per session less the fit's own CPU (the engine's
   bookkeeping, Dask's protocol and TLS, the nanny's and the worker's heartbeats), and the
   engine's share alone: the task thread's CPU less the fit's (target ≤ 2 % of a task);
-* a 10,000-session refit on 16 and 64 cores: 10,000 × CPU per session (whole cluster) /
-  (cores × efficiency), and what the single scheduler's CPU per task allows.
+* a 10,000-session refit on 16 and 64 cores, a worker per core: 10,000 × one worker's CPU
+  per session (whole cluster) / (cores × efficiency), and what the single scheduler's CPU per
+  task allows.
 
 Run: python benchmarks/bench_refit_cluster.py [--sessions 50] [--workers 1 2]
                                               [--database fbrefit] [--db SERVER_URL]
@@ -403,15 +404,15 @@ def report(runs: list[Run]) -> None:
               f"workers / 1): workers {eff_w:.2f}, whole cluster {eff_c:.2f} (target >= "
               f"{TARGET_EFFICIENCY:g}); on wall time {eff_wall:.2f} (the machine is shared)")
         eff = min(1.0, eff_c)
+        per = one.cluster_cpu_s / one.sessions
     else:
-        eff = 1.0
-        print("\n(one configuration: scaling efficiency taken as 1.0 in the estimate)")
+        print("\n(one configuration: its CPU per session, efficiency taken as 1.0)")
+        eff, per = 1.0, runs[-1].cluster_cpu_s / runs[-1].sessions
     base = by.get(2, runs[-1])
-    per = base.cluster_cpu_s / base.sessions
     for cores in (16, 64):
         hours = SESSIONS * per / (cores * eff) / 3600
-        print(f"estimate: {SESSIONS} sessions on {cores} cores = {SESSIONS} x {per:.2f} CPU-s "
-              f"/ ({cores} x {eff:.2f}) = {hours:.2f} h"
+        print(f"estimate: {SESSIONS} sessions on {cores} cores, a worker per core = {SESSIONS} x "
+              f"{per:.2f} CPU-s / ({cores} x {eff:.2f}) = {hours:.2f} h"
               + (f" (target <= {TARGET_HOURS_16:g} h)" if cores == 16 else ""))
     sched = base.scheduler_cpu_s / base.sessions
     print(f"the one scheduler: {1e3 * sched:.1f} ms CPU per task -> at most {1 / sched:.0f} "
