@@ -9,13 +9,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from fieldbank.cli import choices as ch
-from fieldbank.cli.choices import (
-    CLASSIFY_PREDICTORS,
-    PROBE_CRITERIA,
-    PROBE_FAMILIES,
-    PROBE_TARGETS,
-)
+from fieldbank import probechoices as pc
 from fieldbank.cli.options import (
     db_option,
     emit,
@@ -43,6 +37,7 @@ if TYPE_CHECKING:  # typing only: the library loads when a command runs
         ProbeSetScore,
     )
     from fieldbank.evaluate.observation import Observation
+    from fieldbank.evaluate.openset import OpenClassification
     from fieldbank.figures import Scene
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -85,20 +80,20 @@ def candidate_options(f: F) -> F:
 def noise_options(f: F) -> F:
     """The noise model and what a hand feels."""
     opts = [
-        click.option("--force-sd-n", type=float, default=ch.NOISE_FORCE_SD_N, show_default=True,
+        click.option("--force-sd-n", type=float, default=pc.FORCE_SD_N, show_default=True,
                      help="Force noise per axis, N (assumption)."),
-        click.option("--correlation-s", type=float, default=ch.NOISE_CORRELATION_S,
+        click.option("--correlation-s", type=float, default=pc.CORRELATION_S,
                      show_default=True,
                      help="Time over which force noise decorrelates, s (assumption)."),
-        click.option("--direction-sd-deg", type=float, default=ch.NOISE_DIRECTION_SD_DEG,
+        click.option("--direction-sd-deg", type=float, default=pc.DIRECTION_SD_DEG,
                      show_default=True, help="Operator's scatter of a probe's direction, °."),
-        click.option("--length-sd", type=float, default=ch.NOISE_LENGTH_SD, show_default=True,
+        click.option("--length-sd", type=float, default=pc.LENGTH_SD, show_default=True,
                      help="Operator's relative scatter of a probe's length."),
-        click.option("--speed-sd", type=float, default=ch.NOISE_SPEED_SD, show_default=True,
+        click.option("--speed-sd", type=float, default=pc.SPEED_SD, show_default=True,
                      help="Operator's relative scatter of a probe's speed."),
-        click.option("--force-jnd", type=float, default=ch.PERCEPTION_FORCE_JND, show_default=True,
+        click.option("--force-jnd", type=float, default=pc.FORCE_JND, show_default=True,
                      help="Weber fraction of force magnitude."),
-        click.option("--direction-jnd-deg", type=float, default=ch.PERCEPTION_DIRECTION_JND_DEG,
+        click.option("--direction-jnd-deg", type=float, default=pc.DIRECTION_JND_DEG,
                      show_default=True, help="Force-direction threshold, °."),
         click.option("--free-exploration", is_flag=True,
                      help="Judge magnitudes with the free-exploration Weber fraction 0.6."),
@@ -109,10 +104,10 @@ def noise_options(f: F) -> F:
 def limit_options(f: F) -> F:
     """The probe limits (defaults: ProbeLimits())."""
     opts = [
-        click.option("--max-speed", type=float, default=ch.PROBE_MAX_SPEED_M_PER_S,
+        click.option("--max-speed", type=float, default=pc.MAX_SPEED_M_PER_S,
                      show_default=True,
                      help="Peak hand speed of a probe, m/s."),
-        click.option("--force-limit-n", type=float, default=ch.PROBE_FORCE_LIMIT_N,
+        click.option("--force-limit-n", type=float, default=pc.FORCE_LIMIT_N,
                      show_default=True,
                      help="The renderer's force saturation, N."),
         click.option("--workspace", metavar="XMIN,XMAX,YMIN,YMAX",
@@ -235,12 +230,14 @@ def probe() -> None:
 
 @probe.command("design")
 @candidate_options
-@click.option("--criterion", type=click.Choice(PROBE_CRITERIA), default="feel", show_default=True,
+@click.option("--criterion", type=click.Choice(pc.CRITERIA), default=pc.DEFAULT_CRITERION,
+              show_default=True,
               help="feel: felt differences in JNDs; information: bits; orientation / minmax: "
                    "the seed's paradigms alone.")
-@click.option("--family", type=click.Choice(PROBE_FAMILIES), default=None,
+@click.option("--family", type=click.Choice(pc.PATH_FAMILIES), default=None,
               help="stroke (default) or circle (default for --criterion minmax).")
-@click.option("--target", type=click.Choice(PROBE_TARGETS), default="candidate", show_default=True,
+@click.option("--target", type=click.Choice(pc.TARGETS), default=pc.DEFAULT_TARGET,
+              show_default=True,
               help="Tell every candidate apart, or only the impaired groups.")
 @click.option("--max-probes", type=click.IntRange(min=1), default=None,
               help="At most this many probes (default: number of candidates - 1).")
@@ -343,7 +340,7 @@ def _classification_text(cl: Classification) -> str:
 @candidate_options
 @noise_options
 @limit_options
-@click.option("--predictor", type=click.Choice(CLASSIFY_PREDICTORS), default="replay",
+@click.option("--predictor", type=click.Choice(pc.PREDICTORS), default=pc.DEFAULT_PREDICTOR,
               show_default=True,
               help="replay: the recorded motion drives each candidate's virtual arm (rendered "
                    "traces); rigid: muscles and inertia of a rigidly held arm (measured "
@@ -351,6 +348,13 @@ def _classification_text(cl: Classification) -> str:
 @click.option("--model", type=click.Choice(["A", "B"]), default=None,
               help="In a session that rendered two models, the ticks of this one.")
 @click.option("--no-next", is_flag=True, help="Do not design the next probe.")
+@click.option("--open", "open_set", is_flag=True,
+              help="Among every state of every muscle group of the body (--mass, --height, "
+                   "--side): each group unimpaired, or its stiffness, spasticity or both at a "
+                   "half step of the severity scale, or a contracture of 5-20 mm; up to two "
+                   "groups at once. Says per group whether it is impaired and how, and when "
+                   "none of these explains the recording. Best with the stretch of every group "
+                   "(fieldbank.evaluate.design.coverage.stretch_set).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               callback=figure_path,
               help="Figure of the recorded and predicted forces and the posterior (.svg, .png "
@@ -364,8 +368,8 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
                  length_sd: float, speed_sd: float, force_jnd: float,
                  direction_jnd_deg: float, free_exploration: bool, max_speed: float,
                  force_limit_n: float, workspace: str | None, shoulder_offset: str | None,
-                 predictor: str, model: str | None, no_next: bool, plot_path: Path | None,
-                 db_url: str | None, as_json: bool) -> None:
+                 predictor: str, model: str | None, no_next: bool, open_set: bool,
+                 plot_path: Path | None, db_url: str | None, as_json: bool) -> None:
     """Name the candidate arm most likely to have made the recorded TRACEs, and the next probe.
 
     A TRACE is a haptic trace file (.h5), a database session (haptic_session:ID) or a CSV with
@@ -374,6 +378,10 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
     from fieldbank.evaluate.classify import classify
     from fieldbank.figures.probes import classification_figure
 
+    if open_set:
+        _open_classify(traces, levels, param_files, model_ids, mass, height, side, force_sd_n,
+                       correlation_s, shoulder_offset, model, plot_path, db_url, as_json)
+        return
     cands = build_candidates(groups, levels if levels is not None else
                              (None if param_files or model_ids else "all"), unimpaired,
                              param_files, model_ids, mass, height, side, db_url)
@@ -387,6 +395,56 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
     if plot_path is not None:
         _save_plot(classification_figure(cl), plot_path)
     emit(cl.to_dict(offset), as_json, "\n".join([_classification_text(cl), *_notes(cands)]))
+
+
+def _open_classify(traces: tuple[str, ...], levels: str | None, param_files: tuple[Path, ...],
+                   model_ids: tuple[int, ...], mass: float | None, height: float | None,
+                   side: str | None, force_sd_n: float, correlation_s: float,
+                   shoulder_offset: str | None, model: str | None, plot_path: Path | None,
+                   db_url: str | None, as_json: bool) -> None:
+    from fieldbank import modelsource
+    from fieldbank.evaluate.design import NoiseModel
+    from fieldbank.evaluate.openset import classify_on_body
+
+    given = [name for name, v in (("--levels", levels), ("--candidate-params", param_files),
+                                  ("--candidate-model", model_ids), ("--plot", plot_path))
+             if v]
+    if given:
+        raise click.UsageError(f"--open classifies among every state of every group of the "
+                               f"body; {', '.join(given)} do not apply to it.")
+    offset = xy_metres(shoulder_offset, "--shoulder-offset")
+    obs = _read_observations(traces, db_url, model,
+                             offset if shoulder_offset is not None else None)
+    body = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
+    cl = classify_on_body(obs, body, NoiseModel(force_sd_n=force_sd_n,
+                                                correlation_s=correlation_s))
+    emit(cl.to_dict(), as_json, _open_text(cl))
+
+
+def _open_text(cl: OpenClassification) -> str:
+    from fieldbank.evaluate.classify import FIT_LEVEL
+    from fieldbank.evaluate.openset import KINDS, NONE_OF_THEM
+    from fieldbank.params import GROUP_NAMES
+
+    answer, p = cl.answer
+    said = ("none of the candidates explains the recording" if answer == NONE_OF_THEM else
+            "no group impaired" if answer == "unimpaired" else f"impaired: {answer}")
+    lines = [f"{said}  (p = {p:.2f})",
+             f"  {'group':<28} {'impaired':>8}   " + "  ".join(f"{k:>10}" for k in
+                                                             ("spasticity", "stiffness",
+                                                              "both", "contracture"))]
+    for g, kinds in cl.group_kinds().items():
+        row = [kinds[KINDS[1]], kinds[KINDS[0]], kinds[KINDS[2]], kinds[KINDS[3]]]
+        lines.append(f"  {GROUP_NAMES[g] + ' (' + g + ')':<28} {cl.group_probability[g]:>8.2f}"
+                     "   " + "  ".join(f"{v:>10.2f}" for v in row))
+    lines.append(f"  none of the candidates: p = {cl.other_probability:.2f} (fit of the most "
+                 f"probable arm: p = {cl.fit_p_value:.3g} under the noise model; below "
+                 f"{FIT_LEVEL:g} none of them explains it, below "
+                 f"{cl.calibration.misfit_level:g} this rises)")
+    lines.append(f"  most probable arm: {', '.join(cl.best)}")
+    lines.append("  spasticity: velocity-dependent resistance (the stretch reflex); stiffness: "
+                 "position-dependent, slack length normal; contracture: the slack length short")
+    return "\n".join(lines)
 
 
 @probe.command("paths")
@@ -452,7 +510,7 @@ def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tu
               help="Force-noise draws met by each execution.")
 @click.option("--max-probes", type=click.IntRange(min=1), default=2, show_default=True,
               help="Probes in the designed set (the seed's set has 2).")
-@click.option("--criterion", type=click.Choice(PROBE_CRITERIA), default="information",
+@click.option("--criterion", type=click.Choice(pc.CRITERIA), default="information",
               show_default=True)
 @noise_options
 @click.option("--seed", "rng_seed", type=int, default=0, show_default=True)

@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.choices import VALIDATE_CHANGE_TOLERANCE, VALIDATE_MAX_CHANGE_SE
 from fieldbank.cli.options import (
     db_option,
     emit_json,
@@ -30,6 +29,7 @@ from fieldbank.cli.options import (
     say,
     scheduler_option,
 )
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 
 if TYPE_CHECKING:  # typing only: the checks load when the command runs ('--help' at once)
     from fieldbank.fitting.crossval import CrossValidation
@@ -159,10 +159,10 @@ def loo_text(cv: CrossValidation) -> str:
 @click.option("--model", "model_id", type=int, default=None,
               help="With --loo: the fitted model to cross-validate.")
 @click.option("--change-tolerance", type=click.FloatRange(0.0, 10.0, min_open=True),
-              default=VALIDATE_CHANGE_TOLERANCE, show_default=True,
+              default=CHANGE_TOLERANCE, show_default=True,
               help="'As predicted' means within this fraction of the predicted change.")
 @click.option("--max-change-se", type=click.FloatRange(0.0, 10.0, min_open=True),
-              default=VALIDATE_MAX_CHANGE_SE, show_default=True,
+              default=MAX_CHANGE_SE, show_default=True,
               help="The realised fraction decides a verdict only when its SE is at most this.")
 @scheduler_option
 @db_option

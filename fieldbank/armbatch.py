@@ -10,16 +10,17 @@ compiled arms (the prediction intervals of a what-if and of a report).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from dataclasses import fields as dataclass_fields
+from operator import attrgetter
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from fieldbank.errors import ParameterError
-from fieldbank.model import Arm, FloatArray, hand_force
-from fieldbank.muscle import passive_force, reflex_force
+from fieldbank.model import Arm, FloatArray, endpoint_field, hand_force
+from fieldbank.muscle import passive_force, passive_tension, reflex_force, reflex_tension
 from fieldbank.params import ArmParams
 
 #: ArmParams fields that may differ between the parameter sets of one :class:`ArmBatch`: every
@@ -49,6 +50,13 @@ class ArmBatch:
     q_rest : ndarray, shape (S, 2), rad
     lam_rest, lam_slack, lam_min, lam_max, excursion : ndarray, shape (S, 6), m
     km, alpha, beta : ndarray, shape (S, 6); N/m, N, dimensionless
+    same_lengths : bool
+        Every set has the same rest posture, rest and slack lengths (a fit's samples of Km, α
+        and β; the prior's table): at joint angles every set shares, their muscle lengths are
+        one set's (:meth:`muscle_lengths` returns them broadcast), and so is everything the
+        equations compute from the lengths alone - the passive force's shape, the reflex's
+        position term - computed once and scaled per set: the same numbers, a fraction of the
+        work.
     """
 
     geometry: Arm
@@ -62,6 +70,7 @@ class ArmBatch:
     km: FloatArray
     alpha: FloatArray
     beta: FloatArray
+    same_lengths: bool = False
 
     @classmethod
     def from_params(cls, params: Sequence[ArmParams], geometry: Arm | None = None) -> ArmBatch:
@@ -110,34 +119,70 @@ class ArmBatch:
         }
         for a in arrays.values():
             a.setflags(write=False)
-        return cls(geometry=geo, params=sets, **arrays)
+        same = all(np.array_equal(a, a[:1].repeat(len(a), axis=0))
+                   for a in (q_rest, lam_rest, arrays["lam_slack"]))
+        return cls(geometry=geo, params=sets, same_lengths=same, **arrays)
 
     def __len__(self) -> int:
         return len(self.params)
 
     def muscle_lengths(self, q: ArrayLike) -> FloatArray:
-        """λ (S, N, 6), m, at joint angles q: (N, 2) shared by every set, or (S, N, 2)."""
+        """λ (S, N, 6), m, at joint angles q: (N, 2) shared by every set, or (S, N, 2). With
+        :attr:`same_lengths` and shared angles, one set's lengths broadcast (read-only)."""
         qa = np.asarray(q, dtype=float)
+        if self.same_lengths and qa.ndim == 2:
+            lam = self.lam_rest[0] + (qa - self.q_rest[0]) @ self.geometry.jl.T
+            return np.broadcast_to(lam, (len(self.params), *lam.shape))
         return self.lam_rest[:, None, :] + (qa - self.q_rest[:, None, :]) @ self.geometry.jl.T
+
+    def columns(self, lam: FloatArray, cols: NDArray[np.intp]) -> FloatArray:
+        """The muscles ``cols`` (indices, (k,)) of λ (S, N, 6): (S, N, k), broadcast as λ is."""
+        if self._one(lam):
+            return np.broadcast_to(lam[:1][..., cols], (*lam.shape[:2], len(cols)))
+        return lam[..., cols]
+
+    def _one(self, lam: FloatArray) -> bool:
+        """λ is one set's lengths broadcast to every set (:meth:`muscle_lengths`)."""
+        return self.same_lengths and lam.ndim == 3 and lam.strides[0] == 0
 
     def passive_force(self, lam: FloatArray, groups: ArrayLike | None = None) -> FloatArray:
         """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only.
         ``groups`` (indices): λ holds only these muscle groups' columns, and so does Ψ."""
         g = slice(None) if groups is None else np.asarray(groups)
+        if self._one(lam):  # the shape once, Km per set
+            return passive_force(lam[:1], self.lam_slack[:1, None, g], self.km[:, None, g],
+                                 self.excursion[:1, None, g], self.geometry.w)
         return passive_force(lam, self.lam_slack[:, None, g], self.km[:, None, g],
                              self.excursion[:, None, g], self.geometry.w)
 
     def reflex_force(self, lam: FloatArray, ldot: FloatArray) -> FloatArray:
         """Φ (S, N, 6), N, for λ (S, N, 6) and λ̇ (N, 6) shared by every set: the value of
         :meth:`Arm.reflex_forces` of each set. Computed only where λ̇ > 0: elsewhere the
-        reflex is exactly zero (u = 0), and about half the muscles shorten at any motion."""
-        phi = np.zeros(np.broadcast_shapes(lam.shape, (len(self.params), *ldot.shape)))
-        rows, cols = np.nonzero(ldot > 0)
-        if rows.size:
-            phi[:, rows, cols] = reflex_force(
-                lam[:, rows, cols], ldot[rows, cols], self.geometry.ldot_max[cols],
-                self.alpha[:, cols], self.beta[:, cols], self.excursion[:, cols],
-                self.lam_rest[:, cols], self.lam_min[:, cols], self.lam_max[:, cols])
+        reflex is exactly zero (u = 0), and about half the muscles shorten at any motion.
+        Those (point, muscle) pairs are the same for every set: whole muscles when each
+        lengthens at every point or none (a joint stretch), else the pairs by one flat index;
+        each value the one the equations give for it."""
+        g = self.geometry
+        s = len(self.params)
+        live = ldot > 0
+        one = self._one(lam)
+        r = slice(0, 1) if one else slice(None)
+        lengths = lam[:1] if one else np.broadcast_to(lam, (s, *ldot.shape))
+        phi = np.zeros((s, *ldot.shape))
+        cols = np.flatnonzero(live.any(axis=0))
+        if live[:, cols].all():  # whole muscles
+            phi[..., cols] = reflex_force(
+                lengths[..., cols], ldot[:, cols], g.ldot_max[cols], self.alpha[:, None, cols],
+                self.beta[:, None, cols], self.excursion[r, None, cols],
+                self.lam_rest[r, None, cols], self.lam_min[r, None, cols],
+                self.lam_max[r, None, cols])
+            return phi
+        at = np.flatnonzero(live)  # (point, muscle) pairs, flat
+        m = at % ldot.shape[1]
+        phi.reshape(s, -1)[:, at] = reflex_force(
+            lengths.reshape(lengths.shape[0], -1)[:, at], ldot.reshape(-1)[at], g.ldot_max[m],
+            self.alpha[:, m], self.beta[:, m], self.excursion[r, m], self.lam_rest[r, m],
+            self.lam_min[r, m], self.lam_max[r, m])
         return phi
 
     def endpoint_force(self, x: ArrayLike, v: ArrayLike | None = None) -> FloatArray:
@@ -147,6 +192,29 @@ class ArmBatch:
         q, _, (ia, ib, ic, id_), (qd1, qd2) = geo.hand_state(x, v)
         lam = self.muscle_lengths(q)
         return geo._out_vec(self._force(self.passive_force(lam), lam, ia, ib, ic, id_, qd1, qd2))
+
+    def field(self, x: ArrayLike, v: ArrayLike | None = None
+              ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`Arm.field` of every set: force (S, N, 2), stiffness K = -∂F/∂x and damping
+        B = -∂F/∂v (S, N, 2, 2) at hand positions x (N, 2), m, and velocity v ((2,) or
+        (N, 2), m/s; None: static). The same equations in the same order as one arm's
+        (:func:`fieldbank.model.endpoint_field`), so each set's values are those of its own
+        compiled arm to the last bit (``tests/test_armbatch_field.py``)."""
+        geo = self.geometry
+        q, jac, jinv, qd = geo.hand_state(x, v)
+        jl = geo.jl
+        lam = self.muscle_lengths(q)
+        ldot = np.outer(qd[0], jl[:, 0]) + np.outer(qd[1], jl[:, 1])
+        one = slice(0, 1) if self._one(lam) else slice(None)
+        psi, dpsi = passive_tension(lam[one], self.lam_slack[one, None, :], self.km[:, None, :],
+                                    self.excursion[one, None, :], geo.w)
+        phi, dphi_l, dphi_ld = reflex_tension(
+            lam[one], ldot, geo.ldot_max, self.alpha[:, None, :], self.beta[:, None, :],
+            self.excursion[one, None, :], self.lam_rest[one, None, :], self.lam_min[one, None, :],
+            self.lam_max[one, None, :])
+        force, stiff, damp = endpoint_field(psi, dpsi, phi, dphi_l, dphi_ld, jl,
+                                            geo._jl_products, jac, jinv, qd)
+        return geo._out_vec(force), geo._out_mat(stiff), geo._out_mat(damp)
 
     def grid_force(self, x: ArrayLike, velocities: ArrayLike) -> FloatArray:
         """:meth:`endpoint_force` at every hand position x (N, 2), m, with every velocity of
@@ -177,5 +245,6 @@ _GEOMETRY_FIELDS: tuple[str, ...] = tuple(
     f.name for f in dataclass_fields(ArmParams) if f.name not in SAMPLED_FIELDS)
 
 
-def _geometry_key(p: ArmParams) -> tuple[object, ...]:
-    return tuple(getattr(p, f) for f in _GEOMETRY_FIELDS)
+#: The geometry fields of a set, as one tuple (a copy made by ``with_group`` shares their
+#: objects, so comparing two keys is mostly identity checks).
+_geometry_key: Callable[[ArmParams], tuple[object, ...]] = attrgetter(*_GEOMETRY_FIELDS)

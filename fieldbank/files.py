@@ -29,7 +29,6 @@ import errno
 import json
 import math
 import os
-import secrets
 import shutil
 import stat
 from collections.abc import Mapping
@@ -103,7 +102,9 @@ def _new_temp(p: Path) -> tuple[int, str]:
     plain ``open``: reading the umask would mean setting it, for every thread at once."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC | os.O_NOFOLLOW
     for _ in range(100):
-        tmp = os.path.join(p.parent, f".{p.name}.{secrets.token_hex(6)}")
+        # os.urandom is what secrets.token_hex reads; the secrets module would load hmac and
+        # OpenSSL into every command at start-up
+        tmp = os.path.join(p.parent, f".{p.name}.{os.urandom(6).hex()}")
         try:
             return os.open(tmp, flags, 0o666), tmp
         except FileExistsError:
@@ -307,7 +308,7 @@ def write_directory(path: str | Path, files: Mapping[str, bytes | str], *,
 def _new_temp_dir(p: Path, mode: int) -> str:
     """A new, empty temporary directory beside ``p`` (``mode`` less the umask), its path."""
     for _ in range(100):
-        tmp = os.path.join(p.parent, f".{p.name}.{secrets.token_hex(6)}")
+        tmp = os.path.join(p.parent, f".{p.name}.{os.urandom(6).hex()}")  # as in _new_temp
         try:
             os.mkdir(tmp, mode)
             return tmp

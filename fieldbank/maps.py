@@ -19,6 +19,7 @@ import io
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -26,6 +27,9 @@ from numpy.typing import ArrayLike
 from fieldbank.errors import MapError
 from fieldbank.model import Arm, FloatArray
 from fieldbank.sanitize import csv_comment
+
+if TYPE_CHECKING:
+    from fieldbank.armbatch import ArmBatch
 
 KINDS = ("postural", "stiffness")
 FRAMES = ("shoulder",)
@@ -282,6 +286,28 @@ def model_map_like(arm: Arm, m: FieldMap, source: str | None = None) -> FieldMap
     if m.kind == "postural":
         return postural_map(arm, m.positions_m, source)
     return stiffness_map(arm, m.positions_m, m.velocity_m_per_s, source)
+
+
+def model_map_values(batch: ArmBatch, m: FieldMap) -> FloatArray:
+    """The values of :func:`model_map_like` for every parameter set of ``batch`` in one
+    vectorised pass: (S, N, 2) N or (S, N, 2, 2) N/m, each set's to the last bit what its own
+    compiled arm gives.
+
+    Raises
+    ------
+    UnreachableError
+        A position of ``m`` the arm cannot reach.
+    MapError
+        A set's values are not finite (as :class:`FieldMap` refuses them).
+    """
+    if m.kind == "postural":
+        vals = batch.endpoint_force(m.positions_m)
+    else:
+        vel = np.asarray(m.velocity_m_per_s, dtype=float).reshape(2)
+        vals = batch.field(m.positions_m, vel)[1]
+    if not np.all(np.isfinite(vals)):
+        raise MapError("values contains NaN or infinite entries.")
+    return vals
 
 
 def evaluate(

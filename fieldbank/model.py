@@ -37,7 +37,7 @@ one-sided slopes, the value a central difference measures.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,11 +50,6 @@ FloatArray = NDArray[np.float64]
 #: Four same-shaped arrays: the entries of a 2 × 2 matrix per point, row by row.
 Quad = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
-#: Version of the arm model and of how a fit estimates it: raised with every change of the
-#: equations, of the fitter or of its defaults that changes what a fit of the same maps gives.
-#: Every fit records it; ``fieldbank fit --all --older-than N`` refits what older versions made.
-MODEL_VERSION = 1
-
 #: Elbow angles closer than this to 0 or π make the endpoint Jacobian singular.
 SINGULAR_ELBOW_RAD = 0.02
 #: Gauss-Legendre segments (in units of the smoothing width w) for the potential's
@@ -62,6 +57,9 @@ SINGULAR_ELBOW_RAD = 0.02
 #: segments near 0 and long ones in the exponentially small tails give ~1e-10 relative error.
 _POT_SEGMENTS = ((-30.0, -12.0), (-12.0, -4.0), (-4.0, 0.0), (0.0, 4.0), (4.0, 12.0), (12.0, 30.0))
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
+
+#: The fields of a parameter record, in order.
+_PARAM_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(ArmParams))
 
 
 def _as_points(x: ArrayLike, name: str = "positions") -> FloatArray:
@@ -188,8 +186,8 @@ class Arm:
             ``p`` differs in anything else (segments, moment arms, rest posture, range, ...).
         """
         q = self.params
-        other = [f for f in q.to_dict() if f not in self.MUSCLE_FIELDS
-                 and f not in ("schema", "version") and getattr(p, f) != getattr(q, f)]
+        other = [f for f in _PARAM_FIELDS if f not in self.MUSCLE_FIELDS
+                 and getattr(p, f) != getattr(q, f)]
         if other:
             raise ParameterError(
                 f"with_muscles: the parameters differ in {', '.join(other)}, not only in "
@@ -398,41 +396,18 @@ class Arm:
         derivatives : bool
             Skip K and B (returned as empty arrays) when False.
         """
-        q, (a, b, c, d), (ia, ib, ic, id_), (qd1, qd2) = self.hand_state(x, v)
+        q, jac, jinv, qd = self.hand_state(x, v)
         jl = self.jl
         lam = self.lam_rest + (q - self.q_rest) @ jl.T
-        ldot = np.outer(qd1, jl[:, 0]) + np.outer(qd2, jl[:, 1])
+        ldot = np.outer(qd[0], jl[:, 0]) + np.outer(qd[1], jl[:, 1])
         psi, dpsi = self.passive_forces(lam)
         phi, dphi_l, dphi_ld = self.reflex_forces(lam, ldot)
-        fx, fy = hand_force(psi + phi, jl, ia, ib, ic, id_)
-        force = np.stack([fx, fy], axis=1)
         if not derivatives:
+            fx, fy = hand_force(psi + phi, jl, *jinv)
             empty = np.empty((0, 2, 2))
-            return self._out_vec(force), empty, empty
-        # J_λᵀ diag(g) J_λ as (g @ P) with P the products of J_λ's columns
-        prod = self._jl_products
-        a00, a01, a11 = ((dpsi + dphi_l) @ prod).T
-        b00, b01, b11 = (dphi_ld @ prod).T
-        # ∂J/∂q1 = [[-c, -d], [a, b]], ∂J/∂q2 = [[-d, -d], [b, b]]
-        # (∂J/∂q_k) q̇ and then Q = -J⁻¹ [(∂J/∂q1) q̇, (∂J/∂q2) q̇]
-        u1x, u1y = -c * qd1 - d * qd2, a * qd1 + b * qd2
-        u2x, u2y = -d * (qd1 + qd2), b * (qd1 + qd2)
-        q11 = -(ia * u1x + ib * u1y)
-        q21 = -(ic * u1x + id_ * u1y)
-        q12_ = -(ia * u2x + ib * u2y)
-        q22 = -(ic * u2x + id_ * u2y)
-        # ∂τ/∂q = -A - B Q ; G column k = (∂J/∂q_k)ᵀ F ; inner = ∂τ/∂q - G
-        g11 = -c * fx + a * fy
-        g21 = -d * fx + b * fy
-        g12 = -d * fx + b * fy
-        g22 = -d * fx + b * fy
-        m11 = -a00 - (b00 * q11 + b01 * q21) - g11
-        m12 = -a01 - (b00 * q12_ + b01 * q22) - g12
-        m21 = -a01 - (b01 * q11 + b11 * q21) - g21
-        m22 = -a11 - (b01 * q12_ + b11 * q22) - g22
-        # K = -J⁻ᵀ M J⁻¹ ; B = J⁻ᵀ Bm J⁻¹  (J⁻ᵀ = [[ia, ic], [ib, id]])
-        stiff = -_sandwich(ia, ib, ic, id_, m11, m12, m21, m22)
-        damp = _sandwich(ia, ib, ic, id_, b00, b01, b01, b11)
+            return self._out_vec(np.stack([fx, fy], axis=1)), empty, empty
+        force, stiff, damp = endpoint_field(psi, dpsi, phi, dphi_l, dphi_ld, jl,
+                                            self._jl_products, jac, jinv, qd)
         return self._out_vec(force), self._out_mat(stiff), self._out_mat(damp)
 
     def potential(self, x: ArrayLike) -> FloatArray:
@@ -461,6 +436,46 @@ def hand_force(f: FloatArray, jl: FloatArray, ia: FloatArray, ib: FloatArray, ic
     return ia * t1 + ic * t2, ib * t1 + id_ * t2
 
 
+def endpoint_field(psi: FloatArray, dpsi: FloatArray, phi: FloatArray, dphi_l: FloatArray,
+                   dphi_ld: FloatArray, jl: FloatArray, prod: FloatArray, jac: Quad, jinv: Quad,
+                   qd: tuple[FloatArray, FloatArray]
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Hand force F (…, N, 2), stiffness K = -∂F/∂x and damping B = -∂F/∂v (…, N, 2, 2), model
+    frame, of muscle tensions Ψ + Φ and their slopes (each (…, N, 6)) at the joint state of
+    :meth:`Arm.hand_state` (``jac``, ``jinv``, ``qd``: each entry (N,)); ``prod`` the products
+    of J_λ's columns (``Arm._jl_products``). Leading axes of the tensions carry through, so
+    one arm (N, 6) and S parameter sets of one geometry (S, N, 6) share the arithmetic."""
+    a, b, c, d = jac
+    ia, ib, ic, id_ = jinv
+    qd1, qd2 = qd
+    fx, fy = hand_force(psi + phi, jl, ia, ib, ic, id_)
+    force = np.stack([fx, fy], axis=-1)
+    # J_λᵀ diag(g) J_λ as (g @ P) with P the products of J_λ's columns
+    a00, a01, a11 = np.moveaxis((dpsi + dphi_l) @ prod, -1, 0)
+    b00, b01, b11 = np.moveaxis(dphi_ld @ prod, -1, 0)
+    # ∂J/∂q1 = [[-c, -d], [a, b]], ∂J/∂q2 = [[-d, -d], [b, b]]
+    # (∂J/∂q_k) q̇ and then Q = -J⁻¹ [(∂J/∂q1) q̇, (∂J/∂q2) q̇]
+    u1x, u1y = -c * qd1 - d * qd2, a * qd1 + b * qd2
+    u2x, u2y = -d * (qd1 + qd2), b * (qd1 + qd2)
+    q11 = -(ia * u1x + ib * u1y)
+    q21 = -(ic * u1x + id_ * u1y)
+    q12_ = -(ia * u2x + ib * u2y)
+    q22 = -(ic * u2x + id_ * u2y)
+    # ∂τ/∂q = -A - B Q ; G column k = (∂J/∂q_k)ᵀ F ; inner = ∂τ/∂q - G
+    g11 = -c * fx + a * fy
+    g21 = -d * fx + b * fy
+    g12 = -d * fx + b * fy
+    g22 = -d * fx + b * fy
+    m11 = -a00 - (b00 * q11 + b01 * q21) - g11
+    m12 = -a01 - (b00 * q12_ + b01 * q22) - g12
+    m21 = -a01 - (b01 * q11 + b11 * q21) - g21
+    m22 = -a11 - (b01 * q12_ + b11 * q22) - g22
+    # K = -J⁻ᵀ M J⁻¹ ; B = J⁻ᵀ Bm J⁻¹  (J⁻ᵀ = [[ia, ic], [ib, id]])
+    stiff = -_sandwich(ia, ib, ic, id_, m11, m12, m21, m22)
+    damp = _sandwich(ia, ib, ic, id_, b00, b01, b01, b11)
+    return force, stiff, damp
+
+
 def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatArray]:
     """Flexed-branch joint angles (N, 2) for model-frame positions, and cos q2 (N,) (unclipped,
     so |cos q2| > 1 marks an unreachable position)."""
@@ -473,17 +488,17 @@ def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatA
 
 def _sandwich(ia: FloatArray, ib: FloatArray, ic: FloatArray, id_: FloatArray,
               m11: FloatArray, m12: FloatArray, m21: FloatArray, m22: FloatArray) -> FloatArray:
-    """J⁻ᵀ M J⁻¹ for J⁻¹ = [[ia, ib], [ic, id]], component-wise, shape (N, 2, 2)."""
+    """J⁻ᵀ M J⁻¹ for J⁻¹ = [[ia, ib], [ic, id]], component-wise, shape (…, N, 2, 2)."""
     # R = M J⁻¹
     r11 = m11 * ia + m12 * ic
     r12 = m11 * ib + m12 * id_
     r21 = m21 * ia + m22 * ic
     r22 = m21 * ib + m22 * id_
-    out = np.empty((ia.shape[0], 2, 2))
-    out[:, 0, 0] = ia * r11 + ic * r21
-    out[:, 0, 1] = ia * r12 + ic * r22
-    out[:, 1, 0] = ib * r11 + id_ * r21
-    out[:, 1, 1] = ib * r12 + id_ * r22
+    out = np.empty((*np.broadcast_shapes(ia.shape, r11.shape), 2, 2))
+    out[..., 0, 0] = ia * r11 + ic * r21
+    out[..., 0, 1] = ia * r12 + ic * r22
+    out[..., 1, 0] = ib * r11 + id_ * r21
+    out[..., 1, 1] = ib * r12 + id_ * r22
     return out
 
 

@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
-from dataclasses import MISSING, asdict, dataclass, fields, replace
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -157,6 +157,27 @@ def _check_tuple(name: str, value: Any, length: int) -> tuple[float, ...]:
                        labels=[_label(name, i) for i in range(length)])
 
 
+_is_float = frozenset((float,)).__contains__
+#: :data:`BOUNDS` as fast tests (:func:`_in_bounds`): per field, the length of a tuple field
+#: (0: a number) and the low and high test, each a float comparison method (C-level, so that a
+#: whole tuple is tested with ``map``). Every bound is finite: a NaN or an infinity fails.
+_BOUND_CHECKS: dict[str, tuple[int, Callable[[float], bool], Callable[[float], bool]]] = {
+    name: (6 if name in _SIX else 2 if name in _PAIRS else 0,
+           float(iv.low).__le__ if iv.low_closed else float(iv.low).__lt__,
+           float(iv.high).__ge__ if iv.high_closed else float(iv.high).__gt__)
+    for name, iv in BOUNDS.items() if iv.low is not None and iv.high is not None}
+
+
+def _in_bounds(name: str, v: Any) -> bool:
+    """``v`` is a float (a tuple of floats of the field's length) inside the interval of field
+    ``name``: what :func:`_check_value` and :func:`_check_tuple` accept unchanged."""
+    n, low, high = _BOUND_CHECKS[name]
+    if n:
+        return (type(v) is tuple and len(v) == n and all(map(_is_float, map(type, v)))
+                and all(map(low, v)) and all(map(high, v)))
+    return type(v) is float and low(v) and high(v)
+
+
 @dataclass(frozen=True)
 class ArmParams:
     """Constants of one arm, SI units, right-arm convention (a left arm is mirrored in x).
@@ -226,21 +247,27 @@ class ArmParams:
 
     def __post_init__(self) -> None:
         # Validation only; conversions live in the named constructors.
+        self._check(None)
+
+    def _check(self, names: Iterable[str] | None) -> None:
+        """Check the fields ``names`` (None: every field) against :data:`BOUNDS`, converting
+        or refusing what is not a float inside its interval, then everything that relates
+        fields to one another (always)."""
         if self.side not in ("right", "left"):
             raise ParameterError(
                 f"The 'side' parameter must be 'right' or 'left'; got {self.side!r} instead."
             )
-        for f in fields(self):
-            if f.name == "side":
-                continue
-            value = getattr(self, f.name)
-            if f.name in _SIX:
-                checked: Any = _check_tuple(f.name, value, 6)
-            elif f.name in _PAIRS:
-                checked = _check_tuple(f.name, value, 2)
+        values = self.__dict__
+        for name in _BOUND_CHECKS if names is None else names:
+            if name == "side" or _in_bounds(name, values[name]):
+                continue  # the common case, checked without a call per value
+            if name in _SIX:
+                checked: Any = _check_tuple(name, values[name], 6)
+            elif name in _PAIRS:
+                checked = _check_tuple(name, values[name], 2)
             else:
-                checked = _check_value(f.name, value)
-            object.__setattr__(self, f.name, checked)
+                checked = _check_value(name, values[name])
+            object.__setattr__(self, name, checked)
         for rng in ("shoulder_range_rad", "elbow_range_rad"):
             lo, hi = getattr(self, rng)
             if not lo < hi:
@@ -391,7 +418,17 @@ class ArmParams:
         unknown = sorted(set(changes) - names)
         if unknown:
             raise ParameterError(f"Unknown arm parameter(s) {', '.join(unknown)}.")
-        return replace(self, **changes)
+        return self._copy(changes)
+
+    def _copy(self, changes: Mapping[str, Any]) -> ArmParams:
+        """A copy with ``changes`` (known field names), checked as :meth:`__post_init__`
+        checks a new record - only the changed fields against their bounds (the others were
+        checked when this one was made), then every relation between fields."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new.__dict__.update(changes)
+        new._check(changes)
+        return new
 
     def with_group(self, group: str, **values: float) -> ArmParams:
         """Copy with per-group values set, e.g. ``with_group('ef', km_n_per_m=6000)``."""
@@ -405,7 +442,7 @@ class ArmParams:
             row = list(getattr(self, name))
             row[i] = value
             changes[name] = tuple(row)
-        return replace(self, **changes)
+        return self._copy(changes)
 
     def group_value(self, name: str, group: str) -> float:
         return float(getattr(self, name)[group_index(group)])
@@ -417,10 +454,10 @@ class ArmParams:
         The reference every severity grade and the inverse what-if measure against: only the
         muscles differ from this arm.
         """
-        return replace(
-            self, km_n_per_m=(DEFAULT_KM_N_PER_M,) * 6, alpha_n=(DEFAULT_ALPHA_N,) * 6,
-            beta=(DEFAULT_BETA,) * 6, slack_offset_m=(0.0,) * 6,
-        )
+        return self._copy({
+            "km_n_per_m": (DEFAULT_KM_N_PER_M,) * 6, "alpha_n": (DEFAULT_ALPHA_N,) * 6,
+            "beta": (DEFAULT_BETA,) * 6, "slack_offset_m": (0.0,) * 6,
+        })
 
 
 PER_GROUP_FIELDS: tuple[str, ...] = _SIX

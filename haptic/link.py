@@ -7,7 +7,8 @@ STATE in its :class:`~haptic.port.HandleState`, and counts what went wrong (CRC 
 decode errors, frames lost to sequence gaps, duplicates, device FAULT frames, STATE frames whose
 flags report a device fault or a tripped watchdog - each frame counted, even when a newer STATE
 of the same read replaces it; the fault flag even in a frame dropped as a duplicate). It is a
-:class:`~haptic.port.RobotPort`; judging its counts is the safety monitor's job
+:class:`~haptic.port.RobotPort` (and a :class:`~haptic.port.SensingPort`: :meth:`sensor_on`);
+judging its counts is the safety monitor's job
 (:mod:`haptic.monitor`); a port that fails raises :class:`LinkDown`.
 
 Sequence numbers: a frame numbered behind the last one is a duplicate and dropped. One forged
@@ -114,26 +115,6 @@ class RobotLink:
         return {"crc_errors": self.state.crc_errors, "decode_errors": dict(self.reader.errors),
                 "frames_lost": self.frames_lost, "duplicates": self.duplicates,
                 "states": self.state.states, "frames_tx": self.frames_tx}
-
-    # --- the newest state under the names the remote sites read (haptic/remote) -----------
-    # The remote sites read the link's state as attributes of the link; they move to
-    # ``state`` with their next change, and these go then.
-    x = property(lambda self: self.state.x)
-    y = property(lambda self: self.state.y)
-    vx = property(lambda self: self.state.vx)
-    vy = property(lambda self: self.state.vy)
-    flags = property(lambda self: self.state.flags)
-    sensor_fx = property(lambda self: self.state.sensor_fx)
-    sensor_fy = property(lambda self: self.state.sensor_fy)
-    sensors = property(lambda self: self.state.sensors)
-    crc_errors = property(lambda self: self.state.crc_errors)
-    device_faults = property(lambda self: self.state.device_faults)
-    last_device_fault = property(lambda self: self.state.last_device_fault)
-    fault_flag_frames = property(lambda self: self.state.fault_flag_frames)
-    watchdog_flag_frames = property(lambda self: self.state.watchdog_flag_frames)
-
-    def take_gap(self) -> int:
-        return self.state.take_gap()
 
     # --- sending ----------------------------------------------------------------------------
     def _send(self, msg_type: int, payload: bytes = b"") -> int:

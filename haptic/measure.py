@@ -54,6 +54,7 @@ from fieldbank.haptic.errors import HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.monitor import SafetyMonitor
 from fieldbank.haptic.protocol import FaultCode
+from fieldbank.haptic.robots import with_force_sensor
 from fieldbank.haptic.safety import Mode, SafetyConfig
 from fieldbank.home import data_home
 from fieldbank.ingest import IngestReport, ingest_data
@@ -138,20 +139,8 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
          clock: object) -> tuple[Recording, np.ndarray]:
     dt = 1.0 / cfg.rate_hz
     link.handshake(cfg.rate_hz, round(cfg.safety.state_timeout_ms) or 20)
-    link.sensor_on()
     link.heartbeat()
-    st = link.state
-    deadline = clock() + 1.0  # type: ignore[operator]
-    while st.sensors == 0:
-        link.send_force(0.0, 0.0)
-        link.wait_state(0.01)
-        if st.device_faults:
-            raise HapticError(f"the robot at {mask_url(url)} has no force sensor (it answered "
-                              f"SENSOR_ON with fault {st.last_device_fault}); measuring "
-                              "needs one")
-        if clock() > deadline:  # type: ignore[operator]
-            raise HapticError(f"the robot at {mask_url(url)} sent no force-sensor reading "
-                              "within 1 s of SENSOR_ON; measuring needs a force sensor")
+    st = with_force_sensor(link, url, "measuring", clock).state  # type: ignore[arg-type]
     ox, oy = cfg.shoulder_offset_m
     monitor = SafetyMonitor(link, cfg.safety, dt)
     monitor.arm(running=False)

@@ -53,6 +53,8 @@ class SafetyMonitor:
         Called on every trip, after the fault is latched and before the robot is disarmed.
     spin_s : float, s
         How long :meth:`read` busy-polls for a lock-step reply before it sleeps.
+    force_from : str
+        What computes the forces :meth:`output` is given, in words (its NAN fault names it).
 
     Attributes
     ----------
@@ -67,8 +69,10 @@ class SafetyMonitor:
     """
 
     def __init__(self, port: RobotPort, config: SafetyConfig, dt_s: float,
-                 on_fault: OnFault | None = None, spin_s: float = 0.0) -> None:
+                 on_fault: OnFault | None = None, spin_s: float = 0.0,
+                 force_from: str = "the model") -> None:
         self.port = port
+        self.force_from = force_from
         self.state = port.state
         self.safety = Safety(config, dt_s)
         self.dt_s = dt_s
@@ -173,7 +177,7 @@ class SafetyMonitor:
         limiter = safety.limiter
         if limiter.nan_seen:
             limiter.nan_seen = False
-            self.trip(FaultCode.NAN, "non-finite force from the model")
+            self.trip(FaultCode.NAN, f"non-finite force from {self.force_from}")
             return 0.0, 0.0
         if safety.mode != Mode.ARMED:
             return 0.0, 0.0
@@ -206,7 +210,9 @@ class SafetyMonitor:
     def arm(self, running: bool) -> int:
         """Arm (or re-arm after a fault), refused with every reason of :meth:`problems`; the
         bitmask of the faults it cleared. What the port counted until now is forgiven, except
-        fault flags read on the running loop's current tick, which :meth:`check` judges next."""
+        what the running loop read on its current tick (fault flags, a sequence gap), which
+        :meth:`check` judges next; before a loop runs (``running`` False) also the frames lost
+        so far."""
         problems = self.problems(running)
         if problems:
             raise CommandError("cannot arm: " + "; ".join(problems))
@@ -221,6 +227,8 @@ class SafetyMonitor:
         self._fault_flags_seen = (self._fault_flags_before_read if running
                                   else st.fault_flag_frames)
         self._watchdog_flags_seen = st.watchdog_flag_frames
+        if not running:  # frames lost before the loop (the handshake) are forgiven
+            st.max_gap = 0
         try:
             self.port.arm()
         except LinkDown as exc:

@@ -11,7 +11,11 @@ robot through this seam only. Three kinds of robot stand behind it:
 * a robot adapter installed beside fieldbank: a distribution that registers a factory for a URL
   scheme in the entry point group ``fieldbank.robots`` (:mod:`haptic.robots`;
   ``docs/robot-adapters.md`` has a worked adapter);
-* anything else that has the members below (a test's scripted robot, a remote site).
+* anything else that has the members below (a test's scripted robot).
+
+Both sites of a remote assessment (:mod:`haptic.remote`) drive their robots through this seam
+too; the patient's site needs a robot that can also report the force of the hand on its handle
+(:class:`SensingPort`).
 
 A port is driven by one thread, the loop's. Per tick the loop calls :meth:`RobotPort.poll` (or
 :meth:`RobotPort.wait_state` for a robot that answers each force with one state), reads
@@ -141,4 +145,17 @@ class RobotPort(Protocol):
 
     def close(self) -> None:
         """Release the robot (called once, after the session)."""
+        ...
+
+
+@runtime_checkable
+class SensingPort(RobotPort, Protocol):
+    """A robot with a force sensor at its handle (the patient's site of a remote assessment
+    needs one: it tells the clinician what the patient's arm does)."""
+
+    def sensor_on(self) -> None:
+        """Ask the robot to report the force of the hand on the handle with every state
+        (:attr:`HandleState.sensor_fx`, ``sensor_fy``; :attr:`HandleState.sensors` counts the
+        readings). A robot without a sensor refuses with a fault report
+        (:attr:`HandleState.device_faults`) or never sends a reading."""
         ...

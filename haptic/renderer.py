@@ -8,14 +8,12 @@ their raised-cosine blend and fades (:class:`~haptic.pair.ModelPair`), the A/B/X
 training protocols the commands address (:mod:`haptic.activities`), a display's snapshot in
 shared memory (:mod:`haptic.snapshot`). ``docs/haptics.md`` describes every step.
 
-Timing (:mod:`haptic.clock`): absolute deadlines on a :class:`~haptic.clock.Clock`; the loop
-runs inside :func:`~haptic.clock.realtime` (garbage collector frozen and off, SCHED_FIFO, short
-thread switch interval); every tick's wake time and per-phase cost are kept
-(:mod:`haptic.loopstats`). A :class:`~haptic.clock.VirtualClock` runs it faster than real time
-in tests. Commands (:mod:`haptic.commands`) come from other threads through
-:meth:`Renderer.submit` and are applied at the start of a tick, so the loop's state has one
-owner; what the renderer tells other processes is :mod:`haptic.readouts`, and the session's
-trace is put together by :mod:`haptic.assemble`.
+Timing (:mod:`haptic.clock`): absolute deadlines on a :class:`~haptic.clock.Clock` (a
+:class:`~haptic.clock.VirtualClock` runs faster than real time), inside
+:func:`~haptic.clock.realtime`; each tick's wake time and phase costs are kept
+(:mod:`haptic.loopstats`). Commands (:mod:`haptic.commands`) from other threads
+(:meth:`Renderer.submit`) are applied at the start of a tick: the loop's state has one owner.
+Read-outs: :mod:`haptic.readouts`; the session's trace: :mod:`haptic.assemble`.
 """
 
 from __future__ import annotations
@@ -23,6 +21,7 @@ from __future__ import annotations
 import logging
 import queue
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -52,13 +51,9 @@ _MODEL_BIT = 1 << (FaultCode.MODEL - 1)
 
 
 class Renderer:
-    """Renders model A (before) and B (after) through ``port``.
-
-    ``port``: a connected robot (handshake done), a :class:`~haptic.link.RobotLink` or an
-    adapter's; ``clock``: :class:`~haptic.clock.RealClock` by default, a
-    :class:`~haptic.clock.VirtualClock` runs faster than real time; ``environment``: what is
-    ticked in place of each compiled arm (:data:`haptic.pair.Environment`: the remote link).
-    """
+    """Renders model A (before) and B (after) through ``port`` (a connected robot, handshake
+    done); ``clock``: :class:`~haptic.clock.RealClock` by default; ``environment``: what is
+    ticked in place of each compiled arm (:data:`haptic.pair.Environment`: the remote link)."""
 
     def __init__(self, port: RobotPort, before: ArmParams, after: ArmParams,
                  config: RendererConfig | None = None, safety: SafetyConfig | None = None,
@@ -91,6 +86,8 @@ class Renderer:
         self._tick_ns = self.times.tick_ns
         #: What the OS granted the loop: priority, core, refusals (haptic.clock.Grant).
         self.realtime_grant: Grant | None = None
+        #: How a stop winds down (None: at once; a remote link ramps out, then :meth:`stop_now`)
+        self.wind_down: Callable[[], None] | None = None
 
     # --- the tick ---------------------------------------------------------------------------
     def tick(self) -> None:
@@ -159,23 +156,22 @@ class Renderer:
 
     # --- the loop ---------------------------------------------------------------------------
     def run(self, duration_s: float | None = None, first_state_timeout_s: float = 1.0) -> Trace:
-        """Render until ``duration_s`` passes (None: until a ``stop`` command or Ctrl-C) or a
-        ``stop`` command; wait ``first_state_timeout_s`` for the robot's first state. The
-        session's trace."""
+        """Render for ``duration_s`` (None: until stopped) or until a ``stop`` command or Ctrl-C,
+        the robot's first state awaited ``first_state_timeout_s``; the session's trace."""
         cfg = self.config
         n_ticks = None if duration_s is None else max(1, round(duration_s * cfg.rate_hz))
-        # the process is prepared before arming: nothing may stand between the ARM frame and
-        # the first FORCE (haptic.clock.realtime)
+        # prepared before arming: nothing may stand between the ARM and the first FORCE
         with realtime(cfg.realtime_priority) as granted:
             self.realtime_grant = granted
             try:
                 self.start(first_state_timeout_s, n_ticks)
+                end = None if n_ticks is None else self.ticks + n_ticks
                 with np.errstate(over="ignore", invalid="ignore"):  # diverging arms are faults
-                    self._loop(n_ticks)
-            except KeyboardInterrupt:
-                if not self.running:
-                    raise
-                self.log_event("interrupted")
+                    while not self._loop(end):  # Ctrl-C: stopped as asked (winding down)
+                        self.log_event("interrupted")
+                        if self.wind_down is None:
+                            break
+                        self.request_stop()  # a second Ctrl-C ends it at once
             finally:
                 self.running = False
         return self.finish()
@@ -198,24 +194,26 @@ class Renderer:
             except HapticError as exc:
                 log.warning("not armed at start: %s", exc)
 
-    def _loop(self, n_ticks: int | None) -> None:
+    def _loop(self, end: int | None) -> bool:
+        """Tick until ``end`` ticks or a stop; False when Ctrl-C interrupted it."""
         clock, period, times = self.clock, self.period_ns, self.times
         wake, late = times.wake_ns, times.late_ns
-        end = None if n_ticks is None else self.ticks + n_ticks
         deadline = clock.now_ns()
-        while not self._stop and (end is None or self.ticks < end):
-            clock.sleep_until(deadline)
-            now = clock.now_ns()
-            wake.append(now)
-            late.append(now - deadline)
-            self.tick()
-            deadline += period
-            if now >= deadline:
-                # a whole period late: skip the missed ticks instead of bursting through
-                # them back to back (which would read no new state and command stale forces)
-                skipped = (now - deadline) // period + 1
-                times.skipped_ticks += skipped
-                deadline += skipped * period
+        try:
+            while not self._stop and (end is None or self.ticks < end):
+                clock.sleep_until(deadline)
+                now = clock.now_ns()
+                wake.append(now)
+                late.append(now - deadline)
+                self.tick()
+                deadline += period
+                if now >= deadline:  # a whole period late: skip the missed ticks (no bursts)
+                    skipped = (now - deadline) // period + 1
+                    times.skipped_ticks += skipped
+                    deadline += skipped * period
+        except KeyboardInterrupt:
+            return False
+        return True
 
     def finish(self) -> Trace:
         """Command zero force, disarm the robot, answer pending commands; the trace."""
@@ -279,6 +277,14 @@ class Renderer:
         self.log_event("disarm")
 
     def request_stop(self) -> None:
+        """End the run after this tick, or when :attr:`wind_down` is done (a second: at once)."""
+        wind, self.wind_down = self.wind_down, None
+        if wind is not None and self.running:
+            wind()
+        else:
+            self._stop = True
+
+    def stop_now(self) -> None:
         """End the run after the current tick."""
         self._stop = True
 

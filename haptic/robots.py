@@ -16,18 +16,23 @@
 
 Every failure is a :class:`~haptic.errors.HapticError` that names the scheme, the distribution
 and what went wrong, with the URL's secrets masked.
+
+:func:`with_force_sensor` turns an open robot's force sensor on (what a measurement and the
+patient's site of a remote assessment need), refusing in words a robot without one.
 """
 
 from __future__ import annotations
 
 import re
+import time
+from collections.abc import Callable
 from importlib.metadata import EntryPoint, entry_points
 
 from fieldbank.errors import FieldbankError
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
-from fieldbank.haptic.port import RobotPort
-from fieldbank.redact import mask_port, redact_port
+from fieldbank.haptic.port import RobotPort, SensingPort
+from fieldbank.redact import mask_port, mask_url, redact_port
 
 #: The entry point group robot adapters register in (name: URL scheme; object: factory).
 GROUP = "fieldbank.robots"
@@ -56,18 +61,14 @@ def _origin(ep: EntryPoint) -> str:
     return f"{ep.value!r} of {dist.name} {dist.version}" if dist is not None else repr(ep.value)
 
 
-def open_robot(url: str, rate_hz: int, watchdog_ms: int) -> RobotPort:
-    """The robot ``url`` names, connected and its handshake done at ``rate_hz`` with the
-    robot's watchdog asked for ``watchdog_ms``; not armed. Close it with ``close()``."""
+def adapter_for(url: str) -> EntryPoint | None:
+    """The installed adapter that opens ``url`` (None: the project's own link does - a device
+    path or a built-in scheme); a :class:`~haptic.errors.HapticError` when no adapter, or more
+    than one, claims its scheme. Nothing is imported or opened: a configuration naming a robot
+    is checked with it where it is made."""
     scheme = scheme_of(url)
     if scheme is None or scheme in BUILT_IN:
-        link = RobotLink.open(url)
-        try:
-            link.handshake(rate_hz, watchdog_ms)
-        except BaseException:
-            link.close()
-            raise
-        return link
+        return None
     found = adapters().get(scheme, [])
     if not found:
         known = ", ".join(f"{s}://" for s in sorted(adapters())) or "none"
@@ -77,7 +78,22 @@ def open_robot(url: str, rate_hz: int, watchdog_ms: int) -> RobotPort:
     if len(found) > 1:
         raise HapticError(f"{len(found)} robot adapters claim {scheme}://: "
                           f"{'; '.join(_origin(ep) for ep in found)}; uninstall all but one")
-    ep = found[0]
+    return found[0]
+
+
+def open_robot(url: str, rate_hz: int, watchdog_ms: int) -> RobotPort:
+    """The robot ``url`` names, connected and its handshake done at ``rate_hz`` with the
+    robot's watchdog asked for ``watchdog_ms``; not armed. Close it with ``close()``."""
+    ep = adapter_for(url)
+    if ep is None:
+        link = RobotLink.open(url)
+        try:
+            link.handshake(rate_hz, watchdog_ms)
+        except BaseException:
+            link.close()
+            raise
+        return link
+    scheme = ep.name.lower()
     try:
         factory = ep.load()
     except Exception as exc:  # an adapter's import error, whatever it is
@@ -113,3 +129,28 @@ def _refusal(port: object, rate_hz: int) -> str | None:
     if rate_hz > port.device.max_rate_hz:
         return f"the robot accepts at most {port.device.max_rate_hz} Hz; asked {rate_hz} Hz"
     return None
+
+
+def with_force_sensor(robot: RobotPort, url: str, needed_by: str,
+                      clock: Callable[[], float] = time.monotonic) -> SensingPort:
+    """``robot`` (at ``url``) with its force sensor on and its first reading in, within 1 s of
+    asking by ``clock``; a :class:`~haptic.errors.HapticError` saying that ``needed_by`` ("the
+    patient's site", "measuring") needs one when its port has no sensor, the robot answers
+    SENSOR_ON with a fault, or no reading arrives."""
+    if not isinstance(robot, SensingPort):
+        raise HapticError(f"the robot at {mask_url(url)} cannot report the force of the hand "
+                          f"on its handle (its port has no force sensor); {needed_by} needs one")
+    st = robot.state
+    robot.sensor_on()
+    deadline = clock() + 1.0
+    while st.sensors == 0:
+        robot.send_force(0.0, 0.0)
+        robot.wait_state(0.01)
+        if st.device_faults:
+            raise HapticError(f"the robot at {mask_url(url)} has no force sensor (it answered "
+                              f"SENSOR_ON with fault {st.last_device_fault}); {needed_by} "
+                              "needs one")
+        if clock() > deadline:
+            raise HapticError(f"the robot at {mask_url(url)} sent no force-sensor reading "
+                              f"within 1 s of SENSOR_ON; {needed_by} needs one")
+    return robot

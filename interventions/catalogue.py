@@ -37,8 +37,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, TypeVar, cast
 
-import numpy as np
-
 from fieldbank.errors import ParameterError
 from fieldbank.interventions.defaults import DOSE_UNIT, TOXIN, value
 from fieldbank.interventions.errors import InterventionError
@@ -78,17 +76,17 @@ def _raise(kind: str, problems: list[str]) -> None:
 
 
 def _scaled(params: ArmParams, name: str, factors: Mapping[str, float]) -> tuple[float, ...]:
-    row = np.array(getattr(params, name), dtype=float)
+    row = [float(v) for v in getattr(params, name)]
     for g, f in factors.items():
         row[GROUP_INDEX[g]] *= f
-    return tuple(row.tolist())
+    return tuple(row)
 
 
 def _shifted(params: ArmParams, name: str, deltas: Mapping[str, float]) -> tuple[float, ...]:
-    row = np.array(getattr(params, name), dtype=float)
+    row = [float(v) for v in getattr(params, name)]
     for g, d in deltas.items():
         row[GROUP_INDEX[g]] += d
-    return tuple(row.tolist())
+    return tuple(row)
 
 
 def _replace(kind: str, params: ArmParams, **changes: Any) -> ArmParams:

@@ -17,7 +17,6 @@ Reading a document checks every step and reports every bad one at once, each as
 
 from __future__ import annotations
 
-import hashlib
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -37,6 +36,8 @@ PLAN_VERSION = 1
 
 def params_sha256(params: ArmParams) -> str:
     """SHA-256 of the canonical JSON of a parameter set (sorted keys, no whitespace)."""
+    import hashlib  # OpenSSL: loaded when a hash is taken, not when 'plans list' reads a plan
+
     text = json.dumps(params.to_dict(), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -118,6 +119,8 @@ class Plan:
         return json.dumps(self.to_dict(), indent=2)
 
     def sha256(self) -> str:
+        import hashlib  # as in params_sha256
+
         text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode("utf-8")).hexdigest()
 

@@ -94,12 +94,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fieldbank.armbatch import ArmBatch
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, synthesize
 from fieldbank.fitting.problem import map_sd
 from fieldbank.fitting.quality import MapFit, Thresholds, map_fit
 from fieldbank.interventions.spread import arm_like
-from fieldbank.maps import FieldMap, model_map_like
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
+from fieldbank.maps import FieldMap, model_map_like, model_map_values
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import BOUNDS, GROUPS, ArmParams
 
@@ -117,10 +119,6 @@ CONTRADICTED = (FAILED, OVER, PARTIAL)
 Z = 2.0
 #: Smallest whitened size of the predicted change (sd) at which the maps can see it.
 MIN_SENSITIVITY = 4.0
-#: The realised fraction decides a verdict only when its SE is at most this.
-MAX_CHANGE_SE = 0.25
-#: "As predicted" means within this fraction of the predicted change (80-120%).
-CHANGE_TOLERANCE = 0.2
 #: A confirmation needs at least this fraction of the predicted change, at 2 SE.
 CONFIRM_FLOOR = 0.5
 #: A realised fraction whose SE exceeds this is not printed: its 2-SE interval spans two whole
@@ -242,24 +240,32 @@ def map_changes(before: ArmParams, after: ArmParams, maps: Sequence[tuple[int, F
     with the reason. A map repeating another (same kind, velocity, positions and values: one
     measurement stored from two files) is marked ``duplicate_of`` and counted once."""
     arm_b = Arm.from_params(before)
-    arm_a = arm_like(arm_b, after)
-    arms_s = [(arm_like(arm_b, pb), arm_like(arm_b, pa)) for pb, pa in samples]
+    sets = [before, after, *(p for pair in samples for p in pair)]
+    try:  # one geometry (samples and plans change muscle values): one vectorised pass
+        batch = ArmBatch.from_params(sets, arm_b)
+
+        def values(m: FieldMap) -> FloatArray:
+            return model_map_values(batch, m)
+    except ParameterError:  # each set as its own arm
+        arms = [arm_b, *(arm_like(arm_b, p) for p in sets[1:])]
+
+        def values(m: FieldMap) -> FloatArray:
+            return np.array([model_map_like(a, m).values for a in arms])
     out: list[MapChange] = []
     problems: list[str] = []
     for map_id, raw in maps:
         m = raw.as_arm_on_handle()
         try:
-            yb = model_map_like(arm_b, m).values
-            ya = model_map_like(arm_a, m).values
-            ys = [(model_map_like(b, m).values, model_map_like(a, m).values) for b, a in arms_s]
+            ys = values(m)  # the model before, after, then each sample's before and after
         except (ParameterError, ValueError) as exc:
             problems.append(f"map {map_id}: not compared: {exc}")
             continue
         n = m.n
         sd = map_sd(m).reshape(n, -1)
         k = sd.shape[1]
-        bs = np.array([b for b, _ in ys]).reshape(len(ys), n, k)
-        as_ = np.array([a for _, a in ys]).reshape(len(ys), n, k)
+        yb, ya = ys[0], ys[1]
+        bs = ys[2::2].reshape(-1, n, k)
+        as_ = ys[3::2].reshape(-1, n, k)
         dup = next((c.map_id for c in out if c.duplicate_of is None and _same(c.measured, m)),
                    None)
         out.append(MapChange(int(map_id), m, sd, yb.reshape(n, k), ya.reshape(n, k), bs, as_,

@@ -48,13 +48,11 @@ from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.realised import (
-    CHANGE_TOLERANCE,
     CONFIRMED,
     CONTRADICTED,
     DEFAULT_RULES,
     FAILED,
     INCONCLUSIVE,
-    MAX_CHANGE_SE,
     MAX_REPORTED_SE,
     NOT_CHECKED,
     OVER,
@@ -72,14 +70,15 @@ from fieldbank.interventions.realised import (
 )
 from fieldbank.interventions.spread import NO_FIT, FitSpread, first_session_se
 from fieldbank.interventions.suggest import suggestion
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database, PlanRecord
 
 __all__ = [
-    "CHANGE_TOLERANCE", "CONFIRMED", "CONTRADICTED", "FAILED", "INCONCLUSIVE",
-    "MAX_CHANGE_SE", "NOT_CHECKED", "OVER", "PARTIAL", "LaterSession", "MapCheck", "PlanInputs",
+    "CONFIRMED", "CONTRADICTED", "FAILED", "INCONCLUSIVE",
+    "NOT_CHECKED", "OVER", "PARTIAL", "LaterSession", "MapCheck", "PlanInputs",
     "PlanValidation", "SessionCheck", "ValidationReport", "check_plan", "check_session",
     "given_on", "predicted_after", "read_plan_inputs", "validate_plans",
 ]

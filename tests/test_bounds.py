@@ -18,6 +18,7 @@ from fieldbank.haptic.station.config import StationConfig
 from fieldbank.haptic.station.launch import StationOptions
 from fieldbank.haptic.trainee import TraineeMotion
 from fieldbank.haptic.training import TrainingProtocol
+from fieldbank.haptic.workspace.host import RobotSettings
 from fieldbank.ingest.limits import IngestLimits
 from fieldbank.validation import Interval, check_fields
 
@@ -73,6 +74,8 @@ def test_every_problem_in_one_message_and_whole_numbers_stay_whole() -> None:
     (lambda: PatientPlacement(float("nan"), float("inf")), ("shoulder_x_m", "shoulder_y_m"),
      "patient placement"),
     (lambda: ScheduledSwitch(-1.0, "B"), ("at_s",), "switch time"),
+    (lambda: RobotSettings(None, "sqlite://", "t", rate_hz=8000, force_limit_n=0.0),
+     ("rate_hz", "force_limit_n"), "workspace robot setting"),
 ])
 def test_each_configuration_names_every_field_out_of_bounds(make, fields_, what) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(ParameterError) as err:

@@ -236,3 +236,38 @@ def test_a_held_reflex_is_drawn_jointly_and_never_beyond_a_severe_joint() -> Non
                 assert s.reflex_torque_n_m <= cap[s.name] * 1.001, (g, s.name, a, b)
     assert min(reached[g] for g in ("sf", "se", "ef", "ee")) > 4.0  # severe reached
     assert min(reached.values()) > 2.0  # every group's range reaches past mild
+
+
+def test_a_body_s_prior_table_is_made_once_and_is_the_table_made_afresh() -> None:
+    import fieldbank.fitting.prior as prior_mod
+
+    impaired = synthesize({"ef:dynamic": "severe", "sf:passive": "moderate"}, BASE)
+    kept = Prior.for_arm(Arm.from_params(impaired))
+    # the table depends on the geometry only: an arm of other muscle values, the same table
+    assert Prior.for_arm(Arm.from_params(BASE)) is kept
+    assert not kept.path_ratio.flags.writeable and not kept.dynamic_top.flags.writeable
+    prior_mod._TABLES.clear()
+    fresh = Prior.for_arm(Arm.from_params(BASE))
+    assert fresh is not kept
+    for name in ("path_s", "path_ratio", "dynamic_top"):
+        assert np.array_equal(getattr(fresh, name), getattr(kept, name)), name
+    assert fresh.reference.params == kept.reference.params
+    # another body: its own table
+    other = Prior.for_arm(Arm.from_params(ArmParams.from_anthropometry(95.0, 1.92)))
+    assert other is not fresh
+    assert not np.array_equal(other.path_ratio, fresh.path_ratio)
+
+
+def test_the_kept_prior_tables_are_bounded_the_oldest_dropped(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import fieldbank.fitting.prior as prior_mod
+
+    monkeypatch.setattr(prior_mod, "TABLES_KEPT", 2)
+    monkeypatch.setattr(prior_mod, "_TABLES", {})
+    bodies = [Arm.from_params(ArmParams.from_anthropometry(m, 1.75)) for m in (60., 70., 80.)]
+    first = [Prior.for_arm(a) for a in bodies]
+    assert len(prior_mod._TABLES) == 2
+    assert Prior.for_arm(bodies[2]) is first[2]  # kept
+    again = Prior.for_arm(bodies[0])  # dropped as the oldest: made afresh, the same numbers
+    assert again is not first[0]
+    assert np.array_equal(again.path_ratio, first[0].path_ratio)

@@ -151,24 +151,32 @@ def test_each_kind_of_misplaced_import_is_caught() -> None:
     assert v("def f():\n    from fieldbank.storage import Database\n", cli, "cli") == []
 
 
-# --- inside the core: no arrow runs back up -----------------------------------------------------
+# --- inside a layer: no arrow runs back up -----------------------------------------------------
+
+def _unit(module: str, package: str) -> str:
+    """The unit of a layer's own picture a module of ``package`` belongs to: a sub-package
+    (``fieldbank.evaluate``, ``fieldbank.haptic.remote``) or a top-level module
+    (``fieldbank.maps``, ``fieldbank.haptic.session``)."""
+    return ".".join(module.split(".")[:package.count(".") + 2])
+
 
 def _core_unit(module: str) -> str:
-    """The unit of the core's own picture a module belongs to: a sub-package
-    (``fieldbank.evaluate``) or a top-level module (``fieldbank.maps``)."""
-    return ".".join(module.split(".")[:2])
+    return _unit(module, "fieldbank")
 
 
-def core_cycles(root: Path) -> list[list[str]]:
-    """Cycles between the core's sub-packages and top-level modules (every import counts)."""
+def unit_cycles(root: Path, folder: str) -> list[list[str]]:
+    """Cycles between the sub-packages and top-level modules of one layer's folder
+    (``fieldbank``: the core; ``haptic``) - every import counts."""
+    package, layer = FOLDERS[folder]
     edges: dict[str, set[str]] = {}
-    for path in sorted((root / "fieldbank").rglob("*.py")):
+    for path in sorted((root / folder).rglob("*.py")):
         module, _ = _module_name(path, root)
-        here = _core_unit(module)
+        here = _unit(module, package)
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             for name in _imported(node, module, path.name == "__init__.py"):
-                there = _core_unit(name)
-                if layer_of(name) == "core" and name != "fieldbank" and there != here:
+                there = _unit(name, package)
+                if (layer_of(name) == layer and name.startswith(package + ".")
+                        and there != here):
                     edges.setdefault(here, set()).add(there)
     cycles: list[list[str]] = []
     state: dict[str, int] = {}
@@ -189,6 +197,11 @@ def core_cycles(root: Path) -> list[list[str]]:
     return cycles
 
 
+def core_cycles(root: Path) -> list[list[str]]:
+    """Cycles between the core's sub-packages and top-level modules (every import counts)."""
+    return unit_cycles(root, "fieldbank")
+
+
 def test_no_arrow_runs_back_up_inside_the_core() -> None:
     found = core_cycles(ROOT)
     assert not found, "\n".join(" -> ".join(c) for c in found)
@@ -206,3 +219,21 @@ def test_an_arrow_back_up_inside_the_core_is_caught(tmp_path: Path) -> None:
     compare.write_text(compare.read_text() + "\nfrom fieldbank.grading import stretch_profile\n")
     found = core_cycles(tmp_path)
     assert found and any("fieldbank.grading" in c and "fieldbank.evaluate" in c for c in found)
+
+
+def test_no_arrow_runs_back_up_inside_the_haptic_wing() -> None:
+    found = unit_cycles(ROOT, "haptic")
+    assert not found, "\n".join(" -> ".join(c) for c in found)
+
+
+def test_an_arrow_back_up_inside_the_haptic_wing_is_caught(tmp_path: Path) -> None:
+    shutil.copytree(ROOT / "haptic", tmp_path / "haptic",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    assert unit_cycles(tmp_path, "haptic") == []
+    # the arrow the station once ran: its server importing the remote desk, while the
+    # clinician's site imports the station's launcher
+    server = tmp_path / "haptic" / "station" / "server.py"
+    server.write_text(server.read_text() + "\nfrom fieldbank.haptic.remote.desk import Desk\n")
+    found = unit_cycles(tmp_path, "haptic")
+    assert found and any("fieldbank.haptic.station" in c and "fieldbank.haptic.remote" in c
+                         for c in found)

@@ -6,14 +6,17 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from fieldbank.cli.main import COMMANDS, cli
 from fieldbank.evaluate.design import equilibrium, severity_candidates
+from fieldbank.evaluate.observation import Observation, with_force_noise
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
+from fieldbank.params import ArmParams
 from fieldbank.probepath import ProbePath
 from fieldbank.storage import Database
 from tests.haptic_util import mild_shoulder_trace
@@ -190,3 +193,73 @@ def test_trials_prints_confusion_matrices() -> None:
     assert set(sets) == {"designed", "seed"}
     assert sum(map(sum, sets["seed"]["confusion"])) == 2 * 2
 
+
+
+def _stretch_csvs(params: ArmParams, folder: Path, seed: int) -> list[str]:
+    """The stretch of every group performed on the arm ``params``, 2 N of sensor noise, one
+    CSV a stretch as a recording would be exported."""
+    from fieldbank.evaluate.design import NoiseModel
+    from fieldbank.evaluate.design.coverage import stretch_set
+    from fieldbank.evaluate.replay import replay_forces
+    from fieldbank.model import Arm
+
+    rng = np.random.default_rng(seed)
+    noise = NoiseModel(force_sd_n=2.0)
+    true = Arm.from_params(params)
+    out = []
+    for m in stretch_set(Arm.from_params(params.with_unimpaired_muscles())):
+        dt = float(m.times_s[1] - m.times_s[0])
+        start = (float(m.positions_m[0, 0]), float(m.positions_m[0, 1]))
+        f = replay_forces([true], m.positions_m, m.velocities_m_per_s, dt, start)[0]
+        obs = with_force_noise(Observation.from_arrays(m.name, m.times_s, m.positions_m, f,
+                                                       m.velocities_m_per_s), noise, rng)
+        path = folder / f"{m.name.replace(' ', '_')}.csv"
+        rows = np.column_stack([obs.times_s, obs.positions_m, obs.force_n,
+                                m.velocities_m_per_s])
+        path.write_text("# frame: shoulder\n# sign: arm-on-handle\n"
+                        "t_s,x_m,y_m,fx_n,fy_n,vx_m_per_s,vy_m_per_s\n"
+                        + "\n".join(",".join(f"{v:.6g}" for v in r) for r in rows) + "\n")
+        out.append(str(path))
+    return out
+
+
+@pytest.mark.slow
+def test_classify_open_says_per_group_how_it_is_impaired_and_when_no_state_explains(
+        tmp_path: Path) -> None:
+    """Severe elbow-flexor spasticity on a body of the clinic's own, probed with the stretch of
+    every group: the elbow flexors are named impaired, most probably by spasticity, the other
+    groups not; three severe groups at once are none of the candidates."""
+    body = ["--mass", "82", "--height", "1.84", "--side", "left"]
+    base = ArmParams.from_anthropometry(82.0, 1.84, "left")
+    ef = tmp_path / "ef"
+    ef.mkdir()
+    files = _stretch_csvs(synthesize({"ef:dynamic": "severe"}, base), ef, seed=5)
+    r = _run("probe", "classify", *files, "--open", *body, "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["answer"] == "ef" and doc["probability"] > 0.3, doc
+    g = doc["groups"]["ef"]
+    assert g["impaired"] > 0.6 and g["impaired"] == max(v["impaired"] for v in
+                                                        doc["groups"].values()), doc["groups"]
+    kinds = {k: g[k] for k in ("stiffness", "spasticity", "spasticity and stiffness",
+                               "contracture")}
+    assert max(kinds, key=kinds.__getitem__) == "spasticity" and g["contracture"] < 0.1, g
+    assert sum(kinds.values()) == pytest.approx(g["impaired"], abs=1e-5)
+    assert all(doc["groups"][o]["impaired"] < 0.2 for o in ("sf", "se", "ee")), doc["groups"]
+    assert doc["explains_recording"] and doc["none_of_the_candidates"] < 0.5
+    text = _run("probe", "classify", *files, "--open", *body)
+    assert text.exit_code == 0, text.output
+    assert "impaired: ef" in text.stdout and "elbow flexors (ef)" in text.stdout
+    assert "none of the candidates: p = " in text.stdout
+    three = tmp_path / "three"
+    three.mkdir()
+    files = _stretch_csvs(synthesize({"sf": "severe", "ee": "severe", "bf": "severe"}, base),
+                          three, seed=6)
+    r = _run("probe", "classify", *files, "--open", *body, "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["answer"] == "none of the candidates" and doc["probability"] > 0.9, doc
+    assert not doc["explains_recording"]
+    # the candidate lists of the joint-group classifier do not apply to the open set
+    r = _run("probe", "classify", *files, "--open", "--levels", "severe")
+    assert r.exit_code != 0 and "--levels do not apply" in r.output

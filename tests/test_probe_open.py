@@ -7,16 +7,30 @@ reliability over seeded families of their own is ``benchmarks/bench_probe_open.p
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design import NoiseModel, open_candidates
 from fieldbank.evaluate.design.coverage import differing_groups, stretch_set
 from fieldbank.evaluate.observation import Observation, with_force_noise
-from fieldbank.evaluate.openset import NONE_OF_THEM, OpenSet, OpenTrace, classify_open
+from fieldbank.evaluate.openset import (
+    KINDS,
+    NONE_OF_THEM,
+    RAW,
+    Calibration,
+    OpenClassification,
+    OpenSet,
+    OpenTrace,
+    classify_open,
+)
 from fieldbank.evaluate.reliability import (
+    Outcome,
     calibration_error,
     family_arms,
+    fit_calibration,
     reliability_bins,
     truth_label,
 )
@@ -149,3 +163,48 @@ def test_a_design_that_covers_stretches_every_group_the_candidates_differ_in() -
         angle = math.degrees(math.atan2(want[1], want[0]))
         assert any(abs((p.direction_deg - angle + 180.0) % 360.0 - 180.0) <= 30.0
                    for p in d.paths), (g, [p.direction_deg for p in d.paths])
+
+
+def _stated(labels: tuple[str, ...], raw: tuple[float, ...], fit_p: float,
+            cal: Calibration) -> OpenClassification:
+    return OpenClassification(labels, np.array(raw), ("ef dynamic 2",), 0.0, 0.0, fit_p, 1.0,
+                              np.zeros((6, len(KINDS))), cal)
+
+
+def test_the_calibration_tempers_the_posterior_and_sets_a_share_aside() -> None:
+    """Numbers worked by hand: raw 0.8, 0.15, 0.05 at power 0.5 are √ of them over their sum
+    (0.894, 0.387, 0.224 over 1.505), 0.9 of it stated when 0.1 is set aside."""
+    labels = ("ef", "ef+bf", "unimpaired")
+    c = _stated(labels, (0.8, 0.15, 0.05), 0.5, Calibration(power=0.5, other=0.1))
+    np.testing.assert_allclose(c.label_probability, 0.9 * np.sqrt([0.8, 0.15, 0.05])
+                               / np.sqrt([0.8, 0.15, 0.05]).sum())
+    assert c.other_probability == 0.1
+    assert c.answer == ("ef", pytest.approx(0.9 * 0.8944 / 1.5053, abs=1e-4))
+    # per group, should the arm be one of the set: every label holding the group
+    assert c.group_probability["ef"] == pytest.approx(1 - 0.2236 / 1.5053, abs=1e-4)
+    assert c.group_probability["bf"] == pytest.approx(0.3873 / 1.5053, abs=1e-4)
+    assert c.group_probability["sf"] == 0.0
+    # a residual beyond the noise: none of the candidates, 1 - p/level
+    c = _stated(labels, (0.8, 0.15, 0.05), 1e-4, Calibration(power=0.5, other=0.1))
+    assert c.answer == (NONE_OF_THEM, pytest.approx(0.9))
+    assert _stated(labels, (0.8, 0.15, 0.05), 0.5, RAW).answer == ("ef", pytest.approx(0.8))
+    with pytest.raises(ParameterError, match="'other'"):
+        Calibration(power=0.5, other=1.0)
+
+
+def test_the_fitted_calibration_states_what_happens() -> None:
+    """A posterior that says 0.99 where the truth is so four times in five: the fit tempers it
+    to 0.8 (0.99^a / (0.99^a + 0.01^a) = 0.8 at a = ln 4 / ln 99 ≈ 0.30) and sets nothing
+    aside for arms the set holds."""
+    out = [Outcome("two groups", f"arm {k}", "ef" if k % 5 else "ee", "ef", 0.99, True, 0.5,
+                   labels=("ef", "ee"), label_probability=(0.99, 0.01)) for k in range(100)]
+    cal, _score = fit_calibration(out)
+    assert cal == Calibration(power=0.3, other=0.0)
+    stated = [o.restated(cal) for o in out]
+    assert all(o.answer == "ef" and o.probability == pytest.approx(0.8, abs=0.01)
+               for o in stated)
+    # arms outside the set that the posterior puts on a label: a share is set aside
+    outside = [dataclasses.replace(o, family="outside the candidates",
+                                   truth="ef+bf+ee" if k % 4 == 0 else o.truth)
+               for k, o in enumerate(out)]
+    assert fit_calibration(outside)[0].other > 0.1

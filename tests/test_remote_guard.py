@@ -10,12 +10,16 @@ import numpy as np
 import pytest
 
 from fieldbank.evaluate.severity import synthesize
+from fieldbank.haptic import protocol as P
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.motions import pull
+from fieldbank.haptic.port import HandleState, RobotPort, SensingPort
 from fieldbank.haptic.remote.account import account
 from fieldbank.haptic.remote.config import LinkConfig, SiteConfig
 from fieldbank.haptic.remote.plausible import Plausibility, PlausibilityCheck
 from fieldbank.haptic.remote.simulate import Pair, clinician_robot
 from fieldbank.haptic.remote.wire import FLAG_ARMED, State
+from fieldbank.haptic.robots import with_force_sensor
 from fieldbank.haptic.safety import SafetyConfig
 from tests.haptic_util import rest_hand
 
@@ -143,6 +147,52 @@ def test_a_silent_peer_in_lockstep_ends_the_session_with_a_ramp_not_a_step(elbow
     assert "silent" in ev[0]["reason"]
 
 
+def test_the_clinician_s_stop_ramps_both_forces_out_before_the_session_ends(elbow: tuple) -> None:
+    """The clinician stops the session (``fieldbank haptic stop``: the renderer's stop command)
+    while holding the severe elbow stretched: the felt force and the patient's servo force
+    ramp to zero together (raised cosine over ramp_s: no step at either handle), the patient's
+    site hears why, and only then does the clinician's loop end."""
+    p, hand = elbow
+    cfg = SiteConfig(lockstep=True)
+    pair = _held_pair(p, hand, cfg)
+    before = []                                         # the servo's own tick-to-tick noise
+    for _ in range(200):
+        pair.tick()
+        before.append(math.hypot(pair.patient.port.fx, pair.patient.port.fy))
+    noise = float(np.max(np.abs(np.diff(before))))
+    held = math.hypot(pair.renderer.fx, pair.renderer.fy)
+    servo = before[-1]
+    assert held > 2.0 and servo > 2.0 and noise < 0.2 * servo
+    ended: list[int] = []
+    stop_now = pair.port.on_end
+    assert stop_now is not None
+
+    def end() -> None:
+        ended.append(pair.port.tick_n)
+        stop_now()
+
+    pair.port.on_end = end
+    req = pair.renderer.submit("stop")                  # applied at the next tick
+    felt, servos = [], []
+    for _ in range(400):
+        if ended:
+            break
+        pair.tick()
+        felt.append(math.hypot(pair.renderer.fx, pair.renderer.fy))
+        servos.append(math.hypot(pair.patient.port.fx, pair.patient.port.fy))
+    assert req.wait(1.0) == {"stopping": True}
+    run = pair.finish()
+    f, s = np.array(felt), np.array(servos)
+    ramp_ticks = round(cfg.link.ramp_s * cfg.rate_hz)
+    assert len(ended) == 1 and ramp_ticks <= len(f) <= ramp_ticks + 3
+    assert f[-1] == 0.0 and np.max(np.abs(np.diff(f))) < 0.03 * held      # a ramp, not a step
+    assert np.max(np.abs(np.diff(s))) <= 1.2 * noise and s[-1] < 0.05 * servo
+    closing = [e for e in run.clinician_summary["events"] if e["event"] == "closing"]
+    assert closing and closing[0]["reason"] == "stopped by the clinician"
+    heard = [e for e in run.patient_summary["events"] if e["event"] == "peer_ended"]
+    assert heard and heard[0]["reason"] == "stopped by the clinician"
+
+
 def test_a_site_engages_only_after_its_robot_has_been_ready_and_on_time_for_ready_s(
         elbow: tuple) -> None:
     p, hand = elbow
@@ -156,6 +206,65 @@ def test_a_site_engages_only_after_its_robot_has_been_ready_and_on_time_for_read
     run = pair.finish()
     engaged = [e["t_s"] for e in run.clinician_summary["events"] if e["event"] == "engaged"]
     assert engaged and 0.8 <= engaged[0] <= 0.81        # 0.5 s on time after the late tick
+
+
+# --- the patient's robot: a robot port with a force sensor -------------------------------------
+class _Handle:
+    """A scripted robot port: a state on every poll; ``sensor`` how it answers SENSOR_ON
+    (``"reading"``: readings follow; ``"fault"``: a fault report)."""
+
+    def __init__(self, sensor: str) -> None:
+        self.state = HandleState(x=0.1, y=0.4)
+        self.device = P.DeviceInfo(P.PROTOCOL_VERSION, "scripted", 1000, 40.0, 20)
+        self.sensor = sensor
+        self.asked = False
+
+    def poll(self) -> int:
+        st = self.state
+        st.states += 1
+        if self.asked and self.sensor == "reading":
+            st.sensors += 1
+        return 1
+
+    def wait_state(self, timeout_s: float, spin_s: float = 0.0) -> int:
+        return self.poll()
+
+    def send_force(self, fx_n: float, fy_n: float) -> None:
+        pass
+
+    def arm(self) -> None:
+        pass
+
+    def disarm(self) -> None:
+        pass
+
+    def counters(self) -> dict[str, int]:
+        return {}
+
+    def close(self) -> None:
+        pass
+
+
+class _Sensing(_Handle):
+    def sensor_on(self) -> None:
+        self.asked = True
+        if self.sensor == "fault":
+            self.state.device_faults += 1
+            self.state.last_device_fault = 9
+
+
+def test_the_patient_s_site_takes_only_a_robot_that_reports_the_hand_s_force() -> None:
+    """A robot port without a force sensor, or whose robot refuses SENSOR_ON, is refused in
+    words naming the robot; one whose readings arrive is the patient's robot."""
+    bare = _Handle("reading")
+    assert isinstance(bare, RobotPort) and not isinstance(bare, SensingPort)
+    with pytest.raises(HapticError, match="desk://arm cannot report the force of the hand"):
+        with_force_sensor(bare, "desk://arm", "the patient's site")
+    with pytest.raises(HapticError, match="answered SENSOR_ON with fault 9"):
+        with_force_sensor(_Sensing("fault"), "desk://arm", "the patient's site")
+    good = _Sensing("reading")
+    assert with_force_sensor(good, "desk://arm", "the patient's site") is good
+    assert good.state.sensors > 0
 
 
 # --- the account ----------------------------------------------------------------------------------

@@ -166,3 +166,38 @@ def test_open_robot_says_why_it_refuses() -> None:
 
     assert isinstance(NoDevice(), RobotPort)
     assert "did not say what it is" in str(_refusal(NoDevice(), 1000))
+
+
+def test_the_remote_patient_s_site_and_the_workspace_take_the_adapter_s_robot(
+        adapter_env: Path, tmp_path: Path) -> None:
+    """The patient's site of a remote assessment opens its robot through the robot port too:
+    the desk robot opens, and is refused in words because it reports no force of the hand
+    (its port has no ``sensor_on``) - before anything listens. The workspace takes desk:// as
+    its robot and refuses a scheme no adapter serves when it starts."""
+    env = {"PATH": f"{adapter_env / 'bin'}:/usr/bin:/bin", "FIELDBANK_HOME": str(tmp_path)}
+    cli = [str(adapter_env / "bin" / "python"), "-m", "fieldbank.cli", "haptic", "remote"]
+    key = tmp_path / "session.key"
+    r = subprocess.run([*cli, "key", "--out", str(key)], cwd=tmp_path, text=True,
+                       capture_output=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([*cli, "patient", "--robot", "desk://?x0=0.1&y0=0.45", "--key", str(key),
+                        "--shoulder", "0,0", "--bind", "127.0.0.1:0", "--wait-s", "1"],
+                       cwd=tmp_path, text=True, capture_output=True, timeout=600, env=env)
+    assert r.returncode == 1
+    assert ("the robot at desk://?x0=0.1&y0=0.45 cannot report the force of the hand on its "
+            "handle (its port has no force sensor); the patient's site needs one") in r.stderr
+    assert "listening" not in r.stdout + r.stderr
+    r = _py(adapter_env, (
+        "from fieldbank.haptic.errors import HapticError\n"
+        "from fieldbank.haptic.workspace.host import RobotSettings\n"
+        "s = RobotSettings('desk://?x0=0.1', 'sqlite://', 'traces')\n"
+        "print('desk', s.simulated)\n"
+        "try:\n"
+        "    RobotSettings('acme://arm', 'sqlite://', 'traces')\n"
+        "except HapticError as exc:\n"
+        "    print(exc)\n"), tmp_path)
+    assert r.returncode == 0, r.stderr
+    first, second = r.stdout.splitlines()
+    assert first == "desk False"
+    assert second.startswith("no robot adapter for acme:// is installed")
+    assert "adapters installed: desk://" in second

@@ -73,11 +73,12 @@ def stretch_torques(batch: ArmBatch, joint: str, direction: str,
     sign = DIRECTION_SIGN[direction]
     lo, hi = (geo.params.shoulder_range_rad, geo.params.elbow_range_rad)[j]
     angles = np.linspace(lo, hi, samples) if sign > 0 else np.linspace(hi, lo, samples)
-    q = np.repeat(batch.q_rest[:, None, :], samples, axis=1)
+    # the other joint at each set's rest posture (one posture when the sets share it)
+    q = np.repeat(batch.q_rest[:1 if batch.same_lengths else None, None, :], samples, axis=1)
     q[:, :, j] = angles
     if hold_rad is not None:
         q[:, :, 1 - j] = hold_rad
-    lam = batch.muscle_lengths(q)
+    lam = batch.muscle_lengths(q[0] if batch.same_lengths else q)
     lever = sign * geo.jl[:, j]
 
     def reflex(speed: float) -> FloatArray:
@@ -88,7 +89,7 @@ def stretch_torques(batch: ArmBatch, joint: str, direction: str,
     # the groups this joint moves: the others add exactly 0 N·m (a zero lever)
     moved = np.flatnonzero(lever)
     passive = np.zeros_like(lam)
-    passive[..., moved] = batch.passive_force(lam[..., moved], moved) * lever[moved]
+    passive[..., moved] = batch.passive_force(batch.columns(lam, moved), moved) * lever[moved]
     slow = (passive + reflex(slow_speed_rad_s)).sum(axis=-1)
     fast = (passive + reflex(fast_speed_rad_s)).sum(axis=-1)
     return StretchTorques(joint, direction, angles, slow, fast)

@@ -87,9 +87,9 @@ from fieldbank.evaluate.design import (
 )
 from fieldbank.evaluate.observation import Observation
 from fieldbank.model import Arm, FloatArray
+from fieldbank.probechoices import DEFAULT_PREDICTOR, PREDICTORS
 from fieldbank.sim import ArmSim
 
-PREDICTORS = ("replay", "rigid", "static")
 #: Window of the Savitzky-Golay derivative giving the ``rigid`` predictor's accelerations, s.
 ACCELERATION_WINDOW_S = 0.025
 #: Stop suggesting probes when the most probable candidate has at least this probability.
@@ -122,7 +122,8 @@ def recorded_accelerations(obs: Observation) -> FloatArray:
                                     delta=dt, axis=0), dtype=float)
 
 
-def predict_observation(arm: Arm, obs: Observation, predictor: str = "replay") -> FloatArray:
+def predict_observation(arm: Arm, obs: Observation,
+                        predictor: str = DEFAULT_PREDICTOR) -> FloatArray:
     """The force (T, 2), N, the arm puts on the handle for the recorded motion of ``obs``."""
     if predictor in ("static", "rigid"):
         try:
@@ -325,7 +326,7 @@ class Classification:
 
 
 def predict_all(observations: Sequence[Observation], candidates: Sequence[Candidate],
-                predictor: str = "replay") -> tuple[FloatArray, ...]:
+                predictor: str = DEFAULT_PREDICTOR) -> tuple[FloatArray, ...]:
     """Every candidate's predicted force for every observation: per observation (n, T, 2)."""
     if predictor not in PREDICTORS:
         raise ParameterError(f"Unknown predictor {predictor!r}; known: {', '.join(PREDICTORS)}.")
@@ -335,7 +336,7 @@ def predict_all(observations: Sequence[Observation], candidates: Sequence[Candid
 
 def classify(observations: Sequence[Observation], candidates: Sequence[Candidate], *,
              noise: NoiseModel | None = None, prior: Sequence[float] | FloatArray | None = None,
-             predictor: str = "replay", next_probe: bool = True,
+             predictor: str = DEFAULT_PREDICTOR, next_probe: bool = True,
              perception: Perception | None = None, limits: ProbeLimits | None = None,
              stop_probability: float = STOP_PROBABILITY,
              remaining_probability: float = REMAINING_PROBABILITY,
@@ -448,5 +449,5 @@ def _fit_p_value(q: float, expected: float, variance: float) -> float:
     return float(chi2.sf(q / scale, dof))
 
 
-__all__ = ["FIT_LEVEL", "PREDICTORS", "TEMPERATURE", "Classification", "classify",
+__all__ = ["FIT_LEVEL", "TEMPERATURE", "Classification", "classify",
            "predict_all", "predict_observation", "recorded_accelerations"]

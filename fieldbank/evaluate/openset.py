@@ -34,6 +34,7 @@ answer is "none of the candidates", with probability 1 − p/level: the residual
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -53,12 +54,17 @@ from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import ratio_of_score, synthesize_ratios
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS, ArmParams
+from fieldbank.validation import Interval, check_fields
 
 #: Severity scores of a group's passive, reflex or both states (half Weber steps).
 SCORES: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5)
 #: A group's contractures: its slack length this much short, m.
 CONTRACTURES_M: tuple[float, ...] = (0.005, 0.010, 0.015, 0.020)
 COMPONENTS: tuple[str, ...] = ("passive", "dynamic", "both")
+#: The clinic's words for a group's states: passive stiffness (position-dependent, slack
+#: length normal), spasticity (velocity-dependent: the reflex), both, contracture (the slack
+#: length short).
+KINDS: tuple[str, ...] = ("stiffness", "spasticity", "spasticity and stiffness", "contracture")
 STATES_PER_GROUP = len(COMPONENTS) * len(SCORES) + len(CONTRACTURES_M)
 #: Prior probability that a group is impaired (each group independently; assumption).
 GROUP_PRIOR = 0.3
@@ -139,48 +145,133 @@ class OpenSet:
         return p
 
 
+@dataclass(frozen=True)
+class Calibration:
+    """How the posterior over the sets of impaired groups is stated: each set's probability
+    raised to ``power`` and renormalised (below 1: the likelihood tempered for the misfit the
+    grid of states leaves - an arm between the grid's states, a partner group compensating),
+    then a share ``other`` set aside for an arm the set does not hold, which no residual
+    reveals (its force fitted within the noise by some arm of the set). Above 1 the
+    posterior is sharpened: a grid coarser than what the recording tells spreads it.
+    Fitted on arms of their own (:func:`fieldbank.evaluate.reliability.fit_calibration`)."""
+
+    power: float = 1.0
+    other: float = 0.0
+    #: Below this p-value of the fit test the share for an arm outside the set is at least
+    #: 1 − p/level (a residual a little beyond the noise: a rest posture other than assumed,
+    #: a partner group compensating), as below the fit test's own level.
+    misfit_level: float = FIT_LEVEL
+
+    def __post_init__(self) -> None:
+        check_fields(self, CALIBRATION_BOUNDS, what="open-set calibration")
+
+
+CALIBRATION_BOUNDS = {"power": Interval(0.0, 2.0, "", low_closed=False),
+                      "other": Interval(0.0, 1.0, "", high_closed=False),
+                      "misfit_level": Interval(FIT_LEVEL, 0.5, "")}
+#: No calibration: the posterior as the likelihood and the prior give it.
+RAW = Calibration()
+#: The calibration the classifier states its answers with: fitted by
+#: ``benchmarks/tune_open_calibration.py`` (72 trials: between severities, two groups and
+#: outside the candidates at seed 7; mean log probability of the truth −0.686): the posterior
+#: tempered to the power 0.6, a fit test below p = 0.01 read as a residual beyond the model.
+CALIBRATED = Calibration(power=0.6, other=0.0, misfit_level=0.01)
+
+
 @dataclass(frozen=True, eq=False)
 class OpenClassification:
     """What a recorded trace says about the groups (module docstring).
 
-    ``labels`` / ``label_probability``: every set of impaired groups with its posterior
-    probability (most probable first); ``group_probability``: each group's probability of
-    being impaired; ``best``: the most probable arm's states; ``fit_p_value``: the fit test
-    of the best arm; ``temperature``: the model-error correction of the likelihoods.
+    ``labels`` / ``raw_probability``: every set of impaired groups with its posterior
+    probability as the likelihood and prior give it (most probable first);
+    ``calibration``: how it is stated (:class:`Calibration`; :attr:`label_probability`,
+    :attr:`group_probability`, :attr:`answer` are the stated ones); ``best``: the most
+    probable arm's states; ``fit_p_value``: the fit test of the best arm; ``temperature``:
+    the model-error correction of the likelihoods.
     """
 
     labels: tuple[str, ...]
-    label_probability: FloatArray
-    group_probability: dict[str, float]
+    raw_probability: FloatArray
     best: tuple[str, ...]
     fit_statistic: float
     fit_expected: float
     fit_p_value: float
     temperature: float
+    #: Posterior mass of each group (rows, the model's order) in each of :data:`KINDS`.
+    raw_kinds: FloatArray
+    calibration: Calibration = RAW
 
     @property
     def explains(self) -> bool:
         return bool(self.fit_p_value >= FIT_LEVEL)
 
     @property
+    def other_probability(self) -> float:
+        """The stated probability that no arm of the set made the recording: 1 − p/level when
+        the residual says so (the fit test below the calibration's misfit level, at least
+        :data:`~fieldbank.evaluate.classify.FIT_LEVEL`), and never below the calibration's
+        share."""
+        level = max(self.calibration.misfit_level, FIT_LEVEL)
+        return max(1.0 - self.fit_p_value / level, self.calibration.other)
+
+    @property
+    def label_probability(self) -> FloatArray:
+        """The stated probability of each of :attr:`labels` (they and
+        :attr:`other_probability` sum to 1)."""
+        q = np.power(np.asarray(self.raw_probability, dtype=float), self.calibration.power)
+        return np.asarray(q / q.sum() * (1.0 - self.other_probability), dtype=float)
+
+    @property
+    def group_probability(self) -> dict[str, float]:
+        """Each group's stated probability of being impaired, should the arm be one of the
+        set (:attr:`other_probability` says how likely it is not)."""
+        q = np.power(np.asarray(self.raw_probability, dtype=float), self.calibration.power)
+        q = q / q.sum()
+        return {g: float(sum(v for lab, v in zip(self.labels, q, strict=True)
+                             if g in lab.split("+"))) for g in GROUPS}
+
+    @property
     def answer(self) -> tuple[str, float]:
-        """The most probable set of impaired groups with its probability, or
-        :data:`NONE_OF_THEM` with 1 − p/level when no arm explains the recording."""
-        if not self.explains:
-            return NONE_OF_THEM, 1.0 - self.fit_p_value / FIT_LEVEL
-        return self.labels[0], float(self.label_probability[0])
+        """The most probable set of impaired groups with its stated probability, or
+        :data:`NONE_OF_THEM` when that is more probable than any of them."""
+        q = self.label_probability
+        k = int(np.argmax(q))
+        if self.other_probability > q[k]:
+            return NONE_OF_THEM, self.other_probability
+        return self.labels[k], float(q[k])
+
+    def with_calibration(self, calibration: Calibration) -> OpenClassification:
+        return dataclasses.replace(self, calibration=calibration)
+
+    def group_kinds(self) -> dict[str, dict[str, float]]:
+        """Per group, the stated probability of each of :data:`KINDS` (they sum to the
+        group's :attr:`group_probability`): the group's stated probability shared as the
+        posterior shares it."""
+        out = {}
+        for i, (g, p) in enumerate(self.group_probability.items()):
+            row = self.raw_kinds[i]
+            total = float(row.sum())
+            out[g] = {k: (p * float(v) / total if total > 0 else 0.0)
+                      for k, v in zip(KINDS, row, strict=True)}
+        return out
 
     def to_dict(self) -> dict[str, object]:
         answer, p = self.answer
+        q = self.label_probability
         return {"answer": answer, "probability": p,
-                "labels": {lab: float(f"{q:.6g}") for lab, q in
-                           zip(self.labels[:10], self.label_probability[:10], strict=False)},
+                "labels": {lab: float(f"{v:.6g}") for lab, v in
+                           zip(self.labels[:10], q[:10], strict=False)},
+                "none_of_the_candidates": round(self.other_probability, 6),
                 "groups_impaired": {g: round(v, 6) for g, v in self.group_probability.items()},
+                "groups": {g: {"impaired": round(self.group_probability[g], 6),
+                               **{k: round(v, 6) for k, v in kinds.items()}}
+                           for g, kinds in self.group_kinds().items()},
                 "best": list(self.best), "explains_recording": self.explains,
                 "fit_test": {"statistic": round(self.fit_statistic, 3),
                              "expected": round(self.fit_expected, 3),
                              "p_value": float(f"{self.fit_p_value:.4g}"), "level": FIT_LEVEL},
-                "temperature": round(self.temperature, 4)}
+                "temperature": round(self.temperature, 4),
+                "calibration": dataclasses.asdict(self.calibration)}
 
 
 def predict(arms: Sequence[Arm], obs: Observation) -> FloatArray:
@@ -293,12 +384,15 @@ def _weights(o: Observation, noise: NoiseModel) -> FloatArray:
 
 def classify_open(observations: Sequence[Observation], openset: OpenSet,
                   noise: NoiseModel | None = None,
-                  trace: OpenTrace | None = None) -> OpenClassification:
+                  trace: OpenTrace | None = None,
+                  calibration: Calibration | None = None) -> OpenClassification:
     """The posterior over the impaired groups of the arm that made ``observations``.
 
     ``trace``: the replays of these motions (:class:`OpenTrace`), when already made (the same
-    motions met with other recorded forces).
+    motions met with other recorded forces); ``calibration``: how the answer is stated
+    (:data:`CALIBRATED` unless given; :data:`RAW` for the posterior itself).
     """
+    calibration = CALIBRATED if calibration is None else calibration
     obs = tuple(observations)
     tr = trace if trace is not None else OpenTrace.of(obs, openset, noise)
     nz = tr.noise
@@ -341,13 +435,25 @@ def classify_open(observations: Sequence[Observation], openset: OpenSet,
     post /= post.sum()
     by_mask = np.bincount(cb.mask, weights=post, minlength=1 << len(GROUPS))
     labels = {_label(m): float(v) for m, v in enumerate(by_mask) if v > 0.0}
-    groups = {g: float(by_mask[[m for m in range(by_mask.size) if m >> i & 1]].sum())
-              for i, g in enumerate(GROUPS)}
+    kinds = np.zeros((len(GROUPS), len(KINDS)))
+    g_of = np.array([GROUPS.index(st.group) for st in openset.states])
+    k_of = np.array([len(KINDS) - 1 if st.component == "contracture"
+                     else COMPONENTS.index(st.component) for st in openset.states])
+    for col in cb.picks.T:
+        held = col >= 0
+        np.add.at(kinds, (g_of[col[held]], k_of[col[held]]), post[held])
     order = sorted(labels, key=lambda x: -labels[x])
     best = tuple(openset.states[i].name for i in cb.states_of(int(np.argmax(post)))) or (
         "unimpaired",)
-    return OpenClassification(tuple(order), np.array([labels[x] for x in order]), groups,
-                              best, q, expected, p_fit, temperature)
+    return OpenClassification(tuple(order), np.array([labels[x] for x in order]), best, q,
+                              expected, p_fit, temperature, kinds, calibration)
+
+
+def classify_on_body(observations: Sequence[Observation], body: ArmParams,
+                     noise: NoiseModel | None = None) -> OpenClassification:
+    """:func:`classify_open` among every state of the groups of ``body`` (its muscles taken
+    unimpaired first: :meth:`OpenSet.for_arm`)."""
+    return classify_open(observations, OpenSet.for_arm(body), noise)
 
 
 def _label(mask: int) -> str:
@@ -366,7 +472,25 @@ def _chi2(obs: Sequence[Observation], arms: Sequence[Arm], noise: NoiseModel) ->
     return out
 
 
-__all__ = ["COMPONENTS", "CONTRACTURES_M", "EXACT_TOP", "GROUP_PRIOR", "MAX_GROUPS",
-           "NONE_OF_THEM",
-           "SCORES", "STATES_PER_GROUP", "GroupState", "OpenClassification", "OpenSet",
-           "OpenTrace", "classify_open", "predict"]
+__all__ = [
+    "CALIBRATED",
+    "CALIBRATION_BOUNDS",
+    "COMPONENTS",
+    "CONTRACTURES_M",
+    "EXACT_TOP",
+    "GROUP_PRIOR",
+    "KINDS",
+    "MAX_GROUPS",
+    "NONE_OF_THEM",
+    "RAW",
+    "SCORES",
+    "STATES_PER_GROUP",
+    "Calibration",
+    "GroupState",
+    "OpenClassification",
+    "OpenSet",
+    "OpenTrace",
+    "classify_on_body",
+    "classify_open",
+    "predict",
+]

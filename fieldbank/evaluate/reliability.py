@@ -28,17 +28,29 @@ such answers were right; :func:`calibration_error` is the trial-weighted mean ga
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from fieldbank.evaluate.classify import classify
+from fieldbank.evaluate.classify import FIT_LEVEL, classify
 from fieldbank.evaluate.design import NoiseModel, draw_execution, severity_candidates
 from fieldbank.evaluate.design.coverage import stretch_noise, stretch_set
 from fieldbank.evaluate.observation import Observation, with_force_noise
-from fieldbank.evaluate.openset import NONE_OF_THEM, OpenSet, OpenTrace, classify_open, predict
+from fieldbank.evaluate.openset import (
+    KINDS,
+    NONE_OF_THEM,
+    RAW,
+    Calibration,
+    OpenClassification,
+    OpenSet,
+    OpenTrace,
+    classify_open,
+    predict,
+)
 from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import LEVELS, ratio_of_score, synthesize_ratios
 from fieldbank.evaluate.severity import classify as grade
@@ -171,6 +183,11 @@ class Outcome:
     baseline_answer: str = ""
     baseline_probability: float = float("nan")
     baseline_right: bool = False
+    #: The classifier's uncalibrated posterior over the sets of impaired groups (most
+    #: probable first), from which :func:`fieldbank.evaluate.openset.calibrated` states its
+    #: answer; kept so that a calibration can be measured on the same trials.
+    labels: tuple[str, ...] = ()
+    label_probability: tuple[float, ...] = ()
 
     @property
     def right(self) -> bool:
@@ -179,16 +196,60 @@ class Outcome:
         return self.answer == self.truth or (self.family == "outside the candidates"
                                              and self.answer == NONE_OF_THEM)
 
+    def restated(self, calibration: Calibration) -> Outcome:
+        """The same trial, its answer stated with ``calibration`` (from the posterior kept in
+        :attr:`labels`)."""
+        c = self.classification(calibration)
+        answer, p = c.answer
+        return dataclasses.replace(self, answer=answer, probability=p)
+
+    def classification(self, calibration: Calibration) -> OpenClassification:
+        return OpenClassification(self.labels, np.asarray(self.label_probability), (),
+                                  math.nan, math.nan, self.fit_p_value, math.nan,
+                                  np.zeros((len(GROUPS), len(KINDS))), calibration)
+
+    def truth_probability(self, calibration: Calibration) -> float:
+        """The probability ``calibration`` states for the truth: its set of groups, and for an
+        arm outside the candidates also "none of the candidates"."""
+        c = self.classification(calibration)
+        q = dict(zip(c.labels, c.label_probability, strict=True)).get(self.truth, 0.0)
+        return float(q) + (c.other_probability if self.family == "outside the candidates"
+                           else 0.0)
+
+
+#: The calibrations :func:`fit_calibration` tries: the posterior's power, the share for an
+#: arm outside the set, the fit test's p-value below which the residual adds to that share.
+POWERS = tuple(round(0.1 * k, 1) for k in range(1, 21))
+OTHERS = tuple(round(0.02 * k, 2) for k in range(0, 21))
+MISFIT_LEVELS = (FIT_LEVEL, 0.003, 0.01, 0.03, 0.1)
+
+
+def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
+    """The calibration of :data:`POWERS` × :data:`OTHERS` × :data:`MISFIT_LEVELS` under which
+    the truth is most probable over ``outcomes`` (the mean log probability of the truth, each
+    floored at 1e-6: a proper score, so the stated probabilities come out as often right as
+    they say), with that mean log score."""
+    best, score = RAW, -math.inf
+    for power, other, level in itertools.product(POWERS, OTHERS, MISFIT_LEVELS):
+        cal = Calibration(power, other, level)
+        s = float(np.mean([math.log(max(o.truth_probability(cal), 1e-6))
+                           for o in outcomes]))
+        if s > score:
+            best, score = cal, s
+    return best, score
+
 
 def run_trials(arms: Sequence[TrialArm], noise: NoiseModel, draws: int = 4, seed: int = 0,
-               progress: Progress | None = None, baseline: bool = False) -> list[Outcome]:
+               progress: Progress | None = None, baseline: bool = False,
+               calibration: Calibration | None = None) -> list[Outcome]:
     """Every arm probed with the clinic's fast stretch of each group from where the arm
     rests (:func:`~fieldbank.evaluate.design.coverage.stretch_set`, performed with the
     operator's scatter) and classified among every state of its groups
     (:func:`~fieldbank.evaluate.openset.classify_open` on the arm's body), ``draws``
     sensor-noise draws per execution (module docstring). ``baseline``: also the joint-group
     classifier (:func:`fieldbank.evaluate.classify.classify` among the twelve severity
-    candidates and the unimpaired arm) on the same traces."""
+    candidates and the unimpaired arm) on the same traces. ``calibration``: how the answers
+    are stated (:func:`~fieldbank.evaluate.openset.classify_open`'s default unless given)."""
     out: list[Outcome] = []
     scatter = stretch_noise(noise)
     for k, arm in enumerate(arms):
@@ -214,7 +275,7 @@ def run_trials(arms: Sequence[TrialArm], noise: NoiseModel, draws: int = 4, seed
         jpreds = [predict([c.arm for c in joint], o) for o in obs] if baseline else []
         for _ in range(draws):
             noisy = [with_force_noise(o, noise, rng) for o in obs]
-            c = classify_open(noisy, openset, trace=trace)
+            c = classify_open(noisy, openset, trace=trace, calibration=calibration)
             answer, stated = c.answer
             extra: dict[str, object] = {}
             if baseline:
@@ -225,7 +286,9 @@ def run_trials(arms: Sequence[TrialArm], noise: NoiseModel, draws: int = 4, seed
                          "baseline_probability": b.group_posterior[b.group],
                          "baseline_right": truth <= held and bool(held) == bool(truth)}
             out.append(Outcome(arm.family, arm.name, arm.truth, answer, stated, c.explains,
-                               c.fit_p_value, **extra))  # type: ignore[arg-type]
+                               c.fit_p_value, labels=c.labels,
+                               label_probability=tuple(float(v) for v in c.raw_probability),
+                               **extra))  # type: ignore[arg-type]
         if progress is not None:
             progress(k + 1, len(arms))
     return out
@@ -280,6 +343,7 @@ def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[i
     return sum(not o.right for o in sure), len(sure)
 
 
-__all__ = ["BINS", "FAMILIES", "NONE_OF_THEM", "Outcome", "ReliabilityBin", "TrialArm",
-           "calibration_error", "family_arms", "reliability_bins", "run_trials",
+__all__ = ["BINS", "FAMILIES", "MISFIT_LEVELS", "NONE_OF_THEM", "OTHERS", "POWERS", "Outcome",
+           "ReliabilityBin", "TrialArm", "calibration_error", "family_arms", "fit_calibration",
+           "reliability_bins", "run_trials",
            "truth_label", "wrong_when_sure"]

@@ -6,7 +6,7 @@ process pool or a Dask cluster. Each task (:func:`fit_session`, on a worker) rea
 session's maps from the database, and
 
 * finds a fit with the same key (:func:`fieldbank.fitting.records.fit_key`: same maps, patient,
-  options and :data:`fieldbank.model.MODEL_VERSION`) - then nothing is repeated ('skipped');
+  options and :data:`fieldbank.fitchoices.MODEL_VERSION`) - then nothing is repeated ('skipped');
 * else fits and stores the fit and its model in one transaction under that key. The key is
   unique in the database, so a task that runs twice (its first worker died after committing)
   stores nothing twice: the second finds the first's fit. Its job's result keeps the fit's
@@ -28,10 +28,10 @@ from typing import Any
 
 from fieldbank.engine import BatchResult, Done, Progress, Task, run_batch
 from fieldbank.errors import FitError, ParameterError
+from fieldbank.fitchoices import MODEL_VERSION
 from fieldbank.fitting.dbstore import DatabaseFitStore
 from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.fitting.records import fit_key, fit_patient
-from fieldbank.model import MODEL_VERSION
 from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
@@ -44,7 +44,7 @@ def fit_tasks(db: Database, patients: Sequence[str] = (),
     ------
     ParameterError
         ``older_than`` is not a model version this fieldbank can refit to (1 …
-        :data:`~fieldbank.model.MODEL_VERSION`).
+        :data:`~fieldbank.fitchoices.MODEL_VERSION`).
     StorageError
         A named patient is not in the database.
     FitError

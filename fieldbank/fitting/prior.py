@@ -86,7 +86,7 @@ from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.space import SLACK_RANGE_M
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.model import Arm, FloatArray
-from fieldbank.params import GROUP_INDEX, GROUPS
+from fieldbank.params import GROUP_INDEX, GROUPS, ArmParams
 
 #: Version of the prior's definition (range, path, draws). Raise it when any of them changes.
 #: 2: bi-articular reflexes not beyond a severe joint (:attr:`Prior.dynamic_top`); slack ranges.
@@ -210,6 +210,11 @@ def ranges_from_report(report: Mapping[str, Any] | None) -> tuple[GuessRange, ..
     return full_ranges([str(h) for h in (report or {}).get("held_at_unimpaired", []) or []])
 
 
+#: Prior tables a process keeps (:meth:`Prior.for_arm`), the oldest dropped first; a table is
+#: about 10 kB.
+TABLES_KEPT = 64
+
+
 @dataclass(frozen=True, eq=False)
 class Prior:
     """The severity scale's parameter values for one arm geometry (module docstring).
@@ -230,12 +235,27 @@ class Prior:
     @classmethod
     def for_arm(cls, arm: Arm, scale: SeverityScale = SCALE) -> Prior:
         """Tabulate each group's dynamic ratio along the synthesis path, all groups and path
-        points in one vectorised pass (:class:`~fieldbank.model.ArmBatch`)."""
+        points in one vectorised pass (:class:`~fieldbank.model.ArmBatch`).
+
+        The table depends on the arm's geometry and the scale only (it is built on the arm
+        with unimpaired muscles): the last :data:`TABLES_KEPT` are kept in the process, so a
+        report's cases, a fit and its intervals, or a cluster worker's successive tasks on
+        one body tabulate it once - the same object, the same numbers."""
+        ref = unimpaired_reference(arm)
+        key = (ref.params, scale)
+        kept = _TABLES.get(key)
+        if kept is not None:
+            return kept
         top = ratio_of_score(SCORE_HIGH, "dynamic", scale)
         for end in (PATH_TOP, REFLEX_PATH_MAX):
-            table = cls._table(arm, scale, np.linspace(0.0, end, PATH_POINTS))
+            table = cls._table(ref, scale, np.linspace(0.0, end, PATH_POINTS))
             if table.path_ratio[:, -1].min() >= top:
                 break
+        for a in (table.path_s, table.path_ratio, table.dynamic_top):
+            a.setflags(write=False)
+        _TABLES[key] = table
+        while len(_TABLES) > TABLES_KEPT:
+            _TABLES.pop(next(iter(_TABLES)), None)
         return table
 
     @classmethod
@@ -317,6 +337,10 @@ class Prior:
         """The top of ``rng`` on the score: what the maps allow, never above the prior's own
         top (:meth:`top`; a range kept by an older fit may not know it)."""
         return min(rng.score_high, self.top(rng.group, rng.component))
+
+
+#: (unimpaired reference parameters, scale) -> its table, in the order they were made.
+_TABLES: dict[tuple[ArmParams, SeverityScale], Prior] = {}
 
 
 def _joint_tops(scale: SeverityScale, s: FloatArray, ratio: FloatArray,

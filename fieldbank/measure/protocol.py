@@ -19,7 +19,8 @@ Three parts, any of them (Mussa-Ivaldi, Hogan & Bizzi 1985 for the first two; BR
 
 Between postures the hand moves on minimum-jerk paths at ``transfer_speed_m_per_s`` (peak) and
 settles for ``settle_s``. Every choice is a documented, overridable default; the robot time of a
-plan is :attr:`Plan.duration_s` (the driver adds nothing but the first approach).
+plan is :attr:`Plan.duration_s` (the driver adds nothing but the first approach); those the
+command line shows are in :mod:`fieldbank.measurechoices`.
 
 The grid is ``grid`` = (columns, rows) postures ``spacing_m`` apart, centred on ``centre_m``
 (shoulder frame). By default both follow the patient's arm (:meth:`ProtocolConfig.resolved`):
@@ -44,11 +45,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from fieldbank.errors import ParameterError
+from fieldbank.measurechoices import (
+    DIRECTIONS,
+    DISPLACEMENT_M,
+    HOLD_S,
+    PARTS,
+    STRETCH_SPEED_M_PER_S,
+)
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
 from fieldbank.validation import Interval, check_number
 
-PARTS = ("postural", "stiffness", "stretch")
 #: The posture (shoulder, elbow), degrees, whose hand position centres the default grid.
 DEFAULT_CENTRE_POSTURE_DEG = (40.0, 80.0)
 #: The default spacing of the grid, as a fraction of the arm's length (upper arm + forearm).
@@ -82,15 +89,15 @@ class ProtocolConfig:
     spacing_m: float | None = None
     #: None: the patient's hand at :data:`DEFAULT_CENTRE_POSTURE_DEG` (:meth:`resolved`)
     centre_m: tuple[float, float] | None = None
-    displacement_m: float = 0.006
-    directions: int = 8
-    hold_s: float = 0.6
+    displacement_m: float = DISPLACEMENT_M
+    directions: int = DIRECTIONS
+    hold_s: float = HOLD_S
     transient_s: float = 0.15
     move_s: float = 0.15
     postural_hold_s: float = 1.0
     transfer_speed_m_per_s: float = 0.2
     settle_s: float = 0.25
-    stretch_speed_m_per_s: float = 1.2
+    stretch_speed_m_per_s: float = STRETCH_SPEED_M_PER_S
     stretch_offset_m: float = 0.008
     ramp_s: float = 0.2
     pass_margin_m: float = 0.015

@@ -19,7 +19,7 @@ from dataclasses import replace
 from datetime import date
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import or_, select
 from sqlalchemy.orm import Session
 
 from fieldbank.errors import ParameterError, StorageError
@@ -34,7 +34,8 @@ from fieldbank.storage.orm import (
     SessionRow,
     fit_maps,
 )
-from fieldbank.storage.records import FitRecord, PlanRecord, StoredModel
+from fieldbank.storage.records import FitRecord, StoredModel
+from fieldbank.stored.records import PlanRecord
 
 ORIGINS = ("synthetic", "fitted", "intervention")
 
@@ -304,6 +305,11 @@ class Lineage(DatabaseCore):
             return [self._plan(s, r) for r in s.scalars(q)]
 
 
+#: Up to this many models, :func:`_plan_links` asks for their plans by id; beyond, it reads
+#: every plan once.
+_LINKS_BY_ID = 200
+
+
 def _plan_links(s: Session, model_ids: Sequence[int]) -> dict[int, tuple[int | None, list[int]]]:
     """model id -> (the plan that made it, the plans applied to it), in one query."""
     out: dict[int, tuple[int | None, list[int]]] = {m: (None, []) for m in model_ids}
@@ -311,6 +317,8 @@ def _plan_links(s: Session, model_ids: Sequence[int]) -> dict[int, tuple[int | N
         return out
     wanted = set(model_ids)
     q = select(PlanRow.id, PlanRow.base_model_id, PlanRow.result_model_id).order_by(PlanRow.id)
+    if len(wanted) <= _LINKS_BY_ID:  # a few models: their plans only, not every plan
+        q = q.where(or_(PlanRow.base_model_id.in_(wanted), PlanRow.result_model_id.in_(wanted)))
     for pid, base, result in s.execute(q):
         if result in wanted:
             out[result] = (pid, out[result][1])

@@ -22,8 +22,8 @@
   account in words;
 * :mod:`~haptic.remote.environment` — the link as the renderer's virtual arm;
 * :mod:`~haptic.remote.patient_site`, :mod:`~haptic.remote.clinician_site` — the two sites
-  (``fieldbank haptic remote patient|clinician``); :mod:`~haptic.remote.guard` the robot checks
-  of the patient's site;
+  (``fieldbank haptic remote patient|clinician``), each driving its robot through the robot
+  port (:mod:`haptic.port`) and judging it with the safety monitor (:mod:`haptic.monitor`);
 * :mod:`~haptic.remote.tap` — the link's rows for the station's process;
 * :mod:`~haptic.remote.simulate` — both sites in one process (benchmark, simulated trainee).
 

@@ -14,11 +14,12 @@
    patient's site, the patient's force comes back through the passivity controller. The
    CONFIRM that proves this site holds the key goes with the loop's first tick, so the
    patient's site arms its robot and starts its loop when this one starts;
-3. with a station, serves the remote panels (:mod:`haptic.remote.station`): the link's figures
-   and the supervised assessment, which reads the patient's side from the link's tap
-   (:mod:`haptic.remote.tap`) and logs the posterior after each probe and the clinician's
-   answers to a file beside the trace;
-4. at its planned end ramps the force out and says BYE; then says what happened (the account of
+3. with a station, serves it with the remote panels (:mod:`haptic.remote.deskstation`): the
+   link's figures and the supervised assessment, which reads the patient's side from the
+   link's tap (:mod:`haptic.remote.tap`) and logs the posterior after each probe and the
+   clinician's answers to a file beside the trace;
+4. at its planned end, or when the clinician stops it (``fieldbank haptic stop``, Ctrl-C),
+   ramps the force out and says BYE; then says what happened (the account of
    :mod:`haptic.remote.account`), writes the link's log (every tick: both ports' energies, the
    passivity controller, the round trip, the patient's side as received) as
    ``<trace>.link.h5``, and with a database records the link
@@ -58,7 +59,8 @@ from fieldbank.haptic.remote.linklog import CLINICIAN_COLUMNS
 from fieldbank.haptic.remote.ports import ClinicianPort
 from fieldbank.haptic.remote.tap import TapWriter
 from fieldbank.haptic.remote.wire import Kind, SessionCipher, key_fingerprint
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.session import SessionResult, serve
 from fieldbank.haptic.station.launch import StationOptions
@@ -67,6 +69,8 @@ from fieldbank.params import ArmParams
 Say = Callable[[str], None]
 #: How often HELLO is repeated until the patient's site answers, s.
 HELLO_EVERY_S = 0.5
+#: The station's program of a remote session: the station with the desk's panel.
+DESK_STATION = "fieldbank.haptic.remote.deskstation"
 #: The classifier's candidates by default: every group at every severity, and the unimpaired arm.
 GROUPS = ("shoulder", "elbow", "biarticular")
 LEVELS = ("very mild", "mild", "moderate", "severe")
@@ -78,7 +82,7 @@ def _quiet(msg: str) -> None:
 
 @dataclass(frozen=True)
 class AssessOptions:
-    """The station's supervised assessment (:mod:`haptic.remote.station`).
+    """The station's supervised assessment (:mod:`haptic.remote.desk`).
 
     Attributes
     ----------
@@ -294,7 +298,7 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
         if station is not None:
             tap = TapWriter(tuple(c for c, _ in CLINICIAN_COLUMNS))
             port.tap = tap
-            station_opts = replace(station, remote={
+            station_opts = replace(station, program=DESK_STATION, panel={
                 "tap_path": str(tap.path), "assessment_path": str(assess_path),
                 "columns": [c for c, _ in CLINICIAN_COLUMNS], "rate_hz": cfg.rate_hz,
                 "drawing": drawing.with_unimpaired_muscles().to_dict(),
@@ -314,7 +318,10 @@ def serve_clinician(robot: str, key: bytes, peer: tuple[str, int], *,
             late = rd.times
             port.late_s = lambda: late.late_ns[-1] * 1e-9 if late.late_ns else 0.0
             port.commanded = lambda: (rd.fx, rd.fy)
-            port.on_end = rd.request_stop
+            port.on_end = rd.stop_now
+            # the clinician's stop (haptic stop, Ctrl-C) ramps the force out, the patient's
+            # site with it, before the loop ends
+            rd.wind_down = lambda: port.end_now("stopped by the clinician")
             rd.metadata["remote"] = remote_meta
 
         if duration_s is not None:  # the port ends it, the force ramped out by then

@@ -86,7 +86,7 @@ class Desk:
     Parameters
     ----------
     config : mapping
-        :attr:`haptic.station.config.StationConfig.remote` (tap, columns, rate, assessment
+        :attr:`haptic.station.config.StationConfig.panel` (tap, columns, rate, assessment
         log, the patient's body, the candidates).
     """
 

@@ -3,7 +3,8 @@
 ``fieldbank haptic remote patient --robot URL --key FILE --bind HOST:PORT`` runs
 :func:`serve_patient`:
 
-1. opens the robot, shakes hands at the loop's rate and asks for its force sensor (a robot
+1. opens the robot (:func:`haptic.robots.open_robot`: the project's link or an installed
+   adapter's robot), shakes hands at the loop's rate and asks for its force sensor (a robot
    without one cannot tell the clinician what the arm does: refused);
 2. listens on UDP for the clinician's HELLO (:mod:`haptic.remote.handshake`: one that does not
    open under the key is not answered), checks the rate, the clock mode and the time, answers
@@ -14,10 +15,11 @@
 3. arms the robot — inside the real-time context, right before the first tick, so nothing
    stands between the ARM frame and the first FORCE (the device's watchdog is 20 ms; preparing
    the process, a full garbage collection, took 0.2–1.6 s) — and runs the loop: each tick reads
-   the robot (every safety check of :mod:`haptic.remote.guard`), hands the patient's handle and
-   the force the hand puts on it to the :class:`~haptic.remote.ports.PatientPort`, which
-   answers the servo force, and sends that through the site's own limits (:mod:`haptic.safety`,
-   the passivity controller of the handle port off: the link's is in the port);
+   the robot and judges it (the renderer's safety monitor, :mod:`haptic.monitor`: every fault
+   check of a loop on a robot), hands the patient's handle and the force the hand puts on it
+   to the :class:`~haptic.remote.ports.PatientPort`, which answers the servo force, and sends
+   that through the robot's limits (:mod:`haptic.safety`, the passivity controller of the
+   handle port off: the link's is in the port);
 4. ends after ``duration_s``, on Ctrl-C, or once the force has ramped out after the
    clinician's BYE or (lockstep) silence; commands zero and disarms; says what happened (the
    account of :mod:`haptic.remote.account`); writes its log (every tick: the patient's handle
@@ -40,18 +42,18 @@ from typing import Any
 from fieldbank.errors import ParameterError
 from fieldbank.files import write_new
 from fieldbank.haptic.clock import Clock, RealClock, VirtualClock, cpu_plan, realtime
-from fieldbank.haptic.errors import HapticError, LinkDown
-from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.errors import HapticError
+from fieldbank.haptic.monitor import SafetyMonitor
 from fieldbank.haptic.patient import resolve_patient
-from fieldbank.haptic.protocol import FaultCode
+from fieldbank.haptic.port import SensingPort
 from fieldbank.haptic.remote.account import Account, account
 from fieldbank.haptic.remote.channel import Address, Endpoint, UdpTransport
 from fieldbank.haptic.remote.config import SiteConfig
-from fieldbank.haptic.remote.guard import RobotGuard
 from fieldbank.haptic.remote.handshake import Responder
 from fieldbank.haptic.remote.ports import PatientPort
 from fieldbank.haptic.remote.wire import Datagram, Kind, SessionCipher, key_fingerprint, peek_kind
-from fieldbank.haptic.safety import Mode, Safety
+from fieldbank.haptic.robots import open_robot, with_force_sensor
+from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import SimRobotConfig
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
@@ -100,11 +102,17 @@ class PatientResult:
 
 
 class PatientSite:
-    """The loop of the patient's site (robot link and endpoint open, handshakes done).
+    """The loop of the patient's site (robot and endpoint open, handshakes done).
+
+    The robot is read, judged and commanded through one
+    :class:`~haptic.monitor.SafetyMonitor` (every fault check of the renderer: the port's CRC
+    bucket and sequence gaps, no state within the timeout, the robot's fault reports and flags,
+    NaN, the workspace and the speed limit; the force through the robot's limits, the
+    passivity controller of the handle port off: the link's is in the port).
 
     Parameters
     ----------
-    link : RobotLink
+    robot : SensingPort
         The patient's robot (force sensor on).
     endpoint : Endpoint
     config : SiteConfig
@@ -112,14 +120,15 @@ class PatientSite:
         The patient's shoulder in the robot frame.
     """
 
-    def __init__(self, link: RobotLink, endpoint: Endpoint, config: SiteConfig,
+    def __init__(self, robot: SensingPort, endpoint: Endpoint, config: SiteConfig,
                  shoulder_m: tuple[float, float]) -> None:
-        self.link = link
+        self.robot = robot
         self.config = config
         self.dt = 1.0 / config.rate_hz
         self.shoulder = shoulder_m
-        self.safety = Safety(config.safety, self.dt)
-        self.guard = RobotGuard(link, self.safety, self.dt)
+        self.monitor = SafetyMonitor(robot, config.safety, self.dt, force_from="the servo")
+        #: the latched state machine and the force path (the monitor's)
+        self.safety = self.monitor.safety
         #: how late the present tick woke, s (the loop keeping time, for engaging)
         self.late_s = 0.0
         self.port = PatientPort.for_site(endpoint, config, shoulder_m)
@@ -128,59 +137,31 @@ class PatientSite:
         self.port.late_s = lambda: self.late_s
         self.armed = False
         self._awaiting = False
-        self._down = False
         self.stop = False
         self.reason = ""
         #: the session ended as asked (its duration, the clinician's BYE, this site's Ctrl-C)
         self.asked = False
 
     def arm(self) -> None:
-        """Arm the robot: the first FORCE must follow at once (the device's watchdog is a few
+        """Arm the robot, refused (:class:`~haptic.errors.CommandError`) with every reason
+        the monitor finds: the first FORCE must follow at once (the device's watchdog is a few
         ticks), so a real-time loop arms inside :func:`haptic.clock.realtime`, right before
         its first tick (:meth:`run`)."""
-        link = self.link
-        self.safety.rearm((link.x, link.y, link.vx, link.vy))
-        self.guard.forgive()
-        link.arm()
+        self.monitor.arm(running=False)
         self.armed = True
 
-    def _trip(self, code: int, message: str) -> None:
-        self.safety.trip(code, self.port.now(), message)
-        if not self._down:
-            try:
-                self.link.disarm()
-            except LinkDown:
-                self._down = True
-
     def tick(self) -> None:
-        link = self.link
-        new = 0
-        if not self._down:
-            try:
-                wait = self.config.state_wait_s if self.config.lockstep else 0.0
-                new = link.wait_state(wait) if wait > 0 and self._awaiting else link.poll()
-            except LinkDown as exc:
-                self._down = True
-                self._trip(FaultCode.DISCONNECT, str(exc))
-        if self.safety.mode == Mode.ARMED:
-            code, msg = self.guard.check(new)
-            if code:
-                self._trip(code, msg)
+        m = self.monitor
+        wait = self.config.state_wait_s if self.config.lockstep and self._awaiting else 0.0
+        new = m.read(wait, self.port.now())
+        m.check(new)
+        st = m.state
         sx, sy = self.shoulder
-        fx, fy = self.port.tick(link.x - sx, link.y - sy, link.vx, link.vy, link.sensor_fx,
-                                link.sensor_fy)
-        fx, fy = self.safety.output(fx, fy, link.vx, link.vy)
-        if self.safety.limiter.nan_seen:
-            self.safety.limiter.nan_seen = False
-            self._trip(FaultCode.NAN, "non-finite servo force")
-            fx = fy = 0.0
-        if not self._down:
-            try:
-                link.send_force(fx, fy)
-                self._awaiting = True
-            except LinkDown as exc:
-                self._down = True
-                self._trip(FaultCode.DISCONNECT, str(exc))
+        fx, fy = self.port.tick(st.x - sx, st.y - sy, st.vx, st.vy, st.sensor_fx,
+                                st.sensor_fy)
+        fx, fy = m.output(fx, fy, st.vx, st.vy)
+        if m.send(fx, fy):
+            self._awaiting = True
         if self.port.closed and not self.stop:
             self.stop = True
             if self.port.ended:
@@ -193,9 +174,14 @@ class PatientSite:
         """Arm (when not yet) and tick until the port closes — its planned end after
         ``duration_s``, or the clinician's end, the force ramped out either way — or
         :attr:`stop`; a tick woken a whole period late skips the ticks it missed instead of
-        bursting through them."""
+        bursting through them. A robot that cannot be armed ends the session before its
+        first tick, with the reason."""
         if not self.armed:
-            self.arm()
+            try:
+                self.arm()
+            except HapticError as exc:
+                self.reason = f"the patient's robot could not be armed: {exc}"
+                return
         period = round(1e9 / self.config.rate_hz)
         if duration_s is not None:
             self.port.plan_end(max(1, round(duration_s * self.config.rate_hz)),
@@ -211,12 +197,8 @@ class PatientSite:
                 deadline += ((now - deadline) // period + 1) * period
 
     def finish(self) -> None:
-        try:
-            if not self._down:
-                self.link.send_force(0.0, 0.0)
-                self.link.disarm()
-        except LinkDown:
-            self._down = True
+        """Zero force and disarm the robot (a failing robot is left)."""
+        self.monitor.release()
 
     def account(self) -> Account:
         """The session in words (:mod:`haptic.remote.account`)."""
@@ -224,21 +206,6 @@ class PatientSite:
         return account(cols["t_s"], cols["gain"], self.port.events,
                        ended=self.reason or "the loop stopped", asked=self.asked,
                        peer_name=self.port.peer_name)
-
-
-def _await_sensor(link: RobotLink, robot: str) -> None:
-    link.sensor_on()
-    deadline = time.monotonic() + 1.0
-    while link.sensors == 0:
-        link.send_force(0.0, 0.0)
-        link.wait_state(0.01)
-        if link.device_faults:
-            raise HapticError(f"the robot at {mask_url(robot)} has no force sensor (it answered "
-                              f"SENSOR_ON with fault {link.last_device_fault}); the patient's "
-                              "site needs one")
-        if time.monotonic() > deadline:
-            raise HapticError(f"the robot at {mask_url(robot)} sent no force-sensor reading "
-                              "within 1 s of SENSOR_ON; the patient's site needs one")
 
 
 def _check_hello(msg: dict[str, Any], cfg: SiteConfig) -> str:
@@ -330,11 +297,12 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
     """
     cfg = config or SiteConfig()
     dt = 1.0 / cfg.rate_hz
-    link = RobotLink.open(robot)
+    opened = open_robot(robot, cfg.rate_hz, WATCHDOG_MS)
     transport: UdpTransport | None = None
     try:
-        dev = link.handshake(cfg.rate_hz, WATCHDOG_MS)
-        _await_sensor(link, robot)
+        dev = opened.device
+        assert dev is not None  # open_robot refuses a robot that does not say what it is
+        sensing = with_force_sensor(opened, robot, "the patient's site")
         say(f"patient's robot {dev.device_id!r}: force sensor on, device limit "
             f"{dev.force_limit_n:g} N")
         transport = UdpTransport(bind)
@@ -343,7 +311,7 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
         if ready is not None:
             ready((host, port))
         sx, sy = shoulder_m
-        rest = (link.x - sx, link.y - sy)
+        rest = (sensing.state.x - sx, sensing.state.y - sy)
         geo = Arm.from_params(drawing)
         welcome = {"rate_hz": cfg.rate_hz, "lockstep": cfg.lockstep,
                    "drawing": drawing.with_unimpaired_muscles().to_dict(),
@@ -358,7 +326,7 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
             cipher, first, peer, after = _handshake(transport, key, cfg, welcome, wait_s, say)
             transport.set_peer(peer)  # pinned for the session: nothing from elsewhere is read
             endpoint = Endpoint(transport, cipher, cfg.impairment, cfg.lockstep, dt, peer=peer)
-            site = PatientSite(link, endpoint, cfg, shoulder_m)
+            site = PatientSite(sensing, endpoint, cfg, shoulder_m)
             endpoint.deliver(first, 0.0)
             endpoint.backlog = after
             say(f"clinician confirmed from {peer[0]}:{peer[1]}; session "
@@ -397,7 +365,7 @@ def serve_patient(robot: str, key: bytes, bind: tuple[str, int], drawing: ArmPar
     finally:
         if transport is not None:
             transport.close()
-        link.close()
+        opened.close()
 
 
 __all__ = ["PatientResult", "PatientSite", "serve_patient", "sim_patient"]

@@ -43,7 +43,8 @@ from fieldbank.haptic.remote.handshake import Initiator, Responder
 from fieldbank.haptic.remote.patient_site import WATCHDOG_MS, PatientSite
 from fieldbank.haptic.remote.ports import ClinicianPort
 from fieldbank.haptic.remote.wire import SessionCipher, new_key
-from fieldbank.haptic.renderer import Renderer, RendererConfig
+from fieldbank.haptic.renderer import Renderer
+from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.simrobot import SimDevice
 from fieldbank.model import Arm
@@ -254,6 +255,8 @@ class Pair:
         self.port.robot_ok = lambda: rd.safety.mode == Mode.ARMED
         self.port.latched = lambda: rd.safety.latched
         self.port.commanded = lambda: (rd.fx, rd.fy)
+        self.port.on_end = rd.stop_now  # as the clinician's site: a stop ramps out first
+        rd.wind_down = lambda: self.port.end_now("stopped by the clinician")
         rd.start()
 
     def tick(self) -> None:

@@ -15,9 +15,10 @@ Each port (:mod:`haptic.remote.ports`) is a :class:`LinkPort`; every tick it ask
   STATEs again it is back (the first link-up counts at once);
 * **the gain** (:meth:`LinkPort._gain`): a raised cosine over ``ramp_s`` toward 1 while the end
   may render and toward 0 otherwise. After the peer's end, and before this site's own planned
-  end (:meth:`LinkPort.plan_end`), it ramps to zero and only then is the session closed: the
-  port says BYE at once and calls :attr:`LinkPort.on_end`. Neither a BYE, nor a silent peer,
-  nor the end of the session's duration steps the force.
+  end (:meth:`LinkPort.plan_end`; its operator's stop, :meth:`LinkPort.end_now`), it ramps to
+  zero and only then is the session closed: the port says BYE at once and calls
+  :attr:`LinkPort.on_end`. Neither a BYE, nor a silent peer, nor the end of the session's
+  duration, nor the operator's stop steps the force.
 
 Every change is an event (:attr:`LinkPort.events`: time, kind, what was seen); those a person
 at either site must know — engaged, the link lost and back, a fault of this robot or the
@@ -160,6 +161,13 @@ class LinkPort:
         """End the session after ``ticks`` ticks (its duration), the force ramped out by then."""
         self.end_tick = ticks
         self.end_reason = reason
+
+    def end_now(self, reason: str) -> None:
+        """End the session as soon as the force has ramped out over ``ramp_s`` (this site's
+        operator stopped it), unless it ends sooner anyway."""
+        end = self.tick_n + self._ramp_ticks + 1
+        if self.end_tick is None or end < self.end_tick:
+            self.plan_end(end, reason)
 
     @property
     def closing(self) -> bool:

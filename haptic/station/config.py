@@ -52,9 +52,10 @@ class StationConfig:
         The training protocol 'Start training' begins (``TrainingProtocol.to_dict``).
     view : str
         'opposite' (the patient faces the clinician, as in the seed) or 'behind'.
-    remote : dict
-        A remote assessment (:mod:`haptic.remote.station`): the link's tap, the assessment
-        log, the candidates; empty for an ordinary session.
+    panel : dict
+        The settings of the page's panel (:mod:`haptic.station.panel`; a remote assessment's:
+        the link's tap, the assessment log, the candidates), read by the panel's program;
+        empty for an ordinary session.
     """
 
     snapshot_path: str
@@ -65,7 +66,7 @@ class StationConfig:
     frame_hz: float = 60.0
     training: dict[str, Any] = field(default_factory=dict)
     view: str = "opposite"
-    remote: dict[str, Any] = field(default_factory=dict)
+    panel: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         check_fields(self, STATION_BOUNDS, what="station setting")

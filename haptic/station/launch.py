@@ -28,6 +28,16 @@ from fieldbank.validation import check_fields
 
 #: Longest wait for the station process to listen, s.
 START_TIMEOUT_S = 20.0
+#: The station's own program (``python -m``).
+STATION_PROGRAM = "fieldbank.haptic.station"
+
+
+def check_program(program: str) -> None:
+    """HapticError unless ``program`` names one of fieldbank's modules (the station's process
+    runs it)."""
+    parts = program.split(".")
+    if parts[0] != "fieldbank" or not all(p.isidentifier() for p in parts):
+        raise HapticError(f"the station's program must be a fieldbank module; got {program!r}")
 
 
 @dataclass(frozen=True)
@@ -46,9 +56,13 @@ class StationOptions:
     training : dict
         The training protocol the page's 'Start training' begins
         (``TrainingProtocol.to_dict()``; empty: the seed's).
-    remote : dict
-        A remote assessment's station (:mod:`haptic.remote.station`): the link's tap, the
-        assessment log, the candidates (empty: an ordinary session).
+    program : str
+        The module run as the station's process (``python -m``): the station itself, or a
+        panel's program that serves the station with its panel (:mod:`haptic.station.panel`;
+        a remote assessment's: :mod:`haptic.remote.deskstation`).
+    panel : dict
+        The panel's settings (:attr:`haptic.station.config.StationConfig.panel`; empty: no
+        panel).
     """
 
     host: str = "127.0.0.1"
@@ -56,11 +70,13 @@ class StationOptions:
     allow_remote: bool = False
     view: str = "opposite"
     training: dict[str, Any] = field(default_factory=dict)
-    remote: dict[str, Any] = field(default_factory=dict)
+    program: str = STATION_PROGRAM
+    panel: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         check_fields(self, STATION_BOUNDS, what="station setting", names=("port",))
         check_view(self.view)
+        check_program(self.program)
 
 
 def _loopback(host: str) -> bool:
@@ -89,21 +105,25 @@ class StationProcess:
         The training protocol the page starts (``TrainingProtocol.to_dict``).
     view : str
         'opposite' (patient faces the clinician, the seed's picture) or 'behind'.
-    remote : dict, optional
-        A remote assessment's station settings (:class:`StationOptions`).
+    program : str
+        The module run as the process (:attr:`StationOptions.program`).
+    panel : dict, optional
+        The panel's settings (:attr:`StationOptions.panel`).
     """
 
     def __init__(self, snapshot_path: str, socket_path: str, host: str = "127.0.0.1",
                  port: int = 0, allow_remote: bool = False,
                  training: dict[str, Any] | None = None, view: str = "opposite",
-                 remote: dict[str, Any] | None = None) -> None:
+                 program: str = STATION_PROGRAM, panel: dict[str, Any] | None = None) -> None:
         if not _loopback(host) and not allow_remote:
             raise HapticError(f"the station binds to 127.0.0.1 unless told otherwise; "
                               f"{host!r} is reachable from other machines (pass "
                               f"--station-allow-remote to mean it)")
         self.config = StationConfig(str(snapshot_path), str(socket_path), new_token(), host,
                                     int(port), training=dict(training or {}), view=view,
-                                    remote=dict(remote or {}))
+                                    panel=dict(panel or {}))
+        check_program(program)
+        self.program = program
         self._proc: subprocess.Popen[bytes] | None = None
         self.host = host
         self.port = 0
@@ -121,7 +141,7 @@ class StationProcess:
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
-        proc = subprocess.Popen([sys.executable, "-m", "fieldbank.haptic.station"],
+        proc = subprocess.Popen([sys.executable, "-m", self.program],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr,
                                 env=env)
         self._proc = proc
@@ -162,7 +182,7 @@ class StationProcess:
     def for_session(cls, snapshot_path: str, socket_path: str,
                     options: StationOptions) -> StationProcess:
         return cls(snapshot_path, socket_path, options.host, options.port, options.allow_remote,
-                   options.training, options.view, options.remote)
+                   options.training, options.view, options.program, options.panel)
 
 
 def _readline(f: IO[bytes], timeout_s: float) -> bytes:

@@ -22,12 +22,10 @@ In (JSON): ``{"id": n, "cmd": "switch", "to": "A"|"B"}``, ``{"cmd": "abx", "acti
 ``{"cmd": "page_stats", "fps": …}``. Nothing else is forwarded: the page cannot push models or
 stop the session.
 
-A remote assessment's station (``StationConfig.remote``) also sends ``{"type": "link", …}``
-(delay, loss, the passivity controller, warnings) and ``{"type": "posterior", …}`` after each
-probe, and answers ``{"cmd": "prior", "groups", "levels", "unimpaired"}`` and
-``{"cmd": "assess_answer", "group", "level", "note"}`` itself
-(:mod:`haptic.remote.desk`); its frames carry no muscle forces (the arm is drawn from its
-geometry only).
+A station with a panel (:class:`~haptic.station.panel.Panel`: a remote assessment's desk,
+:mod:`haptic.remote.deskstation`) also sends the panel's messages, answers the panel's commands
+through the panel, and adds its script and style to the page; a panel may ask for frames
+without muscle forces (the arm drawn from its geometry only).
 
 Blinding: while the snapshot says an A/B/X block or a training assessment runs, frames carry no
 blend and no muscle forces, and the info names no model (the renderer hides them too).
@@ -52,10 +50,10 @@ from fieldbank.errors import FieldbankError
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES
 from fieldbank.haptic.client import ControlClient
 from fieldbank.haptic.errors import HapticError
-from fieldbank.haptic.remote.desk import Desk
 from fieldbank.haptic.safety import FaultCode, Mode
 from fieldbank.haptic.snapshot import SnapshotReader
 from fieldbank.haptic.station.config import StationConfig
+from fieldbank.haptic.station.panel import Panel
 from fieldbank.haptic.training import TrainingProtocol
 from fieldbank.logthrottle import ThrottledLog
 from fieldbank.model import Arm
@@ -78,11 +76,6 @@ MAX_PAGES = 8
 INFO_REFRESH_S = 2.0
 #: Refused requests are logged at most this often per reason, with counts, s.
 REFUSED_LOG_INTERVAL_S = 1.0
-#: Commands a remote assessment's page sends to the station itself (not to the renderer).
-DESK_COMMANDS = ("prior", "assess_answer")
-#: How often a remote station reads the link's tap, s, and sends the link's figures.
-DESK_POLL_S = 0.1
-LINK_EVERY_S = 0.25
 
 
 def _fault_names(mask: int) -> list[str]:
@@ -152,10 +145,11 @@ def page_info(info: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class Station:
-    """The server's state: the snapshot, the latest frame and info, the connected pages."""
+    """The server's state: the snapshot, the latest frame and info, the connected pages, and
+    the page's panel if it has one (:class:`~haptic.station.panel.Panel`)."""
 
-    def __init__(self, config: StationConfig,
-                 control: Callable[..., Any] | None = None) -> None:
+    def __init__(self, config: StationConfig, control: Callable[..., Any] | None = None,
+                 panel: Panel | None = None) -> None:
         self.config = config
         self.reader = SnapshotReader(config.snapshot_path)
         self.client = ControlClient(config.socket_path, timeout_s=5.0)
@@ -170,9 +164,14 @@ class Station:
         self.pages: dict[int, dict[str, Any]] = {}
         self._page_ids = 0
         self.frames_made = 0
-        #: a remote assessment's panels (haptic.remote.desk), and their newest messages
-        self.desk: Desk | None = Desk(config.remote) if config.remote else None
+        self.panel = panel
+        #: the panel's newest message of each kind, as JSON
         self.extra: dict[str, str] = {}
+
+    def publish(self, kind: str, message: Mapping[str, Any]) -> None:
+        """The panel's newest message of ``kind``, sent to every page
+        (:data:`haptic.station.panel.Publish`)."""
+        self.extra[kind] = json.dumps(message)
 
     # --- the renderer, through its control socket -------------------------------------------
     async def request(self, cmd: str, **args: Any) -> Any:
@@ -208,7 +207,7 @@ class Station:
         geo = self.geometry
         elbow, hand = geo.points(key, *q) if geo else ([0.0, 0.0], [0.0, 0.0])
         muscles = None
-        if not blinded and geo is not None and self.desk is None:
+        if not blinded and geo is not None and (self.panel is None or self.panel.muscles):
             qk = (s[f"{key.lower()}_q1_rad"], s[f"{key.lower()}_q2_rad"])
             muscles = geo.muscles(key, qk, qd) or None
         mode = int(s["mode"])
@@ -246,70 +245,6 @@ class Station:
                 self.frames_made += 1
             await asyncio.sleep(max(0.0, period - (loop.time() - t0)))
 
-    async def produce_desk(self) -> None:
-        """A remote station: read the link's tap, send its figures; classify each probe that
-        ended (in a worker thread: the page keeps drawing meanwhile)."""
-        desk = self.desk
-        assert desk is not None
-        loop = asyncio.get_running_loop()
-        link_at = 0.0
-        while True:
-            try:
-                ended = desk.poll()
-            except (HapticError, ValueError, IndexError) as exc:
-                log.warning("link tap: %s", exc)
-                ended = []
-            if ended:
-                await self.reclassify()
-            now = loop.time()
-            if desk.link and now - link_at >= LINK_EVERY_S:
-                link_at = now
-                self.extra["link"] = json.dumps(desk.link_message())
-            await asyncio.sleep(DESK_POLL_S)
-
-    async def reclassify(self) -> None:
-        """The posterior of every probe so far, to the page and the assessment log."""
-        desk = self.desk
-        if desk is None or not desk.probes:
-            return
-        loop = asyncio.get_running_loop()
-        try:
-            cl = await loop.run_in_executor(None, desk.classify)
-        except (FieldbankError, ValueError) as exc:
-            log.warning("classification failed: %s", exc)
-            self.extra["posterior"] = json.dumps({"type": "posterior", "error": str(exc)})
-            return
-        if cl is not None:
-            self.extra["posterior"] = json.dumps(desk.posterior_message(cl))
-
-    async def desk_command(self, cmd: str, args: Mapping[str, Any]) -> Any:
-        """``prior`` and ``assess_answer``, answered by the station itself."""
-        desk = self.desk
-        if desk is None:
-            raise FieldbankError("this station serves no remote assessment")
-        if cmd == "prior":
-            def names(key: str) -> list[str]:
-                v = args.get(key)
-                if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
-                    raise FieldbankError(f'prior: "{key}" must be a list of names')
-                return v
-            try:
-                desk.set_prior(names("groups"), names("levels"), bool(args.get("unimpaired")))
-            except ValueError as exc:
-                raise FieldbankError(f"prior: {exc}") from None
-            await self.reclassify()
-            return {"weights": desk.weights}
-        group, level, note = args.get("group"), args.get("level"), args.get("note", "")
-        for k, v in (("group", group), ("level", level)):
-            if v is not None and not isinstance(v, str):
-                raise FieldbankError(f'assess_answer: "{k}" must be a name or null')
-        if not isinstance(note, str):
-            raise FieldbankError('assess_answer: "note" must be text')
-        try:
-            return desk.answer(group, level, note)
-        except ValueError as exc:
-            raise FieldbankError(f"assess_answer: {exc}") from None
-
     # --- one page -------------------------------------------------------------------------------
     async def pump(self, ws: web.WebSocketResponse) -> None:
         """Send the newest frame (when there is a new one) and any new info to one page."""
@@ -334,9 +269,10 @@ class Station:
         cmd = msg.get("cmd")
         rid = msg.get("id")
         reply: dict[str, Any] = {"type": "reply", "id": rid if isinstance(rid, int) else None}
-        if isinstance(cmd, str) and cmd in DESK_COMMANDS:
+        panel = self.panel
+        if panel is not None and isinstance(cmd, str) and cmd in panel.commands:
             try:
-                return {**reply, "ok": True, "result": await self.desk_command(cmd, msg)}
+                return {**reply, "ok": True, "result": await panel.command(cmd, msg)}
             except FieldbankError as exc:
                 return {**reply, "ok": False, "error": str(exc)}
         if not isinstance(cmd, str) or cmd not in PAGE_COMMANDS:
@@ -388,18 +324,18 @@ def page_html(station: Station, extra: Mapping[str, Any] | None = None,
     template = (pkg / "page.html").read_text("utf-8")
     script = (pkg / "station.js").read_text("utf-8")
     style = (pkg / "station.css").read_text("utf-8")
-    if station.desk is not None:  # a remote assessment's panels, in files of their own
-        script += (pkg / "remote.js").read_text("utf-8")
-        style += (pkg / "remote.css").read_text("utf-8")
+    panel = station.panel
+    if panel is not None:  # the panel's own, in files of its own
+        more_script, more_style = panel.assets()
+        script += more_script
+        style += more_style
     # what the page knows from the start: the view, what 'Start training' runs, the muscles
     proto = TrainingProtocol.from_dict(cfg.training or {})
     config = {
         "view": cfg.view,
         "training": {"name": proto.title, "n_trials": proto.n_trials},
         "muscles": [{"code": k, "name": v} for k, v in MUSCLE_GROUP_NAMES.items()],
-        "remote": station.desk is not None,
-        "assess": {} if station.desk is None else {
-            "groups": station.desk.groups, "levels": station.desk.levels},
+        **(panel.page_config() if panel is not None else {}),
         **(extra or {}),
     }
     nonce = secrets.token_urlsafe(16)
@@ -490,23 +426,25 @@ def make_app(station: Station) -> web.Application:
 
     async def start_producer(app: web.Application) -> None:
         app["producer"] = asyncio.create_task(station.produce())
-        if station.desk is not None:
-            app["desk"] = asyncio.create_task(station.produce_desk())
+        if station.panel is not None:
+            app["panel"] = asyncio.create_task(station.panel.run(station.publish))
 
     async def stop_producer(app: web.Application) -> None:
         refused.flush()
         app["producer"].cancel()
-        if "desk" in app:
-            app["desk"].cancel()
+        if "panel" in app:
+            app["panel"].cancel()
 
     app.on_startup.append(start_producer)
     app.on_cleanup.append(stop_producer)
     return app
 
 
-async def serve(config: StationConfig, ready: Callable[[str, int], None]) -> None:
-    """Run the station until cancelled; ``ready(host, port)`` once it listens."""
-    station = Station(config)
+async def serve(config: StationConfig, ready: Callable[[str, int], None],
+                panel: Panel | None = None) -> None:
+    """Run the station (with ``panel``, if any) until cancelled; ``ready(host, port)`` once it
+    listens."""
+    station = Station(config, panel=panel)
     runner = web.AppRunner(make_app(station), access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, config.host, config.port)
@@ -520,3 +458,5 @@ async def serve(config: StationConfig, ready: Callable[[str, int], None]) -> Non
     finally:
         await runner.cleanup()
         station.reader.close()
+        if panel is not None:
+            panel.close()

@@ -45,7 +45,7 @@ function connect() {
       if (!msg.ok) setMessage(msg.error, true);
       if (done) done(msg);
     } else if (window.fbExtra) {
-      window.fbExtra.onMessage(msg);  // panels of their own (remote.js)
+      window.fbExtra.onMessage(msg);  // panels of their own (haptic/remote/desk.js)
     }
   };
   ws.onclose = () => {
@@ -299,7 +299,7 @@ function updateBadges(f) {
   const r = $("rendering");
   const tr = info && info.training;
   if (window.fbExtra && window.fbExtra.badge(f)) {
-    // the panel's own badge (remote.js)
+    // the panel's own badge (haptic/remote/desk.js)
   } else if (tr && !tr.done && !f.blinded) {
     r.textContent = tr.phase ? `Training · ${tr.phase}` : "Training"; r.className = "badge";
     $("btn-a").classList.remove("active"); $("btn-b").classList.remove("active");

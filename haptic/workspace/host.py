@@ -32,7 +32,11 @@ from typing import Any
 from fieldbank.haptic.client import ControlClient, push_models
 from fieldbank.haptic.errors import ControlError, HapticError
 from fieldbank.haptic.modelinfo import ModelInfo
+from fieldbank.haptic.rendererconfig import RENDERER_BOUNDS
+from fieldbank.haptic.robots import adapter_for, scheme_of
+from fieldbank.haptic.safety import SAFETY_BOUNDS
 from fieldbank.redact import mask_url
+from fieldbank.validation import check_fields
 from fieldbank.web.robot import FeelPair
 
 #: The robot when none is configured: the simulated one, in real time.
@@ -42,12 +46,19 @@ SIMULATED = "sim://?mode=realtime"
 START_TIMEOUT_S = 120.0
 #: Longest wait for a stopped renderer to write its trace and end, s.
 STOP_TIMEOUT_S = 60.0
+#: The ranges of :class:`RobotSettings`: the loop's and the safety layer's own.
+ROBOT_SETTINGS_BOUNDS = {"rate_hz": RENDERER_BOUNDS["rate_hz"],
+                         "force_limit_n": SAFETY_BOUNDS["force_limit_n"]}
 
 
 @dataclass(frozen=True)
 class RobotSettings:
     """How the workspace renders: the robot (None: the simulated one), the loop's rate, the
-    force limit, the database the sessions are recorded in, where traces go."""
+    force limit, the database the sessions are recorded in, where traces go.
+
+    The robot is any the robot port opens (:func:`haptic.robots.open_robot`: a device path,
+    a built-in scheme, or an installed adapter's): one no adapter serves is refused here, when
+    the workspace starts, not at the first 'Feel it'."""
 
     robot: str | None
     db_url: str
@@ -55,9 +66,14 @@ class RobotSettings:
     rate_hz: int = 1000
     force_limit_n: float = 40.0
 
+    def __post_init__(self) -> None:
+        check_fields(self, ROBOT_SETTINGS_BOUNDS, what="workspace robot setting")
+        if self.robot is not None:
+            adapter_for(self.robot)
+
     @property
     def simulated(self) -> bool:
-        return self.robot is None or self.robot.startswith("sim://")
+        return self.robot is None or scheme_of(self.robot) == "sim"
 
 
 class _Running:

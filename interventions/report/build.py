@@ -167,11 +167,12 @@ def cohort_figures(results: list[CaseResult]) -> list[tuple[str, str, str]]:
     return out
 
 
-def checked_cases(db: Database, selection: Selection, accept_poor_fit: bool = False
-                  ) -> list[CaseSpec]:
-    """The selected cases; SelectionError for none, and for a case whose model comes from a
-    poor fit unless ``accept_poor_fit`` (then each case records it)."""
-    cases = select_cases(db, selection)
+def checked_cases(db: Database, selection: Selection, accept_poor_fit: bool = False,
+                  checks: bool = True) -> list[CaseSpec]:
+    """The selected cases (``checks``: :func:`select_cases`); SelectionError for none, and for
+    a case whose model comes from a poor fit unless ``accept_poor_fit`` (then each case
+    records it)."""
+    cases = select_cases(db, selection, checks)
     poor = [c for c in cases if (c.fit_report or {}).get("status") == "poor"]
     if poor and not accept_poor_fit:
         raise SelectionError(
@@ -223,7 +224,7 @@ def build_report(db: Database, selection: Selection, out_dir: str | Path, jobs: 
     if there and not force:
         raise FileRefused(f"{out_dir} already holds a report ({', '.join(there)}); give --force "
                           "to replace it, or choose another --out.")
-    cases = checked_cases(db, selection, accept_poor_fit)
+    cases = checked_cases(db, selection, accept_poor_fit, checks=not scheduler)
     wrap = None
     if progress:
         from tqdm import tqdm

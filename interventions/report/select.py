@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import date
-from typing import Any
+from typing import Any, cast
 
 from fieldbank.interventions.errors import InterventionError, SelectionError
 from fieldbank.interventions.guesses import IntervalSet
@@ -127,6 +127,41 @@ def read_plan(spec: Mapping[str, Any], plan_id: int) -> Plan | None:
         return None
 
 
+class _ReadOnce:
+    """The records one selection reads from ``db``, each read once: a case's models, its
+    patient's fits and maps are asked for by the selection and again by
+    :func:`~fieldbank.interventions.validate.read_plan_inputs` (stored records do not change;
+    a selection is a moment's view). Everything else goes to the database."""
+
+    def __init__(self, db: Database) -> None:
+        self._db = db
+        self._seen: dict[tuple[Any, ...], Any] = {}
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._db, name)
+
+    def _once(self, key: tuple[Any, ...], read: Any) -> Any:
+        if key not in self._seen:
+            self._seen[key] = read()
+        return self._seen[key]
+
+    def get_model(self, model_id: int) -> StoredModel:
+        return self._once(("model", model_id),
+                          lambda: self._db.get_model(model_id))
+
+    def model_lineage(self, model_id: int) -> list[StoredModel]:
+        return self._once(("lineage", model_id),
+                          lambda: self._db.model_lineage(model_id))
+
+    def list_fits(self, patient_code: str) -> list[FitRecord]:
+        return self._once(("fits", patient_code),
+                          lambda: self._db.list_fits(patient_code))
+
+    def list_maps(self, patient_code: str, session_label: str | None = None) -> list[StoredMap]:
+        return self._once(("maps", patient_code, session_label),
+                          lambda: self._db.list_maps(patient_code, session_label))
+
+
 def _fitted_ancestor(db: Database, model_id: int) -> StoredModel | None:
     for m in db.model_lineage(model_id):
         if m.origin == "fitted":
@@ -134,8 +169,10 @@ def _fitted_ancestor(db: Database, model_id: int) -> StoredModel | None:
     return None
 
 
-def select_cases(db: Database, selection: Selection) -> list[CaseSpec]:
-    """The cases matching ``selection``, ordered by patient code then plan id.
+def select_cases(db: Database, selection: Selection, checks: bool = True) -> list[CaseSpec]:
+    """The cases matching ``selection``, ordered by patient code then plan id; ``checks``:
+    with what checking each plan against later maps needs (a command whose cases a cluster's
+    workers compute leaves it to them: they read it themselves).
 
     Raises
     ------
@@ -143,6 +180,7 @@ def select_cases(db: Database, selection: Selection) -> list[CaseSpec]:
         Nothing matches (the message says which filter and what is stored), or a named patient
         or plan has no data to report (no plans; no fitted model).
     """
+    db = cast(Database, _ReadOnce(db))
     for named in selection.patients:
         db.get_patient(named)  # an unknown patient: the storage layer's clear error
     plans = []
@@ -215,7 +253,7 @@ def select_cases(db: Database, selection: Selection) -> list[CaseSpec]:
             fit_id=fit.id if fit is not None else None,
             fit_report=dict(fit.result) if fit is not None else None,
             fitted_model_id=ancestor.id if ancestor is not None and fit is not None else None,
-            checks=read_plan_inputs(db, plan)))
+            checks=read_plan_inputs(db, plan) if checks else None))
     if not cases:
         raise SelectionError(
             f"No stored plan matches the selection ({selection.describe()}) in "

@@ -12,7 +12,7 @@ import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design.candidates import Candidate, check_candidates, check_prior
-from fieldbank.evaluate.design.config import TARGETS, NoiseModel, Perception, ProbeLimits
+from fieldbank.evaluate.design.config import NoiseModel, Perception, ProbeLimits
 from fieldbank.evaluate.design.paths import Circle, Path
 from fieldbank.evaluate.design.perception import (
     _arc_fraction,
@@ -37,6 +37,7 @@ from fieldbank.evaluate.design.predict import (
 )
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.model import FloatArray
+from fieldbank.probechoices import DEFAULT_TARGET, TARGETS
 
 
 @dataclass
@@ -161,7 +162,7 @@ class ProbeSetScore:
     perception: Perception
     noise: NoiseModel
     labels: tuple[str, ...]
-    target: str = "candidate"
+    target: str = DEFAULT_TARGET
 
     def matrix(self, what: str) -> FloatArray:
         """(n, n): 'feel', 'orientation', 'minmax' (max over probes) or 'kl' (sum)."""
@@ -308,7 +309,7 @@ def score_probes(candidates: Sequence[Candidate], motions: Sequence[ProbeMotion]
                  perception: Perception | None = None, noise: NoiseModel | None = None,
                  limits: ProbeLimits | None = None,
                  closed: Sequence[bool] | None = None,
-                 target: str = "candidate") -> ProbeSetScore:
+                 target: str = DEFAULT_TARGET) -> ProbeSetScore:
     """Score given probes (e.g. the seed's pull and semi-ellipse) on the candidates."""
     cands = check_candidates(candidates, 2)
     p = check_prior(prior, len(cands))

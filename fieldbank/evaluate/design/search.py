@@ -26,7 +26,6 @@ from fieldbank.evaluate.design.candidates import (
     equilibrium,
 )
 from fieldbank.evaluate.design.config import (
-    CRITERIA,
     DESIGN_SAMPLES,
     LIMIT_SAMPLES,
     MIN_GAIN,
@@ -43,6 +42,7 @@ from fieldbank.evaluate.design.predict import _execute, _execution_deltas, feasi
 from fieldbank.evaluate.design.score import ProbeSetScore, _Context, score_probes, target_labels
 from fieldbank.evaluate.probing import PROBE_SAMPLES, ProbeMotion
 from fieldbank.model import FloatArray
+from fieldbank.probechoices import CRITERIA, DEFAULT_CRITERION, DEFAULT_TARGET
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,8 +183,8 @@ def _search_one(ctx: _Context, fam: _Family, start: FloatArray,
     return best_v, best
 
 
-def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: str = "stroke",
-           target: str = "candidate", max_probes: int | None = None,
+def design(candidates: Sequence[Candidate], *, criterion: str = DEFAULT_CRITERION,
+           family: str = "stroke", target: str = DEFAULT_TARGET, max_probes: int | None = None,
            prior: Sequence[float] | FloatArray | None = None,
            perception: Perception | None = None, noise: NoiseModel | None = None,
            limits: ProbeLimits | None = None, start_m: Sequence[float] | None = None,

@@ -21,7 +21,8 @@ from fieldbank.figures.style import (
     limits,
 )
 from fieldbank.interventions.report.figures.common import ACCENT_OK, WIDTH
-from fieldbank.interventions.validate import CHANGE_TOLERANCE, PlanValidation
+from fieldbank.interventions.validate import PlanValidation
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE
 
 
 @dataclass(frozen=True)
