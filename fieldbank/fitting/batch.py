@@ -9,7 +9,9 @@ session's maps from the database, and
   options and :data:`fieldbank.fitchoices.MODEL_VERSION`) - then nothing is repeated ('skipped');
 * else fits and stores the fit and its model in one transaction under that key. The key is
   unique in the database, so a task that runs twice (its first worker died after committing)
-  stores nothing twice: the second finds the first's fit.
+  stores nothing twice: the second finds the first's fit. Its job's result keeps the fit's
+  own wall and CPU time (``fit_s``, ``fit_cpu_s``: the CPU of the thread that ran it), so a
+  run's bookkeeping is the task's time less these.
 
 Which sessions: without ``older_than``, every session with maps of the patients (all patients
 when none is named). With ``older_than`` N, the fits stored under a model version below N (or
@@ -20,6 +22,7 @@ prior, uncertainty) are the command's for every task.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -87,14 +90,17 @@ def fit_session(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
         return Done("skipped", f"fit {found.fit_id} (model {found.model_id}) holds these maps "
                     f"under model version {MODEL_VERSION} already",
                     {"fit_id": found.fit_id, "model_id": found.model_id, "found": True})
+    c0 = time.thread_time()
     out = fit_patient(store, task.patient, task.session, fitter)
+    cpu = time.thread_time() - c0
     fid, mid = out.saved.fit_id, out.saved.model_id
     if not out.saved.created:
         return Done("skipped", f"fit {fid} (model {mid}) was stored meanwhile by another "
                     "attempt", {"fit_id": fid, "model_id": mid, "found": True})
     return Done("done", f"fit {fid} -> model {mid}: {out.fitter.status_}, "
                 f"{len(ids)} maps, {out.fitter.time_s_:.1f} s",
-                {"fit_id": fid, "model_id": mid, "status": out.fitter.status_})
+                {"fit_id": fid, "model_id": mid, "status": out.fitter.status_,
+                 "fit_s": round(out.fitter.time_s_, 4), "fit_cpu_s": round(cpu, 4)})
 
 
 def fit_all(db: Database, options: Mapping[str, Any], *, patients: Sequence[str] = (),
