@@ -41,7 +41,8 @@ from fieldbank.fitting.synthetic import LEVELS, impaired_params
 from fieldbank.haptic.measure import run_protocol
 from fieldbank.maps import model_map_like
 from fieldbank.measure.estimate import estimate
-from fieldbank.measure.protocol import PARTS, ProtocolConfig, plan
+from fieldbank.measure.protocol import ProtocolConfig, plan
+from fieldbank.measurechoices import PARTS
 from fieldbank.model import Arm
 from fieldbank.params import JOINT_GROUPS, ArmParams
 

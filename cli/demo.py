@@ -130,7 +130,8 @@ def populate(db: Database, samples: Path, patients: Sequence[str] | None = None,
 def run_demo(out_dir: str | Path, home: str | Path | None = None, force: bool = False,
              jobs: int | None = None, haptic_s: float = 3.0, say: Say = _quiet) -> DemoResult:
     """Run every step (module docstring) under ``out_dir``; returns what was made."""
-    from fieldbank.interventions.report import Selection, build_report, default_jobs
+    from fieldbank.engine import default_jobs
+    from fieldbank.interventions.report import Selection, build_report
     from fieldbank.storage import Database
 
     out = Path(out_dir)

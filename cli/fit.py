@@ -5,7 +5,8 @@ Thin: the commands open a :class:`fieldbank.fitting.records.FitStore`, call
 :func:`fieldbank.fitting.batch.fit_all` (a batch on local processes or a Dask cluster).
 The store comes from ``ctx.obj['fit_store']`` when the caller provides one (a factory
 ``db_url -> FitStore``), else from :func:`fieldbank.fitting.dbstore.open_fit_store` on the
-field database.
+field database; without one, ``models list`` reads the database through its driver alone
+(:func:`fieldbank.cli.options.read_db`).
 """
 
 from __future__ import annotations
@@ -17,16 +18,6 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from fieldbank.cli.choices import (
-    FIT_ALGORITHMS,
-    FIT_DEFAULT_ALGORITHM,
-    FIT_DEFAULT_PRIOR_WEIGHT,
-    FIT_KINDS,
-    MODEL_VERSION,
-    UNCERTAINTY_DEFAULT_METHOD,
-    UNCERTAINTY_DEFAULT_REPLICATES,
-    UNCERTAINTY_METHODS,
-)
 from fieldbank.cli.options import (
     MODEL_ID,
     db_option,
@@ -34,10 +25,21 @@ from fieldbank.cli.options import (
     figure_path,
     json_option,
     open_db,
+    read_db,
     say,
     scheduler_option,
 )
 from fieldbank.cli.table import fit_lines, table, wrap
+from fieldbank.fitchoices import (
+    ALGORITHMS,
+    DEFAULT_ALGORITHM,
+    DEFAULT_PRIOR_WEIGHT,
+    DEFAULT_REPLICATES,
+    DEFAULT_UNCERTAINTY,
+    FIT_KINDS,
+    MODEL_VERSION,
+    UNCERTAINTY_METHODS,
+)
 from fieldbank.params import GROUP_NAMES, GROUPS, ArmParams
 from fieldbank.sanitize import printable
 
@@ -45,7 +47,7 @@ if TYPE_CHECKING:  # typing only: the library loads when a command runs
     from fieldbank.engine import BatchResult
     from fieldbank.fitting.records import FitOutcome, FitStore
     from fieldbank.scheduler import SchedulerFlags
-    from fieldbank.storage import StoredModel
+    from fieldbank.stored.records import ListedModel
 
 StoreFactory = Callable[[str | None], "FitStore"]
 
@@ -61,7 +63,17 @@ def _store(ctx: click.Context, db_url: str | None) -> FitStore:
     return factory(db_url)
 
 
-def _plans_cell(m: StoredModel) -> str:
+def _listed_models(ctx: click.Context, db_url: str | None,
+                   patient: str | None) -> list[ListedModel]:
+    """The models ``models list`` shows: from the caller's FitStore when it provides one, else
+    read from the database through its driver alone (:func:`read_db`)."""
+    if isinstance(ctx.obj, Mapping) and ctx.obj.get("fit_store") is not None:
+        return list(_store(ctx, db_url).list_models(patient))
+    with read_db(db_url) as db:
+        return list(db.list_models(patient))
+
+
+def _plans_cell(m: ListedModel) -> str:
     """'plan 4' (the plan that made it) and '-> 5,6' (plans applied to it)."""
     parts = ([f"plan {m.plan_id}"] if m.plan_id is not None else []) + (
         ["->" + ",".join(map(str, m.plans_from))] if m.plans_from else [])
@@ -184,19 +196,19 @@ def _severity_lines(severity: Mapping[str, Mapping[str, Mapping[str, object]]]) 
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="With --all and no scheduler: worker processes (default: the cores "
                    "available).")
-@click.option("--algorithm", type=click.Choice(list(FIT_ALGORITHMS)), default=FIT_DEFAULT_ALGORITHM,
+@click.option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
               show_default=True, help="nlopt global+local, or the dual annealing baseline.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--fit", "fit_kinds", default="km,alpha,beta", show_default=True,
               help=f"Comma-separated parameter kinds to fit ({', '.join(FIT_KINDS)}).")
-@click.option("--prior-weight", type=float, default=FIT_DEFAULT_PRIOR_WEIGHT, show_default=True)
+@click.option("--prior-weight", type=float, default=DEFAULT_PRIOR_WEIGHT, show_default=True)
 @click.option("--max-evals", type=click.IntRange(min=10), default=None)
 @click.option("--uncertainty", type=click.Choice(list(UNCERTAINTY_METHODS)),
-              default=UNCERTAINTY_DEFAULT_METHOD,
+              default=DEFAULT_UNCERTAINTY,
               show_default=True,
               help="Gauss-Newton where it holds else a parametric bootstrap ('auto'), or one "
                    "of the two always.")
-@click.option("--replicates", type=click.IntRange(min=2), default=UNCERTAINTY_DEFAULT_REPLICATES,
+@click.option("--replicates", type=click.IntRange(min=2), default=DEFAULT_REPLICATES,
               show_default=True, help="Bootstrap replicates (and parameter samples kept).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               callback=figure_path,
@@ -320,9 +332,9 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
                 db_url: str | None) -> None:
     """List models with their origin, parent and plans (the plan that made each, and the
     plans applied to it: 'fieldbank plans show ID')."""
-    from fieldbank.fitting.records import model_summary
+    from fieldbank.stored.records import model_summary
 
-    rows = list(_store(ctx, db_url).list_models(patient))
+    rows = _listed_models(ctx, db_url, patient)
     if as_json:
         emit_json([model_summary(m) for m in rows])
         return

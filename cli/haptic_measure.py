@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from fieldbank.cli import choices as ch
+from fieldbank import measurechoices as mc
 from fieldbank.cli.options import (
     DATE,
     SESSION_LABEL,
@@ -21,6 +21,7 @@ from fieldbank.cli.options import (
 )
 from fieldbank.cli.progress import robot_time
 from fieldbank.cli.table import wrap
+from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.sanitize import printable
 
 
@@ -42,7 +43,7 @@ def _grid(text: str) -> tuple[int, int]:
               help="Session label.")
 @click.option("--date", "session_date", type=DATE,
               help="Date of the session.")
-@click.option("--protocol", "parts", multiple=True, type=click.Choice(ch.MEASURE_PARTS),
+@click.option("--protocol", "parts", multiple=True, type=click.Choice(mc.PARTS),
               help="Part(s) to measure (repeatable; default all three).")
 @click.option("--grid", default="5x5", show_default=True, help="Postures, COLUMNSxROWS.")
 @click.option("--spacing-mm", type=float, default=None,
@@ -50,18 +51,18 @@ def _grid(text: str) -> tuple[int, int]:
 @click.option("--centre", default=None,
               help="Grid centre X,Y in m, shoulder frame (default: the patient's hand at "
                    "shoulder 40°, elbow 80°).")
-@click.option("--directions", type=int, default=ch.MEASURE_DIRECTIONS, show_default=True,
+@click.option("--directions", type=int, default=mc.DIRECTIONS, show_default=True,
               help="Displacement directions per posture (stiffness).")
-@click.option("--displacement-mm", type=float, default=ch.MEASURE_DISPLACEMENT_MM,
+@click.option("--displacement-mm", type=float, default=mc.DISPLACEMENT_M * 1000,
               show_default=True, help="Size of each displacement (stiffness).")
-@click.option("--hold-s", type=float, default=ch.MEASURE_HOLD_S, show_default=True,
+@click.option("--hold-s", type=float, default=mc.HOLD_S, show_default=True,
               help="Hold after each displacement (stiffness).")
-@click.option("--stretch-speed", type=float, default=ch.MEASURE_STRETCH_SPEED_M_PER_S,
+@click.option("--stretch-speed", type=float, default=mc.STRETCH_SPEED_M_PER_S,
               show_default=True,
               help="Hand speed of the stretch passes, m/s.")
 @click.option("--shoulder", default="0,0", show_default=True,
               help="The shoulder's position in robot coordinates X,Y, m.")
-@click.option("--force-limit-n", type=float, default=ch.MEASURE_FORCE_LIMIT_N, show_default=True)
+@click.option("--force-limit-n", type=float, default=SafetyConfig.force_limit_n, show_default=True)
 @click.option("--raw", "raw_out", type=click.Path(dir_okay=False, path_type=Path),
               help="Where to write the raw recording (NWB); default: the data directory.")
 @click.option("--force", is_flag=True, help="Replace an existing --raw file.")
@@ -85,10 +86,10 @@ def measure(db_url: str | None, url: str, patient_code: str, session_label: str,
     # the robot link and the estimator: when the command runs (--help stays light)
     from fieldbank.haptic.measure import MeasureConfig, measure_session
     from fieldbank.haptic.safety import SafetyConfig
-    from fieldbank.measure.protocol import PARTS, ProtocolConfig
+    from fieldbank.measure.protocol import ProtocolConfig
     from fieldbank.measure.visibility import parse_groups
 
-    protocol = ProtocolConfig(parts=parts or PARTS, grid=_grid(grid),
+    protocol = ProtocolConfig(parts=parts or mc.PARTS, grid=_grid(grid),
                               spacing_m=None if spacing_mm is None else spacing_mm / 1000,
                               centre_m=None if centre is None else xy_metres(centre, "--centre"),
                               displacement_m=displacement_mm / 1000, directions=directions,

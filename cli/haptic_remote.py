@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from fieldbank.cli.choices import PASSIVITY_MODES, REMOTE_RATE_HZ
 from fieldbank.cli.options import (
     db_option,
     emit,
@@ -29,6 +28,8 @@ from fieldbank.cli.options import (
     say,
     xy_metres,
 )
+from fieldbank.haptic.remote.passivity import PASSIVITY_MODES
+from fieldbank.haptic.rendererconfig import RENDERER_BOUNDS
 
 # The link, the sites and the robot load inside the commands: '--help' starts at once.
 if TYPE_CHECKING:
@@ -50,12 +51,20 @@ def _address(text: str, name: str) -> tuple[str, int]:
     return host, n
 
 
+def _whole(bound: float | None) -> int | None:
+    return None if bound is None else int(bound)
+
+
+#: The loop's rate: the renderer's range (the clinician's site is a rendering session).
+_RATE = RENDERER_BOUNDS["rate_hz"]
+
 link_options = option_group(
     click.option("--key", "key_file", required=True,
                  type=click.Path(dir_okay=False, path_type=Path),
                  help="The key both sites share ('fieldbank haptic remote key'); each "
                       "session's own keys are drawn from it and both sites' fresh values."),
-    click.option("--rate-hz", type=click.IntRange(*REMOTE_RATE_HZ), default=1000,
+    click.option("--rate-hz", type=click.IntRange(_whole(_RATE.low), _whole(_RATE.high)),
+                 default=1000,
                  show_default=True, help="Loop and link rate (both sites the same: the "
                                          "handshake refuses a difference)."),
     click.option("--lockstep", is_flag=True,

@@ -11,13 +11,13 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.choices import JOB_KINDS
-from fieldbank.cli.options import RUN_ID, db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import RUN_ID, db_option, emit_json, json_option, read_db
 from fieldbank.cli.table import table, wrap
 from fieldbank.sanitize import printable
+from fieldbank.stored.records import JOB_KINDS
 
 if TYPE_CHECKING:  # typing only: the storage layer loads when the command runs
-    from fieldbank.storage.records import JobRecord, JobRunRecord
+    from fieldbank.stored.records import JobRecord, JobRunRecord
 
 
 def _when(t: datetime | None) -> str:
@@ -56,7 +56,7 @@ def _status(r: JobRunRecord) -> str:
 def jobs(run_id: int | None, kind: str | None, limit: int, states: tuple[str, ...],
          as_json: bool, db_url: str | None) -> None:
     """Batch runs: what ran, what failed, what is left (RUN: each of its tasks)."""
-    with open_db(db_url) as db:
+    with read_db(db_url) as db:
         if run_id is None:
             runs = db.list_runs(kind, limit)
             if as_json:

@@ -7,7 +7,7 @@ from datetime import date
 
 import click
 
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import DATE, db_option, emit_json, json_option, read_db
 from fieldbank.cli.table import table
 from fieldbank.sanitize import printable
 
@@ -29,7 +29,7 @@ def list_(db_url: str | None, patient_code: str | None, session_label: str | Non
           kind: str | None, since: date | None, until: date | None,
           as_json: bool) -> None:
     """List maps matching every filter given."""
-    with open_db(db_url) as db:
+    with read_db(db_url) as db:
         if patient_code is not None:  # an unknown patient: the one "not found" message
             db.get_patient(patient_code)
         rows = db.list_maps(patient_code, session_label, kind, since, until)

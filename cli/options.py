@@ -3,7 +3,8 @@ the one JSON emitter (:func:`fieldbank.files.to_json`: one indent, one encoder).
 
 This module imports nothing heavy: ``fieldbank.storage`` (SQLAlchemy, alembic, numpy) is
 imported only when :func:`open_db` runs, so commands that never open the database - ``haptic
-switch``, ``--help`` - start at once.
+switch``, ``--help`` - start at once; the commands that list what the database holds open it
+with :func:`read_db`, through its driver alone when they can.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from fieldbank.files import to_json
 
 if TYPE_CHECKING:  # typing only; the storage layer loads when a command opens the database
     from fieldbank.storage import Database
+    from fieldbank.stored.listing import Reads
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -210,6 +212,16 @@ def open_db(db_url: str | None, upgrade: str = "auto", create: bool = False) -> 
     from fieldbank.storage import Database  # heavy; deferred so light commands stay instant
 
     return Database.open(db_url, upgrade=upgrade, create=create)
+
+
+def read_db(db_url: str | None) -> Reads:
+    """The database at ``db_url`` for a command that only lists what it holds: read through
+    its driver alone (:func:`fieldbank.stored.listing.open_listing`: no SQLAlchemy, numpy or
+    array store to load) when it is at head, else opened as :func:`open_db` opens it (migrated,
+    or refused in the same words). The records and the errors are the same either way."""
+    from fieldbank.stored.listing import open_listing
+
+    return open_listing(db_url) or open_db(db_url)
 
 
 def emit_json(data: Any) -> None:

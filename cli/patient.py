@@ -6,7 +6,7 @@ import dataclasses
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import db_option, emit_json, json_option, open_db, read_db
 from fieldbank.cli.table import fit_lines
 from fieldbank.sanitize import printable
 
@@ -41,7 +41,7 @@ def add(db_url: str | None, code: str, mass_kg: float, height_m: float, side: st
 @json_option
 def list_(db_url: str | None, as_json: bool) -> None:
     """List patients."""
-    with open_db(db_url) as db:
+    with read_db(db_url) as db:
         rows = db.list_patients()
     if as_json:
         emit_json([dataclasses.asdict(p) for p in rows])

@@ -15,6 +15,7 @@ from fieldbank.cli.options import (
     emit_json,
     json_option,
     open_db,
+    read_db,
     say,
 )
 from fieldbank.sanitize import printable
@@ -42,7 +43,7 @@ def list_cmd(patient: str | None, kind: str | None, given: bool | None, db_url: 
     """List stored plans: id, patient, given date, models before -> after, steps."""
     from fieldbank.interventions.plans import list_plans
 
-    with open_db(db_url) as db:
+    with read_db(db_url) as db:
         rows = list_plans(db, patient, kind, given)
         where = db.url_masked
     if as_json:

@@ -9,13 +9,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
-from fieldbank.cli import choices as ch
-from fieldbank.cli.choices import (
-    CLASSIFY_PREDICTORS,
-    PROBE_CRITERIA,
-    PROBE_FAMILIES,
-    PROBE_TARGETS,
-)
+from fieldbank import probechoices as pc
 from fieldbank.cli.options import (
     MODEL_ID,
     SESSION_ID,
@@ -32,7 +26,7 @@ from fieldbank.cli.options import (
 from fieldbank.cli.progress import counted
 from fieldbank.errors import ParameterError
 from fieldbank.files import to_json, write_atomic
-from fieldbank.params import JOINT_GROUPS, ArmParams
+from fieldbank.params import JOINT_GROUPS
 from fieldbank.probepath import probes_document
 
 if TYPE_CHECKING:  # typing only: the library loads when a command runs
@@ -89,20 +83,20 @@ def candidate_options(f: F) -> F:
 def noise_options(f: F) -> F:
     """The noise model and what a hand feels."""
     opts = [
-        click.option("--force-sd-n", type=float, default=ch.NOISE_FORCE_SD_N, show_default=True,
+        click.option("--force-sd-n", type=float, default=pc.FORCE_SD_N, show_default=True,
                      help="Force noise per axis, N (assumption)."),
-        click.option("--correlation-s", type=float, default=ch.NOISE_CORRELATION_S,
+        click.option("--correlation-s", type=float, default=pc.CORRELATION_S,
                      show_default=True,
                      help="Time over which force noise decorrelates, s (assumption)."),
-        click.option("--direction-sd-deg", type=float, default=ch.NOISE_DIRECTION_SD_DEG,
+        click.option("--direction-sd-deg", type=float, default=pc.DIRECTION_SD_DEG,
                      show_default=True, help="Operator's scatter of a probe's direction, °."),
-        click.option("--length-sd", type=float, default=ch.NOISE_LENGTH_SD, show_default=True,
+        click.option("--length-sd", type=float, default=pc.LENGTH_SD, show_default=True,
                      help="Operator's relative scatter of a probe's length."),
-        click.option("--speed-sd", type=float, default=ch.NOISE_SPEED_SD, show_default=True,
+        click.option("--speed-sd", type=float, default=pc.SPEED_SD, show_default=True,
                      help="Operator's relative scatter of a probe's speed."),
-        click.option("--force-jnd", type=float, default=ch.PERCEPTION_FORCE_JND, show_default=True,
+        click.option("--force-jnd", type=float, default=pc.FORCE_JND, show_default=True,
                      help="Weber fraction of force magnitude."),
-        click.option("--direction-jnd-deg", type=float, default=ch.PERCEPTION_DIRECTION_JND_DEG,
+        click.option("--direction-jnd-deg", type=float, default=pc.DIRECTION_JND_DEG,
                      show_default=True, help="Force-direction threshold, °."),
         click.option("--free-exploration", is_flag=True,
                      help="Judge magnitudes with the free-exploration Weber fraction 0.6."),
@@ -113,10 +107,10 @@ def noise_options(f: F) -> F:
 def limit_options(f: F) -> F:
     """The probe limits (defaults: ProbeLimits())."""
     opts = [
-        click.option("--max-speed", type=float, default=ch.PROBE_MAX_SPEED_M_PER_S,
+        click.option("--max-speed", type=float, default=pc.MAX_SPEED_M_PER_S,
                      show_default=True,
                      help="Peak hand speed of a probe, m/s."),
-        click.option("--force-limit-n", type=float, default=ch.PROBE_FORCE_LIMIT_N,
+        click.option("--force-limit-n", type=float, default=pc.FORCE_LIMIT_N,
                      show_default=True,
                      help="The renderer's force saturation, N."),
         click.option("--workspace", metavar="XMIN,XMAX,YMIN,YMAX",
@@ -131,31 +125,10 @@ def build_candidates(groups: str, levels: str | None, unimpaired: bool,
                      param_files: tuple[Path, ...], model_ids: tuple[int, ...],
                      mass: float | None, height: float | None, side: str | None,
                      db_url: str | None) -> list[Candidate]:
-    from fieldbank import modelsource
-    from fieldbank.evaluate.arms import ArmCache
-    from fieldbank.evaluate.design import Candidate, check_candidates, severity_candidates
-    from fieldbank.evaluate.severity import group_name, level_name
+    from fieldbank.probeset import candidate_set
 
-    cache = ArmCache()
-    base = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
-    out: list[Candidate] = []
-    lv = levels if levels is not None else (None if param_files or model_ids else "severe")
-    if lv:
-        gs = _list(groups, group_name, tuple(JOINT_GROUPS))
-        ls = _list(lv, level_name, ALL_LEVELS)
-        out += severity_candidates(gs, ls, unimpaired=unimpaired, base=base, cache=cache)
-    elif unimpaired:
-        out.append(Candidate.from_severity(None, "unimpaired", base, cache))
-    for path in param_files:
-        out.append(Candidate(path.stem, cache(ArmParams.from_file(path))))
-    if model_ids:
-        with open_db(db_url) as db:
-            for mid in model_ids:
-                src = modelsource.stored(db, mid)
-                out.append(Candidate(f"model {mid}", cache(src.params),
-                                     notes=tuple(f"rests on a guess: {g}"
-                                                 for g in src.guesses)))
-    return list(check_candidates(out, 2))
+    return candidate_set(groups, levels, unimpaired, param_files, model_ids, mass, height,
+                         side, db_url)
 
 
 def build_noise(force_sd_n: float, correlation_s: float, direction_sd_deg: float,
@@ -239,12 +212,14 @@ def probe() -> None:
 
 @probe.command("design")
 @candidate_options
-@click.option("--criterion", type=click.Choice(PROBE_CRITERIA), default="feel", show_default=True,
+@click.option("--criterion", type=click.Choice(pc.CRITERIA), default=pc.DEFAULT_CRITERION,
+              show_default=True,
               help="feel: felt differences in JNDs; information: bits; orientation / minmax: "
                    "the seed's paradigms alone.")
-@click.option("--family", type=click.Choice(PROBE_FAMILIES), default=None,
+@click.option("--family", type=click.Choice(pc.PATH_FAMILIES), default=None,
               help="stroke (default) or circle (default for --criterion minmax).")
-@click.option("--target", type=click.Choice(PROBE_TARGETS), default="candidate", show_default=True,
+@click.option("--target", type=click.Choice(pc.TARGETS), default=pc.DEFAULT_TARGET,
+              show_default=True,
               help="Tell every candidate apart, or only the impaired groups.")
 @click.option("--max-probes", type=click.IntRange(min=1), default=None,
               help="At most this many probes (default: number of candidates - 1).")
@@ -344,7 +319,7 @@ def _classification_text(cl: Classification) -> str:
 @candidate_options
 @noise_options
 @limit_options
-@click.option("--predictor", type=click.Choice(CLASSIFY_PREDICTORS), default="replay",
+@click.option("--predictor", type=click.Choice(pc.PREDICTORS), default=pc.DEFAULT_PREDICTOR,
               show_default=True,
               help="replay: the recorded motion drives each candidate's virtual arm (rendered "
                    "traces); rigid: muscles and inertia of a rigidly held arm (measured "
@@ -514,7 +489,7 @@ def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tu
               help="Force-noise draws met by each execution.")
 @click.option("--max-probes", type=click.IntRange(min=1), default=2, show_default=True,
               help="Probes in the designed set (the seed's set has 2).")
-@click.option("--criterion", type=click.Choice(PROBE_CRITERIA), default="information",
+@click.option("--criterion", type=click.Choice(pc.CRITERIA), default="information",
               show_default=True)
 @noise_options
 @click.option("--seed", "rng_seed", type=int, default=0, show_default=True)

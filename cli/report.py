@@ -75,8 +75,9 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     Terms (R1, R2, catch, χ²/n, under-determined, ...): docs/glossary.md.
     """
     # the report's numerics load when it runs, so 'report --help' starts at once
+    from fieldbank.engine import default_jobs
     from fieldbank.interventions.catalogue import KINDS
-    from fieldbank.interventions.report import Selection, build_report, default_jobs
+    from fieldbank.interventions.report import Selection, build_report
     from fieldbank.scheduler import resolve_scheduler
 
     bad = [k for k in kinds if k not in KINDS]

@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.choices import VALIDATE_CHANGE_TOLERANCE, VALIDATE_MAX_CHANGE_SE
 from fieldbank.cli.options import (
     MODEL_ID,
     PLAN_ID,
@@ -32,6 +31,7 @@ from fieldbank.cli.options import (
     say,
     scheduler_option,
 )
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 
 if TYPE_CHECKING:  # typing only: the checks load when the command runs ('--help' at once)
     from fieldbank.fitting.crossval import CrossValidation
@@ -72,7 +72,7 @@ _SHORT = {"prediction confirmed": "confirmed", "partial effect": "partial",
 
 def overall(rep: ValidationReport) -> str:
     """The one overall line: the verdict, the plans contradicted, the count of the others."""
-    from fieldbank.interventions.validate import CONTRADICTED
+    from fieldbank.interventions.realised import CONTRADICTED
 
     bad = [f"plan {p.plan_id} ({p.patient or 'no patient'}) {_SHORT[p.verdict]}"
            for p in rep.contradicted]
@@ -97,7 +97,7 @@ def _plan_lines(p: PlanValidation) -> list[str]:
 
 
 def _session_lines(s: SessionCheck) -> list[str]:
-    from fieldbank.interventions.validate import CONTRADICTED
+    from fieldbank.interventions.realised import CONTRADICTED
 
     timing = "botulinum re-timed" if s.retimed else "as stored"
     verdict = s.verdict.upper() if s.verdict in CONTRADICTED else s.verdict
@@ -161,10 +161,10 @@ def loo_text(cv: CrossValidation) -> str:
 @click.option("--model", "model_id", type=MODEL_ID, default=None,
               help="With --loo: the fitted model to cross-validate.")
 @click.option("--change-tolerance", type=click.FloatRange(0.0, 10.0, min_open=True),
-              default=VALIDATE_CHANGE_TOLERANCE, show_default=True,
+              default=CHANGE_TOLERANCE, show_default=True,
               help="'As predicted' means within this fraction of the predicted change.")
 @click.option("--max-change-se", type=click.FloatRange(0.0, 10.0, min_open=True),
-              default=VALIDATE_MAX_CHANGE_SE, show_default=True,
+              default=MAX_CHANGE_SE, show_default=True,
               help="The realised fraction decides a verdict only when its SE is at most this.")
 @scheduler_option
 @db_option

@@ -14,13 +14,6 @@ from typing import Any
 
 import click
 
-from fieldbank.cli.choices import (
-    BOTULINUM_SESSION_WARNING_UNITS,
-    BOTULINUM_WEEKS_SINCE,
-    CASTING_DELTA_M,
-    DOSE_UNIT,
-    WHATIF_INTERVAL_SAMPLES,
-)
 from fieldbank.cli.options import (
     GIVEN_DATE,
     SESSION_LABEL,
@@ -33,6 +26,8 @@ from fieldbank.cli.options import (
 )
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.haptic.client import push_models
+from fieldbank.interventions.defaults import DOSE_UNIT, value
+from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
 
 
 @click.command("whatif")
@@ -48,17 +43,17 @@ from fieldbank.haptic.client import push_models
               help=f"Botulinum toxin A in {DOSE_UNIT}, e.g. ef=200U,ee=100U (one injection "
                    "session).")
 @click.option("--session-limit", "session_limit", type=float,
-              default=BOTULINUM_SESSION_WARNING_UNITS, show_default=True,
+              default=value("botulinum.session_warning_units"), show_default=True,
               help=f"Warn when a botulinum session exceeds this many {DOSE_UNIT} (adult "
-                   "upper-limb label maximum 400).")
+                   f"upper-limb label maximum {value('botulinum.session_warning_units'):g}).")
 @click.option("--weeks", type=float, default=None,
-              help=f"Weeks since the injection (default {BOTULINUM_WEEKS_SINCE:g}, "
+              help=f"Weeks since the injection (default {value('botulinum.weeks_since'):g}, "
                    "the peak).")
 @click.option("--lengthen", multiple=True, metavar="GROUP=LENGTH",
               help="Lengthening surgery, e.g. bf=1cm (the unit is required: cm, mm or m).")
 @click.option("--tenotomy", multiple=True, metavar="GROUP", help="Tenotomy / release.")
 @click.option("--cast", multiple=True, metavar="GROUP[=LENGTH]",
-              help=f"Serial casting (default +{CASTING_DELTA_M * 1000:g} mm).")
+              help=f"Serial casting (default +{value('casting.delta_m') * 1000:g} mm).")
 @click.option("--rhizotomy", metavar="GROUPS[:FACTOR]",
               help="Selective dorsal rhizotomy: 'all' or e.g. ef,ee:0.4 (β × factor).")
 @click.option("--baclofen", metavar="GROUPS[:FACTOR]",
@@ -88,7 +83,7 @@ from fieldbank.haptic.client import push_models
               help="Run on a model from a poor fit anyway (recorded in the output).")
 @click.option("--interval-samples", type=click.IntRange(min=0), default=None,
               help="Fit samples carried through the plan for 95% intervals (default "
-                   f"{WHATIF_INTERVAL_SAMPLES}; 0: none).")
+                   f"{DEFAULT_INTERVAL_SAMPLES}; 0: none).")
 @click.option("--session", "session", type=SESSION_LABEL, default=None,
               help="With PATIENT: start from the model fitted to this session's maps (default: "
                    "the latest measured session's; the output names it).")
@@ -163,7 +158,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
                      save_to=(lambda: open_db(db_url)) if save and not render else None,
                      session_limit_units=session_limit,
                      accept_poor_fit=accept_poor_fit,
-                     interval_samples=(WHATIF_INTERVAL_SAMPLES if interval_samples is None
+                     interval_samples=(DEFAULT_INTERVAL_SAMPLES if interval_samples is None
                                        else interval_samples),
                      given_on=None if render else given_on)
     rendered = None

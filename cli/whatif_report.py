@@ -15,7 +15,7 @@ import textwrap
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from fieldbank.cli.choices import DOSE_UNIT
+from fieldbank.interventions.defaults import DOSE_UNIT
 from fieldbank.params import GROUP_NAMES
 
 if TYPE_CHECKING:  # typing only: 'whatif --help' loads no numerics

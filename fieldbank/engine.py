@@ -54,7 +54,7 @@ from sqlalchemy.engine import make_url
 from fieldbank.errors import FieldbankError, ParameterError
 from fieldbank.scheduler import Scheduler, resolve_scheduler
 from fieldbank.storage import Database
-from fieldbank.storage.records import JobRecord, JobRunRecord
+from fieldbank.stored.records import JobRecord, JobRunRecord
 
 if TYPE_CHECKING:  # typing only: Dask loads when a batch runs on a cluster
     from distributed import Client

@@ -37,7 +37,8 @@ class FieldbankError(Exception):
 
 
 class ParameterError(FieldbankError, ValueError):
-    """A model parameter is missing, not finite, or outside its allowed range."""
+    """A model parameter, or an argument of the library, is missing, not finite, outside its
+    allowed range or not one of the names it may be."""
 
 
 class UnreachableError(FieldbankError, ValueError):

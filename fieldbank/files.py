@@ -29,15 +29,14 @@ import errno
 import json
 import math
 import os
-import secrets
 import shutil
 import stat
 from collections.abc import Mapping
 from datetime import date, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Self
 
-from fieldbank.errors import FileRefused, Problem, ValidationError
+from fieldbank.errors import FieldbankError, FileRefused, Problem, ValidationError
 
 #: Largest JSON document (plan, parameters) read from a file, bytes.
 MAX_DOCUMENT_BYTES = 16 << 20
@@ -103,7 +102,9 @@ def _new_temp(p: Path) -> tuple[int, str]:
     plain ``open``: reading the umask would mean setting it, for every thread at once."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC | os.O_NOFOLLOW
     for _ in range(100):
-        tmp = os.path.join(p.parent, f".{p.name}.{secrets.token_hex(6)}")
+        # os.urandom is what secrets.token_hex reads; the secrets module would load hmac and
+        # OpenSSL into every command at start-up
+        tmp = os.path.join(p.parent, f".{p.name}.{os.urandom(6).hex()}")
         try:
             return os.open(tmp, flags, 0o666), tmp
         except FileExistsError:
@@ -209,6 +210,40 @@ def read_json_document(path: str | Path, max_bytes: int = MAX_DOCUMENT_BYTES) ->
     return parse_json_document(read_regular_file(path, max_bytes), os.fspath(path))
 
 
+class JsonDocument:
+    """A value kept as a JSON document (an arm's parameters, a plan): ``from_json`` and
+    ``from_file`` read the document the one way (:func:`parse_json_document`,
+    :func:`read_json_document`) and hand it to the class's ``from_dict``; a document that is
+    not one is raised as the class's ``document_error``, located."""
+
+    #: What the document is called in messages when no file names it.
+    document_name: ClassVar[str] = "document"
+    #: The error a document that cannot be read is raised as.
+    document_error: ClassVar[type[FieldbankError]] = FieldbankError
+
+    @classmethod
+    def from_dict(cls, data: Any, where: str) -> Self:
+        raise NotImplementedError
+
+    @classmethod
+    def from_json(cls, text: str, where: str | None = None) -> Self:
+        name = where or cls.document_name
+        try:
+            data = parse_json_document(text, name)
+        except ValidationError as exc:
+            raise cls.document_error(f"{exc}.") from None
+        return cls.from_dict(data, name)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Self:
+        p = Path(path)
+        try:
+            data = read_json_document(p)
+        except (FileRefused, ValidationError) as exc:
+            raise cls.document_error(f"{exc}.") from None
+        return cls.from_dict(data, str(p))
+
+
 class _NotANumber(ValueError):
     pass
 
@@ -307,7 +342,7 @@ def write_directory(path: str | Path, files: Mapping[str, bytes | str], *,
 def _new_temp_dir(p: Path, mode: int) -> str:
     """A new, empty temporary directory beside ``p`` (``mode`` less the umask), its path."""
     for _ in range(100):
-        tmp = os.path.join(p.parent, f".{p.name}.{secrets.token_hex(6)}")
+        tmp = os.path.join(p.parent, f".{p.name}.{os.urandom(6).hex()}")  # as in _new_temp
         try:
             os.mkdir(tmp, mode)
             return tmp

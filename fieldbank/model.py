@@ -50,11 +50,6 @@ FloatArray = NDArray[np.float64]
 #: Four same-shaped arrays: the entries of a 2 × 2 matrix per point, row by row.
 Quad = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
-#: Version of the arm model and of how a fit estimates it: raised with every change of the
-#: equations, of the fitter or of its defaults that changes what a fit of the same maps gives.
-#: Every fit records it; ``fieldbank fit --all --older-than N`` refits what older versions made.
-MODEL_VERSION = 1
-
 #: Elbow angles closer than this to 0 or π make the endpoint Jacobian singular.
 SINGULAR_ELBOW_RAD = 0.02
 #: Gauss-Legendre segments (in units of the smoothing width w) for the potential's
@@ -72,10 +67,10 @@ def _as_points(x: ArrayLike, name: str = "positions") -> FloatArray:
     if a.ndim == 1:
         a = a.reshape(1, -1)
     if a.ndim != 2 or a.shape[1] != 2:
-        raise ValueError(f"{name} must have shape (N, 2); got {np.shape(x)}.")
+        raise ParameterError(f"{name} must have shape (N, 2); got {np.shape(x)}.")
     if not np.all(np.isfinite(a)):
         bad = int(np.argmax(~np.all(np.isfinite(a), axis=1)))
-        raise ValueError(f"{name}[{bad}] is not finite: {a[bad].tolist()}.")
+        raise ParameterError(f"{name}[{bad}] is not finite: {a[bad].tolist()}.")
     return a
 
 
@@ -368,7 +363,7 @@ class Arm:
         else:
             vm = np.broadcast_to(np.asarray(v, dtype=float), (n, 2)).copy()
             if not np.all(np.isfinite(vm)):
-                raise ValueError("velocity must be finite.")
+                raise ParameterError("velocity must be finite.")
             if self.mirror:
                 vm[:, 0] *= -1.0
         q = self._ik_model(xm)

@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import io
 import json
-import os
-import tempfile
 import uuid
 from datetime import UTC, date, datetime, time
 from typing import Any
@@ -44,6 +42,7 @@ from fieldbank.maps import (
     FieldMap,
 )
 from fieldbank.measure.budget import ReadBudget
+from fieldbank.measure.nwbseries import nwb_bytes, opened
 from fieldbank.storage import Database
 
 #: Unit of each exported column (NWB's DynamicTable columns carry it in the description).
@@ -64,7 +63,7 @@ def _utc(t: datetime) -> datetime:
 def patient_nwb(db: Database, patient_code: str) -> bytes:
     """Everything stored about ``patient_code`` as the bytes of one NWB file."""
     from hdmf.common import DynamicTable, VectorData
-    from pynwb import NWBHDF5IO, NWBFile, TimeSeries
+    from pynwb import NWBFile, TimeSeries
     from pynwb.epoch import TimeIntervals
     from pynwb.file import Subject
 
@@ -205,15 +204,7 @@ def patient_nwb(db: Database, patient_code: str) -> bytes:
             n_trials += 1
     if n_trials:
         nwb.add_time_intervals(trials)
-    fd, path = tempfile.mkstemp(suffix=".nwb")
-    os.close(fd)
-    try:
-        with NWBHDF5IO(path, "w") as io_:
-            io_.write(nwb)
-        with open(path, "rb") as f:
-            return f.read()
-    finally:
-        os.unlink(path)
+    return nwb_bytes(nwb)
 
 
 def _param_unit(name: str) -> str:
@@ -240,14 +231,9 @@ def read_nwb_maps(name: str, data: bytes, budget: ReadBudget | None = None
     ``session`` (and ``session_date``) of the export in its metadata, so that an export of
     several sessions goes back into them (:mod:`fieldbank.ingest.batch`). Every column is
     charged to ``budget`` by its declared size before it is read."""
-    import h5py
-    from pynwb import NWBHDF5IO
-
     bud = budget or ReadBudget(1 << 30, len(data))
     out = []
-    with h5py.File(io.BytesIO(data), "r") as h5, \
-            NWBHDF5IO(file=h5, mode="r", load_namespaces=True) as io_:
-        nwb = io_.read()
+    with opened(data) as nwb:
         mod = nwb.processing["maps"]
         for tname in sorted(mod.data_interfaces, key=lambda s: (len(s), s)):
             where = f"{name}:/processing/maps/{tname}"

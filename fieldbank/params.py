@@ -27,11 +27,10 @@ import json
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import MISSING, asdict, dataclass, fields
-from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import FileRefused, ParameterError, ValidationError
-from fieldbank.files import parse_json_document, read_json_document
+from fieldbank.errors import ParameterError
+from fieldbank.files import JsonDocument
 from fieldbank.validation import Interval, check_number, check_tuple
 
 GROUPS: tuple[str, ...] = ("sf", "se", "ef", "ee", "bf", "be")
@@ -179,7 +178,7 @@ def _in_bounds(name: str, v: Any) -> bool:
 
 
 @dataclass(frozen=True)
-class ArmParams:
+class ArmParams(JsonDocument):
     """Constants of one arm, SI units, right-arm convention (a left arm is mirrored in x).
 
     Parameters
@@ -218,6 +217,9 @@ class ArmParams:
         passive force of eq. 5 acts on λ - λ_rest - offset. A tendon lengthening or serial
         casting adds to it; a contracture is negative. The reflex terms keep λ_rest.
     """
+
+    document_name = "parameters"
+    document_error = ParameterError
 
     side: str
     body_mass_kg: float
@@ -351,7 +353,7 @@ class ArmParams:
         return cls(**values)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], where: str = "parameters") -> ArmParams:
+    def from_dict(cls, data: Any, where: str = "parameters") -> ArmParams:
         """Read the JSON document form (see :meth:`to_dict`); every field must be present."""
         if not isinstance(data, Mapping):
             raise ParameterError(f"{where}: expected a JSON object, got {type(data).__name__}.")
@@ -384,22 +386,6 @@ class ArmParams:
         except ParameterError as exc:
             raise ParameterError(f"{where}: {exc}") from None
 
-    @classmethod
-    def from_json(cls, text: str, where: str = "parameters") -> ArmParams:
-        try:
-            data = parse_json_document(text, where)
-        except ValidationError as exc:
-            raise ParameterError(f"{exc}.") from None
-        return cls.from_dict(data, where)
-
-    @classmethod
-    def from_file(cls, path: str | Path) -> ArmParams:
-        p = Path(path)
-        try:
-            data = read_json_document(p)
-        except (FileRefused, ValidationError) as exc:
-            raise ParameterError(f"{exc}.") from None
-        return cls.from_dict(data, str(p))
 
     # --- conversions ---------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

@@ -35,10 +35,10 @@ import numpy as np
 
 from fieldbank.ingest.hdf5fmt import write_hdf5
 from fieldbank.ingest.matfmt import write_mat5, write_mat73
-from fieldbank.ingest.units import KGF_N
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
+from fieldbank.units import KGF_N
 
 SOURCE = "fieldbank synthetic sample (not patient data)"
 NOISE_FRACTION = 0.05

@@ -21,13 +21,13 @@ looked up):
   ``[scheduler] insecure = true``) accepts the risk, which is then said on every run.
 
 An address never carries a user or a password (:func:`fieldbank.config` refuses one without
-echoing it). This module imports only the standard library until a connection is made; the
-certificate checks load ``cryptography``, the connection ``distributed``.
+echoing it). This module imports only the standard library until a connection is made (and
+asyncio not before then: the batch commands' options import it); the certificate checks load
+``cryptography``, the connection ``distributed``.
 """
 
 from __future__ import annotations
 
-import asyncio
 import ipaddress
 import os
 import stat
@@ -125,6 +125,10 @@ class Scheduler:
             scheduler, or it refused this client's certificate - a TLS refusal looks the same
             from here).
         """
+        # asyncio with the connection: a command that only names a scheduler (every batch
+        # command's options) starts without the event loop's modules
+        import asyncio
+
         from distributed import Client
         from distributed.comm import connect
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from fieldbank.dynamics import inertia_constants
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm
+from fieldbank.validation import Interval, check_fields
 
 #: Virtual coupling defaults (assumption): stiff enough to feel the arm's fields, soft enough to
 #: stay passive at 1 kHz with ~1.5 kg of apparent hand mass.
@@ -32,6 +33,15 @@ DEFAULT_COUPLING_N_S_PER_M = 15.0
 #: Joint stops beyond the range of motion (assumption).
 DEFAULT_STOP_N_M_PER_RAD = 50.0
 DEFAULT_STOP_N_M_S_PER_RAD = 1.0
+
+
+#: The range of each gain of :class:`CouplingConfig`.
+COUPLING_BOUNDS: dict[str, Interval] = {
+    "stiffness_n_per_m": Interval(0.0, None, "N/m"),
+    "damping_n_s_per_m": Interval(0.0, None, "N·s/m"),
+    "stop_stiffness_n_m_per_rad": Interval(0.0, None, "N·m/rad"),
+    "stop_damping_n_m_s_per_rad": Interval(0.0, None, "N·m·s/rad"),
+}
 
 
 @dataclass(frozen=True)
@@ -44,13 +54,7 @@ class CouplingConfig:
     stop_damping_n_m_s_per_rad: float = DEFAULT_STOP_N_M_S_PER_RAD
 
     def __post_init__(self) -> None:
-        for name in ("stiffness_n_per_m", "damping_n_s_per_m", "stop_stiffness_n_m_per_rad",
-                     "stop_damping_n_m_s_per_rad"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ParameterError(
-                    f"The '{name}' coupling parameter must be a finite number >= 0; got {v!r}."
-                )
+        check_fields(self, COUPLING_BOUNDS, what="coupling parameter")
 
 
 class SimState:

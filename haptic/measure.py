@@ -59,7 +59,7 @@ from fieldbank.haptic.safety import Mode, SafetyConfig
 from fieldbank.home import data_home
 from fieldbank.ingest import IngestReport, ingest_data
 from fieldbank.measure.nwbraw import RecordingInfo, write_recording
-from fieldbank.measure.protocol import Plan, ProtocolConfig, Segment, plan
+from fieldbank.measure.protocol import ProtocolConfig, ProtocolPlan, Segment, plan
 from fieldbank.measure.recording import Recording, Trial
 from fieldbank.measure.visibility import ProtocolSight, check_must_see, sight
 from fieldbank.model import Arm
@@ -119,7 +119,7 @@ def _approach(start: tuple[float, float], to: tuple[float, float], speed: float)
 Progress = Callable[[float, float], None]
 
 
-def run_protocol(url: str, plan: Plan, config: MeasureConfig | None = None,
+def run_protocol(url: str, plan: ProtocolPlan, config: MeasureConfig | None = None,
                  clock: object = time.perf_counter,
                  progress: Progress | None = None) -> tuple[Recording, np.ndarray]:
     """Drive the robot at ``url`` through ``plan``; the recording and the commanded forces.
@@ -141,7 +141,7 @@ def run_protocol(url: str, plan: Plan, config: MeasureConfig | None = None,
         link.close()
 
 
-def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
+def _run(link: RobotLink, url: str, plan: ProtocolPlan, cfg: MeasureConfig,
          clock: object, progress: Progress | None = None) -> tuple[Recording, np.ndarray]:
     dt = 1.0 / cfg.rate_hz
     link.handshake(cfg.rate_hz, round(cfg.safety.state_timeout_ms) or 20)
@@ -211,7 +211,7 @@ def _run(link: RobotLink, url: str, plan: Plan, cfg: MeasureConfig,
     return rec, data[:, 7:9]  # type: ignore[return-value]
 
 
-def _recording(data: np.ndarray, plan: Plan, url: str, fault: str) -> Recording | None:
+def _recording(data: np.ndarray, plan: ProtocolPlan, url: str, fault: str) -> Recording | None:
     if len(data) < 2:
         return None
     end = float(data[-1, 0])
@@ -234,7 +234,7 @@ def _recording(data: np.ndarray, plan: Plan, url: str, fault: str) -> Recording 
                      source=f"fieldbank haptic measure on {mask_url(url)}")
 
 
-def check_plan_fits(plan: Plan, cfg: MeasureConfig) -> None:
+def check_plan_fits(plan: ProtocolPlan, cfg: MeasureConfig) -> None:
     """Refuse a plan whose reference leaves the safety workspace (robot frame) or whose pass
     speed is over the speed limit, before the robot moves."""
     x0, x1, y0, y1 = cfg.safety.workspace_m
@@ -330,7 +330,7 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
                          ingested, len(rec.trials), dropped, the_plan.notes, seen)
 
 
-def _fits(p: Plan, cfg: MeasureConfig) -> bool:
+def _fits(p: ProtocolPlan, cfg: MeasureConfig) -> bool:
     try:
         check_plan_fits(p, cfg)
     except ParameterError:

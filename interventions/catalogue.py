@@ -37,8 +37,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar, TypeVar, cast
 
-import numpy as np
-
 from fieldbank.errors import ParameterError
 from fieldbank.interventions.defaults import DOSE_UNIT, TOXIN, value
 from fieldbank.interventions.errors import InterventionError
@@ -78,17 +76,17 @@ def _raise(kind: str, problems: list[str]) -> None:
 
 
 def _scaled(params: ArmParams, name: str, factors: Mapping[str, float]) -> tuple[float, ...]:
-    row = np.array(getattr(params, name), dtype=float)
+    row = [float(v) for v in getattr(params, name)]
     for g, f in factors.items():
         row[GROUP_INDEX[g]] *= f
-    return tuple(row.tolist())
+    return tuple(row)
 
 
 def _shifted(params: ArmParams, name: str, deltas: Mapping[str, float]) -> tuple[float, ...]:
-    row = np.array(getattr(params, name), dtype=float)
+    row = [float(v) for v in getattr(params, name)]
     for g, d in deltas.items():
         row[GROUP_INDEX[g]] += d
-    return tuple(row.tolist())
+    return tuple(row)
 
 
 def _replace(kind: str, params: ArmParams, **changes: Any) -> ArmParams:
@@ -158,6 +156,23 @@ class Intervention:
             return sub(**body)
         except TypeError as exc:  # a missing required field
             raise InterventionError(f"{kind}: {exc}.") from None
+
+
+@dataclass(frozen=True)
+class OneGroup(Intervention):
+    """An intervention on one muscle group (``group``): the group and the fields of its
+    bounds table checked together, every problem in one error."""
+
+    group: str = ""
+
+    def __post_init__(self) -> None:
+        problems: list[str] = []
+        _check_group(problems, "group", self.group)
+        _check_bounds(problems, self)
+        _raise(self.kind, problems)
+
+    def targets(self) -> tuple[str, ...]:
+        return (self.group,)
 
 
 # --- botulinum toxin A -----------------------------------------------------------------------
@@ -296,7 +311,7 @@ class Botulinum(Intervention):
 
 # --- lengthening -----------------------------------------------------------------------------
 @dataclass(frozen=True)
-class Lengthening(Intervention):
+class Lengthening(OneGroup):
     """Tendon or muscle lengthening surgery of one group by ``delta_m``.
 
     The passive onset moves by Δ (slack offset + Δ). The reflex force capacity α drops by the
@@ -312,20 +327,11 @@ class Lengthening(Intervention):
         "width_factor": Interval(0.0, 10.0, low_closed=False),
     }
 
-    group: str = ""
     delta_m: float = 0.0
     alpha_factor: float | None = None
     fibre_length_m: float = value("lengthening.fibre_length_m")
     width_factor: float = value("lengthening.width_factor")
 
-    def __post_init__(self) -> None:
-        problems: list[str] = []
-        _check_group(problems, "group", self.group)
-        _check_bounds(problems, self)
-        _raise(self.kind, problems)
-
-    def targets(self) -> tuple[str, ...]:
-        return (self.group,)
 
     def force_factor(self) -> float:
         """Multiplier on α: the given ``alpha_factor`` or the force-length default."""
@@ -347,7 +353,7 @@ class Lengthening(Intervention):
 
 # --- tenotomy --------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class Tenotomy(Intervention):
+class Tenotomy(OneGroup):
     """Tenotomy or release of one group: Km and α × residual fraction (default 0)."""
 
     kind: ClassVar[str] = "tenotomy"
@@ -357,17 +363,8 @@ class Tenotomy(Intervention):
     }
     NO_CHANGE: ClassVar[dict[str, float]] = {"residual_fraction": 1.0}
 
-    group: str = ""
     residual_fraction: float = value("tenotomy.residual_fraction")
 
-    def __post_init__(self) -> None:
-        problems: list[str] = []
-        _check_group(problems, "group", self.group)
-        _check_bounds(problems, self)
-        _raise(self.kind, problems)
-
-    def targets(self) -> tuple[str, ...]:
-        return (self.group,)
 
     def apply(self, params: ArmParams) -> ArmParams:
         f = {self.group: float(self.residual_fraction)}
@@ -440,7 +437,7 @@ class Baclofen(_ReflexReduction):
 
 # --- serial casting --------------------------------------------------------------------------
 @dataclass(frozen=True)
-class SerialCasting(Intervention):
+class SerialCasting(OneGroup):
     """Serial casting / sustained stretch of one group: slack + Δ, Km × factor."""
 
     kind: ClassVar[str] = "casting"
@@ -450,18 +447,9 @@ class SerialCasting(Intervention):
         "km_factor": Interval(0.0, 1.0, low_closed=False),
     }
 
-    group: str = ""
     delta_m: float = value("casting.delta_m")
     km_factor: float = value("casting.km_factor")
 
-    def __post_init__(self) -> None:
-        problems: list[str] = []
-        _check_group(problems, "group", self.group)
-        _check_bounds(problems, self)
-        _raise(self.kind, problems)
-
-    def targets(self) -> tuple[str, ...]:
-        return (self.group,)
 
     def apply(self, params: ArmParams) -> ArmParams:
         return _replace(

@@ -29,7 +29,6 @@ from fieldbank.figures import render
 from fieldbank.interventions.catalogue import KINDS
 from fieldbank.interventions.defaults import DEFAULTS, DOSE_UNIT, value
 from fieldbank.interventions.errors import InterventionError
-from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.plot import comparison_page
 from fieldbank.interventions.spec import build_plan
@@ -41,6 +40,7 @@ from fieldbank.interventions.whatif import (
     run_whatif,
     save_plan,
 )
+from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
 from fieldbank.model import Arm
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import GROUP_NAMES, GROUPS

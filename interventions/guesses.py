@@ -55,18 +55,18 @@ import numpy as np
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, SCALE, ratio_of_score
+from fieldbank.fitchoices import MODEL_VERSION
 from fieldbank.fitting.prior import PRIOR_VERSION, GuessRange, Prior, draw, ranges_from_report
 from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.samplemetrics import SampleMetrics, sample_metrics
 from fieldbank.interventions.suggest import reflex_test
-from fieldbank.model import MODEL_VERSION, Arm, FloatArray
+from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
+from fieldbank.model import Arm, FloatArray
 from fieldbank.modelsource import ModelSource
 from fieldbank.params import ArmParams
 
-#: Parameter samples a what-if runs through its plan (at most; the fit keeps 40 by default).
-DEFAULT_INTERVAL_SAMPLES = 40
 #: Percentiles of the reported intervals.
 INTERVAL_PERCENTILES = (2.5, 97.5)
 #: An interval rests on a guess when drawing the held parameters from their prior range
@@ -473,7 +473,7 @@ class IntervalSet:
 
 
 #: Raised with every change of how intervals are computed; with
-#: :data:`fieldbank.model.MODEL_VERSION` part of :func:`interval_key`. 2: the bands of what
+#: :data:`fieldbank.fitchoices.MODEL_VERSION` part of :func:`interval_key`. 2: the bands of what
 #: the maps identified kept beside the bands with the guesses drawn.
 INTERVALS_VERSION = 2
 #: The suffix of a band of what the maps identified (``bands["after identified"]``): the

@@ -17,15 +17,12 @@ Reading a document checks every step and reports every bad one at once, each as
 
 from __future__ import annotations
 
-import hashlib
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-from fieldbank.errors import FileRefused, ValidationError
-from fieldbank.files import parse_json_document, read_json_document
+from fieldbank.files import JsonDocument
 from fieldbank.interventions.catalogue import Botulinum, Intervention
 from fieldbank.interventions.defaults import DOSE_UNIT, value
 from fieldbank.interventions.errors import InterventionError
@@ -37,12 +34,14 @@ PLAN_VERSION = 1
 
 def params_sha256(params: ArmParams) -> str:
     """SHA-256 of the canonical JSON of a parameter set (sorted keys, no whitespace)."""
+    import hashlib  # OpenSSL: loaded when a hash is taken, not when 'plans list' reads a plan
+
     text = json.dumps(params.to_dict(), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
 @dataclass(frozen=True)
-class Plan:
+class Plan(JsonDocument):
     """An ordered list of interventions.
 
     Parameters
@@ -51,6 +50,9 @@ class Plan:
     label : str
         Free text shown in reports.
     """
+
+    document_name = "plan"
+    document_error = InterventionError
 
     steps: tuple[Intervention, ...]
     label: str = ""
@@ -118,6 +120,8 @@ class Plan:
         return json.dumps(self.to_dict(), indent=2)
 
     def sha256(self) -> str:
+        import hashlib  # as in params_sha256
+
         text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -163,22 +167,6 @@ class Plan:
             raise InterventionError(f"{where}: {len(problems)} problems:\n{lines}")
         return cls(tuple(steps), label)
 
-    @classmethod
-    def from_json(cls, text: str, where: str = "plan") -> Plan:
-        try:
-            data = parse_json_document(text, where)
-        except ValidationError as exc:
-            raise InterventionError(f"{exc}.") from None
-        return cls.from_dict(data, where)
-
-    @classmethod
-    def from_file(cls, path: str | Path) -> Plan:
-        p = Path(path)
-        try:
-            data = read_json_document(p)
-        except (FileRefused, ValidationError) as exc:
-            raise InterventionError(f"{exc}.") from None
-        return cls.from_dict(data, str(p))
 
 
 @dataclass(frozen=True)

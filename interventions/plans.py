@@ -20,12 +20,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import date, datetime
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fieldbank.interventions.catalogue import KINDS
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
-from fieldbank.storage import Database, PlanRecord
+from fieldbank.stored.listing import Reads
+from fieldbank.stored.records import PlanRecord
+
+if TYPE_CHECKING:  # typing only: listing plans reads through fieldbank.stored.listing
+    from fieldbank.storage import Database
 
 
 @dataclass(frozen=True)
@@ -78,7 +82,7 @@ def plan_of(rec: PlanRecord) -> Plan:
     return Plan.from_dict(doc, where=f"stored plan {rec.id}")
 
 
-def list_plans(db: Database, patient: str | None = None, kind: str | None = None,
+def list_plans(db: Reads, patient: str | None = None, kind: str | None = None,
                given: bool | None = None) -> list[PlanSummary]:
     """The stored plans, oldest first: of ``patient``, with a step of ``kind``, given (True)
     or only explored (False)."""

@@ -100,9 +100,11 @@ from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES, synthesize
 from fieldbank.fitting.problem import map_sd
 from fieldbank.fitting.quality import MapFit, Thresholds, map_fit
 from fieldbank.interventions.spread import arm_like
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.maps import FieldMap, model_map_like, model_map_values
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import BOUNDS, GROUPS, ArmParams
+from fieldbank.validation import Interval, check_fields
 
 #: Verdicts of a session, a plan and a whole check.
 CONFIRMED = "prediction confirmed"
@@ -118,10 +120,6 @@ CONTRADICTED = (FAILED, OVER, PARTIAL)
 Z = 2.0
 #: Smallest whitened size of the predicted change (sd) at which the maps can see it.
 MIN_SENSITIVITY = 4.0
-#: The realised fraction decides a verdict only when its SE is at most this.
-MAX_CHANGE_SE = 0.25
-#: "As predicted" means within this fraction of the predicted change (80-120%).
-CHANGE_TOLERANCE = 0.2
 #: A confirmation needs at least this fraction of the predicted change, at 2 SE.
 CONFIRM_FLOOR = 0.5
 #: A realised fraction whose SE exceeds this is not printed: its 2-SE interval spans two whole
@@ -141,6 +139,16 @@ _FIELDS = {"alpha_n": "alpha", "beta": "beta", "km_n_per_m": "km", "slack_offset
 _REFLEX_FIELDS = ("alpha_n", "beta")
 
 
+#: The range of each threshold of :class:`Rules`.
+RULES_BOUNDS: dict[str, Interval] = {
+    "tolerance": Interval(0.0, 1.0, low_closed=False, high_closed=False),
+    "max_se": Interval(0.0, None, low_closed=False),
+    "confirm_floor": Interval(0.0, 1.0, high_closed=False),
+    "min_sensitivity": Interval(0.0, None, "sd", low_closed=False),
+    "z": Interval(0.0, None, low_closed=False),
+}
+
+
 @dataclass(frozen=True)
 class Rules:
     """The verdict's thresholds (module docstring); defaults: the module constants."""
@@ -150,6 +158,9 @@ class Rules:
     confirm_floor: float = CONFIRM_FLOOR
     min_sensitivity: float = MIN_SENSITIVITY
     z: float = Z
+
+    def __post_init__(self) -> None:
+        check_fields(self, RULES_BOUNDS, what="verdict threshold")
 
     def to_dict(self) -> dict[str, float]:
         return {"change_tolerance": self.tolerance, "max_change_se": self.max_se,
@@ -474,29 +485,3 @@ def positions_of(changes: Sequence[MapChange]) -> FloatArray:
 
 
 # --- the verdict ------------------------------------------------------------------------------
-def decide(f: float, se: float, rules: Rules = DEFAULT_RULES) -> tuple[str, str]:
-    """Verdict and its reason from a decided realised fraction (SE ≤ ``rules.max_se``)."""
-    lo, hi = f - rules.z * se, f + rules.z * se
-    top = 1.0 - rules.tolerance
-    span = f"{lo:.2f} to {hi:.2f} at {rules.z:g} SE"
-    if f > 1.0 + rules.tolerance:
-        if lo > 1.0:
-            return OVER, (f"the change is stronger than predicted: {f:.2f}, beyond "
-                          f"{1 + rules.tolerance:g}, and {span}, above 1")
-        return INCONCLUSIVE, (f"the maps leave open whether the change came as predicted or "
-                              f"stronger: {f:.2f}, beyond {1 + rules.tolerance:g}, but {span} "
-                              "reaches 1")
-    if hi < top:
-        if hi < 0:
-            return FAILED, f"the maps changed the opposite way to the prediction: {span}"
-        if lo <= 0:
-            return FAILED, (f"no change distinguishable from none where the prediction "
-                            f"expected one: {span}, below {top:g} and reaching 0")
-        return PARTIAL, (f"part of the predicted change came: {span}, clearly above 0 and "
-                         f"below {top:g}")
-    if lo >= rules.confirm_floor:
-        return CONFIRMED, (f"the change came as predicted: {span}, at least "
-                           f"{rules.confirm_floor:g} and reaching {top:g}")
-    return INCONCLUSIVE, (f"the maps leave open whether all or only part of the change came: "
-                          f"{span}, reaching both below {rules.confirm_floor:g} and "
-                          f"{top:g}")

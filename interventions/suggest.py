@@ -17,7 +17,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from fieldbank.evaluate.probing import STRETCH_SPEED_RAD_S, lengthening_direction
-from fieldbank.evaluate.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES, POSITIONED_STRETCH
+from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES
+from fieldbank.evaluate.tone import GRADED_STRETCH, POSITIONED_STRETCH
 from fieldbank.fitting.problem import DEFAULT_RELATIVE_SD, map_sd
 from fieldbank.interventions.realised import Treated
 from fieldbank.interventions.spread import arm_like

@@ -27,11 +27,13 @@ after repeated injections).
 from __future__ import annotations
 
 import math
-
-import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from typing import TYPE_CHECKING
 
 from fieldbank.interventions.errors import InterventionError
+
+if TYPE_CHECKING:  # numpy is imported where a curve is computed: a plan is read without it
+    import numpy as np
+    from numpy.typing import ArrayLike, NDArray
 
 
 def shape_exponent(peak_week: float, wearoff_week: float, wearoff_fraction: float) -> float:
@@ -53,6 +55,8 @@ def time_shape(
     weeks: ArrayLike, peak_week: float, wearoff_week: float, wearoff_fraction: float
 ) -> NDArray[np.float64]:
     """s(t) ∈ [0, 1], 1 at the peak week; ``weeks`` any shape, ≥ 0."""
+    import numpy as np
+
     t = np.asarray(weeks, dtype=float)
     k = shape_exponent(peak_week, wearoff_week, wearoff_fraction)
     r = np.maximum(t, 0.0) / peak_week
@@ -65,6 +69,8 @@ def dose_effect(
     units: ArrayLike, emax: float, ed50_units: float, hill: float
 ) -> NDArray[np.float64]:
     """Peak effect of a dose (Emax curve), same shape as ``units``, in [0, emax)."""
+    import numpy as np
+
     d = np.maximum(np.asarray(units, dtype=float), 0.0)
     dh = d**hill
     return np.asarray(emax * dh / (dh + ed50_units**hill), dtype=float)

@@ -48,13 +48,11 @@ from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.realised import (
-    CHANGE_TOLERANCE,
     CONFIRMED,
     CONTRADICTED,
     DEFAULT_RULES,
     FAILED,
     INCONCLUSIVE,
-    MAX_CHANGE_SE,
     MAX_REPORTED_SE,
     NOT_CHECKED,
     OVER,
@@ -62,7 +60,6 @@ from fieldbank.interventions.realised import (
     Fraction,
     MapChange,
     Rules,
-    decide,
     fraction_of,
     guesses_explain,
     map_changes,
@@ -72,14 +69,15 @@ from fieldbank.interventions.realised import (
 )
 from fieldbank.interventions.spread import NO_FIT, FitSpread, first_session_se
 from fieldbank.interventions.suggest import suggestion
+from fieldbank.interventions.verdict import Evidence, judge
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database, PlanRecord
 
 __all__ = [
-    "CHANGE_TOLERANCE", "CONFIRMED", "CONTRADICTED", "FAILED", "INCONCLUSIVE",
-    "MAX_CHANGE_SE", "NOT_CHECKED", "OVER", "PARTIAL", "LaterSession", "MapCheck", "PlanInputs",
+    "LaterSession", "MapCheck", "PlanInputs",
     "PlanValidation", "SessionCheck", "ValidationReport", "check_plan", "check_session",
     "given_on", "predicted_after", "read_plan_inputs", "validate_plans",
 ]
@@ -167,7 +165,7 @@ class SessionCheck:
     fit_uncertainty: str = ""
     rules: Rules = field(default=DEFAULT_RULES)
     #: The verdict was read from the realised fraction's interval (the rules of
-    #: :func:`~fieldbank.interventions.realised.decide`).
+    #: :func:`~fieldbank.interventions.verdict.decide`).
     decided: bool = False
 
     def to_dict(self) -> dict[str, Any]:
@@ -370,94 +368,26 @@ def check_session(before: ArmParams, plan: Plan | None, stored_after: ArmParams,
                 if unexplained else ())
     # a misfit where the model before was never fitted may be the model's, not a change
     elsewhere = [c.map_id for c, u in poor if u.verdict == "poor" and not spread.covers(c.measured)]
-    interval = None
-    decided = False
     se = _num(f.se)
-    advice = ""
+    interval = None
     if shown:
         assert f.value is not None and se is not None
         interval = (f.value - rules.z * se, f.value + rules.z * se)
-    if not changes:
-        verdict = INCONCLUSIVE
-        reasons.append("no map of the session could be compared")
-    elif unexplained and untested:
-        verdict = INCONCLUSIVE
-        reasons += [r for u in unexplained for r in u.reasons]
-        reasons.append(f"these maps differ from the model before + the predicted change by "
-                       f"more than their noise and the fit's uncertainty, but a change of the "
-                       f"{' and '.join(untested)}, which fit {spread.fit_id} held at the "
-                       "unimpaired value (a guess), explains the difference: it may be that "
-                       "guess, not the plan; refit with maps like these to decide")
-    elif unexplained and len(elsewhere) == len(unexplained):
-        verdict = INCONCLUSIVE
-        reasons += [r for u in unexplained for r in u.reasons]
-        reasons.append(f"these maps differ from the model before + the predicted change by "
-                       f"more than their noise and the fit's uncertainty, but fit "
-                       f"{spread.fit_id} used no map measured like map(s) "
-                       f"{', '.join(map(str, elsewhere))} (kind, hand velocity and positions): "
-                       "the model may not describe the arm there, so the difference cannot be "
-                       "laid on the plan; measure the later maps as the first session's to "
-                       "decide")
-    elif unexplained:
-        verdict = FAILED
-        at = (f"{scale:.2f} × the predicted change" if seen else "the predicted change")
-        reasons += [r for u in unexplained for r in u.reasons]
-        reasons.append(f"the maps changed in a way the plan does not predict: with the model "
-                       f"before + {at}, {len(unexplained)} map(s) still differ by more than "
-                       "their noise and the fit's uncertainty explain")
-    elif f.value is None or f.sensitivity_sd < rules.min_sensitivity:
-        verdict = INCONCLUSIVE
-        advice = suggestion(before, after, positions_of(changes), what)
-        reasons.append(f"these maps cannot see a change of the {words}: the predicted change "
-                       f"moves them by {f.sensitivity_sd:.1f} sd in all (at least "
-                       f"{rules.min_sensitivity:g} needed); {advice} to decide")
-    elif all_guessed:
-        verdict = INCONCLUSIVE
-        advice = suggestion(before, after, positions_of(changes), what)
-        how = ("held at the unimpaired value" if all(n in spread.held for n in guessed)
-               else "not identified")
-        reasons.append(f"the predicted change rests on a guess: fit {spread.fit_id} did not "
-                       f"identify {', '.join(guessed)} ({how}), so a realised fraction would "
-                       f"measure the guess, not the plan; {advice} and refit to decide")
-    elif se is None or se > rules.max_se:
-        verdict = INCONCLUSIVE
-        parts = f"noise {_f2(f.noise_se)}, fit {_f2(f.fit_part)}" + _misfit(f)
-        value = (f"{f.value:.2f} ± {_f2(se)}" if shown else
-                 f"not known to better than ± {_f2(se)}")
-        bigger = ("the fit before the plan is too uncertain about the " + words
-                  if (f.fit_part or 0.0) > (f.noise_se or 0.0) else
-                  "the later maps are too noisy for this change")
-        reasons.append(f"the realised fraction is {value} ({parts}): SE above "
-                       f"{rules.max_se:g}, {bigger}")
-    else:
-        assert f.value is not None
-        decided = shown
-        if guessed:
-            reasons.append(f"part of the prediction rests on a guess: fit {spread.fit_id} did not "
-                           f"identify {', '.join(guessed)}; the realised fraction measures the "
-                           "change of the groups it did identify")
-        verdict, why = decide(f.value, se, rules)
-        if not shown:
-            lo, hi = limits
-            why = (f"the measured change along the predicted one is beyond what the plan can "
-                   f"produce (a fraction outside {lo:.2f} to {hi:.2f})")
-        reasons.append(f"realised fraction {_f2(f.value) if shown else 'not reported'}"
-                       + (f" ± {se:.2f} (noise {_f2(f.noise_se)}, fit {_f2(f.fit_part)}"
-                          f"{_misfit(f)})" if shown else "") + f": {why}")
-    return SessionCheck(later.label, later.session_date.isoformat(), weeks, retimed, checks,
-                        f.value if shown else None, se if shown else None, verdict,
-                        tuple(reasons), _num(f.noise_se) if seen else None,
-                        _num(f.fit_part) if seen else None, f.sensitivity_sd,
-                        interval, limits, tuple(t.words for t in what), guessed, advice, note,
-                        rules, decided)
-
-
-def _misfit(f: Fraction) -> str:
-    return f"; × {f.misfit:.2f} for misfit" if f.misfit >= 1.005 else ""
-
-
-def _f2(v: float | None) -> str:
-    return "-" if v is None or not math.isfinite(v) else f"{v:.2f}"
+    evidence = Evidence(
+        compared=bool(changes), fraction=f, shown=shown, limits=limits, treated=words,
+        unexplained=tuple(tuple(u.reasons) for u in unexplained), untested=tuple(untested),
+        elsewhere=tuple(elsewhere), scale=scale, guessed=guessed, all_guessed=all_guessed,
+        all_held=all(n in spread.held for n in guessed), fit_id=spread.fit_id,
+        advise=lambda: suggestion(before, after, positions_of(changes), what))
+    v = judge(evidence, rules)
+    return SessionCheck(
+        session=later.label, session_date=later.session_date.isoformat(), weeks_after=weeks,
+        retimed=retimed, maps=checks, realised_fraction=f.value if shown else None,
+        realised_se=se if shown else None, verdict=v.verdict, reasons=(*reasons, *v.reasons),
+        noise_se=_num(f.noise_se) if seen else None, fit_se=_num(f.fit_part) if seen else None,
+        sensitivity_sd=f.sensitivity_sd, interval=interval, physical_range=limits,
+        treated=tuple(t.words for t in what), guessed=guessed, suggestion=v.advice,
+        fit_uncertainty=note, rules=rules, decided=v.decided)
 
 
 @dataclass(frozen=True, eq=False)

@@ -19,14 +19,13 @@ import cattrs
 
 from fieldbank.engine import Done, Progress, Task, run_batch
 from fieldbank.interventions.validate import (
-    CHANGE_TOLERANCE,
-    MAX_CHANGE_SE,
     PlanValidation,
     ValidationReport,
     check_rule_numbers,
     plans_to_check,
     validate_plans,
 )
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 

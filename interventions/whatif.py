@@ -46,7 +46,6 @@ from fieldbank.interventions.course import TimeCourse, time_course
 from fieldbank.interventions.defaults import value
 from fieldbank.interventions.errors import InterventionError
 from fieldbank.interventions.guesses import (
-    DEFAULT_INTERVAL_SAMPLES,
     FitBasis,
     Guesses,
     check_fit,
@@ -56,6 +55,7 @@ from fieldbank.interventions.inverse import DoseSplitResult, optimise_botulinum
 from fieldbank.interventions.plan import Derivation, Plan, dose_warnings, params_sha256
 from fieldbank.interventions.plot import plot_comparison
 from fieldbank.interventions.summary import WhatIfSummary, summarise
+from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
 from fieldbank.model import Arm
 from fieldbank.modelsource import DatabaseOpener, ModelSource
 from fieldbank.params import ArmParams

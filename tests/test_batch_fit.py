@@ -43,6 +43,7 @@ def test_fit_all_fits_each_session_once_and_finds_them_again(any_db_url: str) ->
     doc = json.loads(res.stdout)
     assert doc["counts"]["done"] == len(pairs) and doc["left"] == 0
     assert [(t["patient"], t["session"]) for t in doc["tasks"]] == pairs
+    assert all(0 < t["result"]["fit_cpu_s"] <= t["result"]["fit_s"] + 1e-3 for t in doc["tasks"])
     with Database.open(any_db_url) as db:
         assert _fit_counts(db) == dict.fromkeys(pairs, 1)
         fits = db.list_fits()
@@ -124,6 +125,9 @@ def test_a_task_run_twice_stores_one_fit(any_db_url: str) -> None:
         again = fit_session(db, task, FAST_OPTIONS)
         assert first.state == "done" and again.state == "skipped"
         assert again.result["fit_id"] == first.result["fit_id"]
+        # the fit's own time, kept for the run's figures: one thread's CPU within its wall
+        assert 0 < first.result["fit_cpu_s"] <= first.result["fit_s"] + 1e-3
+        assert "fit_cpu_s" not in again.result
         assert len(db.list_fits()) == 1
         assert len(db.list_models(origin="fitted")) == 1
 

@@ -1,17 +1,26 @@
 """Start-up: which modules a command loads (never how long it takes - loaded machines vary).
 
-* every command's and subcommand's ``--help`` loads none of the numerics, the database layer or
-  the plotting (numpy, scipy, nlopt, SQLAlchemy, alembic, h5py, matplotlib, pyserial);
-* a command that reads the database (``patient list``, ``models list``, ``maps list``,
-  ``plans list``) loads the storage layer and nothing of the fitting, the arrays or the
-  migrations (no scipy, nlopt, h5py, matplotlib, alembic) when the database is at head;
-* the choices and defaults the options show (``fieldbank.cli.choices``) are the library's.
+* every command's and subcommand's ``--help`` loads none of the numerics, the database layer,
+  the plotting or the event loop (numpy, scipy, nlopt, SQLAlchemy, alembic, h5py, matplotlib,
+  pyserial, asyncio);
+* a command that lists what the database holds (``patient list``, ``models list``, ``maps
+  list``, ``plans list``, ``jobs``, with their filters and ``--json``) reads a database at head
+  through its driver alone: none of the above, nor the storage layer (``fieldbank.storage``:
+  its ORM, the array store ``fieldbank.arraystore``, the integrity check), nor psycopg for a
+  SQLite file; on PostgreSQL psycopg and still no SQLAlchemy or numpy. A database behind head
+  is opened through the storage layer (which migrates it) - the light path is not taken
+  blindly;
+* the choices and defaults the options show are the library's own, kept in leaf modules that
+  import nothing (``fieldbank.fitchoices``, ``.probechoices``, ``.measurechoices``,
+  ``fieldbank.interventions.whatifchoices``), which the library's configurations and the
+  commands both read: no copy to keep equal.
 
 ``benchmarks/bench_cli_startup.py`` measures the times, as ratios to ``import click``.
 """
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import subprocess
@@ -23,9 +32,18 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 #: Nothing of these may load for --help.
 HEAVY_FOR_HELP = ("numpy", "scipy", "nlopt", "sqlalchemy", "alembic", "h5py", "matplotlib",
-                  "serial")
-#: Nothing of these may load for a command that reads a database at head.
-HEAVY_FOR_READS = ("scipy", "nlopt", "alembic", "h5py", "matplotlib", "serial")
+                  "serial", "asyncio")
+#: Nothing of these may load for a command that lists a database at head (a SQLite file).
+HEAVY_FOR_READS = (*HEAVY_FOR_HELP, "fieldbank.storage", "fieldbank.storage.check",
+                   "fieldbank.arraystore", "psycopg")
+#: Nothing of these may load for a command that lists a server database (psycopg itself loads
+#: asyncio).
+SERVER_READ_HEAVY = (*(h for h in HEAVY_FOR_HELP if h != "asyncio"), "fieldbank.storage",
+                     "fieldbank.arraystore")
+#: The list commands, with filters and --json.
+READS = ["patient list", "patient list --json", "models list", "models list --patient P-1",
+         "maps list", "maps list --patient P-1 --kind postural --json", "plans list",
+         "plans list --kind botulinum --json", "jobs", "jobs 1 --json", "jobs --kind fit"]
 #: Commands whose module this check does not cover yet (their --help still loads numerics).
 NOT_COVERED: set[tuple[str, ...]] = set()
 
@@ -96,7 +114,8 @@ print(json.dumps(sorted(h for h in json.loads(sys.argv[1]) if h in sys.modules))
 
 @pytest.fixture(scope="module")
 def stored_home(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A data directory with a database at head holding a patient, two models and a plan."""
+    """A data directory with a database at head holding a patient, two models, a plan and a
+    batch run."""
     from fieldbank.interventions import Botulinum, Plan
     from fieldbank.interventions.whatif import save_plan
     from fieldbank.modelsource import synthetic
@@ -108,76 +127,76 @@ def stored_home(tmp_path_factory: pytest.TempPathFactory) -> Path:
         source = synthetic(["elbow=severe"])
         saved = save_plan(db, source, Plan((Botulinum({"ef": 100.0}),)))
         assert saved.plan_id == 1
+        run = db.start_run("fit", "local processes (1)", {}, [("P-1/pre", "P-1", "pre")])
+        db.give_up_job(run.id, "P-1/pre", "no maps")
     return home
 
 
-@pytest.mark.parametrize("command", ["patient list", "models list", "maps list",
-                                     "plans list"])
-def test_reading_the_database_loads_storage_only(stored_home: Path, command: str) -> None:
-    env = {**os.environ, "FIELDBANK_HOME": str(stored_home)}
-    env.pop("FIELDBANK_DB", None)
-    loaded = _python(_READ, json.dumps([*HEAVY_FOR_READS, "sqlalchemy"]), command, env=env)
-    assert "sqlalchemy" in loaded  # it did open the database
-    assert [m for m in loaded if m != "sqlalchemy"] == [], loaded
+def _reads(command: str, heavy: tuple[str, ...], **env: str) -> list[str]:
+    environ = {**os.environ, **env}
+    environ.pop("FIELDBANK_DB", None)
+    loaded = _python(_READ, json.dumps([*heavy, "sqlite3", "fieldbank.stored.listing"]),
+                     command, env=environ)
+    assert isinstance(loaded, list)
+    return loaded
 
 
-def test_the_options_show_the_library_s_choices_and_defaults() -> None:
-    from fieldbank.cli import choices as ch
-    from fieldbank.evaluate.classify import PREDICTORS
-    from fieldbank.evaluate.design import (
-        CRITERIA,
-        FAMILIES,
-        TARGETS,
-        NoiseModel,
-        Perception,
-        ProbeLimits,
-    )
-    from fieldbank.fitting import ALGORITHMS, DEFAULT_ALGORITHM
-    from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
-    from fieldbank.fitting.uncertainty import DEFAULT_METHOD, DEFAULT_REPLICATES, METHODS
-    from fieldbank.haptic.remote.config import PASSIVITY_MODES, RATE_BOUNDS
-    from fieldbank.haptic.safety import SafetyConfig
-    from fieldbank.interventions.defaults import DOSE_UNIT, value
-    from fieldbank.interventions.guesses import DEFAULT_INTERVAL_SAMPLES
-    from fieldbank.interventions.realised import CHANGE_TOLERANCE, MAX_CHANGE_SE
-    from fieldbank.measure.protocol import PARTS, ProtocolConfig
-    from fieldbank.model import MODEL_VERSION
-    from fieldbank.storage.orm import JOB_KINDS
+@pytest.mark.parametrize("command", READS)
+def test_listing_a_database_loads_its_driver_only(stored_home: Path, command: str) -> None:
+    loaded = _reads(command, HEAVY_FOR_READS, FIELDBANK_HOME=str(stored_home))
+    assert {"sqlite3", "fieldbank.stored.listing"} <= set(loaded)  # it did read the database
+    assert sorted(set(loaded) - {"sqlite3", "fieldbank.stored.listing"}) == [], loaded
 
-    assert ch.FIT_ALGORITHMS == tuple(ALGORITHMS)
-    assert ch.FIT_DEFAULT_ALGORITHM == DEFAULT_ALGORITHM
-    assert ch.FIT_KINDS == tuple(FIT_KINDS)
-    assert ch.FIT_DEFAULT_PRIOR_WEIGHT == DEFAULT_PRIOR_WEIGHT
-    assert ch.UNCERTAINTY_METHODS == tuple(METHODS)
-    assert ch.UNCERTAINTY_DEFAULT_METHOD == DEFAULT_METHOD
-    assert ch.UNCERTAINTY_DEFAULT_REPLICATES == DEFAULT_REPLICATES
-    assert ch.PROBE_CRITERIA == tuple(CRITERIA)
-    assert ch.PROBE_FAMILIES == tuple(FAMILIES)
-    assert ch.PROBE_TARGETS == tuple(TARGETS)
-    assert ch.CLASSIFY_PREDICTORS == tuple(PREDICTORS)
-    assert ch.DOSE_UNIT == DOSE_UNIT
-    assert ch.BOTULINUM_SESSION_WARNING_UNITS == value("botulinum.session_warning_units")
-    assert ch.BOTULINUM_WEEKS_SINCE == value("botulinum.weeks_since")
-    assert ch.CASTING_DELTA_M == value("casting.delta_m")
-    assert ch.WHATIF_INTERVAL_SAMPLES == DEFAULT_INTERVAL_SAMPLES
-    n, p, lim = NoiseModel(), Perception(), ProbeLimits()
-    assert (ch.NOISE_FORCE_SD_N, ch.NOISE_CORRELATION_S, ch.NOISE_DIRECTION_SD_DEG,
-            ch.NOISE_LENGTH_SD, ch.NOISE_SPEED_SD) == (
-        n.force_sd_n, n.correlation_s, n.direction_sd_deg, n.length_sd, n.speed_sd)
-    assert (ch.PERCEPTION_FORCE_JND, ch.PERCEPTION_DIRECTION_JND_DEG) == (
-        p.force_jnd, p.direction_jnd_deg)
-    assert (ch.PROBE_MAX_SPEED_M_PER_S, ch.PROBE_FORCE_LIMIT_N) == (
-        lim.max_speed_m_per_s, lim.force_limit_n)
-    pc = ProtocolConfig()
-    assert ch.MEASURE_PARTS == PARTS
-    assert ch.JOB_KINDS == JOB_KINDS
-    assert (ch.VALIDATE_CHANGE_TOLERANCE, ch.VALIDATE_MAX_CHANGE_SE) == (
-        CHANGE_TOLERANCE, MAX_CHANGE_SE)
-    assert ch.PASSIVITY_MODES == PASSIVITY_MODES
-    assert ch.REMOTE_RATE_HZ == (RATE_BOUNDS.low, RATE_BOUNDS.high)
-    assert ch.MODEL_VERSION == MODEL_VERSION
-    assert ch.MEASURE_DISPLACEMENT_MM == pytest.approx(pc.displacement_m * 1000)
-    assert pc.spacing_m is None and pc.centre_m is None  # the grid follows the patient's arm
-    assert (ch.MEASURE_DIRECTIONS, ch.MEASURE_HOLD_S, ch.MEASURE_STRETCH_SPEED_M_PER_S) == (
-        pc.directions, pc.hold_s, pc.stretch_speed_m_per_s)
-    assert ch.MEASURE_FORCE_LIMIT_N == SafetyConfig().force_limit_n
+
+@pytest.mark.postgres
+def test_listing_a_server_database_loads_psycopg_and_no_sqlalchemy(pg_url: str) -> None:
+    from fieldbank.storage import Database
+
+    with Database.open(pg_url, upgrade="always") as db:
+        db.add_patient("P-1", 70.0, 1.7, "right")
+    for command in ("patient list --json", "jobs", "plans list"):
+        loaded = _reads(f"{command} --db {pg_url}", (*SERVER_READ_HEAVY, "psycopg"))
+        assert "psycopg" in loaded and "fieldbank.stored.listing" in loaded
+        assert sorted(set(loaded) - {"psycopg", "fieldbank.stored.listing", "sqlite3"}) == [], \
+            loaded
+
+
+def test_a_database_behind_head_is_opened_through_the_storage_layer(tmp_path: Path) -> None:
+    from sqlalchemy import create_engine
+
+    from fieldbank.storage import migrate
+
+    home = tmp_path / "home"
+    home.mkdir()
+    engine = create_engine(f"sqlite:///{home / 'fieldbank.sqlite3'}")
+    migrate.upgrade(engine, migrate.known_revisions()[-2])
+    engine.dispose()
+    loaded = _reads("patient list", ("sqlalchemy", "alembic"), FIELDBANK_HOME=str(home))
+    assert {"sqlalchemy", "alembic"} <= set(loaded)  # migrated to head, then listed
+
+
+#: The library's leaf modules that own the choices and defaults the options show.
+CHOICE_LEAVES = ("fieldbank/fitchoices.py", "fieldbank/probechoices.py",
+                 "fieldbank/measurechoices.py", "interventions/whatifchoices.py")
+
+
+@pytest.mark.parametrize("leaf", CHOICE_LEAVES)
+def test_the_choices_leaves_import_nothing(leaf: str) -> None:
+    tree = ast.parse((ROOT / leaf).read_text(encoding="utf-8"))
+    imports = [n for n in ast.walk(tree) if isinstance(n, ast.Import | ast.ImportFrom)]
+    assert [ast.unparse(n) for n in imports] == ["from __future__ import annotations"]
+
+
+def test_no_command_keeps_a_copy_of_the_library_s_choices() -> None:
+    assert not (ROOT / "cli" / "choices.py").exists()
+    for path in sorted((ROOT / "cli").glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        modules = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+        assert "fieldbank.cli.choices" not in modules, path.name
+
+
+def test_every_path_family_offered_is_one_the_search_knows() -> None:
+    from fieldbank.evaluate.design.paths import FAMILIES
+    from fieldbank.probechoices import PATH_FAMILIES
+
+    assert tuple(FAMILIES) == PATH_FAMILIES

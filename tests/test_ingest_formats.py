@@ -20,12 +20,12 @@ from fieldbank.ingest import (
     write_mat5,
     write_mat73,
 )
-from fieldbank.ingest.units import KGF_N
 from fieldbank.maps import FieldMap, postural_map, stiffness_map
 from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.sampledata import lab_units_csv
 from fieldbank.storage import Database
+from fieldbank.units import KGF_N
 
 ROOT = Path(__file__).resolve().parents[1]
 P = ArmParams.from_anthropometry(75.0, 1.75, "right")

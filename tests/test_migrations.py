@@ -13,6 +13,7 @@ from sqlalchemy import inspect
 
 from fieldbank.storage import Database, make_engine, migrate
 from fieldbank.storage.orm import Base
+from fieldbank.stored import revisions
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -160,11 +161,11 @@ def test_the_light_reading_of_the_revisions_is_alembic_s() -> None:
 
     script = ScriptDirectory.from_config(migrate.alembic_config())
     walked = [r.revision for r in reversed(list(script.walk_revisions()))]
-    assert migrate.known_revisions() == walked
+    assert revisions.known_revisions() == walked
     assert migrate.head_revision() == script.get_current_head()
     for rev in walked:
         doc = (script.get_revision(rev).doc or "").strip()
-        assert migrate.revision_title(rev) == (doc.splitlines()[0].rstrip(".") if doc else rev)
+        assert revisions.revision_title(rev) == (doc.splitlines()[0].rstrip(".") if doc else rev)
 
 
 def test_a_downgrade_that_rebuilds_a_table_keeps_the_rows_that_point_at_it(

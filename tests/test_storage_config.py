@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 from sqlalchemy import text
 
-from fieldbank.storage import Database, make_engine, mask_url, resolve_url
-from fieldbank.storage.config import DEFAULT_DB_FILE
+from fieldbank.config import DEFAULT_DB_FILE
+from fieldbank.redact import mask_url
+from fieldbank.storage import Database, make_engine, resolve_url
 
 
 def test_url_resolution_order(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

@@ -48,7 +48,8 @@ def _maps_of(params: ArmParams, rng: np.random.Generator) -> list[tuple[int, Fie
 
 def test_check_session_confirms_a_right_prediction_and_fails_a_wrong_one() -> None:
     from fieldbank.interventions import Botulinum, Plan
-    from fieldbank.interventions.validate import CONFIRMED, FAILED, LaterSession, check_session
+    from fieldbank.interventions.realised import CONFIRMED, FAILED
+    from fieldbank.interventions.validate import LaterSession, check_session
 
     before = synthesize({"elbow": "severe"})
     plan = Plan.of(Botulinum({"ef": 150.0}, weeks_since=5.0))
@@ -98,7 +99,8 @@ def _later(params: ArmParams, velocities: list[tuple[float, float]], seed: int,
 
 def test_half_the_effect_is_a_partial_effect_with_its_interval() -> None:
     from fieldbank.interventions import Botulinum, Plan
-    from fieldbank.interventions.validate import PARTIAL, check_session
+    from fieldbank.interventions.realised import PARTIAL
+    from fieldbank.interventions.validate import check_session
 
     before = synthesize({"elbow": "severe"})
     plan = Plan.of(Botulinum({"ef": 150.0}, weeks_since=6.0))
@@ -121,7 +123,8 @@ def test_half_the_effect_is_a_partial_effect_with_its_interval() -> None:
 ])
 def test_an_effect_beyond_the_tolerance_is_an_over_effect_not_a_confirmation(
         f: float, se: float, verdict: str) -> None:
-    from fieldbank.interventions.realised import CONTRADICTED, decide
+    from fieldbank.interventions.realised import CONTRADICTED
+    from fieldbank.interventions.verdict import decide
 
     got, why = decide(f, se)
     assert got == verdict, why
@@ -130,7 +133,8 @@ def test_an_effect_beyond_the_tolerance_is_an_over_effect_not_a_confirmation(
 
 def test_a_stronger_effect_than_predicted_is_said_on_the_maps() -> None:
     from fieldbank.interventions import Botulinum, Plan
-    from fieldbank.interventions.validate import OVER, check_session
+    from fieldbank.interventions.realised import OVER
+    from fieldbank.interventions.validate import check_session
 
     before = synthesize({"elbow": "severe"})
     plan = Plan.of(Botulinum({"ef": 150.0}, weeks_since=6.0))
@@ -169,7 +173,8 @@ def test_a_change_the_maps_cannot_see_is_inconclusive_and_says_what_would_see_it
     """Static maps cannot see a change of the stretch reflex: no number, the group named, and
     a measurement that would see it proposed."""
     from fieldbank.interventions import Botulinum, Plan
-    from fieldbank.interventions.validate import INCONCLUSIVE, check_session
+    from fieldbank.interventions.realised import INCONCLUSIVE
+    from fieldbank.interventions.validate import check_session
 
     before = synthesize({"elbow": "severe"})
     plan = Plan.of(Botulinum({"ef": 150.0}, weeks_since=6.0))
@@ -192,7 +197,8 @@ def test_a_fit_error_on_a_barely_moving_map_gives_no_nonsense_fraction() -> None
     so the predicted change is tiny against the noise: the old check divided the fit error by
     it and printed fractions like -245 ± 4.8. Now no number is reported."""
     from fieldbank.interventions import Botulinum, Plan
-    from fieldbank.interventions.validate import CONFIRMED, check_session
+    from fieldbank.interventions.realised import CONFIRMED
+    from fieldbank.interventions.validate import check_session
 
     truth = synthesize({"elbow": "moderate"})
     fitted = truth.replace(km_n_per_m=tuple(1.1 * k for k in truth.km_n_per_m))

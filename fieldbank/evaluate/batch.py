@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.armbatch import ArmBatch
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import (
     DIRECTION_SIGN,
     JOINTS,
@@ -65,9 +66,9 @@ def stretch_torques(batch: ArmBatch, joint: str, direction: str,
     through its range in ``direction``, the other joint held at ``hold_rad`` (default: each
     set's rest posture)."""
     if joint not in JOINTS:
-        raise ValueError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
+        raise ParameterError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
     if direction not in DIRECTION_SIGN:
-        raise ValueError(f"direction must be 'flexion' or 'extension'; got {direction!r}.")
+        raise ParameterError(f"direction must be 'flexion' or 'extension'; got {direction!r}.")
     geo = batch.geometry
     j = JOINTS.index(joint)
     sign = DIRECTION_SIGN[direction]

@@ -87,9 +87,9 @@ from fieldbank.evaluate.design import (
 )
 from fieldbank.evaluate.observation import Observation
 from fieldbank.model import Arm, FloatArray
+from fieldbank.probechoices import DEFAULT_PREDICTOR, PREDICTORS
 from fieldbank.sim import ArmSim
 
-PREDICTORS = ("replay", "rigid", "static")
 #: Window of the Savitzky-Golay derivative giving the ``rigid`` predictor's accelerations, s.
 ACCELERATION_WINDOW_S = 0.025
 #: Stop suggesting probes when the most probable candidate has at least this probability.
@@ -122,7 +122,8 @@ def recorded_accelerations(obs: Observation) -> FloatArray:
                                     delta=dt, axis=0), dtype=float)
 
 
-def predict_observation(arm: Arm, obs: Observation, predictor: str = "replay") -> FloatArray:
+def predict_observation(arm: Arm, obs: Observation,
+                        predictor: str = DEFAULT_PREDICTOR) -> FloatArray:
     """The force (T, 2), N, the arm puts on the handle for the recorded motion of ``obs``."""
     if predictor in ("static", "rigid"):
         try:
@@ -257,7 +258,7 @@ class Classification:
     def model_error_n(self) -> float:
         """The residual the best-fitting candidate leaves beyond the noise, N RMS per axis
         (σ_m of the module docstring)."""
-        return float(self.noise.force_sd_n * math.sqrt(_model_error_ratio(
+        return float(self.noise.force_sd_n * math.sqrt(model_error_ratio(
             self.fit_statistic, self.fit_expected, self.fit_variance)))
 
     @property
@@ -325,7 +326,7 @@ class Classification:
 
 
 def predict_all(observations: Sequence[Observation], candidates: Sequence[Candidate],
-                predictor: str = "replay") -> tuple[FloatArray, ...]:
+                predictor: str = DEFAULT_PREDICTOR) -> tuple[FloatArray, ...]:
     """Every candidate's predicted force for every observation: per observation (n, T, 2)."""
     if predictor not in PREDICTORS:
         raise ParameterError(f"Unknown predictor {predictor!r}; known: {', '.join(PREDICTORS)}.")
@@ -335,7 +336,7 @@ def predict_all(observations: Sequence[Observation], candidates: Sequence[Candid
 
 def classify(observations: Sequence[Observation], candidates: Sequence[Candidate], *,
              noise: NoiseModel | None = None, prior: Sequence[float] | FloatArray | None = None,
-             predictor: str = "replay", next_probe: bool = True,
+             predictor: str = DEFAULT_PREDICTOR, next_probe: bool = True,
              perception: Perception | None = None, limits: ProbeLimits | None = None,
              stop_probability: float = STOP_PROBABILITY,
              remaining_probability: float = REMAINING_PROBABILITY,
@@ -385,10 +386,10 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
         count += int(used.sum())
         n_eff += float(w.sum())
         expected += 2.0 * float(w.sum())
-        variance += 4.0 * _correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
+        variance += 4.0 * correlated_weight_sum(o.times_s, w, 4.0 / noise.correlation_s)
     q = float((-2.0 * ll).min())  # Σ w |r|² / σ² of the best-fitting candidate
-    p_fit = _fit_p_value(q, expected, variance)
-    temperature = TEMPERATURE * (1.0 + _model_error_ratio(q, expected, variance) * n_eff)
+    p_fit = p_of_fit(q, expected, variance)
+    temperature = TEMPERATURE * (1.0 + model_error_ratio(q, expected, variance) * n_eff)
     raw = _posterior(p0, ll)
     post = _posterior(p0, ll / temperature)
     rms = np.sqrt(sq / count)
@@ -412,7 +413,7 @@ def classify(observations: Sequence[Observation], candidates: Sequence[Candidate
                           reason, raw, temperature, q, expected, variance, p_fit)
 
 
-def _model_error_ratio(q: float, expected: float, variance: float) -> float:
+def model_error_ratio(q: float, expected: float, variance: float) -> float:
     """σ_m²/σ² of the module docstring: the fit statistic's excess beyond
     :data:`MODEL_ERROR_SDS` of its SD, per unit of its mean."""
     if expected <= 0:
@@ -427,7 +428,7 @@ def _posterior(prior: FloatArray, log_likelihood: FloatArray) -> FloatArray:
     return np.asarray(post / post.sum(), dtype=float)
 
 
-def _correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> float:
+def correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> float:
     """Σ_k Σ_l w_k w_l e^(−rate |t_k − t_l|), by one pass of an exponential filter."""
     decay = np.exp(-rate * np.diff(times_s))
     total = 0.0
@@ -439,7 +440,7 @@ def _correlated_weight_sum(times_s: FloatArray, w: FloatArray, rate: float) -> f
     return total
 
 
-def _fit_p_value(q: float, expected: float, variance: float) -> float:
+def p_of_fit(q: float, expected: float, variance: float) -> float:
     """P(Q ≥ q) for Q of mean ``expected`` and ``variance``, as a scaled χ² (Satterthwaite)."""
     if expected <= 0 or variance <= 0:
         return 1.0
@@ -448,5 +449,5 @@ def _fit_p_value(q: float, expected: float, variance: float) -> float:
     return float(chi2.sf(q / scale, dof))
 
 
-__all__ = ["FIT_LEVEL", "PREDICTORS", "TEMPERATURE", "Classification", "classify",
+__all__ = ["FIT_LEVEL", "TEMPERATURE", "Classification", "classify",
            "predict_all", "predict_observation", "recorded_accelerations"]

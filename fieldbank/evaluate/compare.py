@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import (
     JointStretch,
     ProbeMotion,
@@ -277,7 +278,7 @@ def compare_evaluations(before: Evaluation, after: Evaluation) -> Comparison:
     """Metrics from two evaluations on the same conditions."""
     cond = before.conditions
     if after.conditions is not cond:
-        raise ValueError("before and after must be evaluated on the same Conditions object.")
+        raise ParameterError("before and after must be evaluated on the same Conditions object.")
     changes = []
     for k, speed in enumerate(cond.speeds_m_per_s):
         x, v = cond.points(k)

@@ -44,9 +44,9 @@ import numpy as np
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.classify import (
     FIT_LEVEL,
-    _correlated_weight_sum,
-    _fit_p_value,
-    _model_error_ratio,
+    correlated_weight_sum,
+    model_error_ratio,
+    p_of_fit,
 )
 from fieldbank.evaluate.design import NoiseModel, saturate
 from fieldbank.evaluate.observation import Observation
@@ -358,7 +358,7 @@ class OpenTrace:
             gram += np.einsum("stk,utk->su", d * (w / nz.force_sd_n ** 2)[None, :, None], d)
             n_eff += float(w.sum())
             expected += 2.0 * float(w.sum())
-            variance += 4.0 * _correlated_weight_sum(o.times_s[_read(o)], w,
+            variance += 4.0 * correlated_weight_sum(o.times_s[_read(o)], w,
                                                      4.0 / nz.correlation_s)
         return cls(openset, nz, obs, preds, gram, expected, variance, n_eff)
 
@@ -428,8 +428,8 @@ def classify_open(observations: Sequence[Observation], openset: OpenSet,
         chi2[top] = _chi2(obs, [openset.unimpaired.with_muscles(
             openset.combined(cb.states_of(j))) for j in top], nz)
     q = float(chi2.min())
-    p_fit = _fit_p_value(q, expected, variance)
-    temperature = 1.0 + _model_error_ratio(q, expected, variance) * n_eff
+    p_fit = p_of_fit(q, expected, variance)
+    temperature = 1.0 + model_error_ratio(q, expected, variance) * n_eff
     logpost = np.log(cb.prior) - 0.5 * chi2 / temperature
     post = np.exp(logpost - logpost.max())
     post /= post.sum()

@@ -54,6 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUP_LEGEND, GROUPS
 from fieldbank.probepath import ProbePath
@@ -150,7 +151,7 @@ def lengthening_direction(arm: Arm, group: str) -> FloatArray:
     rest posture: λ̇_g = J_λ,g J_q⁻¹ v is largest over |v| = 1 for v ∝ J_q⁻ᵀ J_λ,gᵀ (the
     direction a moving field shows that group's stretch reflex in)."""
     if group not in GROUPS:
-        raise ValueError(f"unknown muscle group {group!r} (known: {GROUP_LEGEND}).")
+        raise ParameterError(f"unknown muscle group {group!r} (known: {GROUP_LEGEND}).")
     jq = arm.jacobian(arm.q_rest)[0]
     w = np.linalg.solve(jq.T, arm.jl[GROUPS.index(group)])
     w = w / np.hypot(w[0], w[1])
@@ -271,9 +272,9 @@ def stretch_profile(arm: Arm, joint: str, direction: str,
     -1 for extension; τ = -J_λᵀ f): positive for a muscle the motion lengthens.
     """
     if joint not in JOINTS:
-        raise ValueError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
+        raise ParameterError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
     if direction not in DIRECTION_SIGN:
-        raise ValueError(f"direction must be 'flexion' or 'extension'; got {direction!r}.")
+        raise ParameterError(f"direction must be 'flexion' or 'extension'; got {direction!r}.")
     j = JOINTS.index(joint)
     sign = DIRECTION_SIGN[direction]
     lo, hi = (arm.params.shoulder_range_rad, arm.params.elbow_range_rad)[j]

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fieldbank.errors import ParameterError
 from fieldbank.evaluate.classify import FIT_LEVEL, classify
 from fieldbank.evaluate.design import NoiseModel, draw_execution, severity_candidates
 from fieldbank.evaluate.design.coverage import stretch_noise, stretch_set
@@ -154,7 +155,7 @@ def _one(family: str, rng: np.random.Generator) -> tuple[str, ArmParams]:
         return (f"{g} {s:.2f}, rest posture {np.degrees(shift[0]):+.0f}°, "
                 f"{np.degrees(shift[1]):+.0f}°"), synthesize_ratios(
             {g: ratio_of_score(s, "passive")}, moved)
-    raise ValueError(f"unknown family {family!r}; known: {', '.join(FAMILIES)}")
+    raise ParameterError(f"unknown family {family!r}; known: {', '.join(FAMILIES)}")
 
 
 def family_arms(family: str, n: int, seed: int) -> tuple[TrialArm, ...]:
@@ -343,7 +344,7 @@ def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[i
     return sum(not o.right for o in sure), len(sure)
 
 
-__all__ = ["BINS", "FAMILIES", "MISFIT_LEVELS", "NONE_OF_THEM", "OTHERS", "POWERS", "Outcome",
+__all__ = ["BINS", "FAMILIES", "MISFIT_LEVELS", "OTHERS", "POWERS", "Outcome",
            "ReliabilityBin", "TrialArm", "calibration_error", "family_arms", "fit_calibration",
            "reliability_bins", "run_trials",
            "truth_label", "wrong_when_sure"]

@@ -13,7 +13,7 @@
 * :mod:`.plot` - measured against fitted fields.
 """
 
+from fieldbank.fitchoices import ALGORITHMS, DEFAULT_ALGORITHM
 from fieldbank.fitting.fitter import ArmFitter, validate_maps
-from fieldbank.fitting.search import ALGORITHMS, DEFAULT_ALGORITHM
 
 __all__ = ["ALGORITHMS", "DEFAULT_ALGORITHM", "ArmFitter", "validate_maps"]

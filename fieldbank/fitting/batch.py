@@ -6,10 +6,12 @@ process pool or a Dask cluster. Each task (:func:`fit_session`, on a worker) rea
 session's maps from the database, and
 
 * finds a fit with the same key (:func:`fieldbank.fitting.records.fit_key`: same maps, patient,
-  options and :data:`fieldbank.model.MODEL_VERSION`) - then nothing is repeated ('skipped');
+  options and :data:`fieldbank.fitchoices.MODEL_VERSION`) - then nothing is repeated ('skipped');
 * else fits and stores the fit and its model in one transaction under that key. The key is
   unique in the database, so a task that runs twice (its first worker died after committing)
-  stores nothing twice: the second finds the first's fit.
+  stores nothing twice: the second finds the first's fit. Its job's result keeps the fit's
+  own wall and CPU time (``fit_s``, ``fit_cpu_s``: the CPU of the thread that ran it), so a
+  run's bookkeeping is the task's time less these.
 
 Which sessions: without ``older_than``, every session with maps of the patients (all patients
 when none is named). With ``older_than`` N, the fits stored under a model version below N (or
@@ -20,15 +22,16 @@ prior, uncertainty) are the command's for every task.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from fieldbank.engine import BatchResult, Done, Progress, Task, run_batch
 from fieldbank.errors import FitError, ParameterError
+from fieldbank.fitchoices import MODEL_VERSION
 from fieldbank.fitting.dbstore import DatabaseFitStore
 from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.fitting.records import fit_key, fit_patient
-from fieldbank.model import MODEL_VERSION
 from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
@@ -41,7 +44,7 @@ def fit_tasks(db: Database, patients: Sequence[str] = (),
     ------
     ParameterError
         ``older_than`` is not a model version this fieldbank can refit to (1 …
-        :data:`~fieldbank.model.MODEL_VERSION`).
+        :data:`~fieldbank.fitchoices.MODEL_VERSION`).
     StorageError
         A named patient is not in the database.
     FitError
@@ -79,22 +82,25 @@ def fit_session(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
     store = DatabaseFitStore(db)
     fitter = ArmFitter(**dict(options))
     base = store.patient_params(task.patient)
-    ids = [m.id for m in db.list_maps(patient_code=task.patient, session_label=task.session)]
+    ids = store.map_ids(task.patient, task.session)
     if not ids:
         raise FitError("no maps to fit.")
-    found = db.fit_by_key(fit_key(task.patient, task.session, ids, base, fitter.options()))
+    found = store.fit_with_key(fit_key(task.patient, task.session, ids, base, fitter.options()))
     if found is not None:
-        return Done("skipped", f"fit {found.id} (model {found.model_id}) holds these maps "
+        return Done("skipped", f"fit {found.fit_id} (model {found.model_id}) holds these maps "
                     f"under model version {MODEL_VERSION} already",
-                    {"fit_id": found.id, "model_id": found.model_id, "found": True})
+                    {"fit_id": found.fit_id, "model_id": found.model_id, "found": True})
+    c0 = time.thread_time()
     out = fit_patient(store, task.patient, task.session, fitter)
+    cpu = time.thread_time() - c0
     fid, mid = out.saved.fit_id, out.saved.model_id
     if not out.saved.created:
         return Done("skipped", f"fit {fid} (model {mid}) was stored meanwhile by another "
                     "attempt", {"fit_id": fid, "model_id": mid, "found": True})
     return Done("done", f"fit {fid} -> model {mid}: {out.fitter.status_}, "
                 f"{len(ids)} maps, {out.fitter.time_s_:.1f} s",
-                {"fit_id": fid, "model_id": mid, "status": out.fitter.status_})
+                {"fit_id": fid, "model_id": mid, "status": out.fitter.status_,
+                 "fit_s": round(out.fitter.time_s_, 4), "fit_cpu_s": round(cpu, 4)})
 
 
 def fit_all(db: Database, options: Mapping[str, Any], *, patients: Sequence[str] = (),
@@ -104,7 +110,7 @@ def fit_all(db: Database, options: Mapping[str, Any], *, patients: Sequence[str]
             say: Callable[[str], None] | None = None) -> BatchResult:
     """Fit every chosen session (:func:`fit_tasks`) with ``options`` (ArmFitter keyword
     arguments as plain values), on the scheduler's cluster or ``jobs`` local processes."""
-    ArmFitter(**dict(options))._check_options()  # bad options fail here, not on every worker
+    ArmFitter(**dict(options)).check_options()  # bad options fail here, not on every worker
     tasks = fit_tasks(db, patients, older_than)
     return run_batch(db, "fit", tasks, fit_session, options, scheduler=scheduler, jobs=jobs,
                      progress=progress, say=say,

@@ -1,9 +1,10 @@
 """The :class:`~fieldbank.fitting.records.FitStore` on the field database.
 
-An adapter over :class:`fieldbank.storage.Database`, using its ``get_patient``, ``list_maps``,
-``get_maps``, ``add_fitted_model`` (model and fit in one transaction), ``list_models``,
-``get_model``, ``model_lineage`` and ``list_fits``. The fitted model is stored with origin
-'fitted' and the fit (report, algorithm, seed, evaluations, time, cost, map ids) refers to it.
+An adapter over :class:`fieldbank.storage.Database`, using its ``get_patient``,
+``list_maps``, ``get_maps``, ``fit_by_key``, ``add_fitted_model`` (model and fit in one
+transaction), ``list_models``, ``get_model``, ``model_lineage`` and ``list_fits``. The fitted
+model is stored with origin 'fitted' and the fit (report, algorithm, seed, evaluations, time,
+cost, map ids) refers to it.
 """
 
 from __future__ import annotations
@@ -34,6 +35,16 @@ class DatabaseFitStore:
         arrays = self.db.get_maps([s.id for s in stored])
         return [PatientMap(s.id, s.patient_code, s.session_label, m)
                 for s, m in zip(stored, arrays, strict=True)]
+
+    def map_ids(self, patient: str, session: str | None = None) -> Sequence[int | str]:
+        """The ids of the maps :meth:`maps_for` would read (their arrays left unread)."""
+        return [m.id for m in self.db.list_maps(patient_code=patient, session_label=session)]
+
+    def fit_with_key(self, fit_key: str) -> SavedFit | None:
+        """The fit stored under ``fit_key`` (:func:`~fieldbank.fitting.records.fit_key`) and
+        its model, not created now; None when there is none."""
+        found = self.db.fit_by_key(fit_key)
+        return None if found is None else SavedFit(found.id, found.model_id, created=False)
 
     def add_fit(self, record: FitSubmission) -> SavedFit:
         label = (f"fit of {len(record.map_ids)} maps"

@@ -33,6 +33,15 @@ from fieldbank.evaluate.severity import (
     ratio_of_score,
     severity_dict,
 )
+from fieldbank.fitchoices import (
+    ALGORITHMS,
+    DEFAULT_ALGORITHM,
+    DEFAULT_PRIOR_WEIGHT,
+    DEFAULT_REPLICATES,
+    DEFAULT_UNCERTAINTY,
+    FIT_KINDS,
+    UNCERTAINTY_METHODS,
+)
 from fieldbank.fitting.holds import (
     attribution,
     held_intervals,
@@ -56,18 +65,9 @@ from fieldbank.fitting.quality import (
     r2_score,
     status,
 )
-from fieldbank.fitting.search import (
-    ALGORITHMS,
-    DEFAULT_ALGORITHM,
-    Progress,
-    run_dual_annealing,
-    run_nlopt,
-)
-from fieldbank.fitting.space import DEFAULT_PRIOR_WEIGHT, FIT_KINDS, ParamSpace
+from fieldbank.fitting.search import Progress, run_dual_annealing, run_nlopt
+from fieldbank.fitting.space import ParamSpace
 from fieldbank.fitting.uncertainty import (
-    DEFAULT_METHOD,
-    DEFAULT_REPLICATES,
-    METHODS,
     FitSamples,
     Uncertainty,
     estimate,
@@ -199,7 +199,7 @@ class ArmFitter:
         max_evals: int | None = None,
         progress: Progress | None = None,
         hold_unidentified: bool = True,
-        uncertainty: str = DEFAULT_METHOD,
+        uncertainty: str = DEFAULT_UNCERTAINTY,
         replicates: int = DEFAULT_REPLICATES,
         thresholds: Thresholds | None = None,
     ) -> None:
@@ -232,7 +232,8 @@ class ArmFitter:
             raise FitError(f"ArmFitter has no result {name!r} yet: call fit(maps, base) first.")
         raise AttributeError(name)
 
-    def _check_options(self) -> None:
+    def check_options(self) -> None:
+        """Refuse options no fit can run with (FitError naming the option), before any work."""
         if self.algorithm not in ALGORITHMS:
             raise FitError(f"unknown algorithm {self.algorithm!r}; choose one of "
                            f"{', '.join(ALGORITHMS)}.")
@@ -245,9 +246,9 @@ class ArmFitter:
         unknown = sorted(set(self.fit_kinds) - set(FIT_KINDS))
         if unknown:
             raise FitError(f"cannot fit {', '.join(unknown)}; choose from {', '.join(FIT_KINDS)}.")
-        if self.uncertainty not in METHODS:
+        if self.uncertainty not in UNCERTAINTY_METHODS:
             raise FitError(f"unknown uncertainty method {self.uncertainty!r}; choose one of "
-                           f"{', '.join(METHODS)}.")
+                           f"{', '.join(UNCERTAINTY_METHODS)}.")
         if isinstance(self.replicates, bool) or not isinstance(self.replicates, int) \
                 or self.replicates < 2:
             raise FitError(f"replicates must be an integer >= 2; got {self.replicates!r}.")
@@ -266,7 +267,7 @@ class ArmFitter:
         patient : str, optional
             When given, maps whose metadata name another patient are refused.
         """
-        self._check_options()
+        self.check_options()
         if not isinstance(base, ArmParams):
             raise FitError(f"base must be ArmParams; got {type(base).__name__}.")
         t0 = time.perf_counter()

@@ -15,11 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.evaluate.severity import GRADED_STRETCH, classify
+from fieldbank.evaluate.severity import classify
+from fieldbank.evaluate.tone import GRADED_STRETCH
+from fieldbank.fitchoices import ALGORITHMS, DEFAULT_ALGORITHM
 from fieldbank.fitting.identify import Unidentified
 from fieldbank.fitting.prior import GuessRange, Prior, draw, units
 from fieldbank.fitting.problem import FitProblem
-from fieldbank.fitting.search import ALGORITHMS, DEFAULT_ALGORITHM, HOLD_EVALS, run_nlopt
+from fieldbank.fitting.search import HOLD_EVALS, run_nlopt
 from fieldbank.fitting.uncertainty import FitSamples, reduced_problem, refit_local
 from fieldbank.model import Arm, FloatArray
 

@@ -73,15 +73,13 @@ from fieldbank.evaluate.probing import (
     unimpaired_reference,
 )
 from fieldbank.evaluate.severity import (
-    GRADED_STRETCH,
-    POSITIONED_STRETCH,
     REFLEX_PATH_MAX,
     SCALE,
     SeverityScale,
-    positioned_hold_rad,
     ratio_of_score,
     reflex_path,
 )
+from fieldbank.evaluate.tone import GRADED_STRETCH, POSITIONED_STRETCH, positioned_hold_rad
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.space import SLACK_RANGE_M
 from fieldbank.fitting.uncertainty import FitSamples

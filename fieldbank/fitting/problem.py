@@ -37,10 +37,13 @@ that position (:func:`relative_scale`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from fieldbank.fitting import kernels
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.maps import FieldMap
 from fieldbank.model import Arm, FloatArray
@@ -82,6 +85,23 @@ def map_sd(m: FieldMap) -> FloatArray:
                        axis=1)
     rms = float(np.sqrt(np.mean(values**2))) or 1.0
     return np.asarray(np.maximum(sd, SD_FLOOR_FRACTION * rms), dtype=float)
+
+
+#: Whether new problems evaluate with the compiled kernels (:mod:`fieldbank.fitting.kernels`);
+#: :func:`reference_kernels` switches to the numpy reference path.
+_COMPILED = [True]
+
+
+@contextmanager
+def reference_kernels() -> Iterator[None]:
+    """Problems built inside evaluate with the numpy reference path, not the compiled kernels
+    (the tests hold the two together; the benchmark's baseline)."""
+    old = _COMPILED[0]
+    _COMPILED[0] = False
+    try:
+        yield
+    finally:
+        _COMPILED[0] = old
 
 
 #: Central-difference steps of the search's gradient (β, dimensionless; q_rest, rad; slack, m).
@@ -132,6 +152,10 @@ class FitProblem:
     dc: FloatArray  # ∂c/∂λ̇ with the model's kink convention, (N, 6)
     n_evals: int = 0
     _xkm_cache: FloatArray | None = None
+    #: Evaluate with the compiled kernels (:mod:`fieldbank.fitting.kernels`); False: the numpy
+    #: reference path (:func:`reference_kernels`).
+    compiled: bool = field(default_factory=lambda: _COMPILED[0])
+    _consts: dict[str, np.ndarray] | None = field(default=None, init=False, repr=False)
 
     # --- construction ---------------------------------------------------------------------
     @classmethod
@@ -243,10 +267,33 @@ class FitProblem:
         pdb = (g * (sig - sp * 2.0 * d / (ell * ell)))[self.row_pt]
         return self.cf * pb + self.cl * pdb
 
-    def _reflex_basis(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
+    def _kk(self, q_rest: FloatArray) -> FloatArray:
+        """λ_rest/λ_max per group at the rest posture ``q_rest``, (6,)."""
         arm = self.arm
         lam_max = arm.lam_rest + self.corner_max - q_rest @ arm.jl.T
-        kk = arm.lam_rest / lam_max
+        return np.asarray(arm.lam_rest / lam_max, dtype=float)
+
+    def _reflex_basis(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
+        if self.compiled:
+            out = np.empty((self.row_pt.size, 6))
+            self._reflex_into(beta, q_rest, out, 0)
+            return out
+        return self._reflex_basis_reference(beta, q_rest)
+
+    def _reflex_into(self, beta: FloatArray, q_rest: FloatArray, out: FloatArray,
+                     col0: int) -> None:
+        """The compiled reflex columns for ``beta`` into ``out[:, col0:col0 + 6]``."""
+        k = self.consts()
+        kk = k["kk"] if not self.space.fit_q_rest else self._kk(q_rest)
+        reflex_columns = kernels.load()["reflex_columns"]
+        reflex_columns(np.ascontiguousarray(beta, dtype=float), kk, self.lam_above_min,
+                       k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl, self.cd, out,
+                       col0)
+
+    def _reflex_basis_reference(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
+        """The reflex columns in numpy (the reference the compiled kernel is held to)."""
+        arm = self.arm
+        kk = self._kk(q_rest)
         u = beta * self.c
         ell = arm.excursion
         gam = self.lam_above_min / ell - kk * (1.0 - u)
@@ -261,6 +308,30 @@ class FitProblem:
         rd = np.where(on, dh_du * beta * self.dc, 0.0)[self.row_pt]
         return self.cf * rf + self.cl * rl + self.cd * rd
 
+    def consts(self) -> dict[str, np.ndarray]:
+        """What the compiled kernels read that does not change during a fit (built once)."""
+        if self._consts is None:
+            s = self.space
+            free = s.fitted[:12]
+            pw = s.prior_weight
+            self._consts = {
+                "kk": self._kk(np.asarray(self.arm.q_rest, dtype=float)),
+                "ell": np.ascontiguousarray(self.arm.excursion, dtype=float),
+                "row_pt": np.ascontiguousarray(self.row_pt, dtype=np.int64),
+                "w": np.ascontiguousarray(1.0 / self.sd),
+                "y": np.ascontiguousarray(self.y, dtype=float),
+                "free": np.flatnonzero(free).astype(np.int64),
+                "mu": np.ascontiguousarray(s.prior_mean[:12][free]),
+                "sdp": np.ascontiguousarray(s.prior_sd[:12][free]),
+                "lo": np.ascontiguousarray(s.lower[:12][free]),
+                "hi": np.ascontiguousarray(s.upper[:12][free]),
+                "nl": np.array([i for i in range(12, s.size) if s.fitted[i]], dtype=int),
+                "beta_fitted": np.array([i - 12 for i in range(12, 18) if s.fitted[i]],
+                                        dtype=np.int64),
+                "pw": np.array(pw),
+            }
+        return self._consts
+
     def design(self, beta: FloatArray, q_rest: FloatArray,
                slack: FloatArray | None = None) -> FloatArray:
         """X(β, q_rest, δ), shape (M, 12): predicted values per unit Km (cols 0-5) and α
@@ -272,6 +343,11 @@ class FitProblem:
                 self._xkm_cache = xkm
         else:
             xkm = self._xkm_cache
+        if self.compiled:
+            x = np.empty((self.row_pt.size, 12))
+            x[:, :6] = xkm
+            self._reflex_into(beta, q_rest, x, 6)
+            return x
         return np.hstack([xkm, self._reflex_basis(beta, q_rest)])
 
     # --- parameter vector helpers -------------------------------------------------------------
@@ -315,6 +391,8 @@ class FitProblem:
     # --- variable projection -------------------------------------------------------------------
     def nonlinear_index(self) -> np.ndarray:
         """Indices (into the full vector) of the fitted nonlinear parameters."""
+        if self.compiled:
+            return self.consts()["nl"]
         s = self.space
         return np.array([i for i in range(12, s.size) if s.fitted[i]], dtype=int)
 
@@ -326,6 +404,8 @@ class FitProblem:
     def project(self, theta_nl: FloatArray, x: FloatArray | None = None) -> Projection:
         """Best Km and α for the nonlinear entries of ``theta_nl`` (full vector; linear part
         ignored except where not fitted)."""
+        if self.compiled:
+            return self._project_compiled(theta_nl, x)
         self.n_evals += 1
         s = self.space
         lin, beta, q_rest, slack = self.split(theta_nl)
@@ -350,22 +430,47 @@ class FitProblem:
             except np.linalg.LinAlgError:
                 sol = None
             if sol is None or np.any(sol < lo) or np.any(sol > hi):
-                sq = np.sqrt(pw) / sdp
-                aa = np.vstack([a, np.diag(sq)])
-                bb = np.concatenate([rhs, sq * mu])
-                # Lower bounds are what binds (α >= 0 of quiet groups): NNLS on x - lo is ~15x
-                # faster than BVLS and solves the same strictly convex problem; BVLS only when
-                # an upper bound binds as well.
-                from scipy.optimize import lsq_linear, nnls  # heavy: where it solves
-
-                shifted, _ = nnls(aa, bb - aa @ lo)
-                sol = shifted + lo
-                if np.any(sol > hi):
-                    sol = lsq_linear(aa, bb, bounds=(lo, hi), method="bvls").x
+                sol = _bounded_solve(a, rhs, pw, mu, sdp, lo, hi)
             lin[free] = sol
         theta = theta_nl.copy()
         theta[:12] = lin
         r = rhs - a @ lin[free] if free.any() else rhs
+        return Projection(float(r @ r) + self.prior_cost(theta), theta, r)
+
+    def _project_compiled(self, theta_nl: FloatArray, x: FloatArray | None) -> Projection:
+        """:meth:`project` with the design and the normal equations compiled
+        (:func:`fieldbank.fitting.kernels.solve_normal`); the bounded fallback as before."""
+        kern = kernels.load()
+        self.n_evals += 1
+        k = self.consts()
+        s = self.space
+        theta = np.array(theta_nl, dtype=float)
+        lin = theta[:12]  # a view: the solve writes the fitted Km and α into theta
+        free = k["free"]
+        m = self.row_pt.size
+        a = np.empty((m, free.size))
+        rhs = np.empty(m)
+        r = np.empty(m)
+        pw = float(k["pw"])
+        if x is None and not (s.fit_q_rest or s.fit_slack):
+            # only β varies: the design and the solve in one compiled call
+            if self._xkm_cache is None:
+                self._xkm_cache = self._passive_basis(
+                    np.asarray(self.arm.q_rest, dtype=float), self.base_slack)
+            ok = kern["project_reflex"](theta[12:18], k["kk"], self.lam_above_min, k["ell"], self.c,
+                                self.dc, k["row_pt"], self.cf, self.cl, self.cd,
+                                self._xkm_cache, k["y"], k["w"], free, lin, pw, k["mu"],
+                                k["sdp"], k["lo"], k["hi"], a, rhs, r)
+        else:
+            if x is None:
+                _, beta, q_rest, slack = self.split(theta)
+                x = self.design(beta, q_rest, slack)
+            ok = kern["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin, pw,
+                                      k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r)
+        if not ok:
+            sol = _bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
+            lin[free] = sol
+            r = rhs - a @ sol
         return Projection(float(r @ r) + self.prior_cost(theta), theta, r)
 
     def design_derivatives(self, theta: FloatArray,
@@ -422,6 +527,8 @@ class FitProblem:
 
     def projected_cost_grad(self, phi: FloatArray) -> tuple[float, FloatArray, Projection]:
         """Projected cost and its gradient over the fitted nonlinear entries."""
+        if self.compiled and not (self.space.fit_q_rest or self.space.fit_slack):
+            return self._projected_cost_grad_compiled(phi)
         theta = self.full_from_nonlinear(phi)
         pr = self.project(theta)
         idx = self.nonlinear_index()
@@ -434,6 +541,25 @@ class FitProblem:
             dy = derivs[k] @ lin
             grad[n] = -2.0 * float(pr.r @ (dy * w))
             grad[n] += 2.0 * s.prior_weight * (pr.theta[k] - s.prior_mean[k]) / s.prior_sd[k] ** 2
+        return pr.cost, grad, pr
+
+    def _projected_cost_grad_compiled(self, phi: FloatArray
+                                      ) -> tuple[float, FloatArray, Projection]:
+        """:meth:`projected_cost_grad` over β alone, the derivative columns compiled
+        (:func:`fieldbank.fitting.kernels.reflex_gradient`)."""
+        k = self.consts()
+        pr = self.project(self.full_from_nonlinear(phi))
+        s = self.space
+        th = pr.theta
+        fitted = k["beta_fitted"]
+        grad = np.empty(fitted.size)
+        reflex_gradient = kernels.load()["reflex_gradient"]
+        reflex_gradient(np.ascontiguousarray(th[12:18]), s.lower[12:18], s.upper[12:18],
+                        _H_BETA, k["kk"], self.lam_above_min, k["ell"], self.c, self.dc,
+                        k["row_pt"], self.cf, self.cl, self.cd, np.ascontiguousarray(th[6:12]),
+                        pr.r, k["w"], fitted, grad)
+        idx = fitted + 12
+        grad += 2.0 * s.prior_weight * (th[idx] - s.prior_mean[idx]) / s.prior_sd[idx] ** 2
         return pr.cost, grad, pr
 
     def jacobian(self, theta: FloatArray, step: float | None = None) -> FloatArray:
@@ -450,3 +576,21 @@ class FitProblem:
             jac[:, k] = -(dx @ lin) * w
         jac[:, ~self.space.fitted] = 0.0
         return jac
+
+
+def _bounded_solve(a: FloatArray, rhs: FloatArray, pw: float, mu: FloatArray, sdp: FloatArray,
+                   lo: FloatArray, hi: FloatArray) -> FloatArray:
+    """The projection's linear least squares with the prior, inside [lo, hi]."""
+    sq = np.sqrt(pw) / sdp
+    aa = np.vstack([a, np.diag(sq)])
+    bb = np.concatenate([rhs, sq * mu])
+    # Lower bounds are what binds (α >= 0 of quiet groups): NNLS on x - lo is ~15x
+    # faster than BVLS and solves the same strictly convex problem; BVLS only when
+    # an upper bound binds as well.
+    from scipy.optimize import lsq_linear, nnls  # heavy: where it solves
+
+    shifted, _ = nnls(aa, bb - aa @ lo)
+    sol = np.asarray(shifted + lo, dtype=float)
+    if np.any(sol > hi):
+        sol = np.asarray(lsq_linear(aa, bb, bounds=(lo, hi), method="bvls").x, dtype=float)
+    return sol

@@ -16,8 +16,9 @@ the storage layer (or a test double) can provide them:
 * ``get_model(model_id)`` - a :class:`ModelDetail`: the model, its ancestors (newest first)
   and the stored fit report that produced it, for ``fieldbank models show``.
 
-:func:`fit_patient` runs one fit for a stored patient and stores it. :func:`model_summary` and
-:meth:`ModelDetail.to_json_dict` give the JSON documents of ``models list`` and ``models show``.
+:func:`fit_patient` runs one fit for a stored patient and stores it.
+:meth:`ModelDetail.to_json_dict` gives the JSON document of ``models show``
+(:func:`fieldbank.stored.records.model_summary`, that of each model in ``models list``).
 """
 
 from __future__ import annotations
@@ -29,11 +30,12 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from fieldbank.errors import FitError
+from fieldbank.fitchoices import MODEL_VERSION
 from fieldbank.fitting.fitter import ArmFitter
 from fieldbank.maps import FieldMap
-from fieldbank.model import MODEL_VERSION
 from fieldbank.params import ArmParams
 from fieldbank.storage.records import StoredModel
+from fieldbank.stored.records import model_summary
 
 
 @dataclass(frozen=True)
@@ -85,17 +87,10 @@ def fit_key(patient: str, session: str | None, map_ids: Sequence[int | str],
     """SHA-256 of what a fit is made from: the patient and the session asked for, the maps
     (stored maps never change, so their ids stand for their contents), the patient's base
     parameters, the fitter's options (:meth:`ArmFitter.options`) and
-    :data:`fieldbank.model.MODEL_VERSION`. The same key means the same fit would result."""
+    :data:`fieldbank.fitchoices.MODEL_VERSION`. The same key means the same fit would result."""
     doc = {"patient": patient, "session": session, "maps": sorted(str(m) for m in map_ids),
            "base": base.to_dict(), "options": dict(options), "model_version": MODEL_VERSION}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode("utf-8")).hexdigest()
-
-
-def model_summary(m: StoredModel) -> dict[str, Any]:
-    """The JSON document of one model in ``fieldbank models list``."""
-    return {"id": m.id, "patient": m.patient_code, "origin": m.origin, "label": m.label,
-            "parent_id": m.parent_id, "created_at": m.created_at, "plan_id": m.plan_id,
-            "plans_from": list(m.plans_from)}
 
 
 @dataclass(frozen=True)
@@ -130,6 +125,10 @@ class FitStore(Protocol):
     def patient_params(self, patient: str) -> ArmParams: ...
 
     def maps_for(self, patient: str, session: str | None = None) -> Sequence[PatientMap]: ...
+
+    def map_ids(self, patient: str, session: str | None = None) -> Sequence[int | str]: ...
+
+    def fit_with_key(self, fit_key: str) -> SavedFit | None: ...
 
     def add_fit(self, record: FitSubmission) -> SavedFit: ...
 

@@ -20,19 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.errors import FitError
+from fieldbank.fitchoices import ALGORITHMS
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.model import FloatArray
 
-#: name -> (nlopt global algorithm, nlopt local algorithm), by their names in nlopt (looked up
-#: when a search runs: nlopt and scipy.optimize load only when something is fitted); the local
-#: one also polishes.
-ALGORITHMS: dict[str, tuple[str, str]] = {
-    "mlsl+lbfgs": ("G_MLSL_LDS", "LD_LBFGS"),
-    "crs2+bobyqa": ("GN_CRS2_LM", "LN_BOBYQA"),
-    "direct+lbfgs": ("GN_DIRECT_L", "LD_LBFGS"),
-    "dual_annealing": ("", ""),
-}
-DEFAULT_ALGORITHM = "mlsl+lbfgs"
 #: Default evaluation budgets: the global stage of nlopt, the polish, and dual annealing.
 DEFAULT_GLOBAL_EVALS = 600
 POLISH_EVALS = 400

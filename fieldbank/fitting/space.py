@@ -34,11 +34,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.errors import FitError
+from fieldbank.fitchoices import DEFAULT_PRIOR_WEIGHT, FIT_KINDS
 from fieldbank.model import FloatArray
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.validation import Interval
 
-FIT_KINDS: tuple[str, ...] = ("km", "alpha", "beta", "q_rest", "slack")
 #: ArmParams field behind each fitted kind.
 PARAM_FIELD: dict[str, str] = {
     "km": "km_n_per_m",
@@ -74,7 +74,6 @@ FIT_BOUNDS: dict[str, Interval] = {
 #: Prior standard deviations: a factor of the unimpaired value (km, alpha) or absolute.
 PRIOR_SD_FACTOR: dict[str, float] = {"km": 10.0, "alpha": 10.0}
 PRIOR_SD: dict[str, float] = {"beta": 0.5, "q_rest": math.radians(20.0), "slack": 0.010}
-DEFAULT_PRIOR_WEIGHT = 1.0
 
 
 @dataclass(frozen=True)

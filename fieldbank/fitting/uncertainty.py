@@ -25,7 +25,8 @@ The choice: Gauss–Newton where it holds, a parametric bootstrap where it does 
    a bound (the Gaussian would cross it).
 3. **Parametric bootstrap** then (``method='auto'``; or always with ``'bootstrap'``): the
    fitted model's predictions plus Gaussian noise of the measurement sd (× s) make
-   :data:`DEFAULT_REPLICATES` new data sets; each is refitted with the fit's own cost and the
+   :data:`~fieldbank.fitchoices.DEFAULT_REPLICATES` new data sets; each is refitted with the
+   fit's own cost and the
    same held parameters, from the fitted point - β (and q_rest) by a bounded local search, a
    coarse grid scan of each coordinate (:data:`REFIT_SWEEP_POINTS`: the reflex's flat regions
    hide steps from local searches) and a last polish; Km and α by the bounded linear solve of
@@ -69,17 +70,13 @@ from typing import Any
 import numpy as np
 
 from fieldbank.errors import FitError
+from fieldbank.fitchoices import DEFAULT_REPLICATES, DEFAULT_UNCERTAINTY, UNCERTAINTY_METHODS
 from fieldbank.fitting.problem import FitProblem
 from fieldbank.fitting.search import nlopt_run
 from fieldbank.fitting.space import PARAM_FIELD
 from fieldbank.model import FloatArray
 from fieldbank.params import GROUP_INDEX, ArmParams
 
-METHODS: tuple[str, ...] = ("auto", "gauss-newton", "bootstrap")
-DEFAULT_METHOD = "auto"
-#: Bootstrap replicates (and Gaussian draws): 40 put the 2.5/97.5 percentiles between the
-#: first and second most extreme replicate; the SD is known to ≈ ±11%.
-DEFAULT_REPLICATES = 40
 #: Two-sided 95% normal quantile.
 Z95 = 1.959963984540054
 #: Secant step of the nonlinear parameters (β dimensionless, q_rest rad).
@@ -341,7 +338,7 @@ def refit_local(problem: FitProblem, y: FloatArray, theta0: FloatArray,
 
 
 def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (), *,
-             unidentified: Collection[str] = (), method: str = DEFAULT_METHOD,
+             unidentified: Collection[str] = (), method: str = DEFAULT_UNCERTAINTY,
              n_replicates: int = DEFAULT_REPLICATES, seed: int = 0,
              held_intervals: Mapping[str, tuple[float, float, float]] | None = None
              ) -> Uncertainty:
@@ -368,9 +365,9 @@ def estimate(problem: FitProblem, theta: FloatArray, held: Collection[str] = (),
         (:mod:`fieldbank.fitting.prior`); a held parameter not in it gets the fit's prior SD
         and ±1.96 SD.
     """
-    if method not in METHODS:
+    if method not in UNCERTAINTY_METHODS:
         raise FitError(f"unknown uncertainty method {method!r}; choose one of "
-                       f"{', '.join(METHODS)}.")
+                       f"{', '.join(UNCERTAINTY_METHODS)}.")
     if isinstance(n_replicates, bool) or not isinstance(n_replicates, int) or n_replicates < 2:
         raise FitError(f"replicates must be an integer >= 2; got {n_replicates!r}.")
     t0 = time.perf_counter()

@@ -33,7 +33,8 @@ import numpy as np
 from fieldbank.errors import Problem
 from fieldbank.ingest.limits import DEFAULT_LIMITS, IngestLimits
 from fieldbank.ingest.parsed import RESERVED_KEYS, ParsedMap, parse_velocity
-from fieldbank.ingest.units import QUANTITIES, factor, split_column
+from fieldbank.ingest.units import QUANTITIES, split_column
+from fieldbank.units import factor
 
 VALUE_QUANTITIES = {
     "postural": ("fx", "fy"),

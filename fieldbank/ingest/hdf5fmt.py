@@ -38,8 +38,8 @@ from fieldbank.ingest.parsed import (
     fill_defaults,
     parse_velocity,
 )
-from fieldbank.ingest.units import FORCE, LENGTH, STIFFNESS, factor
 from fieldbank.maps import VALUE_UNITS, FieldMap
+from fieldbank.units import FORCE, LENGTH, STIFFNESS, factor
 
 FORMAT = "fieldbank.maps"
 FORMAT_VERSION = 1

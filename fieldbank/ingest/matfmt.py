@@ -43,8 +43,8 @@ from fieldbank.errors import Problem
 from fieldbank.ingest.h5safe import H5_ERRORS, H5Reader
 from fieldbank.ingest.limits import DEFAULT_LIMITS, MIB, IngestLimits, LimitExceeded
 from fieldbank.ingest.parsed import RESERVED_KEYS, ParsedMap, fill_defaults, parse_velocity
-from fieldbank.ingest.units import FORCE, LENGTH, STIFFNESS, factor
 from fieldbank.maps import VALUE_UNITS, FieldMap
+from fieldbank.units import FORCE, LENGTH, STIFFNESS, factor
 
 MAT_KEYS = ("kind", "frame", "sign", "source", "velocity_m_per_s", "positions",
             "positions_unit", "values", "values_unit", "sd")

@@ -8,7 +8,7 @@ prefixed ``sd_`` for a standard deviation; HDF5 and MAT files give the unit as t
 
 from __future__ import annotations
 
-from fieldbank.units import FORCE, KGF_N, LBF_N, LENGTH, SPEED, STIFFNESS, factor, normalise
+from fieldbank.units import FORCE, LENGTH, STIFFNESS
 
 #: quantity -> (dimension name, unit table)
 QUANTITIES: dict[str, tuple[str, dict[str, float]]] = {
@@ -35,5 +35,4 @@ def split_column(name: str) -> tuple[str, bool, str] | None:
     return q, is_sd, unit
 
 
-__all__ = ["FORCE", "KGF_N", "LBF_N", "LENGTH", "QUANTITIES", "SPEED", "STIFFNESS", "factor",
-           "normalise", "split_column"]
+__all__ = ["QUANTITIES", "split_column"]

@@ -50,13 +50,29 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from fieldbank.dynamics import hand_inertial_force
-from fieldbank.errors import MapError
+from fieldbank.errors import MapError, ParameterError
 from fieldbank.maps import FieldMap
 from fieldbank.measure.recording import Recording, Trial
 from fieldbank.model import Arm, FloatArray
+from fieldbank.validation import Interval, check_fields
 
 ESTIMATOR = ("least squares ΔF = −K Δx over held displacements (Mussa-Ivaldi, Hogan & Bizzi "
              "1985); postural force = mean over base holds")
+
+
+#: The range of each threshold of :class:`EstimatorConfig`.
+ESTIMATOR_BOUNDS: dict[str, Interval] = {
+    "min_window_s": Interval(0.0, 5.0, "s", low_closed=False),
+    "min_pass_window_s": Interval(0.0, 5.0, "s", low_closed=False),
+    "settle_speed_m_per_s": Interval(0.0, 1.0, "m/s", low_closed=False),
+    "min_displacement_m": Interval(0.0, 0.1, "m"),
+    "max_displacement_m": Interval(0.0, 0.2, "m", low_closed=False),
+    "speed_tolerance": Interval(0.0, 1.0, low_closed=False),
+    "pass_radius_m": Interval(0.0, 0.2, "m", low_closed=False),
+    "sample_speed_tolerance": Interval(0.0, 1.0, low_closed=False),
+    "posture_radius_m": Interval(0.0, 0.2, "m", low_closed=False),
+    "blocks": Interval.whole(1, 1000),
+}
 
 
 @dataclass(frozen=True)
@@ -73,6 +89,12 @@ class EstimatorConfig:
     sample_speed_tolerance: float = 0.04
     posture_radius_m: float = 0.004
     blocks: int = 10
+
+    def __post_init__(self) -> None:
+        check_fields(self, ESTIMATOR_BOUNDS, what="estimator setting")
+        if self.min_displacement_m >= self.max_displacement_m:
+            raise ParameterError(f"min_displacement_m ({self.min_displacement_m:g} m) must be "
+                                 f"less than max_displacement_m ({self.max_displacement_m:g} m)")
 
 
 @dataclass(frozen=True)

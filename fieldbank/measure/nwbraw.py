@@ -29,9 +29,6 @@ fieldbank's columns gives its rows' spans, the roles found by position.
 
 from __future__ import annotations
 
-import io
-import os
-import tempfile
 import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -43,7 +40,14 @@ import numpy as np
 from fieldbank.errors import MapError
 from fieldbank.measure.budget import ReadBudget
 from fieldbank.measure.channels import unit_factor
-from fieldbank.measure.nwbseries import SeriesInfo, SeriesMissing, all_series, find
+from fieldbank.measure.nwbseries import (
+    SeriesInfo,
+    SeriesMissing,
+    all_series,
+    find,
+    nwb_bytes,
+    opened,
+)
 from fieldbank.measure.recording import ChannelProblems, Recording, Trial, derive_velocity
 from fieldbank.measure.segment import holds_in_spans
 
@@ -70,7 +74,7 @@ def write_recording(rec: Recording, info: RecordingInfo,
                     postures_m: np.ndarray | None = None) -> bytes:
     """The recording as the bytes of an NWB file."""
     from hdmf.backends.hdf5.h5_utils import H5DataIO
-    from pynwb import NWBHDF5IO, NWBFile, TimeSeries
+    from pynwb import NWBFile, TimeSeries
     from pynwb.behavior import SpatialSeries
     from pynwb.file import Subject
 
@@ -129,15 +133,7 @@ def write_recording(rec: Recording, info: RecordingInfo,
                       posture=tr.posture, window_start=tr.window_s[0],
                       window_stop=tr.window_s[1], vx=tr.velocity_m_per_s[0],
                       vy=tr.velocity_m_per_s[1], label=tr.label, status=tr.status)
-    fd, path = tempfile.mkstemp(suffix=".nwb")
-    os.close(fd)
-    try:
-        with NWBHDF5IO(path, "w") as io_:
-            io_.write(nwb)
-        with open(path, "rb") as f:
-            return f.read()
-    finally:
-        os.unlink(path)
+    return nwb_bytes(nwb)
 
 
 def _si(role: str, info: SeriesInfo, ts: Any, budget: ReadBudget, units: Mapping[str, str],
@@ -188,16 +184,11 @@ def read_recording(name: str, data: bytes, channels: Mapping[str, str] | None = 
     it is read. Raises MapError naming the file and series; a missing position and force are
     reported together (ChannelProblems).
     """
-    import h5py
-    from pynwb import NWBHDF5IO
-
     bud = budget or ReadBudget(1 << 30, len(data))
     given = dict(channels or {})
     names = {"position": "hand_position", "velocity": "hand_velocity", "force": "hand_force",
              **given}
-    with h5py.File(io.BytesIO(data), "r") as h5, \
-            NWBHDF5IO(file=h5, mode="r", load_namespaces=True) as io_:
-        nwb = io_.read()
+    with opened(data) as nwb:
         series = all_series(nwb)
         found: dict[str, tuple[SeriesInfo, Any]] = {}
         reasons = []

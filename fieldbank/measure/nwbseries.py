@@ -7,15 +7,50 @@ file with its path in the HDF5 file, unit, shape, rate and duration, read from m
 (no data is read; a series' duration from its timestamps is read only when they are few).
 :func:`find` resolves a role's name (``hand_force``) or path (``processing/behavior/…``):
 the path exactly, else the one series of that name, else a :class:`SeriesMissing` whose
-message lists what the file has and the option that maps it.
+message lists what the file has and the option that maps it. :func:`nwb_bytes` and
+:func:`opened` are the one way fieldbank writes an NWB file to bytes and reads one from them
+(the raw recordings of :mod:`fieldbank.measure.nwbraw`, the exports of
+:mod:`fieldbank.nwbexport`).
 """
 
 from __future__ import annotations
 
+import io
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
 from fieldbank.errors import MapError
+
+
+def nwb_bytes(nwb: Any) -> bytes:
+    """An NWB file (``pynwb.NWBFile``) as the bytes of its HDF5 file. pynwb writes through a
+    path, so it goes through a private temporary file, always removed."""
+    from pynwb import NWBHDF5IO
+
+    fd, path = tempfile.mkstemp(suffix=".nwb")
+    os.close(fd)
+    try:
+        with NWBHDF5IO(path, "w") as io_:
+            io_.write(nwb)
+        with open(path, "rb") as f:
+            return f.read()
+    finally:
+        os.unlink(path)
+
+
+@contextmanager
+def opened(data: bytes) -> Iterator[Any]:
+    """The NWB file held in ``data``, read in memory (its datasets are read while open)."""
+    import h5py
+    from pynwb import NWBHDF5IO
+
+    with h5py.File(io.BytesIO(data), "r") as h5, \
+            NWBHDF5IO(file=h5, mode="r", load_namespaces=True) as io_:
+        yield io_.read()
 
 
 class SeriesMissing(MapError):

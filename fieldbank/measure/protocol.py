@@ -19,7 +19,8 @@ Three parts, any of them (Mussa-Ivaldi, Hogan & Bizzi 1985 for the first two; BR
 
 Between postures the hand moves on minimum-jerk paths at ``transfer_speed_m_per_s`` (peak) and
 settles for ``settle_s``. Every choice is a documented, overridable default; the robot time of a
-plan is :attr:`Plan.duration_s` (the driver adds nothing but the first approach).
+plan is :attr:`ProtocolPlan.duration_s` (the driver adds nothing but the first approach); those the
+command line shows are in :mod:`fieldbank.measurechoices`.
 
 The grid is ``grid`` = (columns, rows) postures ``spacing_m`` apart, centred on ``centre_m``
 (shoulder frame). By default both follow the patient's arm (:meth:`ProtocolConfig.resolved`):
@@ -32,7 +33,7 @@ group at ≥ 4 pass points (:mod:`fieldbank.measure.visibility`; the earlier fix
 bi-articular flexors at one posture, and on a 1.90 m arm left the elbow flexors slack
 everywhere). :func:`plan` refuses a grid the patient's arm cannot reach, naming the posture; a
 stretch stroke that would leave the reach (they run 10 cm past the grid to reach speed) leaves
-out the far postures of that stroke, said in :attr:`Plan.notes`.
+out the far postures of that stroke, said in :attr:`ProtocolPlan.notes`.
 """
 
 from __future__ import annotations
@@ -44,11 +45,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from fieldbank.errors import ParameterError
+from fieldbank.measurechoices import (
+    DIRECTIONS,
+    DISPLACEMENT_M,
+    HOLD_S,
+    PARTS,
+    STRETCH_SPEED_M_PER_S,
+)
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.validation import Interval, check_number, check_tuple
+from fieldbank.validation import Interval, check_fields, check_tuple
 
-PARTS = ("postural", "stiffness", "stretch")
 #: The posture (shoulder, elbow), degrees, whose hand position centres the default grid.
 DEFAULT_CENTRE_POSTURE_DEG = (40.0, 80.0)
 #: The default spacing of the grid, as a fraction of the arm's length (upper arm + forearm).
@@ -84,15 +91,15 @@ class ProtocolConfig:
     spacing_m: float | None = None
     #: None: the patient's hand at :data:`DEFAULT_CENTRE_POSTURE_DEG` (:meth:`resolved`)
     centre_m: tuple[float, float] | None = None
-    displacement_m: float = 0.006
-    directions: int = 8
-    hold_s: float = 0.6
+    displacement_m: float = DISPLACEMENT_M
+    directions: int = DIRECTIONS
+    hold_s: float = HOLD_S
     transient_s: float = 0.15
     move_s: float = 0.15
     postural_hold_s: float = 1.0
     transfer_speed_m_per_s: float = 0.2
     settle_s: float = 0.25
-    stretch_speed_m_per_s: float = 1.2
+    stretch_speed_m_per_s: float = STRETCH_SPEED_M_PER_S
     stretch_offset_m: float = 0.008
     ramp_s: float = 0.2
     pass_margin_m: float = 0.015
@@ -105,9 +112,8 @@ class ProtocolConfig:
         nx, ny = self.grid
         if not (1 <= nx <= 15 and 1 <= ny <= 15):
             raise ParameterError(f"grid must be 1–15 by 1–15 postures; got {nx}×{ny}")
-        for name, interval in PROTOCOL_BOUNDS.items():
-            if getattr(self, name) is not None:
-                check_number(name, getattr(self, name), interval, what="protocol setting")
+        check_fields(self, PROTOCOL_BOUNDS, what="protocol setting",
+                     names=[n for n in PROTOCOL_BOUNDS if getattr(self, n) is not None])
         if self.centre_m is not None:
             check_tuple("centre_m", self.centre_m, 2, CENTRE_BOUNDS,
                         labels=("centre x", "centre y"), what="protocol setting")
@@ -211,7 +217,7 @@ class PlannedTrial:
 
 
 @dataclass(frozen=True)
-class Plan:
+class ProtocolPlan:
     """The whole protocol: segments in time order, trials, postures."""
 
     config: ProtocolConfig
@@ -296,7 +302,7 @@ class _Builder:
 
 
 def plan(config: ProtocolConfig, arm: Arm | None = None,
-         start_m: Sequence[float] | None = None) -> Plan:
+         start_m: Sequence[float] | None = None) -> ProtocolPlan:
     """The plan of ``config`` for a patient's ``arm`` (reachability checked when given; the
     grid's centre and spacing resolved for it, :meth:`ProtocolConfig.resolved`), starting with
     the hand at ``start_m`` (default: the first posture)."""
@@ -336,7 +342,7 @@ def plan(config: ProtocolConfig, arm: Arm | None = None,
         _stretch(b, postures, nx, ny, arm)
     if not b.segments:
         b.hold(c.settle_s)
-    return Plan(c, postures, tuple(b.segments), tuple(b.trials), first, tuple(b.notes))
+    return ProtocolPlan(c, postures, tuple(b.segments), tuple(b.trials), first, tuple(b.notes))
 
 
 def _stroke_ends(c: ProtocolConfig, x: float, y_lo: float, y_hi: float, direction: int

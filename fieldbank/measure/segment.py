@@ -22,6 +22,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldbank.measure.recording import Recording, Trial
+from fieldbank.validation import Interval, check_fields
+
+#: The range of each threshold of :class:`SegmentConfig`.
+SEGMENT_BOUNDS: dict[str, Interval] = {
+    "still_speed_m_per_s": Interval(0.0, 1.0, "m/s", low_closed=False),
+    "min_hold_s": Interval(0.0, 60.0, "s", low_closed=False),
+    "transient_s": Interval(0.0, 10.0, "s"),
+    "posture_radius_m": Interval(0.0, 0.2, "m", low_closed=False),
+    "base_radius_m": Interval(0.0, 0.2, "m", low_closed=False),
+}
 
 
 @dataclass(frozen=True)
@@ -33,6 +43,9 @@ class SegmentConfig:
     transient_s: float = 0.15
     posture_radius_m: float = 0.015
     base_radius_m: float = 0.002
+
+    def __post_init__(self) -> None:
+        check_fields(self, SEGMENT_BOUNDS, what="hold-finding setting")
 
 
 def find_holds(rec: Recording, config: SegmentConfig | None = None) -> list[Trial]:

@@ -33,7 +33,7 @@ import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.severity import LEVELS, synthesize
-from fieldbank.measure.protocol import Plan, ProtocolConfig, plan
+from fieldbank.measure.protocol import ProtocolConfig, ProtocolPlan, plan
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUP_LEGEND, GROUP_NAMES, GROUPS
 
@@ -130,7 +130,7 @@ class ProtocolSight:
                 "groups": [s.to_dict() for s in self.groups], "sees_all": self.sees_all}
 
 
-def pass_points(p: Plan) -> tuple[FloatArray, FloatArray]:
+def pass_points(p: ProtocolPlan) -> tuple[FloatArray, FloatArray]:
     """Where the moving stiffness maps of plan ``p`` are read: every posture on a pass, with
     the pass's velocity: positions (K, 2) m and velocities (K, 2) m/s, shoulder frame."""
     pos, vel = [], []
@@ -171,7 +171,7 @@ def _firing(arm: Arm, positions: FloatArray, velocities: FloatArray, group: str)
     return int(np.count_nonzero(phi[:, GROUPS.index(group)] > 0.0))
 
 
-def sight(p: Plan, arm: Arm, reflexes: _Reflexes | None = None) -> ProtocolSight:
+def sight(p: ProtocolPlan, arm: Arm, reflexes: _Reflexes | None = None) -> ProtocolSight:
     """Every group's sight of plan ``p`` on the patient's ``arm`` (module docstring)."""
     refl = reflexes or _Reflexes.of(arm)
     past = arm.muscle_lengths(arm.ik(p.postures_m)) - arm.lam_slack
@@ -211,7 +211,7 @@ def _variants(c: ProtocolConfig) -> list[tuple[str, ProtocolConfig]]:
 
 
 def suggest(config: ProtocolConfig, arm: Arm, groups: Sequence[str],
-            fits: Callable[[Plan], bool] | None = None) -> tuple[str, ProtocolSight] | None:
+            fits: Callable[[ProtocolPlan], bool] | None = None) -> tuple[str, ProtocolSight] | None:
     """The first change (:func:`_variants`) whose protocol sees every group of ``groups`` on
     ``arm``, reachable and accepted by ``fits`` (e.g. the robot's workspace and speed limit),
     with its sight; None when no single change does."""
@@ -243,8 +243,8 @@ def parse_groups(text: str) -> tuple[str, ...]:
     return tuple(g for g in GROUPS if g in items)
 
 
-def check_must_see(p: Plan, arm: Arm, must_see: Sequence[str],
-                   fits: Callable[[Plan], bool] | None = None,
+def check_must_see(p: ProtocolPlan, arm: Arm, must_see: Sequence[str],
+                   fits: Callable[[ProtocolPlan], bool] | None = None,
                    seen: ProtocolSight | None = None) -> ProtocolSight:
     """The sight of plan ``p`` (``seen``, when already computed); :class:`ProtocolBlind`
     when it would not see a group of ``must_see``, with the change that would

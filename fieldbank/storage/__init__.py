@@ -1,6 +1,6 @@
 """The field database: one class, :class:`Database`, that every other part of fieldbank uses.
 
-API (methods return frozen records from :mod:`fieldbank.storage.records` or domain objects such
+API (methods return frozen records from :mod:`fieldbank.stored.records` or domain objects such
 as :class:`~fieldbank.maps.FieldMap` and :class:`~fieldbank.params.ArmParams`; ORM rows never
 leave this package)::
 
@@ -92,7 +92,8 @@ Modules::
     audit.py       AuditTrail mixin: the audit log read and filtered, reads recorded
     arrays.py      where large arrays live (store directory or array_chunks), write, read, gc
     check.py       check(db) -> CheckReport: every reference and checksum, orphans
-    records.py     the frozen records returned by Database
+    records.py     the frozen records returned by Database (those the list commands read
+                   are in fieldbank.stored.records)
     orm.py         ORM rows and the schema (never leave this package)
     config.py      where the database lives (data_home, URLs), engines, SQLite set-up,
                    read-only files
@@ -100,11 +101,13 @@ Modules::
                    refuses a database made by a newer fieldbank
     backup.py      the backup before a destructive downgrade, and that downgrade
 
+The list commands read through the light listing instead (:mod:`fieldbank.stored.listing`:
+the driver alone, no SQLAlchemy; its reads are held equal to this class's by tests).
+
 See ``docs/storage.md`` for the schema and the durability guarantees.
 """
 
-from fieldbank.redact import mask_url
-from fieldbank.storage.config import data_home, make_engine, resolve_url
+from fieldbank.storage.config import make_engine, resolve_url
 from fieldbank.storage.database import Database
 from fieldbank.storage.mapstore import IngestProgress
 from fieldbank.storage.records import (
@@ -116,17 +119,13 @@ from fieldbank.storage.records import (
     HapticTrialRecord,
     IncomingFile,
     IngestOutcome,
-    JobRecord,
-    JobRunRecord,
-    PatientInfo,
-    PlanRecord,
     SessionInfo,
     SourceFileInfo,
-    StoredMap,
     StoredModel,
     TraceRecord,
     UserRecord,
 )
+from fieldbank.stored.records import JobRecord, JobRunRecord, PatientInfo, PlanRecord, StoredMap
 
 __all__ = [
     "ApiTokenRecord",
@@ -149,8 +148,6 @@ __all__ = [
     "StoredModel",
     "TraceRecord",
     "UserRecord",
-    "data_home",
     "make_engine",
-    "mask_url",
     "resolve_url",
 ]

@@ -34,6 +34,7 @@ from fieldbank.home import data_home
 from fieldbank.redact import mask_url, redact
 from fieldbank.storage import migrate
 from fieldbank.storage.config import sqlite_path
+from fieldbank.stored.revisions import known_revisions, revision_title
 
 #: Longest time a pg_dump may take, s.
 PG_DUMP_TIMEOUT_S = 3600
@@ -131,14 +132,14 @@ def removed_by(engine: Engine, current: str | None, target: str) -> str:
     """What a downgrade from ``current`` to ``target`` takes away, in words."""
     if target == "base":
         return "every table and all its data, the audit log included"
-    known = migrate.known_revisions()
+    known = known_revisions()
     if current is None or target not in known or current not in known:
         return "nothing (the database is not above that revision)"
     steps = known[known.index(target) + 1:known.index(current) + 1]
     if not steps:
         return "nothing (the database is not above that revision)"
     return "the schema of revision(s) " + ", ".join(
-        f"{r} ({migrate.revision_title(r)})" for r in steps)
+        f"{r} ({revision_title(r)})" for r in steps)
 
 
 def guarded_downgrade(engine: Engine, revision: str, *, confirmed: bool, make_backup: bool,

@@ -7,7 +7,8 @@ URL resolution, first match wins (the setting ``db`` of :mod:`fieldbank.config`)
 3. ``db`` in the configuration file ``fieldbank.toml``;
 4. the embedded default: a SQLite file ``fieldbank.sqlite3`` in the data directory, which is
    ``FIELDBANK_HOME`` when set, else the file's ``home``, else the platform's user data
-   directory (platformdirs). :func:`url_source` says which, for messages.
+   directory (platformdirs). :func:`fieldbank.stored.location.url_source` says which, for
+   messages.
 
 SQLite connections are opened with WAL journaling, ``synchronous=FULL`` (a committed ingest
 survives power loss), foreign keys on and a busy timeout so that several processes can write
@@ -27,7 +28,6 @@ A password in a URL is never printed or logged: every message shows :func:`mask_
 
 from __future__ import annotations
 
-import os
 import sqlite3
 import warnings
 import weakref
@@ -44,11 +44,10 @@ from fieldbank.config import DEFAULT_DB_FILE, setting
 from fieldbank.errors import StorageError
 from fieldbank.home import data_home
 from fieldbank.redact import blank_password, mask_url, quote_password, redact
+from fieldbank.stored.location import SQLITE_BUSY_TIMEOUT_MS, sqlite_read_only
 
 ENV_DB = "FIELDBANK_DB"
 ENV_ARRAYS = "FIELDBANK_ARRAYS"
-#: How long a SQLite connection waits for another writer before giving up, ms.
-SQLITE_BUSY_TIMEOUT_MS = 60_000
 
 
 def resolve_url(explicit: str | None = None) -> URL:
@@ -94,20 +93,6 @@ def _query_problem(text: str) -> str | None:
     return None
 
 
-def url_source(explicit: str | None = None) -> str:
-    """Where :func:`resolve_url` found the URL, in words for a message: 'flag --db',
-    'variable FIELDBANK_DB', 'file …/fieldbank.toml', or the default database file in the data
-    directory and where that directory came from."""
-    db = setting("db", explicit or None)
-    if db.value:
-        return db.source
-    home = setting("home")
-    if home.source == "default":
-        return ("the default database file in the platform's user data directory: neither "
-                "FIELDBANK_HOME nor FIELDBANK_DB is set, and no fieldbank.toml names one")
-    return f"the default database file in the data directory set by {home.source}"
-
-
 def default_store_root(url: URL) -> Path:
     """The array store directory of a database: ``FIELDBANK_ARRAYS``, else next to a SQLite
     file, else ``arrays/`` in the data directory (a server database keeps its arrays inside
@@ -136,13 +121,6 @@ def sqlite_path(url: URL) -> Path | None:
     if not is_sqlite(url) or url.database in (None, "", ":memory:"):
         return None
     return Path(url.database)
-
-
-def sqlite_read_only(path: Path) -> bool:
-    """Whether an existing SQLite file cannot be written (file or file system read-only)."""
-    if not path.exists():
-        return False
-    return not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK))
 
 
 #: Engines that make_engine opened read-only.

@@ -16,7 +16,6 @@ timeout instead of failing when they upgrade a read lock. Database failures beco
 from __future__ import annotations
 
 import copy
-import difflib
 import json
 import sqlite3
 from collections.abc import Iterator, Mapping
@@ -34,6 +33,7 @@ from fieldbank.redact import mask_url
 from fieldbank.storage.arrays import ArrayAccess
 from fieldbank.storage.config import db_failure, is_read_only
 from fieldbank.storage.orm import AuditRow, PatientRow, SessionRow
+from fieldbank.stored.words import no_patient
 
 
 def now() -> datetime:
@@ -163,15 +163,7 @@ class DatabaseCore:
         row = s.scalar(select(PatientRow).where(PatientRow.code == code))
         if row is None:
             codes = list(s.scalars(select(PatientRow.code).order_by(PatientRow.code)))
-            if not codes:
-                held = ("it holds no patients (a new database, or not the one you meant: "
-                        "'fieldbank config show' says which is in force)")
-            else:
-                near = difflib.get_close_matches(code, codes, n=3, cutoff=0.5) or codes[:3]
-                held = (f"it holds {len(codes)} patient{'s' if len(codes) != 1 else ''}; "
-                        f"nearest: {', '.join(near)}")
-            raise StorageError(f"No patient with code {code!r} in {self.url_masked}: {held}. "
-                               "Add one with 'fieldbank patient add'.")
+            raise StorageError(no_patient(code, codes, self.url_masked))
         return row
 
     def _optional_patient_id(self, s: Session, code: str | None) -> int | None:

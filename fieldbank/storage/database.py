@@ -38,6 +38,7 @@ from sqlalchemy.engine import URL
 from fieldbank.arraystore import ArrayStore
 from fieldbank.errors import DatabaseMissing, ParameterError, StorageError
 from fieldbank.params import ArmParams
+from fieldbank.redact import mask_url
 from fieldbank.storage import migrate
 from fieldbank.storage.accounts import Accounts
 from fieldbank.storage.arrays import CollectReport
@@ -49,19 +50,19 @@ from fieldbank.storage.config import (
     is_read_only,
     is_sqlite,
     make_engine,
-    mask_url,
     resolve_url,
     sqlite_path,
-    url_source,
 )
 from fieldbank.storage.core import now, to_utc
 from fieldbank.storage.jobs import Jobs
 from fieldbank.storage.lineage import Lineage
 from fieldbank.storage.mapstore import MapStore
 from fieldbank.storage.orm import MapRow, PatientRow, SessionRow
-from fieldbank.storage.records import CheckReport, PatientInfo, SessionInfo
+from fieldbank.storage.records import CheckReport, SessionInfo
 from fieldbank.storage.remote import RemoteLinks
 from fieldbank.storage.traces import Traces
+from fieldbank.stored.location import missing_message, url_source
+from fieldbank.stored.records import PatientInfo
 
 SIDES = ("left", "right")
 #: Patient codes are pseudonyms: letters, digits and ``-_.``, no spaces (so no full names).
@@ -75,15 +76,6 @@ def default_actor() -> str:
         return getpass.getuser()
     except (KeyError, OSError):  # no login name (containers without a passwd entry)
         return "unknown"
-
-
-def missing_message(path: Path, source: str) -> str:
-    """Why there is no database at ``path`` and what to do (:class:`DatabaseMissing`)."""
-    return (f"No database at {path} ({source}); nothing was created. To start one there: "
-            "'fieldbank patient add CODE --mass-kg KG --height-m M --side right|left' or "
-            "'fieldbank db upgrade'. If you meant another database, set FIELDBANK_HOME or "
-            "FIELDBANK_DB, give --db, or name it in fieldbank.toml ('fieldbank config show' "
-            "prints what is in force).")
 
 
 def _patient_info(r: PatientRow) -> PatientInfo:

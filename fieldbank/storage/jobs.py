@@ -35,15 +35,9 @@ from sqlalchemy.orm import Session
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.storage.config import db_failure
 from fieldbank.storage.core import DatabaseCore, now, to_utc, to_utc_opt
-from fieldbank.storage.orm import (
-    JOB_KINDS,
-    JOB_STATES,
-    FitIntervalRow,
-    FitRow,
-    JobRow,
-    JobRunRow,
-)
-from fieldbank.storage.records import JobRecord, JobRunRecord
+from fieldbank.storage.orm import FitIntervalRow, FitRow, JobRow, JobRunRow
+from fieldbank.stored.records import JOB_KINDS, JOB_STATES, JobRecord, JobRunRecord
+from fieldbank.stored.words import no_run
 
 #: States a job ends in.
 FINAL_STATES = ("done", "skipped", "failed")
@@ -128,7 +122,7 @@ class Jobs(DatabaseCore):
     def _run_row(self, s: Session, run_id: int) -> JobRunRow:
         r = s.get(JobRunRow, run_id)
         if r is None:
-            raise StorageError(f"No job run with id {run_id}; 'fieldbank jobs' lists them.")
+            raise StorageError(no_run(run_id))
         return r
 
     def _run(self, s: Session, r: JobRunRow) -> JobRunRecord:

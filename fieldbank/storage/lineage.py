@@ -34,7 +34,8 @@ from fieldbank.storage.orm import (
     SessionRow,
     fit_maps,
 )
-from fieldbank.storage.records import FitRecord, PlanRecord, StoredModel
+from fieldbank.storage.records import FitRecord, StoredModel
+from fieldbank.stored.records import PlanRecord
 
 ORIGINS = ("synthetic", "fitted", "intervention")
 

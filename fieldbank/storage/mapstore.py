@@ -11,7 +11,7 @@ transaction, so a crash in between leaves only complete, unreferenced store file
 that ``fieldbank db check`` reports, ``fieldbank db gc`` removes and a new ingest of the same
 file adopts); a server database writes them inside the transaction, so nothing is left.
 ``progress`` is called after each file is written, inside the transaction, with its
-:class:`~fieldbank.storage.records.IngestOutcome`.
+:class:`~fieldbank.stored.records.IngestOutcome`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ from fieldbank.storage.arrays import PendingArray
 from fieldbank.storage.config import db_failure
 from fieldbank.storage.core import DatabaseCore, now, to_utc
 from fieldbank.storage.orm import MapRow, PatientRow, SessionRow, SourceFileRow
-from fieldbank.storage.records import IncomingFile, IngestOutcome, SourceFileInfo, StoredMap
+from fieldbank.storage.records import IncomingFile, IngestOutcome, SourceFileInfo
+from fieldbank.stored.records import StoredMap
 
 #: Source files up to this size are kept inside the database; larger ones in the array store.
 INLINE_MAX_BYTES = 1 << 20

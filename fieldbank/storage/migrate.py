@@ -16,19 +16,17 @@ entry point refuses it with :func:`newer_message` ("created by a newer fieldbank
 and changes nothing, instead of calling it behind or letting alembic fail.
 
 Start-up: opening a database that is at head needs no alembic. The revisions this program knows
-are read from the revision files' ``revision`` / ``down_revision`` lines (:func:`known_revisions`,
-checked against alembic's own reading by tests/test_migrations.py) and the database's revision
-with one query; alembic itself is imported only to migrate or to compare the schema, and its
-INFO lines are kept off the terminal.
+are read from the revision files' ``revision`` / ``down_revision`` lines
+(:mod:`fieldbank.stored.revisions`, checked against alembic's own reading by
+tests/test_migrations.py) and the database's revision with one query; alembic itself is
+imported only to migrate or to compare the schema, and its INFO lines are kept off the
+terminal.
 """
 
 from __future__ import annotations
 
-import ast
-import functools
 import io
 import logging
-import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from importlib import resources
@@ -41,15 +39,13 @@ from sqlalchemy import exc as sa_exc
 from fieldbank.errors import StorageError
 from fieldbank.redact import mask_url
 from fieldbank.storage.config import db_failure
+from fieldbank.stored.revisions import head_revision, known_revisions, schema_state
 
 if TYPE_CHECKING:  # alembic is heavy: imported where a migration runs (module docstring)
     from alembic.config import Config
 
 #: Arbitrary constant key of the PostgreSQL advisory lock held while migrating.
 PG_LOCK_KEY = 0x6669656C64  # "field"
-#: ``revision = "0003"`` and ``down_revision = "0002"`` (or ``None``) lines of a revision file.
-_REVISION_LINE = re.compile(
-    r"^(revision|down_revision)\s*(?::[^=]*)?=\s*(?:[\"']([^\"']+)[\"']|None)\s*$", re.M)
 
 
 def alembic_config(connection: Connection | None = None,
@@ -79,52 +75,6 @@ def _errors(engine: Engine, doing: str) -> Iterator[None]:
         raise StorageError(db_failure(doing, engine.url, exc)) from None
 
 
-@functools.cache
-def _revision_files() -> tuple[tuple[str, str | None, str], ...]:
-    """(revision, down_revision, first docstring line) of every packaged revision file."""
-    out = []
-    for f in resources.files("fieldbank.migrations").joinpath("versions").iterdir():
-        if not f.name.endswith(".py") or f.name.startswith("__"):
-            continue
-        text_ = f.read_text(encoding="utf-8")
-        found = {m.group(1): m.group(2) for m in _REVISION_LINE.finditer(text_)}
-        if "revision" not in found or not found["revision"]:
-            raise StorageError(f"Migration file {f.name} names no revision.")
-        doc = (ast.get_docstring(ast.parse(text_)) or "").strip()
-        title = doc.splitlines()[0].rstrip(".") if doc else found["revision"]
-        out.append((found["revision"], found.get("down_revision"), title))
-    return tuple(out)
-
-
-def known_revisions() -> list[str]:
-    """Every revision this program's migrations know, oldest first."""
-    files = _revision_files()
-    down = {rev: parent for rev, parent, _ in files}
-    heads = sorted(set(down) - {p for p in down.values() if p is not None})
-    if len(heads) != 1:
-        raise StorageError(f"Migrations must have one head; found {heads}.")
-    chain: list[str] = []
-    rev: str | None = heads[0]
-    while rev is not None:
-        if rev in chain or rev not in down:
-            raise StorageError(f"Migrations do not form one chain at revision {rev!r}.")
-        chain.append(rev)
-        rev = down[rev]
-    if len(chain) != len(down):
-        raise StorageError("Migrations do not form one chain: "
-                           f"{', '.join(sorted(set(down) - set(chain)))} left out.")
-    return list(reversed(chain))
-
-
-def head_revision() -> str:
-    return known_revisions()[-1]
-
-
-def revision_title(revision: str) -> str:
-    """The first line of a revision's docstring (what it changes)."""
-    return next((t for rev, _, t in _revision_files() if rev == revision), revision)
-
-
 def current_revision(engine: Engine) -> str | None:
     """The database's schema revision (None: not created yet), read with one query."""
     with _errors(engine, "Reading the schema revision of"), engine.connect() as conn:
@@ -139,15 +89,6 @@ def _current(conn: Connection) -> str | None:
         raise StorageError(f"The database {mask_url(conn.engine.url)} has several schema "
                            f"revisions ({', '.join(sorted(rows))}); fieldbank keeps one.")
     return rows[0] if rows else None
-
-
-def schema_state(current: str | None) -> str:
-    """'empty', 'behind', 'current' or 'newer' (made by a newer fieldbank) for a revision."""
-    if current is None:
-        return "empty"
-    if current == head_revision():
-        return "current"
-    return "behind" if current in known_revisions() else "newer"
 
 
 def newer_message(engine: Engine, current: str) -> str:

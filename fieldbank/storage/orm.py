@@ -214,7 +214,7 @@ class FitRow(Base):
     # per key, so a batch refit that dies and runs again stores nothing twice (None: a fit
     # stored before keys were kept)
     fit_key: Mapped[str | None] = mapped_column(SHA, nullable=True, unique=True)
-    # fieldbank.model.MODEL_VERSION the fit was made under (None: not recorded)
+    # fieldbank.fitchoices.MODEL_VERSION the fit was made under (None: not recorded)
     model_version: Mapped[int | None] = mapped_column(Integer, nullable=True)
     # the session whose maps were fitted (None: every session of the patient)
     session_id: Mapped[int | None] = mapped_column(ForeignKey("sessions.id"), nullable=True,
@@ -238,15 +238,11 @@ class FitIntervalRow(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime)
 
 
-#: Kinds of batch work, and the states of one task of a run.
-JOB_KINDS = ("fit", "report", "validate")
-JOB_STATES = ("pending", "running", "done", "skipped", "failed")
-
-
 class JobRunRow(Base):
     """One batch command (``fit --all``, ``report``, ``validate``) spread over workers."""
 
     __tablename__ = "job_runs"
+    # the kinds are fieldbank.stored.records.JOB_KINDS, the states of jobs.state its JOB_STATES
     __table_args__ = (CheckConstraint("kind IN ('fit', 'report', 'validate')", name="kind"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))

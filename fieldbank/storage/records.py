@@ -1,6 +1,9 @@
 """Frozen records that :class:`fieldbank.storage.Database` returns (never ORM rows).
 
-Timestamps are timezone-aware UTC datetimes; JSON documents come back as dicts.
+Timestamps are timezone-aware UTC datetimes; JSON documents come back as dicts. The records
+the list commands read (patients, maps, models as listed, plans, batch runs and their jobs) are
+in :mod:`fieldbank.stored.records`, which the light listing returns without loading this
+package.
 """
 
 from __future__ import annotations
@@ -15,23 +18,6 @@ from fieldbank.params import ArmParams
 
 
 @dataclass(frozen=True)
-class PatientInfo:
-    """A patient: a pseudonymous code and the anthropometry the arm model needs."""
-
-    id: int
-    code: str
-    body_mass_kg: float
-    height_m: float
-    side: str
-    notes: str
-    created_at: datetime
-
-    def arm_params(self) -> ArmParams:
-        """Unimpaired parameters of this patient's arm (used to check reachability)."""
-        return ArmParams.from_anthropometry(self.body_mass_kg, self.height_m, self.side)
-
-
-@dataclass(frozen=True)
 class SessionInfo:
     """A visit of a patient, e.g. label 'pre-BoNT' on a date."""
 
@@ -41,28 +27,6 @@ class SessionInfo:
     session_date: date | None
     created_at: datetime
     n_maps: int = 0
-
-
-@dataclass(frozen=True)
-class StoredMap:
-    """What the database holds about a map besides its arrays (load those with get_map)."""
-
-    id: int
-    patient_code: str
-    session_label: str
-    session_date: date | None
-    kind: str
-    frame: str
-    sign: str
-    velocity_m_per_s: tuple[float, float]
-    n_points: int
-    value_unit: str
-    source_text: str
-    source_file: str
-    source_sha256: str
-    index_in_file: int
-    ingested_at: datetime
-    ingested_by: str
 
 
 @dataclass(frozen=True)
@@ -115,64 +79,6 @@ class FitRecord:
     model_version: int | None = None
     #: The session whose maps it fitted (None: every session of the patient).
     session_label: str | None = None
-
-
-@dataclass(frozen=True)
-class JobRunRecord:
-    """A batch command run over workers, with how many of its jobs are in each state."""
-
-    id: int
-    kind: str
-    token: str
-    engine: str
-    args: dict[str, Any]
-    actor: str
-    started_at: datetime
-    finished_at: datetime | None
-    counts: dict[str, int]
-
-    @property
-    def left(self) -> int:
-        """Jobs not finished: pending, or started and not (yet) done."""
-        return self.counts.get("pending", 0) + self.counts.get("running", 0)
-
-
-@dataclass(frozen=True)
-class JobRecord:
-    """One job of a run: its state, how often it was started, where and when it ran."""
-
-    id: int
-    run_id: int
-    key: str
-    patient_code: str | None
-    session_label: str | None
-    state: str
-    attempts: int
-    worker: str | None
-    started_at: datetime | None
-    finished_at: datetime | None
-    error: str | None
-    result: dict[str, Any] | None
-
-
-@dataclass(frozen=True)
-class PlanRecord:
-    """An intervention plan applied to a base model, giving a result model."""
-
-    id: int
-    patient_code: str | None
-    base_model_id: int
-    result_model_id: int
-    label: str
-    spec: dict[str, Any]
-    created_at: datetime
-
-    @property
-    def given_on(self) -> date | None:
-        """The day the plan was carried out (its document's ``given_on``); None for a plan
-        only explored."""
-        given = self.spec.get("given_on")
-        return date.fromisoformat(given) if isinstance(given, str) else None
 
 
 @dataclass(frozen=True)

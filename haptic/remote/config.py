@@ -8,7 +8,7 @@ from typing import Any
 
 from fieldbank.errors import ParameterError
 from fieldbank.haptic.remote.channel import Impairment
-from fieldbank.haptic.remote.passivity import DEFAULT_RESERVE_J
+from fieldbank.haptic.remote.passivity import DEFAULT_RESERVE_J, PASSIVITY_MODES
 from fieldbank.haptic.rendererconfig import RENDERER_BOUNDS
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.validation import Interval, check_fields
@@ -33,9 +33,6 @@ LINK_BOUNDS: dict[str, Interval] = {
     "peer_force_slew_n_per_s": Interval(100.0, 1e5, "N/s"),
     "peer_step_margin_m": Interval(0.0, 0.05, "m"),
 }
-#: Passivity modes: the time-domain controller of :mod:`haptic.remote.passivity`, or none
-#: (observer only: for measuring what the link would create).
-PASSIVITY_MODES = ("tdpa", "off")
 
 
 @dataclass(frozen=True)

@@ -46,6 +46,9 @@ clinician's motion (a position drift, pulled back as the tank allows,
 
 from __future__ import annotations
 
+#: Passivity modes of a link: this module's time-domain controller, or none (observer only: for
+#: measuring what the link would create).
+PASSIVITY_MODES: tuple[str, ...] = ("tdpa", "off")
 #: Energy a port keeps before handing the rest to the other side, J (assumption; module
 #: docstring).
 DEFAULT_RESERVE_J = 1e-3

@@ -15,10 +15,7 @@ bytes depend only on the database contents and the selection, so a rerun over th
 database gives identical files (no wall-clock time unless asked for).
 """
 
-from fieldbank.engine import default_jobs
-from fieldbank.interventions.errors import SelectionError
 from fieldbank.interventions.report.build import ReportOutput, build_report
 from fieldbank.interventions.report.select import CaseSpec, Selection, select_cases
 
-__all__ = ["CaseSpec", "ReportOutput", "Selection", "SelectionError", "build_report",
-           "default_jobs", "select_cases"]
+__all__ = ["CaseSpec", "ReportOutput", "Selection", "build_report", "select_cases"]

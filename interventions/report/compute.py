@@ -14,7 +14,8 @@ from typing import Any
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Comparison, Conditions, compare
 from fieldbank.evaluate.probing import STRETCHES
-from fieldbank.evaluate.severity import COMPONENTS, GRADED_STRETCH, GroupSeverity, summary
+from fieldbank.evaluate.severity import COMPONENTS, GroupSeverity, summary
+from fieldbank.evaluate.tone import GRADED_STRETCH
 from fieldbank.figures import svg
 from fieldbank.files import json_finite
 from fieldbank.interventions.catalogue import Botulinum

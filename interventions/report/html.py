@@ -29,7 +29,8 @@ from html import escape
 from typing import Any
 
 from fieldbank.evaluate.probing import STRETCHES
-from fieldbank.evaluate.severity import GRADED_STRETCH, MUSCLE_GROUP_NAMES
+from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES
+from fieldbank.evaluate.tone import GRADED_STRETCH
 from fieldbank.interventions.realised import CONFIRMED, FAILED, INCONCLUSIVE, PARTIAL
 from fieldbank.interventions.report.compute import COLUMNS, STRETCH_READOUTS, CaseResult
 from fieldbank.interventions.report.figures.common import pct

@@ -22,8 +22,8 @@ from typing import Any
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions
 from fieldbank.evaluate.probing import STRETCHES
+from fieldbank.fitchoices import MODEL_VERSION
 from fieldbank.interventions.guesses import (
-    DEFAULT_INTERVAL_SAMPLES,
     FitBasis,
     Guesses,
     IntervalSet,
@@ -32,7 +32,7 @@ from fieldbank.interventions.guesses import (
 )
 from fieldbank.interventions.report.select import CaseSpec
 from fieldbank.interventions.validate import PlanValidation, check_plan
-from fieldbank.model import MODEL_VERSION
+from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
 from fieldbank.storage import Database
 
 #: Headline metrics with interval columns: metric of

@@ -30,7 +30,7 @@ from fieldbank.evaluate.design.candidates import (
     open_candidates,
     severity_candidates,
 )
-from fieldbank.evaluate.design.config import CRITERIA, TARGETS, NoiseModel, Perception, ProbeLimits
+from fieldbank.evaluate.design.config import NoiseModel, Perception, ProbeLimits
 from fieldbank.evaluate.design.paradigms import (
     DesignReport,
     Paradigms,
@@ -64,9 +64,7 @@ from fieldbank.evaluate.design.score import (
 from fieldbank.evaluate.design.search import ProbeDesign, design
 
 __all__ = [
-    "CRITERIA",
     "FAMILIES",
-    "TARGETS",
     "Candidate",
     "Circle",
     "DesignReport",

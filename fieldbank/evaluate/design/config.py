@@ -1,4 +1,5 @@
-"""Probe design's sourced defaults and assumptions, and its three frozen configurations,
+"""Probe design's sourced defaults and assumptions (those the command line shows are in
+:mod:`fieldbank.probechoices`), and its three frozen configurations,
 each with one bounds table: :class:`Perception` (what a hand tells apart), :class:`NoiseModel`
 (force noise of a recording, motion noise of the operator) and :class:`ProbeLimits` (where and
 how fast a probe may go).
@@ -14,16 +15,21 @@ from dataclasses import dataclass
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.probing import PROBE_SAMPLES
+from fieldbank.probechoices import (
+    CORRELATION_S,
+    DIRECTION_JND_DEG,
+    DIRECTION_SD_DEG,
+    FORCE_JND,
+    FORCE_LIMIT_N,
+    FORCE_SD_N,
+    LENGTH_SD,
+    MAX_SPEED_M_PER_S,
+    SPEED_SD,
+)
 from fieldbank.validation import Interval, check_fields, check_tuple
 
-#: Weber fraction of force magnitude: 7 % for matched forces (Jones 1989), 5-15 % for actively
-#: felt forces (Pang, Tan & Durlach 1991); the upper end of 7-10 %.
-FORCE_JND = 0.10
 #: Stiffness Weber fraction for free exploration (seed: up to 67 %, 0.6 chosen for the scale).
 FREE_EXPLORATION_JND = 0.60
-#: Force-direction discrimination threshold with haptics alone, degrees (Barbagli et al. 2006;
-#: 18.4° with congruent vision, 31.9° with incongruent vision).
-DIRECTION_JND_DEG = 25.6
 #: Weber fraction of a distance felt by moving the arm, ≈ 11 % for 25-35 cm (van Beek,
 #: Bergmann Tiest & Kappers 2014): places along a path closer than this fraction of its length
 #: are not told apart (min-max paradigm).
@@ -32,22 +38,9 @@ LOCATION_JND = 0.11
 #: (assumption).
 FELT_FLOOR_N = 1.0
 
-#: Force noise per axis, N: force sensing plus what the model leaves out (assumption).
-FORCE_SD_N = 2.0
-#: Time over which the force noise decorrelates, s: one independent sample per τ (assumption).
-CORRELATION_S = 0.05
-#: Scatter of the executed direction (deg), relative length and relative speed of a probe the
-#: operator performs (assumptions), and the smooth wander of the hand off the path, m.
-DIRECTION_SD_DEG = 10.0
-LENGTH_SD = 0.15
-SPEED_SD = 0.20
+#: The smooth wander of the hand off the path, m (assumption).
 WANDER_M = 0.005
 
-#: Peak hand speed of a probe, m/s: a fast clinical stretch (the seed's pull peaks at 0.94 m/s),
-#: well below the renderer's 2.5 m/s speed limit.
-MAX_SPEED_M_PER_S = 1.2
-#: The renderer's default force saturation, N (haptic safety).
-FORCE_LIMIT_N = 40.0
 #: Distance every posture keeps from the edges of each candidate's range of motion, degrees.
 ROM_MARGIN_DEG = 10.0
 
@@ -70,8 +63,6 @@ MAX_COMBINATIONS = 49
 #: Bayes error below which the information criterion calls a pair separated.
 SEPARATED_ERROR = 0.05
 
-CRITERIA = ("feel", "information", "orientation", "minmax")
-TARGETS = ("candidate", "group")
 
 PERCEPTION_BOUNDS: dict[str, Interval] = {
     "force_jnd": Interval(0.0, 5.0, "", low_closed=False),

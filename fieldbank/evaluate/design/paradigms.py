@@ -12,7 +12,7 @@ import numpy as np
 
 from fieldbank.evaluate.design.candidates import Candidate, check_candidates, equilibrium
 from fieldbank.evaluate.design.config import NoiseModel, Perception, ProbeLimits
-from fieldbank.evaluate.design.perception import _pairs
+from fieldbank.evaluate.design.perception import pair_indices
 from fieldbank.evaluate.design.score import ProbeSetScore, score_probes
 from fieldbank.evaluate.design.search import ProbeDesign, design
 from fieldbank.evaluate.probing import ProbeMotion, pull, semi_ellipse
@@ -41,7 +41,7 @@ class Paradigms:
 def _greedy_cover(score: ProbeSetScore, what: str, limit: int) -> tuple[tuple[str, ...], bool]:
     """At most ``limit`` probes whose union separates the most pairs (≥ 1 JND), greedily."""
     n = len(score.candidates)
-    i, j = _pairs(n)
+    i, j = pair_indices(n)
     covers = [p.separations[what][i, j] >= 1.0 for p in score.probes]
     todo = np.ones(len(i), dtype=bool)
     chosen: list[str] = []

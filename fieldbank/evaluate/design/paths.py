@@ -150,7 +150,7 @@ Path = Stroke | Circle
 
 
 @dataclass(frozen=True)
-class _Family:
+class Family:
     name: str
     make: Callable[[FloatArray, FloatArray, int], tuple[FloatArray, FloatArray, FloatArray]]
     grid: Callable[[ProbeLimits], FloatArray]
@@ -185,15 +185,15 @@ def _circle_grid(lim: ProbeLimits) -> FloatArray:
     return np.array(rows)
 
 
-FAMILIES: dict[str, _Family] = {
-    "stroke": _Family(
+FAMILIES: dict[str, Family] = {
+    "stroke": Family(
         "stroke", _stroke_batch, _stroke_grid,
         lambda lim: (np.array([-540.0, lim.min_length_m, lim.min_duration_s, -lim.max_bulge]),
                      np.array([540.0, lim.max_length_m, lim.max_duration_s, lim.max_bulge])),
         lambda start, v: Stroke((float(start[0]), float(start[1])), float(v[0]), float(v[1]),
                                 float(v[2]), float(v[3])),
         (0, 1, 2, 3), False),
-    "circle": _Family(
+    "circle": Family(
         "circle", _circle_batch, _circle_grid,
         lambda lim: (np.array([lim.min_radius_m, max(lim.min_duration_s, 1.0), -1.0]),
                      np.array([lim.max_radius_m, max(lim.max_duration_s, 1.0, 4.0), 1.0])),

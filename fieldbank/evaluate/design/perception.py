@@ -44,13 +44,13 @@ from fieldbank.evaluate.design.config import (
 from fieldbank.model import FloatArray
 
 
-def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+def pair_indices(n: int) -> tuple[np.ndarray, np.ndarray]:
     i, j = np.triu_indices(n, 1)
     return i, j
 
 
 @dataclass(frozen=True)
-class _Features:
+class Features:
     """Per candidate, path and execution: log magnitude, direction, felt mask, and the places
     of the peak and the trough (fractions of the path length) with the peak's direction."""
 
@@ -63,7 +63,7 @@ class _Features:
     at_min: FloatArray      # (n, S, E)
 
 
-def _features(force: FloatArray, frac: FloatArray, perception: Perception) -> _Features:
+def perceived_features(force: FloatArray, frac: FloatArray, perception: Perception) -> Features:
     """``force`` (n, S, E, K, 2); ``frac`` (S, K) arc-length fraction of each sample."""
     mag = np.hypot(force[..., 0], force[..., 1])
     ang = np.arctan2(force[..., 1], force[..., 0])
@@ -72,7 +72,7 @@ def _features(force: FloatArray, frac: FloatArray, perception: Perception) -> _F
     peak_mag = np.take_along_axis(mag, imax[..., None], -1)[..., 0]
     peak_ang = np.take_along_axis(ang, imax[..., None], -1)[..., 0]
     s_idx = np.arange(frac.shape[0])[None, :, None]
-    return _Features(np.log(np.maximum(mag, perception.floor_n)), ang,
+    return Features(np.log(np.maximum(mag, perception.floor_n)), ang,
                      mag >= perception.floor_n, peak_ang, peak_mag >= perception.floor_n,
                      frac[s_idx, imax], frac[s_idx, imin])
 
@@ -81,12 +81,12 @@ def _wrap(a: FloatArray) -> FloatArray:
     return np.abs((a + np.pi) % (2.0 * np.pi) - np.pi)
 
 
-def _separations(f: _Features, perception: Perception, closed: bool
-                 ) -> dict[str, FloatArray]:
+def feature_separations(f: Features, perception: Perception, closed: bool
+                        ) -> dict[str, FloatArray]:
     """Robust felt, orientation and min-max separations in JNDs for every pair, shape (P, S):
     the smallest over every pair of executions (e of the first candidate, e' of the second)."""
     n = f.logmag.shape[0]
-    i, j = _pairs(n)
+    i, j = pair_indices(n)
     lm_i, lm_j = f.logmag[i][:, :, :, None], f.logmag[j][:, :, None, :]
     mag = np.abs(lm_i - lm_j) / math.log1p(perception.force_jnd)
     both = f.felt[i][:, :, :, None] & f.felt[j][:, :, None, :]
@@ -112,11 +112,12 @@ def felt_jnd(force_a_n: FloatArray, force_b_n: FloatArray,
     largest √(m² + a²) along them (magnitude and direction JNDs, module docstring)."""
     f = np.stack([np.asarray(force_a_n, dtype=float), np.asarray(force_b_n, dtype=float)])
     k = f.shape[1]
-    feats = _features(f[:, None, None], np.linspace(0.0, 1.0, k)[None], perception or Perception())
-    return float(_separations(feats, perception or Perception(), False)["feel"][0, 0])
+    feats = perceived_features(f[:, None, None], np.linspace(0.0, 1.0, k)[None],
+                               perception or Perception())
+    return float(feature_separations(feats, perception or Perception(), False)["feel"][0, 0])
 
 
-def _kl(force: FloatArray, times_s: FloatArray, noise: NoiseModel) -> FloatArray:
+def kl_divergence(force: FloatArray, times_s: FloatArray, noise: NoiseModel) -> FloatArray:
     """D_KL between every pair for every execution (P, S, E); ``force`` (n, S, E, K, 2),
     ``times_s`` (S, E, K)."""
     dt = np.diff(times_s, axis=-1)
@@ -124,15 +125,15 @@ def _kl(force: FloatArray, times_s: FloatArray, noise: NoiseModel) -> FloatArray
     w[..., 1:] += 0.5 * dt
     w[..., :-1] += 0.5 * dt
     w /= noise.correlation_s
-    i, j = _pairs(force.shape[0])
+    i, j = pair_indices(force.shape[0])
     d = force[i] - force[j]
     sq = (d * d).sum(axis=-1)
     return (sq * w[None]).sum(axis=-1) / (2.0 * noise.force_sd_n ** 2)
 
 
-def _full(pairs: FloatArray, n: int) -> FloatArray:
+def full_matrix(pairs: FloatArray, n: int) -> FloatArray:
     """(P, ...) pairwise values → (..., n, n) symmetric with a zero diagonal."""
-    i, j = _pairs(n)
+    i, j = pair_indices(n)
     out = np.zeros((*pairs.shape[1:], n, n))
     out[..., i, j] = np.moveaxis(pairs, 0, -1)
     out[..., j, i] = np.moveaxis(pairs, 0, -1)
@@ -179,21 +180,21 @@ def pair_error(kl_nats: FloatArray) -> FloatArray:
     return ndtr(-np.sqrt(2.0 * np.maximum(kl_nats, 0.0)) / 2.0)
 
 
-def _pair_mask(labels: Sequence[str], n: int) -> np.ndarray:
+def pair_mask(labels: Sequence[str], n: int) -> np.ndarray:
     """Pairs (i < j) that must be told apart: those with different labels."""
-    i, j = _pairs(n)
+    i, j = pair_indices(n)
     lab = np.asarray(labels)
     return np.asarray(lab[i] != lab[j])
 
 
 def _pair_weights(prior: FloatArray, mask: np.ndarray) -> FloatArray:
-    i, j = _pairs(len(prior))
+    i, j = pair_indices(len(prior))
     w = prior[i] * prior[j] * mask
     return w / w.sum() if w.sum() > 0 else mask / max(int(mask.sum()), 1)
 
 
-def _score(criterion: str, sep: Mapping[str, FloatArray], kl: FloatArray, prior: FloatArray,
-           labels: Sequence[str], tie_break: bool = True) -> FloatArray:
+def criterion_score(criterion: str, sep: Mapping[str, FloatArray], kl: FloatArray,
+                    prior: FloatArray, labels: Sequence[str], tie_break: bool = True) -> FloatArray:
     """The criterion's score of each of S paths (or sets): ``sep`` (P, S), ``kl`` (P, S, E)
     → (S,).
 
@@ -203,11 +204,11 @@ def _score(criterion: str, sep: Mapping[str, FloatArray], kl: FloatArray, prior:
     comparison tells the pair apart for a separation of d JNDs (0 … 1). ``tie_break`` adds
     10⁻³·log(1 + the worst pair to tell apart).
     """
-    mask = _pair_mask(labels, len(prior))
+    mask = pair_mask(labels, len(prior))
     named = None if len(set(labels)) == len(labels) else labels
     if criterion == "information":
         # information is concave in D: average it over the executions, not D
-        out = information_bits(_full(kl, len(prior)), prior, named).mean(axis=-1)
+        out = information_bits(full_matrix(kl, len(prior)), prior, named).mean(axis=-1)
         worst = kl.mean(axis=-1)[mask].min(axis=0)
     else:
         s = sep[criterion]
@@ -216,8 +217,8 @@ def _score(criterion: str, sep: Mapping[str, FloatArray], kl: FloatArray, prior:
     return out + TIE_BREAK * np.log1p(worst) if tie_break else out
 
 
-def _separated(criterion: str, sep: Mapping[str, FloatArray], kl: FloatArray,
-               mask: np.ndarray) -> np.ndarray:
+def separated_pairs(criterion: str, sep: Mapping[str, FloatArray], kl: FloatArray,
+                    mask: np.ndarray) -> np.ndarray:
     """Per pair (P, S): separated by ``criterion``, or not one to tell apart (``mask`` False)."""
     if criterion == "information":
         ok = np.asarray(pair_error(kl.mean(axis=-1)) <= SEPARATED_ERROR)
@@ -226,9 +227,9 @@ def _separated(criterion: str, sep: Mapping[str, FloatArray], kl: FloatArray,
     return ok | ~mask.reshape((-1,) + (1,) * (ok.ndim - 1))
 
 
-def _combine(sep: dict[str, FloatArray], kl: FloatArray,
-             prev: tuple[dict[str, FloatArray], FloatArray] | None
-             ) -> tuple[dict[str, FloatArray], FloatArray]:
+def combine_separations(sep: dict[str, FloatArray], kl: FloatArray,
+                        prev: tuple[dict[str, FloatArray], FloatArray] | None
+                        ) -> tuple[dict[str, FloatArray], FloatArray]:
     """A set so far (``prev``: separations (P,), D_KL per execution combination (P, C)) with
     each of S new paths (``sep`` (P, S), ``kl`` (P, S, E)): felt separations take the best
     path, D_KL adds over every combination of executions (at most :data:`MAX_COMBINATIONS`,
@@ -243,7 +244,7 @@ def _combine(sep: dict[str, FloatArray], kl: FloatArray,
 
 
 
-def _arc_fraction(pos: FloatArray) -> FloatArray:
+def arc_fraction(pos: FloatArray) -> FloatArray:
     """Arc length from the start as a fraction of the path's length, (S, K, 2) → (S, K)."""
     seg = np.hypot(*np.moveaxis(np.diff(pos, axis=1), -1, 0))
     arc = np.concatenate([np.zeros((pos.shape[0], 1)), np.cumsum(seg, axis=1)], axis=1)

@@ -25,7 +25,7 @@ from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.model import Arm, FloatArray
 
 
-def _execution_deltas(noise: NoiseModel) -> list[tuple[float, float, float]]:
+def execution_deltas(noise: NoiseModel) -> list[tuple[float, float, float]]:
     """(rotation deg, length scale, speed scale) of the nominal execution and ±1 SD of each."""
     out = [(0.0, 1.0, 1.0)]
     if noise.direction_sd_deg > 0:
@@ -37,9 +37,9 @@ def _execution_deltas(noise: NoiseModel) -> list[tuple[float, float, float]]:
     return out
 
 
-def _execute(pos: FloatArray, vel: FloatArray, t: FloatArray,
-             deltas: Sequence[tuple[float, float, float]], closed: bool = False
-             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def execute_path(pos: FloatArray, vel: FloatArray, t: FloatArray,
+                 deltas: Sequence[tuple[float, float, float]], closed: bool = False
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Executions of S paths (S, K, ·) → (S, E, K, ·): each rotated about and scaled from its
     anchor - the first point of an open path (where the hand starts), the centre of a closed
     one (a circle around the equilibrium stays around it) - its speed scaled."""
@@ -59,8 +59,8 @@ def _execute(pos: FloatArray, vel: FloatArray, t: FloatArray,
 def executions(motion: ProbeMotion, noise: NoiseModel, closed: bool = False
                ) -> list[ProbeMotion]:
     """The nominal execution of ``motion`` and ±1 SD of each kind of motion noise."""
-    deltas = _execution_deltas(noise)
-    pos, vel, t = _execute(motion.positions_m[None], motion.velocities_m_per_s[None],
+    deltas = execution_deltas(noise)
+    pos, vel, t = execute_path(motion.positions_m[None], motion.velocities_m_per_s[None],
                            motion.times_s[None], deltas, closed)
     return [ProbeMotion(motion.name, t[0, e], pos[0, e], vel[0, e], motion.description)
             for e in range(len(deltas))]
@@ -74,7 +74,7 @@ def draw_execution(motion: ProbeMotion, noise: NoiseModel, rng: np.random.Genera
     rot = float(z[0] * noise.direction_sd_deg)
     scale = max(0.3, 1.0 + float(z[1]) * noise.length_sd)
     speed = max(0.3, 1.0 + float(z[2]) * noise.speed_sd)
-    pos, vel, t = _execute(motion.positions_m[None], motion.velocities_m_per_s[None],
+    pos, vel, t = execute_path(motion.positions_m[None], motion.velocities_m_per_s[None],
                            motion.times_s[None], [(rot, scale, speed)], closed)
     return ProbeMotion(motion.name, t[0, 0], pos[0, 0], vel[0, 0],
                        f"{motion.description} (executed: {rot:+.0f}°, length ×{scale:.2f}, "

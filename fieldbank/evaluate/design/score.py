@@ -12,35 +12,36 @@ import numpy as np
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design.candidates import Candidate, check_candidates, check_prior
-from fieldbank.evaluate.design.config import TARGETS, NoiseModel, Perception, ProbeLimits
+from fieldbank.evaluate.design.config import NoiseModel, Perception, ProbeLimits
 from fieldbank.evaluate.design.paths import Circle, Path
 from fieldbank.evaluate.design.perception import (
-    _arc_fraction,
-    _combine,
-    _features,
-    _full,
-    _kl,
-    _pair_mask,
-    _pairs,
-    _score,
-    _separated,
-    _separations,
+    arc_fraction,
+    combine_separations,
+    criterion_score,
     entropy_bits,
+    feature_separations,
+    full_matrix,
     information_bits,
+    kl_divergence,
     pair_error,
+    pair_indices,
+    pair_mask,
+    perceived_features,
+    separated_pairs,
 )
 from fieldbank.evaluate.design.predict import (
-    _execute,
-    _execution_deltas,
+    execute_path,
+    execution_deltas,
     path_accelerations,
     predict,
 )
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.model import FloatArray
+from fieldbank.probechoices import DEFAULT_TARGET, TARGETS
 
 
 @dataclass
-class _Context:
+class ScoreContext:
     candidates: tuple[Candidate, ...]
     prior: FloatArray
     criterion: str
@@ -54,16 +55,17 @@ class _Context:
     def evaluate(self, pos: FloatArray, vel: FloatArray, t: FloatArray, closed: bool,
                  robust: bool) -> tuple[dict[str, FloatArray], FloatArray]:
         """Separations (P, S) and D_KL per execution (P, S, E) of S paths (S, K, ·)."""
-        frac = _arc_fraction(pos)
+        frac = arc_fraction(pos)
         if robust:
-            pe, ve, te = _execute(pos, vel, t, self.deltas, closed)
+            pe, ve, te = execute_path(pos, vel, t, self.deltas, closed)
         else:
             pe, ve, te = pos[:, None], vel[:, None], t[:, None]
         force = predict(self.candidates, pe, ve, self.limits.force_limit_n,
                         path_accelerations(ve, te))
         self.evaluations += pos.shape[0]
-        feats = _features(force, frac, self.perception)
-        return _separations(feats, self.perception, closed), _kl(force, te, self.noise)
+        feats = perceived_features(force, frac, self.perception)
+        return (feature_separations(feats, self.perception, closed),
+                kl_divergence(force, te, self.noise))
 
 
 @dataclass(frozen=True)
@@ -98,7 +100,7 @@ class PathFeatures:
 def path_features(name: str, motion: ProbeMotion, force_n: FloatArray) -> PathFeatures:
     """:class:`PathFeatures` of one candidate's force (K, 2) along ``motion``."""
     mag = np.hypot(force_n[:, 0], force_n[:, 1])
-    frac = _arc_fraction(motion.positions_m[None])[0]
+    frac = arc_fraction(motion.positions_m[None])[0]
     i, k = int(np.argmax(mag)), int(np.argmin(mag))
     mean = force_n.mean(axis=0)
     p = motion.positions_m
@@ -161,7 +163,7 @@ class ProbeSetScore:
     perception: Perception
     noise: NoiseModel
     labels: tuple[str, ...]
-    target: str = "candidate"
+    target: str = DEFAULT_TARGET
 
     def matrix(self, what: str) -> FloatArray:
         """(n, n): 'feel', 'orientation', 'minmax' (max over probes) or 'kl' (sum)."""
@@ -171,18 +173,18 @@ class ProbeSetScore:
         return np.sum(mats, axis=0) if what == "kl" else np.max(mats, axis=0)
 
     def _pair_values(self, what: str) -> FloatArray:
-        i, j = _pairs(len(self.candidates))
+        i, j = pair_indices(len(self.candidates))
         return self.matrix(what)[i, j]
 
     def _kl_combinations(self) -> FloatArray:
         """D_KL of every pair for combinations of the probes' executions, (P, C)."""
         out: tuple[dict[str, FloatArray], FloatArray] | None = None
         for p in self.probes:
-            sep = {k: p.separations[k][_pairs(len(self.candidates))][:, None]
+            sep = {k: p.separations[k][pair_indices(len(self.candidates))][:, None]
                    for k in ("feel", "orientation", "minmax")}
-            s, kl = _combine(sep, p.kl_executions[:, None, :], out)
+            s, kl = combine_separations(sep, p.kl_executions[:, None, :], out)
             out = ({k: v[:, 0] for k, v in s.items()}, kl[:, 0])
-        return out[1] if out is not None else np.zeros((len(_pairs(len(self.candidates))[0]),
+        return out[1] if out is not None else np.zeros((len(pair_indices(len(self.candidates))[0]),
                                                          1))
 
     def _sep_kl(self) -> tuple[dict[str, FloatArray], FloatArray]:
@@ -199,7 +201,7 @@ class ProbeSetScore:
         the executions of its probes."""
         kl = self._kl_combinations()
         n = len(self.candidates)
-        return float(information_bits(_full(kl, n), self.prior, self._named).mean())
+        return float(information_bits(full_matrix(kl, n), self.prior, self._named).mean())
 
     @property
     def information_max_bits(self) -> float:
@@ -209,22 +211,23 @@ class ProbeSetScore:
     def score(self, criterion: str) -> float:
         """The criterion's score of the set (see the module docstring; no tie-break term)."""
         sep, kl = self._sep_kl()
-        return float(_score(criterion, sep, kl, self.prior, self.labels, tie_break=False)[0])
+        return float(criterion_score(criterion, sep, kl, self.prior, self.labels,
+                                     tie_break=False)[0])
 
     def separated(self, criterion: str = "feel") -> np.ndarray:
         """(n, n) bool: pairs the set separates by ``criterion`` (or need not separate)."""
         n = len(self.candidates)
         sep, kl = self._sep_kl()
-        ok = _separated(criterion, sep, kl, _pair_mask(self.labels, n))[:, 0]
+        ok = separated_pairs(criterion, sep, kl, pair_mask(self.labels, n))[:, 0]
         out = np.eye(n, dtype=bool)
-        i, j = _pairs(n)
+        i, j = pair_indices(n)
         out[i, j] = ok
         out[j, i] = ok
         return out
 
     def unseparated(self, criterion: str = "feel") -> list[tuple[str, str]]:
         s = self.separated(criterion)
-        i, j = _pairs(len(self.candidates))
+        i, j = pair_indices(len(self.candidates))
         return [(self.candidates[a], self.candidates[b]) for a, b in zip(i, j, strict=True)
                 if not s[a, b]]
 
@@ -234,9 +237,9 @@ class ProbeSetScore:
     def pairs(self) -> list[dict[str, object]]:
         """Every pair with each measure (JNDs, nats, Bayes error) and the probe felt most."""
         out: list[dict[str, object]] = []
-        i, j = _pairs(len(self.candidates))
+        i, j = pair_indices(len(self.candidates))
         kl = self.matrix("kl")
-        must = _pair_mask(self.labels, len(self.candidates))
+        must = pair_mask(self.labels, len(self.candidates))
         for k, (a, b) in enumerate(zip(i, j, strict=True)):
             felt = [float(p.separations["feel"][a, b]) for p in self.probes]
             best = int(np.argmax(felt)) if felt else -1
@@ -255,7 +258,7 @@ class ProbeSetScore:
 
     def summary(self) -> dict[str, object]:
         """The headline figures: information, worst felt pair, what stays unseparated."""
-        must = _pair_mask(self.labels, len(self.candidates))
+        must = pair_mask(self.labels, len(self.candidates))
         felt = self._pair_values("feel")[must]
         err = pair_error(self._pair_values("kl")[must])
         return {
@@ -308,13 +311,13 @@ def score_probes(candidates: Sequence[Candidate], motions: Sequence[ProbeMotion]
                  perception: Perception | None = None, noise: NoiseModel | None = None,
                  limits: ProbeLimits | None = None,
                  closed: Sequence[bool] | None = None,
-                 target: str = "candidate") -> ProbeSetScore:
+                 target: str = DEFAULT_TARGET) -> ProbeSetScore:
     """Score given probes (e.g. the seed's pull and semi-ellipse) on the candidates."""
     cands = check_candidates(candidates, 2)
     p = check_prior(prior, len(cands))
     labels = target_labels(cands, target)
-    ctx = _Context(cands, p, "feel", perception or Perception(), noise or NoiseModel(),
-                   limits or ProbeLimits(), _execution_deltas(noise or NoiseModel()), labels)
+    ctx = ScoreContext(cands, p, "feel", perception or Perception(), noise or NoiseModel(),
+                   limits or ProbeLimits(), execution_deltas(noise or NoiseModel()), labels)
     out = []
     for k, m in enumerate(motions):
         path = paths[k] if paths is not None else None
@@ -324,8 +327,8 @@ def score_probes(candidates: Sequence[Candidate], motions: Sequence[ProbeMotion]
         force = predict(cands, m.positions_m, m.velocities_m_per_s, ctx.limits.force_limit_n,
                         m.accelerations_m_per_s2)
         n = len(cands)
-        mats = {key: _full(v, n)[0] for key, v in sep.items()}
-        mats["kl"] = _full(kl.mean(axis=-1), n)[0]
+        mats = {key: full_matrix(v, n)[0] for key, v in sep.items()}
+        mats["kl"] = full_matrix(kl.mean(axis=-1), n)[0]
         feats = tuple(path_features(c.name, m, force[i]) for i, c in enumerate(cands))
         out.append(ProbeScore(m, path, tuple(c.name for c in cands), force, feats, mats,
                               kl[:, 0, :], is_closed))

@@ -26,7 +26,6 @@ from fieldbank.evaluate.design.candidates import (
     equilibrium,
 )
 from fieldbank.evaluate.design.config import (
-    CRITERIA,
     DESIGN_SAMPLES,
     LIMIT_SAMPLES,
     MIN_GAIN,
@@ -37,12 +36,18 @@ from fieldbank.evaluate.design.config import (
     ProbeLimits,
 )
 from fieldbank.evaluate.design.coverage import coverage_strokes
-from fieldbank.evaluate.design.paths import FAMILIES, Path, _Family
-from fieldbank.evaluate.design.perception import _combine, _pair_mask, _score, _separated
-from fieldbank.evaluate.design.predict import _execute, _execution_deltas, feasible
-from fieldbank.evaluate.design.score import ProbeSetScore, _Context, score_probes, target_labels
+from fieldbank.evaluate.design.paths import FAMILIES, Family, Path
+from fieldbank.evaluate.design.perception import (
+    combine_separations,
+    criterion_score,
+    pair_mask,
+    separated_pairs,
+)
+from fieldbank.evaluate.design.predict import execute_path, execution_deltas, feasible
+from fieldbank.evaluate.design.score import ProbeSetScore, ScoreContext, score_probes, target_labels
 from fieldbank.evaluate.probing import PROBE_SAMPLES, ProbeMotion
 from fieldbank.model import FloatArray
+from fieldbank.probechoices import CRITERIA, DEFAULT_CRITERION, DEFAULT_TARGET
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,7 +86,7 @@ class ProbeDesign:
                 "limits": self.limits.to_dict(), **self.score.to_dict(shoulder_offset_m)}
 
 
-def _polish(ctx: _Context, fam: _Family, start: FloatArray, x0: FloatArray,
+def _polish(ctx: ScoreContext, fam: Family, start: FloatArray, x0: FloatArray,
             prev: tuple[dict[str, FloatArray], FloatArray] | None,
             evals: int) -> tuple[FloatArray, float]:
     """nlopt Sbplx from ``x0`` on the robust score; returns the best point seen and its score."""
@@ -117,7 +122,7 @@ def _polish(ctx: _Context, fam: _Family, start: FloatArray, x0: FloatArray,
 
 
 
-def _within_limits(ctx: _Context, fam: _Family, start: FloatArray, v: FloatArray,
+def _within_limits(ctx: ScoreContext, fam: Family, start: FloatArray, v: FloatArray,
                    samples: int = LIMIT_SAMPLES) -> np.ndarray:
     """Which of S paths (rows of v) keep every limit in every execution of the motion noise,
     sampled at ``samples`` points: mask (S,).
@@ -126,11 +131,11 @@ def _within_limits(ctx: _Context, fam: _Family, start: FloatArray, v: FloatArray
     search; at :data:`DESIGN_SAMPLES` (points among those) it is a cheap necessary condition.
     """
     pos, vel, t = fam.make(start, v, samples)
-    pe, ve, _ = _execute(pos, vel, t, ctx.deltas, fam.closed)
+    pe, ve, _ = execute_path(pos, vel, t, ctx.deltas, fam.closed)
     return feasible(ctx.candidates, pe, ve, ctx.limits)
 
 
-def _robust_score(ctx: _Context, fam: _Family, start: FloatArray, v: FloatArray,
+def _robust_score(ctx: ScoreContext, fam: Family, start: FloatArray, v: FloatArray,
                   prev: tuple[dict[str, FloatArray], FloatArray] | None) -> FloatArray:
     """Score of S paths (rows of v) added to the set ``prev``; paths that break a limit score
     −1 (a feasible path scores ≥ 0)."""
@@ -139,12 +144,12 @@ def _robust_score(ctx: _Context, fam: _Family, start: FloatArray, v: FloatArray,
     out = np.full(v.shape[0], -1.0)
     if ok.any():
         sep, kl = ctx.evaluate(pos[ok], vel[ok], t[ok], fam.closed, robust=True)
-        sep, kl = _combine(sep, kl, prev)
-        out[ok] = _score(ctx.criterion, sep, kl, ctx.prior, ctx.labels)
+        sep, kl = combine_separations(sep, kl, prev)
+        out[ok] = criterion_score(ctx.criterion, sep, kl, ctx.prior, ctx.labels)
     return out
 
 
-def _search_one(ctx: _Context, fam: _Family, start: FloatArray,
+def _search_one(ctx: ScoreContext, fam: Family, start: FloatArray,
                 prev: tuple[dict[str, FloatArray], FloatArray] | None,
                 starts: int, evals: int) -> tuple[FloatArray | None, float]:
     grid = fam.grid(ctx.limits)
@@ -155,8 +160,9 @@ def _search_one(ctx: _Context, fam: _Family, start: FloatArray,
         return None, -np.inf
     grid = grid[ok]
     sep, kl = ctx.evaluate(pos[ok], vel[ok], t[ok], fam.closed, robust=False)
-    sep, kl = _combine(sep, kl, prev)
-    order = np.argsort(-_score(ctx.criterion, sep, kl, ctx.prior, ctx.labels), kind="stable")
+    sep, kl = combine_separations(sep, kl, prev)
+    order = np.argsort(-criterion_score(ctx.criterion, sep, kl, ctx.prior, ctx.labels),
+                       kind="stable")
     chosen: list[FloatArray] = []
     for k in order:
         g = grid[k]
@@ -183,8 +189,8 @@ def _search_one(ctx: _Context, fam: _Family, start: FloatArray,
     return best_v, best
 
 
-def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: str = "stroke",
-           target: str = "candidate", max_probes: int | None = None,
+def design(candidates: Sequence[Candidate], *, criterion: str = DEFAULT_CRITERION,
+           family: str = "stroke", target: str = DEFAULT_TARGET, max_probes: int | None = None,
            prior: Sequence[float] | FloatArray | None = None,
            perception: Perception | None = None, noise: NoiseModel | None = None,
            limits: ProbeLimits | None = None, start_m: Sequence[float] | None = None,
@@ -232,9 +238,9 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
     fam = FAMILIES[family]
     noise = noise or NoiseModel()
     labels = target_labels(cands, target)
-    ctx = _Context(cands, check_prior(prior, n), criterion, perception or Perception(), noise,
-                   limits or ProbeLimits(), _execution_deltas(noise), labels)
-    mask = _pair_mask(labels, n)
+    ctx = ScoreContext(cands, check_prior(prior, n), criterion, perception or Perception(), noise,
+                   limits or ProbeLimits(), execution_deltas(noise), labels)
+    mask = pair_mask(labels, n)
     start = equilibrium(cands) if start_m is None else np.asarray(start_m, dtype=float)
     chosen: list[FloatArray] = []
     prev: tuple[dict[str, FloatArray], FloatArray] | None = None
@@ -245,7 +251,7 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
             chosen.append(cv)
             pos, vel, t = fam.make(start, cv[None], DESIGN_SAMPLES)
             sep, kl = ctx.evaluate(pos, vel, t, fam.closed, robust=True)
-            sep, kl = _combine(sep, kl, prev)
+            sep, kl = combine_separations(sep, kl, prev)
             prev = ({k: x[:, 0] for k, x in sep.items()}, kl[:, 0])
         limit = max(limit, len(chosen))
     while len(chosen) < limit:
@@ -256,9 +262,9 @@ def design(candidates: Sequence[Candidate], *, criterion: str = "feel", family: 
         last = val
         pos, vel, t = fam.make(start, v[None], DESIGN_SAMPLES)
         sep, kl = ctx.evaluate(pos, vel, t, fam.closed, robust=True)
-        sep, kl = _combine(sep, kl, prev)
+        sep, kl = combine_separations(sep, kl, prev)
         prev = ({k: s[:, 0] for k, s in sep.items()}, kl[:, 0])
-        if stop_when_separated and _separated(
+        if stop_when_separated and separated_pairs(
                 criterion, {k: s[:, None] for k, s in prev[0].items()}, prev[1][:, None, :],
                 mask).all():
             break

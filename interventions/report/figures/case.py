@@ -11,7 +11,7 @@ import numpy as np
 
 from fieldbank.evaluate.compare import Comparison, standard_grid
 from fieldbank.evaluate.probing import lengthening_direction
-from fieldbank.evaluate.severity import GRADED_STRETCH
+from fieldbank.evaluate.tone import GRADED_STRETCH
 from fieldbank.figures import fields
 from fieldbank.figures.scene import Scene
 from fieldbank.interventions.course import StretchCourse

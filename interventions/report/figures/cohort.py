@@ -22,7 +22,8 @@ from fieldbank.figures.style import (
     text_width,
 )
 from fieldbank.interventions.report.figures.common import ACCENT_OK, WIDTH
-from fieldbank.interventions.validate import CHANGE_TOLERANCE, PlanValidation
+from fieldbank.interventions.validate import PlanValidation
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE
 
 
 @dataclass(frozen=True)
