@@ -69,12 +69,13 @@ from fieldbank.interventions.realised import (
 )
 from fieldbank.interventions.spread import NO_FIT, FitSpread, first_session_se
 from fieldbank.interventions.suggest import suggestion
-from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.interventions.verdict import Evidence, judge
+from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
 from fieldbank.params import ArmParams
-from fieldbank.storage import Database, PlanRecord
+from fieldbank.storage import Database
+from fieldbank.stored.records import PlanRecord
 
 __all__ = [
     "LaterSession", "MapCheck", "PlanInputs",

@@ -18,7 +18,6 @@ from typing import Any
 import cattrs
 
 from fieldbank.engine import Done, Progress, Task, run_batch
-from fieldbank.interventions.realised import CHANGE_TOLERANCE, MAX_CHANGE_SE
 from fieldbank.interventions.validate import (
     PlanValidation,
     ValidationReport,
