@@ -74,7 +74,8 @@ from fieldbank.interventions.whatifchoices import CHANGE_TOLERANCE, MAX_CHANGE_S
 from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
 from fieldbank.params import ArmParams
-from fieldbank.storage import Database, PlanRecord
+from fieldbank.storage import Database
+from fieldbank.stored.records import PlanRecord
 
 __all__ = [
     "LaterSession", "MapCheck", "PlanInputs",

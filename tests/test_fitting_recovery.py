@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from fieldbank.fitting import ALGORITHMS, ArmFitter
+from fieldbank.fitchoices import ALGORITHMS
+from fieldbank.fitting import ArmFitter
 from fieldbank.fitting.synthetic import LEVELS, impaired_params, synthetic_patient
 from fieldbank.params import GROUP_INDEX, JOINT_GROUPS, ArmParams
 

@@ -13,7 +13,6 @@
 * :mod:`.plot` - measured against fitted fields.
 """
 
-from fieldbank.fitchoices import ALGORITHMS, DEFAULT_ALGORITHM
 from fieldbank.fitting.fitter import ArmFitter, validate_maps
 
-__all__ = ["ALGORITHMS", "DEFAULT_ALGORITHM", "ArmFitter", "validate_maps"]
+__all__ = ["ArmFitter", "validate_maps"]

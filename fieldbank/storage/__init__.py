@@ -125,7 +125,6 @@ from fieldbank.storage.records import (
     TraceRecord,
     UserRecord,
 )
-from fieldbank.stored.records import JobRecord, JobRunRecord, PatientInfo, PlanRecord, StoredMap
 
 __all__ = [
     "ApiTokenRecord",
@@ -138,13 +137,8 @@ __all__ = [
     "IncomingFile",
     "IngestOutcome",
     "IngestProgress",
-    "JobRecord",
-    "JobRunRecord",
-    "PatientInfo",
-    "PlanRecord",
     "SessionInfo",
     "SourceFileInfo",
-    "StoredMap",
     "StoredModel",
     "TraceRecord",
     "UserRecord",

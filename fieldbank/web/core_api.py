@@ -20,7 +20,8 @@ from fieldbank.figures import render
 from fieldbank.figures.fields import map_figure
 from fieldbank.ingest import ingest_data
 from fieldbank.model import Arm
-from fieldbank.storage import Database, FitRecord, StoredMap, StoredModel
+from fieldbank.storage import Database, FitRecord, StoredModel
+from fieldbank.stored.records import StoredMap
 from fieldbank.web.routes import ApiError, Asset, Call, Param, Route, need, optional
 
 CODE = Param("code", description="patient code")

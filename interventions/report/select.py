@@ -30,7 +30,8 @@ from fieldbank.interventions.guesses import IntervalSet
 from fieldbank.interventions.plan import Plan
 from fieldbank.interventions.validate import PlanInputs, read_plan_inputs
 from fieldbank.params import ArmParams
-from fieldbank.storage import Database, FitRecord, PatientInfo, StoredMap, StoredModel
+from fieldbank.storage import Database, FitRecord, StoredModel
+from fieldbank.stored.records import PatientInfo, StoredMap
 
 
 @dataclass(frozen=True)
