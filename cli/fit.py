@@ -70,6 +70,8 @@ def _listed_models(ctx: click.Context, db_url: str | None,
     if isinstance(ctx.obj, Mapping) and ctx.obj.get("fit_store") is not None:
         return list(_store(ctx, db_url).list_models(patient))
     with read_db(db_url) as db:
+        if patient is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient)
         return list(db.list_models(patient))
 
 
