@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from fieldbank.cli.options import emit_json, json_option
+from fieldbank.cli.options import GLOBAL_FLAGS, emit_json, json_option
+from fieldbank.cli.table import table, wrap
 from fieldbank.config import config_file, search_path, settings
 from fieldbank.sanitize import printable
 
@@ -16,25 +17,26 @@ def config() -> None:
 
 @config.command("show")
 @json_option
-def show(as_json: bool) -> None:
+@click.pass_context
+def show(ctx: click.Context, as_json: bool) -> None:
     """Print every setting in force and where it came from (flag > variable > file > default).
 
     The file is FIELDBANK_CONFIG, else fieldbank.toml in the current directory, else in the
     user configuration directory; the first found is read.
     """
-    rows = settings()
+    given = {name: ctx.meta.get(GLOBAL_FLAGS[flag]) for name, flag in
+             (("db", "--db"), ("robot", "--robot"), ("scheduler", "--scheduler"),
+              ("haptic_socket", "--socket"))}
+    rows = settings(given)
     path = config_file()
     if as_json:
         emit_json({"file": None if path is None else str(path),
                    "searched": [str(p) for p in search_path()],
                    "settings": [s.to_dict() for s in rows]})
         return
-    width = max(len(s.name) for s in rows)
-    shown = [printable(s.shown) for s in rows]
-    vwidth = min(48, max(len(v) for v in shown))
-    click.echo(f"{'setting':<{width}}  {'value':<{vwidth}}  from")
-    for s, v in zip(rows, shown, strict=True):
-        click.echo(f"{s.name:<{width}}  {v:<{vwidth}}  {printable(s.source)}")
+    click.echo("\n".join(table(("setting", "value", "from"),
+                               [(s.name, printable(s.shown), printable(s.source))
+                                for s in rows])))
     where = (f"configuration file: {path}" if path is not None else
              "configuration file: none (looked for " + ", ".join(map(str, search_path())) + ")")
-    click.echo(where, err=True)
+    click.echo(wrap(where), err=True)

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db
+from fieldbank.cli.table import wrap
 
 # The storage layer (SQLAlchemy) loads inside the commands, so 'db --help' starts at once.
 
@@ -113,9 +114,9 @@ def check(db_url: str | None, as_json: bool) -> None:
         for o in report.orphans:
             click.echo(f"orphan (harmless; 'fieldbank db gc' removes it): {o}")
         counts = ", ".join(f"{v} {k}" for k, v in report.counts.items())
-        click.echo(f"{database.url_masked}: {'OK' if report.ok else 'DAMAGED'} ({counts}; "
-                   f"{len(report.problems)} problem(s), {len(report.orphans)} orphan(s))",
-                   err=True)
+        click.echo(wrap(f"{database.url_masked}: {'OK' if report.ok else 'DAMAGED'} "
+                        f"({counts}; {len(report.problems)} problem(s), "
+                        f"{len(report.orphans)} orphan(s))"), err=True)
     if not report.ok:
         raise SystemExit(1)
 
@@ -140,5 +141,5 @@ def gc(db_url: str | None, as_json: bool) -> None:
     for line in report.in_use:
         click.echo(f"kept: {line}")
     n = len(report.rows) + len(report.files) + len(report.temporaries)
-    click.echo(f"{database.url_masked}: removed {n} orphan(s), moved {len(report.moved)} "
-               "array(s) into the database", err=True)
+    click.echo(wrap(f"{database.url_masked}: removed {n} orphan(s), moved {len(report.moved)} "
+                    "array(s) into the database"), err=True)

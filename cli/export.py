@@ -6,7 +6,15 @@ from datetime import date
 
 import click
 
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db
+from fieldbank.cli.options import (
+    DATE,
+    MODEL_ID,
+    SESSION_ID,
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+)
 
 
 @click.command("export")
@@ -20,9 +28,9 @@ from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_
               help="Optional; must agree with the output's name: .h5/.hdf5 one HDF5 file, "
                    ".csv one map, no suffix a directory with one CSV per map, .nwb one "
                    "patient (maps, models, fits, haptic sessions).")
-@click.option("--trace", "trace_id", type=int, metavar="SESSION_ID",
+@click.option("--trace", "trace_id", type=SESSION_ID, metavar="SESSION_ID",
               help="Instead: a haptic session's trace as OpenSim .mot or .sto.")
-@click.option("--model", "model_id", type=int, metavar="ID",
+@click.option("--model", "model_id", type=MODEL_ID, metavar="ID",
               help="Instead: a stored model as an OpenSim .osim.")
 @click.option("--raw", "raw_sha", metavar="SHA256",
               help="Instead: write the source file with this SHA-256 exactly as ingested.")

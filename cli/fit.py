@@ -12,12 +12,14 @@ field database; without one, ``models list`` reads the database through its driv
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+import textwrap
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import click
 
 from fieldbank.cli.options import (
+    MODEL_ID,
     db_option,
     emit_json,
     figure_path,
@@ -27,6 +29,7 @@ from fieldbank.cli.options import (
     say,
     scheduler_option,
 )
+from fieldbank.cli.table import fit_lines, table, wrap
 from fieldbank.fitchoices import (
     ALGORITHMS,
     DEFAULT_ALGORITHM,
@@ -67,6 +70,8 @@ def _listed_models(ctx: click.Context, db_url: str | None,
     if isinstance(ctx.obj, Mapping) and ctx.obj.get("fit_store") is not None:
         return list(_store(ctx, db_url).list_models(patient))
     with read_db(db_url) as db:
+        if patient is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient)
         return list(db.list_models(patient))
 
 
@@ -140,10 +145,19 @@ def _summary(out: FitOutcome) -> str:
     ]
     if f.unidentified_:
         lines.append("  not identified by these maps:")
-        lines += [f"    {u.name}: {u.reason}" for u in f.unidentified_]
+        lines += _unidentified_lines([(u.name, u.reason) for u in f.unidentified_], "    ")
     if f.severity_:
         lines += _severity_lines(f.severity_)
-    return "\n".join(lines)
+    return "\n".join(fit_lines(lines))
+
+
+def _unidentified_lines(items: Sequence[tuple[str, str]], indent: str) -> list[str]:
+    """One line per reason, naming every parameter it holds for (α and β of one group share
+    theirs): 'alpha_sf, beta_sf: reflex gains β and α of sf not identifiable: …'."""
+    by_reason: dict[str, list[str]] = {}
+    for name, reason in items:
+        by_reason.setdefault(reason, []).append(name)
+    return [f"{indent}{', '.join(names)}: {reason}" for reason, names in by_reason.items()]
 
 
 def _grade_text(grade: Mapping[str, object]) -> str:
@@ -214,6 +228,7 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
     from fieldbank.figures.fit import fit_figure
     from fieldbank.fitting import ArmFitter
     from fieldbank.fitting.records import fit_patient
+    from fieldbank.modelsource import default_changes, patient_defaults
 
     kinds = tuple(k.strip() for k in fit_kinds.split(",") if k.strip())
     if batch:
@@ -229,10 +244,14 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
                    "uncertainty": uncertainty, "replicates": replicates}
         address = resolve_scheduler(scheduler)  # a bad address is refused before any work
         with open_db(db_url) as db:
+            before = patient_defaults(db, patients or [p.code for p in db.list_patients()])
             res = fit_all(db, options, patients=patients, older_than=older_than,
                           scheduler=address, jobs=jobs or default_jobs(),
                           progress=progress_bar("fit"), say=say)
+            changes = default_changes(db, before)
         _batch_output(res, as_json)
+        for line in changes:  # a later fit changes what a patient's code stands for: said
+            say(textwrap.fill(line, 100, subsequent_indent="  "))
         if res.failed:
             ctx.exit(1)
         return
@@ -249,12 +268,16 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
                        max_evals=max_evals, progress=progress, uncertainty=uncertainty,
                        replicates=replicates)
     store = _store(ctx, db_url)
+    held = getattr(store, "db", None)  # a database store: say when the patient's model changes
+    defaults = patient_defaults(held, [patient]) if held is not None else None
     out = fit_patient(store, patient, session, fitter,
                       progress=lambda msg: click.echo(msg, err=True))
+    changes = (default_changes(held, defaults) if held is not None and defaults is not None
+               else [])
     if not out.saved.created:
-        click.echo(f"fit {out.saved.fit_id} (model {out.saved.model_id}) holds the same maps "
-                   "with the same options under this model version: it is the fit shown, and "
-                   "nothing new was stored.", err=True)
+        click.echo(wrap(f"fit {out.saved.fit_id} (model {out.saved.model_id}) holds the same "
+                        "maps with the same options under this model version: it is the fit "
+                        "shown, and nothing new was stored."), err=True)
     if plot_path:
         f = out.fitter
         path = save(fit_figure(f.maps_, f.predict(f.maps_), f.r2_,
@@ -268,14 +291,16 @@ def fit(ctx: click.Context, patient: str | None, session: str | None, batch: boo
     else:
         click.echo(_summary(out))
     if out.fitter.unidentified_:
-        click.echo(f"warning: {len(out.fitter.unidentified_)} parameter(s) are not identified "
-                   "by these maps and stay near the unimpaired prior (see 'unidentified').",
-                   err=True)
+        click.echo(wrap(f"warning: {len(out.fitter.unidentified_)} parameter(s) are not "
+                        "identified by these maps and stay near the unimpaired prior (see 'not "
+                        "identified' above)."), err=True)
     if out.fitter.status_ == "poor":
-        click.echo("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons) + "). It is "
-                   "stored, but what-ifs and reports refuse it unless given --accept-poor-fit. "
-                   "A contracture needs its slack length fitted: --fit km,alpha,beta,slack.",
-                   err=True)
+        click.echo(wrap("warning: poor fit (" + "; ".join(out.fitter.goodness_.reasons)
+                        + "). It is stored, but what-ifs and reports refuse it unless given "
+                        "--accept-poor-fit. A contracture needs its slack length fitted: "
+                        "--fit km,alpha,beta,slack."), err=True)
+    for line in changes:
+        say(textwrap.fill(line, 100, subsequent_indent="  "))
 
 
 def _batch_output(res: BatchResult, as_json: bool) -> None:
@@ -318,46 +343,48 @@ def models_list(ctx: click.Context, patient: str | None, as_json: bool,
     if not rows:
         click.echo("no models", err=True)
         return
-    click.echo(f"{'id':>5}  {'patient':<12} {'origin':<13} {'parent':>6}  {'plans':<14} label")
-    for m in rows:
-        parent = "" if m.parent_id is None else str(m.parent_id)
-        click.echo(f"{m.id!s:>5}  {m.patient_code or '-':<12} {m.origin:<13} "
-                   f"{parent:>6}  {_plans_cell(m):<14} {printable(m.label)}")
+    click.echo("\n".join(table(
+        ("id", "patient", "origin", "parent", "plans", "label"),
+        [(str(m.id), m.patient_code or "-", m.origin,
+          "" if m.parent_id is None else str(m.parent_id), _plans_cell(m), printable(m.label))
+         for m in rows], "><<><")))
 
 
 @models.command("show")
-@click.argument("model_id")
+@click.argument("model_id", type=MODEL_ID)
 @json_option
 @db_option
 @click.pass_context
-def models_show(ctx: click.Context, model_id: str, as_json: bool, db_url: str | None) -> None:
+def models_show(ctx: click.Context, model_id: int, as_json: bool, db_url: str | None) -> None:
     """Show a model's parameters, lineage, plans and the fit that produced it."""
-    key: int | str = int(model_id) if model_id.isdigit() else model_id
-    detail = _store(ctx, db_url).get_model(key)
+    detail = _store(ctx, db_url).get_model(model_id)
     if as_json:
         emit_json(detail.to_json_dict())
         return
     m = detail.model
     p = m.params
-    click.echo(f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}")
-    click.echo("  group                        Km N/m    alpha N    beta  slack mm")
-    for i, g in enumerate(GROUPS):
-        click.echo(f"  {g} {GROUP_NAMES[g]:<24}{p.km_n_per_m[i]:>10.1f} {p.alpha_n[i]:>10.1f} "
-                   f"{p.beta[i]:>7.3f} {1000 * p.slack_offset_m[i]:>+9.1f}")
+    lines = [f"model {m.id} ({m.origin}) patient {m.patient_code}: {printable(m.label)}",
+             "  group                        Km N/m    alpha N    beta  slack mm"]
+    lines += [f"  {g} {GROUP_NAMES[g]:<24}{p.km_n_per_m[i]:>10.1f} {p.alpha_n[i]:>10.1f} "
+              f"{p.beta[i]:>7.3f} {1000 * p.slack_offset_m[i]:>+9.1f}"
+              for i, g in enumerate(GROUPS)]
     q = [math.degrees(v) for v in p.q_rest_rad]
-    click.echo(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
+    lines.append(f"  rest posture: {q[0]:.1f}°, {q[1]:.1f}°")
     if detail.lineage:
-        click.echo("  lineage: " + " <- ".join(f"{a.id} ({a.origin})" for a in detail.lineage))
+        lines.append("  lineage: " + " <- ".join(f"{a.id} ({a.origin})" for a in detail.lineage))
     if m.plan_id is not None:
-        click.echo(f"  made by plan {m.plan_id} ('fieldbank plans show {m.plan_id}')")
+        lines.append(f"  made by plan {m.plan_id} ('fieldbank plans show {m.plan_id}')")
     if m.plans_from:
-        click.echo("  plans applied to it: " + ", ".join(map(str, m.plans_from)))
+        lines.append("  plans applied to it: " + ", ".join(map(str, m.plans_from)))
     fit_report = detail.fit
     if fit_report:
-        click.echo(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, cost "
-                   f"{fit_report.get('cost'):.4g}, status {fit_report.get('status')}, maps "
-                   f"{fit_report.get('map_ids')}")
-        for line in fit_quality_lines(fit_report):
-            click.echo("  " + line)
-        for u in fit_report.get("unidentified", []):
-            click.echo(f"    not identified: {u['name']}: {u['reason']}")
+        lines.append(f"  fit: {fit_report.get('algorithm')} seed {fit_report.get('seed')}, "
+                     f"cost {fit_report.get('cost'):.4g}, status {fit_report.get('status')}, "
+                     f"maps {fit_report.get('map_ids')}")
+        lines += ["  " + line for line in fit_quality_lines(fit_report)]
+        unidentified = [(str(u["name"]), str(u["reason"]))
+                        for u in fit_report.get("unidentified", [])]
+        if unidentified:
+            lines.append("    not identified by these maps:")
+            lines += _unidentified_lines(unidentified, "      ")
+    click.echo("\n".join(fit_lines(lines)))

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import click
 
 from fieldbank.cli.lazy import LazyCommand, LazyGroup
-from fieldbank.cli.options import open_db
+from fieldbank.cli.options import from_top, open_db
 from fieldbank.haptic.modelinfo import ModelInfo
 
 if TYPE_CHECKING:  # typing only: parameters load with the commands that need them
@@ -61,7 +61,8 @@ COMMANDS: dict[str, LazyCommand] = {
 }
 
 socket_option = click.option(
-    "--socket", "socket_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+    "--socket", "socket_path", type=click.Path(dir_okay=False, path_type=Path),
+    default=from_top("--socket"),
     help="Control socket of the renderer (default: haptic.sock in the fieldbank data dir).")
 
 

@@ -14,7 +14,7 @@ from typing import Any
 import click
 
 from fieldbank.cli.haptic import resolve_models, socket_option
-from fieldbank.cli.options import db_option, emit, json_option
+from fieldbank.cli.options import MODEL_ID, db_option, emit, json_option
 from fieldbank.haptic.client import ControlClient, push_models
 from fieldbank.haptic.clock import Grant
 from fieldbank.haptic.modelinfo import describe_text
@@ -29,8 +29,8 @@ def _request(socket_path: Path | None, cmd: str, **args: Any) -> Any:
 @click.argument("after_file", required=False, type=click.Path(exists=True, path_type=Path))
 @click.option("--before-severity")
 @click.option("--after-severity")
-@click.option("--before-id", type=int, help="Model A by its id in the field database.")
-@click.option("--after-id", type=int, help="Model B by its id in the field database.")
+@click.option("--before-id", type=MODEL_ID, help="Model A by its id in the field database.")
+@click.option("--after-id", type=MODEL_ID, help="Model B by its id in the field database.")
 @socket_option
 @db_option
 @json_option

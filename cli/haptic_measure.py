@@ -8,7 +8,19 @@ from pathlib import Path
 import click
 
 from fieldbank import measurechoices as mc
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db, say, xy_metres
+from fieldbank.cli.options import (
+    DATE,
+    SESSION_LABEL,
+    db_option,
+    emit_json,
+    from_top,
+    json_option,
+    open_db,
+    say,
+    xy_metres,
+)
+from fieldbank.cli.progress import robot_time
+from fieldbank.cli.table import wrap
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.sanitize import printable
 
@@ -23,11 +35,12 @@ def _grid(text: str) -> tuple[int, int]:
 
 @click.command("measure")
 @db_option
-@click.option("--robot", "url", required=True,
+@click.option("--robot", "url", required=True, default=from_top("--robot"),
               help="Robot port: /dev/ttyUSB0, a pty, socket://…, or sim://?patient=SPEC "
                    "(a virtual patient: model id, file:PATH or a severity).")
 @click.option("--patient", "patient_code", required=True, help="Patient code (stored).")
-@click.option("--session", "session_label", required=True, help="Session label.")
+@click.option("--session", "session_label", type=SESSION_LABEL, required=True,
+              help="Session label.")
 @click.option("--date", "session_date", type=DATE,
               help="Date of the session.")
 @click.option("--protocol", "parts", multiple=True, type=click.Choice(mc.PARTS),
@@ -83,10 +96,10 @@ def measure(db_url: str | None, url: str, patient_code: str, session_label: str,
                               hold_s=hold_s, stretch_speed_m_per_s=stretch_speed)
     cfg = MeasureConfig(shoulder_offset_m=xy_metres(shoulder, "--shoulder"),
                         safety=SafetyConfig(force_limit_n=force_limit_n, passivity=False))
-    with open_db(db_url) as db:
+    seen = parse_groups(must_see) if must_see else ()  # before the database opens
+    with open_db(db_url) as db, robot_time("measuring") as progress:
         res = measure_session(db, url, patient_code, session_label, protocol, cfg, raw_out,
-                              session_date, force, parse_groups(must_see) if must_see else (),
-                              say)
+                              session_date, force, seen, say, progress)
     if as_json:
         emit_json({"robot_time_s": res.robot_time_s, "raw_file": res.raw_file,
                    "visibility": res.sight.to_dict() if res.sight else None,
@@ -94,7 +107,7 @@ def measure(db_url: str | None, url: str, patient_code: str, session_label: str,
                    "trials_dropped": list(res.trials_dropped), **res.report.to_json_dict()})
     maps = sum(o.n_maps for o in res.report.outcomes)
     for note in res.notes:
-        say(f"note: {note}")
-    say(f"measured {patient_code} / {printable(session_label)}: {res.trials} trials in "
-        f"{res.robot_time_s / 60:.1f} min of robot time; {maps} map(s) stored; raw recording "
-        f"{printable(res.raw_file)}")
+        say(wrap(f"note: {note}"))
+    say(wrap(f"measured {patient_code} / {printable(session_label)}: {res.trials} trials in "
+             f"{res.robot_time_s / 60:.1f} min of robot time; {maps} map(s) stored; raw "
+             f"recording {printable(res.raw_file)}"))

@@ -21,6 +21,7 @@ import click
 from fieldbank.cli.options import (
     db_option,
     emit,
+    from_top,
     json_option,
     open_db,
     option_group,
@@ -125,7 +126,7 @@ def key_cmd(out: Path) -> None:
 
 
 @remote.command("patient")
-@click.option("--robot", required=True,
+@click.option("--robot", required=True, default=from_top("--robot"),
               help="The patient's robot, with a force sensor at its handle: a port, an "
                    "installed adapter's URL, or sim://?patient=SPEC (a simulated patient: a "
                    "stored model id, file:PATH or a severity such as elbow=severe).")
@@ -175,7 +176,7 @@ def patient(robot: str, bind: str, shoulder: str | None, drawing_file: Path | No
 
 
 @remote.command("clinician")
-@click.option("--robot", required=True,
+@click.option("--robot", required=True, default=from_top("--robot"),
               help="The clinician's robot: a port, or sim://?… (simulated).")
 @click.option("--peer", required=True, help="The patient's site, HOST:PORT.")
 @click.option("--bind", help="Local HOST:PORT (default: any free port).")

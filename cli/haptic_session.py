@@ -13,7 +13,18 @@ from typing import TYPE_CHECKING
 import click
 
 from fieldbank.cli.haptic import resolve_sources, socket_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say, xy_metres
+from fieldbank.cli.options import (
+    MODEL_ID,
+    SESSION_ID,
+    db_option,
+    emit,
+    from_top,
+    json_option,
+    open_db,
+    output_file,
+    say,
+    xy_metres,
+)
 from fieldbank.config import setting
 from fieldbank.files import read_json_document, write_atomic
 from fieldbank.haptic.errors import HapticError
@@ -56,10 +67,11 @@ def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
 
 
 @click.command("serve")
-@click.option("--robot", default=None, help="Robot port URL: /dev/ttyUSB0, a pty path, "
-              "socket://host:port, sim://?mode=realtime&motion=explore for the simulation, or "
-              "a URL an installed robot adapter serves (docs/robot-adapters.md) (default: "
-              "FIELDBANK_ROBOT, else robot in fieldbank.toml).")
+@click.option("--robot", default=from_top("--robot"),
+              help="Robot port URL: /dev/ttyUSB0, a pty path, socket://host:port, "
+              "sim://?mode=realtime&motion=explore for the simulation, or a URL an installed "
+              "robot adapter serves (docs/robot-adapters.md) (default: FIELDBANK_ROBOT, else "
+              "robot in fieldbank.toml).")
 @click.option("--rate-hz", "--rate", "rate_hz", type=click.IntRange(500, 4000), default=1000,
               show_default=True, help="Tick rate, Hz (4000 for stiffer rendering and lower "
               "latency; the session records it).")
@@ -71,8 +83,8 @@ def station_protocol(text: str, probes_file: Path | None) -> TrainingProtocol:
               help="ArmParams JSON of the model after (B).")
 @click.option("--before-severity", help="Model A from a severity, e.g. elbow=severe.")
 @click.option("--after-severity", help="Model B from a severity, e.g. elbow=mild.")
-@click.option("--before-id", type=int, help="Model A by its id in the field database.")
-@click.option("--after-id", type=int, help="Model B by its id in the field database.")
+@click.option("--before-id", type=MODEL_ID, help="Model A by its id in the field database.")
+@click.option("--after-id", type=MODEL_ID, help="Model B by its id in the field database.")
 @click.option("--force-limit-n", type=click.FloatRange(min=0.1, max=200.0), default=40.0,
               show_default=True)
 @click.option("--shoulder-offset", help="Shoulder position in robot coordinates, X,Y in m.")
@@ -173,7 +185,7 @@ def serve(robot: str | None, rate_hz: int, duration_s: float | None, before_file
 @click.command("probe")
 @click.option("--motion", type=click.Choice(["pull", "fastpull", "ellipse", "circle", "explore",
                                              "hold"]), default="pull", show_default=True)
-@click.option("--robot", default="sim://", show_default=True,
+@click.option("--robot", default=from_top("--robot", "sim://"), show_default="sim://",
               help="sim:// (simulated, faster than real time) or a real robot's port.")
 @click.option("--model", "model_file", type=click.Path(exists=True, path_type=Path))
 @click.option("--severity", help="e.g. shoulder=severe,elbow=mild")
@@ -226,10 +238,7 @@ def replay(trace_ref: str, csv_out: Path | None, rerun: bool, db_url: str | None
     from fieldbank.haptic.replay import rerun as do_rerun
 
     if trace_ref.startswith(SESSION_PREFIX):
-        try:
-            sid = int(trace_ref[len(SESSION_PREFIX):])
-        except ValueError:
-            raise click.BadParameter(f"expected {SESSION_PREFIX}ID; got {trace_ref!r}") from None
+        sid = SESSION_ID.convert(trace_ref[len(SESSION_PREFIX):], None, None)
         with open_db(db_url) as db:
             trace = read_trace_db(db, sid)
     else:

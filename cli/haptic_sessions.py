@@ -6,7 +6,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from fieldbank.cli.options import db_option, emit, json_option, open_db
+from fieldbank.cli.options import SESSION_ID, db_option, emit, json_option, open_db
+from fieldbank.cli.table import fit_lines, table
 
 if TYPE_CHECKING:  # typing only: the storage and training modules load when a command runs
     from fieldbank.storage import Database, HapticSessionRecord, HapticTrialRecord
@@ -53,35 +54,50 @@ def _session_doc(db: Database, s: HapticSessionRecord) -> dict[str, Any]:
 def list_cmd(patient: str | None, db_url: str | None, as_json: bool) -> None:
     """List recorded haptic sessions."""
     with open_db(db_url) as db:
+        if patient is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient)
         docs = [_session_doc(db, s) for s in db.list_haptic_sessions(patient)]
-    lines = [f"{'id':>4}  {'started (UTC)':19s}  {'length':>8s}  {'patient':10s}  "
-             f"{'model A':>7s}  {'model B':>7s}  {'trials':>6s}  robot"]
-    for d in docs:
-        dur = "open" if d["duration_s"] is None else f"{d['duration_s']:.1f} s"
-        a = d["model_a"]["id"] if d["model_a"] else "-"
-        b = d["model_b"]["id"] if d["model_b"] else "-"
-        lines.append(f"{d['id']:>4}  {d['started_at'][:19].replace('T', ' '):19s}  {dur:>8s}  "
-                     f"{d['patient'] or '-':10s}  {a!s:>7s}  {b!s:>7s}  {d['trials']:>6d}  "
-                     f"{d['robot']}")
+    lines = table(("id", "started (UTC)", "length", "patient", "model A", "model B", "trials",
+                   "robot"),
+                  [(str(d["id"]), d["started_at"][:19].replace("T", " "),
+                    "open" if d["duration_s"] is None else f"{d['duration_s']:.1f} s",
+                    d["patient"] or "-", str(d["model_a"]["id"] if d["model_a"] else "-"),
+                    str(d["model_b"]["id"] if d["model_b"] else "-"), str(d["trials"]),
+                    d["robot"]) for d in docs], "><><>>>")
     if not docs:
         lines = ["no haptic sessions recorded" + (f" for patient {patient}" if patient else "")]
     emit(docs, as_json, "\n".join(lines))
 
 
-def _trial_line(t: HapticTrialRecord) -> str:
+#: A group as the results name it (the answer 'both' is the bi-articular group).
+_WORDS = {"biarticular": "bi-articular", "both": "bi-articular"}
+
+
+def _trial_cells(t: HapticTrialRecord) -> tuple[str, ...]:
     right = {True: "right", False: "wrong", None: ""}[t.correct]
-    rt = "" if t.response_time_s is None else f"{t.response_time_s:6.1f} s"
+    rt = "" if t.response_time_s is None else f"{t.response_time_s:.1f} s"
     window = ("" if t.started_s is None else
               f"t = {t.started_s:.2f}–{(t.answered_s or t.detail.get('ended_s') or 0):.2f} s")
-    flag = ""
-    if t.flagged:
-        flag = "  FLAGGED, not counted: " + "; ".join(t.detail.get("flags") or ["fault"])
-    return (f"  {t.kind:8s} {t.block:>2d} {t.trial + 1:>4d}  {t.phase:15s} {t.condition:22s} "
-            f"{t.answer or '-':9s} {right:5s} {rt:>8s}  {window}{flag}")
+    condition = " ".join(_WORDS.get(w, w) for w in t.condition.split())
+    return (str(t.block), str(t.trial + 1), t.phase, condition,
+            _WORDS.get(t.answer or "-", t.answer or "-"), right, rt, window)
+
+
+def _trial_lines(trials: list[HapticTrialRecord]) -> list[str]:
+    """The trials as a table, a flagged trial's reason on the line under it."""
+    rows = table(("bl", "#", "phase", "condition", "answer", "", "resp.", "trace window"),
+                 [_trial_cells(t) for t in trials], ">><<<<><", width=98)
+    out = ["  " + rows[0]]
+    for t, row in zip(trials, rows[1:], strict=True):  # one line per trial: no cell wraps
+        out.append("  " + row)
+        if t.flagged:
+            out += fit_lines(["      FLAGGED, not counted: "
+                              + "; ".join(t.detail.get("flags") or ["fault"])])
+    return out
 
 
 @sessions.command("show")
-@click.argument("session_id", type=int)
+@click.argument("session_id", type=SESSION_ID)
 @db_option
 @json_option
 def show(session_id: int, db_url: str | None, as_json: bool) -> None:
@@ -122,11 +138,10 @@ def show(session_id: int, db_url: str | None, as_json: bool) -> None:
         lines.append(f"  loop      period error p99 {pe.get('p99', 0):.1f} µs, overruns "
                      f"{loop.get('overruns', 0)}; {len(doc['faults'])} fault(s)")
     lines.append(f"  traces    {doc['trace']} (each trial's window below)")
-    if trials:
-        lines.append(f"  {'kind':8s} {'bl':>2s} {'#':>4s}  {'phase':15s} {'condition':22s} "
-                     f"{'answer':9s} {'':5s} {'resp.':>8s}")
-        lines += [_trial_line(t) for t in trials]
-    else:
+    for kind in sorted({t.kind for t in trials}):  # one table per kind of trial
+        lines.append(f"  {kind} trials:")
+        lines += _trial_lines([t for t in trials if t.kind == kind])
+    if not trials:
         lines.append("  no trials")
     if abx:
         blocks = sorted({t.block for t in abx})

@@ -9,7 +9,15 @@ from typing import Any
 import click
 
 from fieldbank.cli.haptic_train import probe_choice, probes_option
-from fieldbank.cli.options import db_option, emit, json_option, open_db, output_file, say
+from fieldbank.cli.options import (
+    SESSION_ID,
+    db_option,
+    emit,
+    json_option,
+    open_db,
+    output_file,
+    say,
+)
 from fieldbank.files import write_atomic
 
 # The loop, the trainee and the database load inside the commands: '--help' starts at once.
@@ -112,7 +120,7 @@ def simulate(instructed: bool, probes_file: Path | None, seed_probes: bool, shor
 
 
 @click.command("results")
-@click.argument("sessions", nargs=-1, type=int)
+@click.argument("sessions", nargs=-1, type=SESSION_ID)
 @click.option("--patient", help="Only sessions of this patient.")
 @click.option("--html", "html_out", type=click.Path(dir_okay=False, path_type=Path),
               callback=output_file,
@@ -126,10 +134,21 @@ def results(sessions: tuple[int, ...], patient: str | None, html_out: Path | Non
     SESSIONS are haptic session ids (default: every session with training trials).
     """
     from fieldbank.haptic.training import summarise
-    from fieldbank.haptic.trainingresults import accuracy_text, results_html, results_page
+    from fieldbank.haptic.trainingresults import (
+        accuracy_text,
+        results_html,
+        results_page,
+        trainee_note,
+    )
 
     with open_db(db_url) as db:
-        chosen = {s.id for s in db.list_haptic_sessions(patient)}
+        if patient is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient)
+        listed = db.list_haptic_sessions(patient)
+        chosen = {s.id for s in listed}
+        # sessions a simulated trainee answered (haptic train simulate records it)
+        by_trainee = {s.id for s in listed
+                      if "simulated_trainee" in ((s.stats or {}).get("metadata") or {})}
         if sessions:
             missing = sorted(set(sessions) - chosen)
             if missing:
@@ -145,10 +164,12 @@ def results(sessions: tuple[int, ...], patient: str | None, html_out: Path | Non
                                    + (f" in session(s) {', '.join(map(str, sessions))}"
                                       if sessions else ""))
     summary = summarise(records)
-    doc = {"sessions": used, "summary": summary}
+    simulated = [i for i in used if i in by_trainee]
+    who = trainee_note(simulated, [i for i in used if i not in by_trainee])
+    doc = {"sessions": used, "simulated_trainee_sessions": simulated, "summary": summary}
     if html_out is not None:
         write_atomic(html_out, results_page([results_html(
-            summary, f"Training results, session(s) {', '.join(map(str, used))}")]))
-    emit(doc, as_json, "\n".join([f"sessions: {', '.join(map(str, used))}",
+            summary, f"Training results, session(s) {', '.join(map(str, used))}", who=who)]))
+    emit(doc, as_json, "\n".join([f"sessions: {', '.join(map(str, used))}", who,
                                   *accuracy_text(summary)]
                                  + ([f"html: {html_out}"] if html_out else [])))

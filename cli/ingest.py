@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+import stat
 from datetime import date
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.options import DATE, db_option, emit_json, json_option, open_db, xy_metres
+from fieldbank.cli.options import (
+    DATE,
+    SESSION_LABEL,
+    db_option,
+    emit_json,
+    json_option,
+    open_db,
+    xy_metres,
+)
 from fieldbank.sanitize import printable
 
 if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to show a bar
@@ -16,13 +25,28 @@ if TYPE_CHECKING:  # typing only; tqdm loads when a batch is large enough to sho
 
 #: Show a progress bar from this many files on (on a terminal).
 PROGRESS_MIN_FILES = 20
+#: A file this small is read to see whether it holds only blank lines.
+_BLANK_CHECK_BYTES = 4096
+
+
+def _is_empty(path: Path) -> bool:
+    """A regular file of no bytes, or only white space (anything else - missing, a device,
+    a link's target - is the reader's to refuse)."""
+    try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            return False
+        return st.st_size == 0 or (st.st_size <= _BLANK_CHECK_BYTES
+                                   and not path.read_bytes().strip())
+    except OSError:
+        return False
 
 
 @click.command("ingest")
 @db_option
 @click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--patient", "patient_code", required=True, help="Patient code.")
-@click.option("--session", "session_label", required=True,
+@click.option("--session", "session_label", type=SESSION_LABEL, required=True,
               help="Session label, e.g. pre-BoNT (created if new).")
 @click.option("--date", "session_date", type=DATE,
               help="Date of the session.")
@@ -67,6 +91,12 @@ def ingest(db_url: str | None, files: tuple[str, ...], patient_code: str, sessio
     """
     from fieldbank.ingest import IngestLimits, ReadOptions, ingest_paths  # readers: when it runs
 
+    empty = [f for f in files if _is_empty(Path(f))]
+    if empty:  # before the database opens; a file of nothing is empty, not of unknown format
+        raise click.ClickException(
+            "Nothing was stored: " + ", ".join(printable(f) for f in empty)
+            + (" is" if len(empty) == 1 else " are") + " empty (no bytes, or only blank "
+            "lines): nothing to read. Was it exported completely?")
     limits = IngestLimits.from_environment(limit_items)
     options = ReadOptions.from_flags(kind, frame, sign, velocity, columns,
                                      xy_metres(shoulder, "--shoulder") if shoulder else None,

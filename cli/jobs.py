@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING
 
 import click
 
-from fieldbank.cli.options import db_option, emit_json, json_option, read_db
+from fieldbank.cli.options import RUN_ID, db_option, emit_json, json_option, read_db
+from fieldbank.cli.table import table, wrap
 from fieldbank.sanitize import printable
 from fieldbank.stored.records import JOB_KINDS
 
@@ -43,7 +44,7 @@ def _status(r: JobRunRecord) -> str:
 
 
 @click.command("jobs")
-@click.argument("run_id", type=int, required=False)
+@click.argument("run_id", type=RUN_ID, required=False)
 @click.option("--kind", type=click.Choice(JOB_KINDS), default=None, help="Only runs of this kind.")
 @click.option("--limit", type=click.IntRange(min=1), default=20, show_default=True,
               help="How many of the latest runs to list.")
@@ -64,13 +65,12 @@ def jobs(run_id: int | None, kind: str | None, limit: int, states: tuple[str, ..
             if not runs:
                 click.echo("no batch runs", err=True)
                 return
-            click.echo(f"{'run':>5}  {'kind':<9}{'started':<21}{'done':>6}{'skipped':>9}"
-                       f"{'failed':>8}{'left':>6}  engine; status")
-            for r in runs:
-                c = r.counts
-                click.echo(f"{r.id:>5}  {r.kind:<9}{_when(r.started_at):<21}{c['done']:>6}"
-                           f"{c['skipped']:>9}{c['failed']:>8}{r.left:>6}  "
-                           f"{printable(r.engine)}; {_status(r)}")
+            click.echo("\n".join(table(
+                ("run", "kind", "started", "done", "skipped", "failed", "left",
+                 "engine; status"),
+                [(str(r.id), r.kind, _when(r.started_at), str(r.counts["done"]),
+                  str(r.counts["skipped"]), str(r.counts["failed"]), str(r.left),
+                  f"{printable(r.engine)}; {_status(r)}") for r in runs], "><<>>>>")))
             return
         run = db.get_run(run_id)
         tasks = db.list_jobs(run_id, states or None)
@@ -78,12 +78,12 @@ def jobs(run_id: int | None, kind: str | None, limit: int, states: tuple[str, ..
         emit_json({**_run_dict(run), "tasks": [_job_dict(j) for j in tasks]})
         return
     c = run.counts
-    click.echo(f"run {run.id}: {run.kind} on {printable(run.engine)}, started "
-               f"{_when(run.started_at)} by {printable(run.actor)}, {_status(run)}; "
-               f"{c['done']} done, {c['skipped']} skipped, {c['failed']} failed, "
+    click.echo(wrap(f"run {run.id}: {run.kind} on {printable(run.engine)}, started "
+                    f"{_when(run.started_at)} by {printable(run.actor)}, {_status(run)}"))
+    click.echo(f"  {c['done']} done, {c['skipped']} skipped, {c['failed']} failed, "
                f"{run.left} left")
-    click.echo(f"  {'task':<32}{'state':<9}{'tries':>6}  {'finished':<21}worker / error")
-    for j in tasks:
-        note = j.error if j.state == "failed" else (j.worker or "")
-        click.echo(f"  {printable(j.key)[:31]:<32}{j.state:<9}{j.attempts:>6}  "
-                   f"{_when(j.finished_at):<21}{printable(note or '')}")
+    click.echo("\n".join("  " + line for line in table(
+        ("task", "state", "tries", "finished", "worker / error"),
+        [(printable(j.key), j.state, str(j.attempts), _when(j.finished_at),
+          printable((j.error if j.state == "failed" else j.worker) or "")) for j in tasks],
+        "<<><", width=98)))

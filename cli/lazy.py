@@ -47,6 +47,17 @@ class LazyGroup(click.Group):
             self.add_command(self.lazy[cmd_name].load(), cmd_name)
         return super().get_command(ctx, cmd_name)
 
+    def resolve_command(self, ctx: click.Context,
+                        args: list[str]) -> tuple[str | None, click.Command | None, list[str]]:
+        """As click's, but a mistyped name is compared with every registered command, not
+        only those loaded so far: ``fieldbank modles`` says "Did you mean 'models'?"."""
+        name = args[0] if args else ""
+        if (not ctx.resilient_parsing and name and not name.startswith("-")
+                and self.get_command(ctx, name) is None):
+            raise click.exceptions.NoSuchCommand(name, possibilities=self.list_commands(ctx),
+                                                 ctx=ctx)
+        return super().resolve_command(ctx, args)
+
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         """The command list from the registered help lines: no command module is imported."""
         rows = []

@@ -13,6 +13,7 @@ from __future__ import annotations
 import click
 
 from fieldbank.cli.lazy import LazyCommand, LazyGroup
+from fieldbank.cli.options import GLOBAL_FLAGS
 from fieldbank.errors import FieldbankError
 from fieldbank.sanitize import printable
 
@@ -93,15 +94,33 @@ class FieldbankGroup(LazyGroup):
             raise
 
 
+def _keep(ctx: click.Context, param: click.Parameter, value: object) -> object:
+    """A setting's flag given before the command: kept for every command that has the same
+    option (:func:`fieldbank.cli.options.from_top`)."""
+    if value is not None:
+        ctx.meta[GLOBAL_FLAGS[param.opts[0]]] = value
+    return value
+
+
 @click.group(cls=FieldbankGroup, lazy=COMMANDS,
              context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--db", metavar="URL", expose_value=False, callback=_keep,
+              help="Database URL for the command that follows (as its own --db).")
+@click.option("--robot", metavar="PORT", expose_value=False, callback=_keep,
+              help="Robot port for the command that follows (as its own --robot).")
+@click.option("--scheduler", metavar="ADDRESS", expose_value=False, callback=_keep,
+              help="Dask scheduler for the command that follows (as its own --scheduler).")
+@click.option("--socket", metavar="SOCKET", expose_value=False, callback=_keep,
+              help="Renderer's control socket for the command that follows (as its own "
+                   "--socket).")
 @click.version_option(package_name="fieldbank")
 def cli() -> None:
     """fieldbank: force-field database and intervention what-if for hypertonic arms.
 
     Muscle groups: sf/se shoulder flexors/extensors, ef/ee elbow flexors/extensors, bf/be
     bi-articular flexors/extensors. Terms (R1, R2, catch, χ²/n, JND, under-determined, ...):
-    docs/glossary.md. Settings in force: 'fieldbank config show'.
+    docs/glossary.md. Settings in force: 'fieldbank config show'. A setting's flag may come
+    before the command (fieldbank --db URL patient list) or after it; after it wins.
     """
 
 

@@ -8,6 +8,7 @@ from datetime import date
 import click
 
 from fieldbank.cli.options import DATE, db_option, emit_json, json_option, read_db
+from fieldbank.cli.table import table
 from fieldbank.sanitize import printable
 
 
@@ -29,15 +30,18 @@ def list_(db_url: str | None, patient_code: str | None, session_label: str | Non
           as_json: bool) -> None:
     """List maps matching every filter given."""
     with read_db(db_url) as db:
+        if patient_code is not None:  # an unknown patient: the one "not found" message
+            db.get_patient(patient_code)
         rows = db.list_maps(patient_code, session_label, kind, since, until)
     if as_json:
         emit_json([dataclasses.asdict(m) for m in rows])
         return
-    for m in rows:
-        v = "static" if m.velocity_m_per_s == (0.0, 0.0) else (
-            "v=({:g}, {:g}) m/s".format(*m.velocity_m_per_s))
+    if rows:
         # labels and file names come from outside: no terminal escapes reach the screen
-        click.echo(f"{m.id:>6} {m.patient_code:<12} {printable(m.session_label):<14} "
-                   f"{m.session_date or ''!s:<10} {m.kind:<9} {m.n_points:>4} pts {v:<18} "
-                   f"{printable(m.source_file)}")
+        click.echo("\n".join(table(
+            ("id", "patient", "session", "date", "kind", "points", "velocity", "file"),
+            [(str(m.id), m.patient_code, printable(m.session_label), str(m.session_date or ""),
+              m.kind, str(m.n_points), "static" if m.velocity_m_per_s == (0.0, 0.0) else
+              "({:g}, {:g}) m/s".format(*m.velocity_m_per_s), printable(m.source_file))
+             for m in rows], "><<<<><")))
     click.echo(f"{len(rows)} map(s)", err=True)

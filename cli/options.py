@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import calendar
 import functools
+import math
 from collections.abc import Callable
 from datetime import date
 from pathlib import Path
@@ -18,6 +19,7 @@ from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import click
 
+from fieldbank.cli.table import fit_lines
 from fieldbank.files import to_json
 
 if TYPE_CHECKING:  # typing only; the storage layer loads when a command opens the database
@@ -36,6 +38,10 @@ class DateParam(click.ParamType):
 
     name = "YYYY-MM-DD"
 
+    def __init__(self, not_after_today: str = "") -> None:
+        #: When set, a day after today is refused with this reason.
+        self.not_after_today = not_after_today
+
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> date:
         if isinstance(value, date):
@@ -46,21 +52,101 @@ class DateParam(click.ParamType):
             self.fail(f"{text!r} is not a date written YYYY-MM-DD (e.g. 2024-02-21).",
                       param, ctx)
         y, m, d = (int(p) for p in parts)
+        if y < 1:
+            self.fail(f"{text}: there is no year 0 (years run from 0001).", param, ctx)
         if not 1 <= m <= 12:
             self.fail(f"{text}: there is no month {m} (months run 01-12).", param, ctx)
         days = calendar.monthrange(y, m)[1]
         if not 1 <= d <= days:
             self.fail(f"{text}: {calendar.month_name[m]} {y} has {days} days.", param, ctx)
-        return date(y, m, d)
+        day = date(y, m, d)
+        if self.not_after_today and day > date.today():
+            self.fail(f"{text} is in the future (today is {date.today().isoformat()}): "
+                      f"{self.not_after_today}.", param, ctx)
+        return day
 
 
-#: The one date option type (``--date``, ``--since``, ``--until``, ``--given-on``, ``--on``).
+#: The one date option type (``--date``, ``--since``, ``--until``).
 DATE = DateParam()
+#: The day a plan was carried out (``--given-on``, ``plans give --on``): never after today.
+GIVEN_DATE = DateParam("a plan is recorded as given on the day it was carried out")
+
+
+class IdParam(click.ParamType):
+    """A stored row's id: a whole number from 1 to the largest id a database column holds
+    (PostgreSQL's ``integer``), refused in words before the database is opened - never a
+    traceback for ``abc`` or ``99999999999999999999999``."""
+
+    name = "ID"
+    MAX = 2**31 - 1
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            text = str(value)
+        else:
+            text = str(value).strip()
+        if not text.isdigit() or not text.isascii():
+            self.fail(f"{text!r} is not a {self.what} id: ids are whole numbers (1, 2, …).",
+                      param, ctx)
+        n = int(text)
+        if not 1 <= n <= self.MAX:
+            self.fail(f"{text} is not a {self.what} id: ids run from 1 to {self.MAX}.",
+                      param, ctx)
+        return n
+
+
+class LabelParam(click.ParamType):
+    """A label the user names a thing by (a session): not empty, nothing but spaces."""
+
+    name = "LABEL"
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> str:
+        text = str(value)
+        if not text.strip():
+            self.fail(f"a {self.what} must not be empty.", param, ctx)
+        return text
+
+
+#: A session's label (``--session``).
+SESSION_LABEL = LabelParam("session label")
+
+#: Typed ids of the stored things commands name.
+MODEL_ID = IdParam("model")
+PLAN_ID = IdParam("plan")
+SESSION_ID = IdParam("haptic session")
+RUN_ID = IdParam("batch run")
+
+#: Settings whose flag may also be given before the command (``fieldbank --db URL patient
+#: list``): flag -> the key under which the top-level group keeps it in ``ctx.meta``.
+GLOBAL_FLAGS = {"--db": "fieldbank.db", "--robot": "fieldbank.robot",
+                "--scheduler": "fieldbank.scheduler", "--socket": "fieldbank.socket"}
+
+
+def from_top(flag: str, fallback: Any = None) -> Callable[[], Any]:
+    """A callable default: the value the same flag had before the command
+    (:data:`GLOBAL_FLAGS`), else ``fallback``. A flag given after the command wins."""
+    key = GLOBAL_FLAGS[flag]
+
+    def default() -> Any:
+        ctx = click.get_current_context(silent=True)
+        value = ctx.meta.get(key) if ctx is not None else None
+        return fallback if value is None else value
+
+    return default
 
 
 def db_option(f: F) -> F:
     """``--db URL`` → parameter ``db_url``."""
-    return click.option("--db", "db_url", default=None, metavar="URL", help=DB_HELP)(f)
+    return click.option("--db", "db_url", default=from_top("--db"), metavar="URL",
+                        help=DB_HELP)(f)
 
 
 SCHEDULER_HELP = ("Run on the Dask cluster of this scheduler: tls://HOST:PORT with the "
@@ -92,7 +178,8 @@ def scheduler_option(f: F) -> F:
         return f(*args, **kwargs)
 
     return option_group(
-        click.option("--scheduler", "scheduler", default=None, metavar="ADDRESS",
+        click.option("--scheduler", "scheduler", default=from_top("--scheduler"),
+                     metavar="ADDRESS",
                      help=SCHEDULER_HELP),
         click.option("--tls-ca", "tls_ca", default=None, metavar="FILE",
                      help="The cluster's CA certificate (PEM) for a tls:// scheduler; "
@@ -143,13 +230,15 @@ def emit_json(data: Any) -> None:
 
 
 def emit(data: Any, as_json: bool, human: str) -> None:
-    """``data`` as JSON with ``--json``, else the human text."""
-    click.echo(to_json(data) if as_json else human)
+    """``data`` as JSON with ``--json``, else the human text (every line within 100 columns:
+    :func:`fieldbank.cli.table.fit_lines`)."""
+    click.echo(to_json(data) if as_json else "\n".join(fit_lines(human.splitlines())))
 
 
 def say(msg: str) -> None:
-    """A message for the person at the terminal: on stderr, so stdout stays the output."""
-    click.echo(msg, err=True)
+    """A message for the person at the terminal: on stderr, so stdout stays the output; every
+    line within 100 columns."""
+    click.echo("\n".join(fit_lines(msg.splitlines())), err=True)
 
 
 def output_file(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
@@ -172,6 +261,9 @@ def xy_metres(text: str | None, name: str) -> tuple[float, float]:
         a, b = (float(v) for v in text.split(","))
     except ValueError:
         raise click.BadParameter(f"{name} must read X,Y in metres; got {text!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise click.BadParameter(f"{name} must read X,Y in metres, two finite numbers; got "
+                                 f"{text!r}")
     return (a, b)
 
 

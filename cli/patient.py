@@ -7,6 +7,7 @@ import dataclasses
 import click
 
 from fieldbank.cli.options import db_option, emit_json, json_option, open_db, read_db
+from fieldbank.cli.table import fit_lines
 from fieldbank.sanitize import printable
 
 
@@ -68,12 +69,12 @@ def show(db_url: str | None, code: str, as_json: bool) -> None:
                         "parent_id": m.parent_id} for m in models],
         })
         return
-    click.echo(f"patient {p.code}: {p.body_mass_kg:g} kg, {p.height_m:g} m, {p.side} arm")
+    lines = [f"patient {p.code}: {p.body_mass_kg:g} kg, {p.height_m:g} m, {p.side} arm"]
     if p.notes:
-        click.echo(f"notes: {printable(p.notes)}")
-    for s in sessions:
-        click.echo(f"  session {printable(s.label)!r} {s.session_date or '(no date)'}: "
-                   f"{s.n_maps} map(s)")
-    for m in models:
-        parent = f" from model {m.parent_id}" if m.parent_id else ""
-        click.echo(f"  model {m.id} ({m.origin}{parent}): {printable(m.label)}")
+        lines.append(f"notes: {printable(p.notes)}")
+    lines += [f"  session {printable(s.label)!r} {s.session_date or '(no date)'}: "
+              f"{s.n_maps} map(s)" for s in sessions]
+    lines += [f"  model {m.id} ({m.origin}"
+              + (f" from model {m.parent_id}" if m.parent_id else "") + f"): {printable(m.label)}"
+              for m in models]
+    click.echo("\n".join(fit_lines(lines)))

@@ -8,7 +8,8 @@ from datetime import date
 import click
 
 from fieldbank.cli.options import (
-    DATE,
+    GIVEN_DATE,
+    PLAN_ID,
     db_option,
     emit,
     emit_json,
@@ -61,7 +62,7 @@ def list_cmd(patient: str | None, kind: str | None, given: bool | None, db_url: 
 
 
 @plans.command("show")
-@click.argument("plan_id", metavar="ID", type=int)
+@click.argument("plan_id", metavar="ID", type=PLAN_ID)
 @db_option
 @json_option
 def show(plan_id: int, db_url: str | None, as_json: bool) -> None:
@@ -97,8 +98,8 @@ def show(plan_id: int, db_url: str | None, as_json: bool) -> None:
 
 
 @plans.command("give")
-@click.argument("plan_id", metavar="ID", type=int)
-@click.option("--on", "on", type=DATE, required=True,
+@click.argument("plan_id", metavar="ID", type=PLAN_ID)
+@click.option("--on", "on", type=GIVEN_DATE, required=True,
               help="The day the plan was carried out, YYYY-MM-DD.")
 @db_option
 @json_option

@@ -11,6 +11,8 @@ import click
 
 from fieldbank import probechoices as pc
 from fieldbank.cli.options import (
+    MODEL_ID,
+    SESSION_ID,
     db_option,
     emit,
     figure_path,
@@ -21,6 +23,7 @@ from fieldbank.cli.options import (
     say,
     xy_metres,
 )
+from fieldbank.cli.progress import counted
 from fieldbank.errors import ParameterError
 from fieldbank.files import to_json, write_atomic
 from fieldbank.params import JOINT_GROUPS
@@ -67,7 +70,7 @@ def candidate_options(f: F) -> F:
         click.option("--candidate-params", "param_files", multiple=True,
                      type=click.Path(exists=True, dir_okay=False, path_type=Path),
                      help="A candidate from a parameter file (named by the file). Repeatable."),
-        click.option("--candidate-model", "model_ids", multiple=True, type=int,
+        click.option("--candidate-model", "model_ids", multiple=True, type=MODEL_ID,
                      help="A candidate from a stored model id. Repeatable."),
         click.option("--mass", type=float, help="Body mass of the synthetic arms, kg."),
         click.option("--height", type=float, help="Height of the synthetic arms, m."),
@@ -272,10 +275,7 @@ def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | N
     out = []
     for ref in refs:
         if ref.startswith(SESSION_PREFIX):
-            try:
-                sid = int(ref[len(SESSION_PREFIX):])
-            except ValueError:
-                raise click.BadParameter(f"expected {SESSION_PREFIX}ID; got {ref!r}") from None
+            sid = SESSION_ID.convert(ref[len(SESSION_PREFIX):], None, None)
             with open_db(db_url) as db:
                 trace = read_trace_db(db, sid)
             out.append(observation_from_trace(trace, ref, ref, model))
@@ -510,10 +510,12 @@ def trials_cmd(groups: str, levels: str, reps: int, draws: int, max_probes: int,
         raise ParameterError("Give impaired groups and levels from very mild to severe.")
     noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
                                     speed_sd, force_jnd, direction_jnd_deg, free_exploration)
-    rep, res = designed_vs_seed(
-        severity_candidates(gs, ls), groups=gs, levels=ls, repetitions=reps, noise_draws=draws,
-        noise=noise, perception=perception, criterion=criterion, max_probes=max_probes,
-        seed=rng_seed, progress=lambda k, n: say(f"trial {k}/{n}") if k % 60 == 0 else None)
+    say("designing the probes, then the trials (a bar counts them on a terminal)")
+    with counted("trials", "trial") as bar:
+        rep, res = designed_vs_seed(
+            severity_candidates(gs, ls), groups=gs, levels=ls, repetitions=reps,
+            noise_draws=draws, noise=noise, perception=perception, criterion=criterion,
+            max_probes=max_probes, seed=rng_seed, progress=bar)
     doc = {"designed": rep.design.to_dict(), "seed_probes": rep.seed.to_dict(),
            "trials": res.to_dict()}
     head = ("designed: " + "; ".join(p.describe() for p in rep.design.paths)

@@ -16,6 +16,7 @@ import click
 
 from fieldbank.cli.options import (
     DATE,
+    PLAN_ID,
     db_option,
     emit_json,
     json_option,
@@ -39,7 +40,7 @@ def _codes(items: tuple[str, ...]) -> tuple[str, ...]:
               help="One patient's stored plans (repeatable).")
 @click.option("--patients", "patients", multiple=True, metavar="CODE,...",
               help="Several patients, comma-separated.")
-@click.option("--plan", "plan_ids", multiple=True, type=int, metavar="ID",
+@click.option("--plan", "plan_ids", multiple=True, type=PLAN_ID, metavar="ID",
               help="One stored plan by id (repeatable).")
 @click.option("--session", "sessions", multiple=True, metavar="LABEL",
               help="Plans whose model was fitted to maps of this session (repeatable).")
@@ -98,5 +99,5 @@ def report(db_url: str | None, patient: tuple[str, ...], patients: tuple[str, ..
     if as_json:
         emit_json({"cases": out.n_cases, "jobs": out.jobs_used, "html": str(out.html),
                    "csv": str(out.csv), "json": str(out.json)})
-    click.echo(f"report of {out.n_cases} case(s) written to {out.html} "
-               f"(metrics: {out.csv.name}, {out.json.name})", err=True)
+    say(f"report of {out.n_cases} case(s) written to {out.html} "
+        f"(metrics: {out.csv.name}, {out.json.name})")

@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING
 import click
 
 from fieldbank.cli.options import (
+    MODEL_ID,
+    PLAN_ID,
     db_option,
     emit_json,
     json_option,
@@ -151,12 +153,12 @@ def loo_text(cv: CrossValidation) -> str:
 
 @click.command("validate")
 @click.argument("patients", nargs=-1)
-@click.option("--plan", "plan_ids", multiple=True, type=int, metavar="ID",
+@click.option("--plan", "plan_ids", multiple=True, type=PLAN_ID, metavar="ID",
               help="Only this stored plan (repeatable).")
 @click.option("--loo", is_flag=True,
               help="Instead: does the fit generalise? Leave each map out of the patient's "
                    "latest fit (or --model's) and predict it from the others.")
-@click.option("--model", "model_id", type=int, default=None,
+@click.option("--model", "model_id", type=MODEL_ID, default=None,
               help="With --loo: the fitted model to cross-validate.")
 @click.option("--change-tolerance", type=click.FloatRange(0.0, 10.0, min_open=True),
               default=CHANGE_TOLERANCE, show_default=True,
@@ -193,6 +195,8 @@ def validate(ctx: click.Context, patients: tuple[str, ...], plan_ids: tuple[int,
             raise click.UsageError("--loo needs one PATIENT (its latest fit) or --model ID.")
         with open_db(db_url) as db:
             store = DatabaseFitStore(db)
+            if patients:  # an unknown patient: the one "not found" message
+                db.get_patient(patients[0])
             mid = model_id if model_id is not None else latest_fitted_model(store, patients[0])
             cv = cross_validate(store, mid, progress=lambda msg: click.echo(msg, err=True))
         if as_json:

@@ -14,7 +14,16 @@ from typing import Any
 
 import click
 
-from fieldbank.cli.options import DATE, db_option, emit_json, figure_path, json_option, open_db
+from fieldbank.cli.options import (
+    GIVEN_DATE,
+    SESSION_LABEL,
+    db_option,
+    emit_json,
+    figure_path,
+    from_top,
+    json_option,
+    open_db,
+)
 from fieldbank.cli.whatif_report import render_text
 from fieldbank.haptic.client import push_models
 from fieldbank.interventions.defaults import DOSE_UNIT, value
@@ -67,7 +76,7 @@ from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
               help="Write plan.json, after.json and lineage.json into this directory.")
 @click.option("--save", is_flag=True,
               help="Store the after model and the plan, with lineage, in the database.")
-@click.option("--given-on", type=DATE, default=None,
+@click.option("--given-on", type=GIVEN_DATE, default=None,
               help="With --save: the plan was carried out on this day ('fieldbank validate' "
                    "checks it against maps measured later).")
 @click.option("--accept-poor-fit", is_flag=True,
@@ -75,13 +84,15 @@ from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
 @click.option("--interval-samples", type=click.IntRange(min=0), default=None,
               help="Fit samples carried through the plan for 95% intervals (default "
                    f"{DEFAULT_INTERVAL_SAMPLES}; 0: none).")
+@click.option("--session", "session", type=SESSION_LABEL, default=None,
+              help="With PATIENT: start from the model fitted to this session's maps (default: "
+                   "the latest measured session's; the output names it).")
 @db_option
 @click.option("--render", is_flag=True,
               help="Push before and after to a running 'fieldbank haptic serve' (A = before, "
-                   "B = after) to feel them side by side. For a patient's stored model the "
-                   "plan and its after model are stored (as with --save), so the session "
-                   "refers to them.")
-@click.option("--socket", "control_path", default=None, metavar="SOCKET",
+                   "B = after) to feel them side by side; with --save the plan is stored once "
+                   "the renderer has accepted the pair, never before.")
+@click.option("--socket", "control_path", default=from_top("--socket"), metavar="SOCKET",
               help="Control socket of the renderer for --render (default: the one "
                    "'fieldbank haptic serve' uses).")
 @json_option
@@ -93,11 +104,13 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
            optimize: bool,
            total_units: float | None, opt_groups: str | None, plot_path: str | None,
            out_dir: str | None, save: bool, given_on: date | None, accept_poor_fit: bool,
-           interval_samples: int | None, db_url: str | None, render: bool,
-           control_path: str | None, as_json: bool) -> None:
+           interval_samples: int | None, session: str | None, db_url: str | None,
+           render: bool, control_path: str | None, as_json: bool) -> None:
     """Apply clinical interventions to a model and compare the fields before and after.
 
-    The model: PATIENT (the patient's latest fitted model), --params FILE or --severity.
+    The model: PATIENT (the model fitted to the patient's latest measured session, or to
+    --session's), --params FILE or --severity; the output's first lines name it, the session
+    and date it was fitted on and any plan the patient was given before.
     Muscle groups: sf = shoulder flexors, se = shoulder extensors, ef = elbow flexors,
     ee = elbow extensors, bf = bi-articular flexors (biceps short head), be = bi-articular
     extensors (triceps long head). The text opens with a three-line summary; --detail prints
@@ -110,13 +123,15 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
     from fieldbank.haptic.modelinfo import ModelInfo
     from fieldbank.interventions.defaults import value
     from fieldbank.interventions.spec import build_plan
-    from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif
+    from fieldbank.interventions.whatif import DoseSearch, plan_label, run_whatif, store_whatif
 
     if sum(bool(x) for x in (patient, params_file, severity)) != 1:
         raise click.UsageError(
             "Give exactly one model: PATIENT, --params FILE or --severity TARGET=LEVEL.")
-    source = modelsource.resolve(params_file=params_file, severity=severity,
-                                 patient=patient, open_db=lambda: open_db(db_url))
+    if session is not None and patient is None:
+        raise click.UsageError("--session chooses among a patient's fitted models: give "
+                               "PATIENT.")
+    # every argument is checked before the database opens or a model loads
     plan = build_plan(plan_file=plan_file, botox=botox, weeks=weeks, lengthen=lengthen,
                       tenotomy=tenotomy, cast=cast, rhizotomy=rhizotomy, baclofen=baclofen)
     if plan is None and not optimize:
@@ -131,28 +146,36 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
             total_units, None if opt_groups is None else
             tuple(g.strip() for g in opt_groups.split(",")),
             value("botulinum.weeks_since") if weeks is None else weeks)
-    # a rendered plan on a stored model is stored too: the session then records the plan and
-    # its after model, never a copy
-    store = save or (render and source.model_id is not None)
+    if given_on is not None and not save:
+        raise click.UsageError("--given-on records the day a stored plan was given: it needs "
+                               "--save.")
+    source = modelsource.resolve(params_file=params_file, severity=severity,
+                                 patient=patient, session=session,
+                                 open_db=lambda: open_db(db_url))
+    # with --render, nothing is stored until the renderer has accepted the pair
     res = run_whatif(source, plan, search=search, timecourse=timecourse,
                      plot_path=plot_path, out_dir=out_dir,
-                     save_to=(lambda: open_db(db_url)) if store else None,
+                     save_to=(lambda: open_db(db_url)) if save and not render else None,
                      session_limit_units=session_limit,
                      accept_poor_fit=accept_poor_fit,
                      interval_samples=(DEFAULT_INTERVAL_SAMPLES if interval_samples is None
                                        else interval_samples),
-                     given_on=given_on)
-    doc: dict[str, Any] = res.to_dict()
+                     given_on=None if render else given_on)
+    rendered = None
     if render:
-        ids = ((res.saved.base_model_id, res.saved.result_model_id) if res.saved else
-               (source.model_id, None))
         plan_text = plan_label(res.plan)
-        info = {"A": ModelInfo.describe(source.description, ids[0], source.patient_code),
-                "B": ModelInfo.describe(f"what-if result on {source.description}", ids[1],
-                                        source.patient_code, plan_text,
-                                        res.saved.plan_id if res.saved else None)}
-        doc["rendered"] = push_models(res.before, res.after, control_path, model_ids=ids,
-                                      model_info=info)
+        info = {"A": ModelInfo.describe(source.description, source.model_id,
+                                        source.patient_code),
+                "B": ModelInfo.describe(f"what-if result on {source.description}", None,
+                                        source.patient_code, plan_text, None)}
+        rendered = push_models(res.before, res.after, control_path,
+                               model_ids=(source.model_id, None), model_info=info)
+        if save:
+            with open_db(db_url) as db:
+                res = store_whatif(db, res, given_on)
+    doc: dict[str, Any] = res.to_dict()
+    if rendered is not None:
+        doc["rendered"] = rendered
     if as_json:
         emit_json(doc)
         return
@@ -171,4 +194,7 @@ def whatif(patient: str | None, params_file: str | None, severity: tuple[str, ..
                    "(switch with 'fieldbank haptic switch')", err=True)
     if res.saved:
         click.echo(f"stored: after model {res.saved.result_model_id} (parent "
-                   f"{res.saved.base_model_id}), plan {res.saved.plan_id}", err=True)
+                   f"{res.saved.base_model_id}), plan {res.saved.plan_id}"
+                   + (f", given on {given_on.isoformat()}" if given_on else ""), err=True)
+    elif render:
+        click.echo("stored: nothing (--save stores the plan and its after model)", err=True)

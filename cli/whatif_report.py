@@ -53,24 +53,41 @@ def _wrap(text: str, indent: str = "  ", first: str | None = None) -> list[str]:
                          subsequent_indent=indent + "  ", break_on_hyphens=False) or [""]
 
 
+def _columns(heads: Sequence[Sequence[str]], rows: Sequence[Sequence[str]]) -> list[str]:
+    """Header lines and rows, the first column left-aligned, the others right-aligned; each
+    column as wide as its widest cell, two spaces apart: never one cell run into the next."""
+    widths = [max(len(x) for x in (*h, *(r[i] for r in rows))) for i, h in enumerate(heads)]
+
+    def line(row: Sequence[str]) -> str:
+        return (f"{row[0]:<{widths[0]}}" + "".join(f"  {v:>{w}}" for v, w in
+                                                   zip(row[1:], widths[1:], strict=True)))
+    return ([line([h[k] for h in heads]).rstrip() for k in range(len(heads[0]))]
+            + [line(r) for r in rows])
+
+
 def _stretch_lines(c: Comparison) -> list[str]:
-    """Per joint and direction: slow and fast resisting torque, velocity-dependent part, catch."""
+    """Per joint and direction: slow and fast resisting torque and its velocity-dependent part;
+    then where each stretch meets the catch (a table of its own: both within 100 columns)."""
     first: JointStretch = c.before.stretches[0]
-    out = [f"{'Joint stretch':<19}{f'slow {first.slow_speed_deg_s:.0f}°/s':>13}"
-           f"{f'fast {first.speed_deg_s:.0f}°/s':>18}{'velocity-dependent':>19}"
-           f"{'R1 °':>10}{'R2 °':>10}{'R2−R1 °':>10}",
-           f"{'(before → after)':<19}{'N·m':>13}{'N·m':>18}{'N·m':>19}"]
-    for name, b, a in c.stretch_rows():
-        out.append(
-            f"{name:<19}"
-            f"{f'{b.slow_torque_n_m:.2f} → {a.slow_torque_n_m:.2f}':>13}"
-            f"{f'{b.peak_torque_n_m:.2f} → {a.peak_torque_n_m:.2f}':>13}"
-            f"{_pct(b.peak_torque_n_m, a.peak_torque_n_m):>5}"
-            f"{f'{b.reflex_torque_n_m:.2f} → {a.reflex_torque_n_m:.2f}':>14}"
-            f"{_pct(b.reflex_torque_n_m, a.reflex_torque_n_m):>5}"
-            f"{_pair(b.catch_angle_deg, a.catch_angle_deg):>10}"
-            f"{_pair(b.slow_stop_angle_deg, a.slow_stop_angle_deg):>10}"
-            f"{_pair(b.dynamic_range_deg, a.dynamic_range_deg):>10}")
+    rows = list(c.stretch_rows())
+    pct_w = max([len(_pct(b.peak_torque_n_m, a.peak_torque_n_m)) for _, b, a in rows]
+                + [len(_pct(b.reflex_torque_n_m, a.reflex_torque_n_m)) for _, b, a in rows])
+    out = _columns(
+        [("Joint stretch", "(before → after)"), (f"slow {first.slow_speed_deg_s:.0f}°/s", "N·m"),
+         (f"fast {first.speed_deg_s:.0f}°/s", "N·m"), ("velocity-dependent", "N·m")],
+        [(name, f"{b.slow_torque_n_m:.2f} → {a.slow_torque_n_m:.2f}",
+          f"{b.peak_torque_n_m:.2f} → {a.peak_torque_n_m:.2f} "
+          f"{_pct(b.peak_torque_n_m, a.peak_torque_n_m):>{pct_w}}",
+          f"{b.reflex_torque_n_m:.2f} → {a.reflex_torque_n_m:.2f} "
+          f"{_pct(b.reflex_torque_n_m, a.reflex_torque_n_m):>{pct_w}}")
+         for name, b, a in rows])
+    out.append("")
+    out += _columns(
+        [("Catch angle", "(before → after)"), ("R1 °", "fast"), ("R2 °", "slow"),
+         ("R2−R1 °", "")],
+        [(name, _pair(b.catch_angle_deg, a.catch_angle_deg),
+          _pair(b.slow_stop_angle_deg, a.slow_stop_angle_deg),
+          _pair(b.dynamic_range_deg, a.dynamic_range_deg)) for name, b, a in rows])
     thresholds = ", ".join(f"{name} {b.catch_threshold_n_m:.2f} N·m"
                            for name, b, _ in c.stretch_rows())
     out += _wrap("R1 and R2: where the fast and the slow stretch first meet the catch torque "
@@ -82,24 +99,31 @@ def _stretch_lines(c: Comparison) -> list[str]:
 
 
 def _grade_cell(b: ComponentGrade, a: ComponentGrade, scores: bool) -> str:
-    cell = f"{b.text()} → {a.text()}"
-    return cell + (f" ({b.score:.1f} → {a.score:.1f})" if scores else "")
+    """'mild → very mild', with scores '(2.1 → 1.0)'; a grade and score the plan leaves as
+    they were once, '= unimpaired (0.0)', so the table keeps within its width."""
+    if not scores:
+        return f"{b.text()} → {a.text()}"
+    if b.text() == a.text() and f"{b.score:.1f}" == f"{a.score:.1f}":
+        return f"= {b.text()} ({b.score:.1f})"
+    return f"{b.text()} → {a.text()} ({b.score:.1f} → {a.score:.1f})"
 
 
 def _severity_lines(c: Comparison, detail: bool) -> list[str]:
     """Per muscle group: passive and dynamic grade before → after (scores with --detail)."""
-    wide = 34 if detail else 26
-    out = [f"{'Severity per muscle group':<28}{'contracture (passive)':<{wide}}"
-           "spasticity (dynamic)"]
-    for g, sb, sa in c.severity_rows():
-        out.append(f"{f'{g} {GROUP_NAMES.get(g, sb.name)}':<28}"
-                   f"{_grade_cell(sb.passive, sa.passive, detail):<{wide}}"
-                   f"{_grade_cell(sb.dynamic, sa.dynamic, detail)}")
+    rows = [(f"{g} {GROUP_NAMES.get(g, sb.name)}", _grade_cell(sb.passive, sa.passive, detail),
+             _grade_cell(sb.dynamic, sa.dynamic, detail)) for g, sb, sa in c.severity_rows()]
+    head = ("Severity per muscle group", "contracture (passive)", "spasticity (dynamic)")
+    # columns as wide as their widest cell, two spaces apart: never one cell run into the next
+    name_w = max(len(r[0]) for r in (head, *rows)) + 2
+    wide = max(len(r[1]) for r in (head, *rows)) + 2
+    out = [f"{head[0]:<{name_w}}{head[1]:<{wide}}{head[2]}"]
+    out += [f"{name:<{name_w}}{passive:<{wide}}{dynamic}" for name, passive, dynamic in rows]
     flagged = sorted({n for _, sb, _ in c.severity_rows() for k in ("passive", "dynamic")
                       for n in sb.component(k).unidentified})
     graded = "; ".join(f"{g} on {sb.stretch}" for g, sb, _ in c.severity_rows()) if detail \
         else ""
-    out += _wrap("before → after; + beyond severe; * rests on a parameter the fit did not "
+    out += _wrap("before → after" + ("; = unchanged" if detail else "")
+                 + "; + beyond severe; * rests on a parameter the fit did not "
                  "identify" + (f" ({', '.join(flagged)})" if flagged else "")
                  + ("; score 0 unimpaired … 4 severe; graded on: " + graded if detail else ""))
     return out
@@ -175,10 +199,26 @@ def _interval_lines(g: Guesses) -> list[str]:
                 first="")
     out.append(f"{'read-out':<37}{'before':>21}{'after':>21}{'change':>21}")
     for i in g.intervals:
-        out.append(f"{(i.metric + ', ' + i.unit)[:37]:<37}"
+        name = f"{i.metric}, {i.unit}" + (" *" if i.rests_on_guess else "")
+        if i.rests_on_guess and i.identified is not None:
+            # what the maps identified on the row; the guess's interval apart, below, marked
+            bl, bh, al, ah, cl, ch = i.identified
+            out.append(f"{name[:37]:<37}{_iv(i.before, bl, bh):>21}{_iv(i.after, al, ah):>21}"
+                       f"{_iv(i.change, cl, ch, True):>21}")
+            out.append(f"{'  * with the guesses drawn':<37}"
+                       f"{_iv(i.before, i.before_low, i.before_high):>21}"
+                       f"{_iv(i.after, i.after_low, i.after_high):>21}"
+                       f"{_iv(i.change, i.change_low, i.change_high, True):>21}")
+            continue
+        out.append(f"{name[:37]:<37}"
                    f"{_iv(i.before, i.before_low, i.before_high):>21}"
                    f"{_iv(i.after, i.after_low, i.after_high):>21}"
                    f"{_iv(i.change, i.change_low, i.change_high, True):>21}")
+    if any(i.rests_on_guess for i in g.intervals):
+        out += _wrap("* rests on a guess: the row gives the interval of what the maps "
+                     "identified (the guessed parameters at their held value), the line under "
+                     "it the interval with them drawn from their prior range.", indent="",
+                     first="")
     return out
 
 
@@ -205,6 +245,9 @@ def render_text(res: WhatIf, detail: bool = False) -> str:
     c = res.comparison
     out: list[str] = []
     out += _wrap(f"Model: {res.source.description}", indent="", first="")
+    if res.source.fitted_on is not None:
+        for line in res.source.fitted_on.lines():
+            out += _wrap(line)
     out.append("Plan:")
     for line in res.plan.describe():
         out += _wrap(line)
@@ -234,4 +277,7 @@ def render_text(res: WhatIf, detail: bool = False) -> str:
         out += ["", *_wrap("More: --detail (field change, probing motions, 95% intervals, "
                            f"weeks after an injection), --json (everything). Terms: {GLOSSARY}.",
                            indent="", first="")]
-    return "\n".join(line if len(line) <= WIDTH else line[:WIDTH - 1] + "…" for line in out)
+    # a line a table could not keep within the width is wrapped, never cut: nothing hidden
+    return "\n".join(w for line in out for w in (
+        [line] if len(line) <= WIDTH else _wrap(line.strip(), indent=" " * (
+            len(line) - len(line.lstrip()) + 2), first=line[:len(line) - len(line.lstrip())])))

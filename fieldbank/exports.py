@@ -150,6 +150,10 @@ def export_maps(db: Database, output: str | Path, *, patient_code: str | None = 
     if form in ("mot", "sto", "osim"):
         raise ExportError(f"{out}: .{form} is written from a haptic session (--trace ID) or "
                           "a model (--model ID), not from maps.")
+    if patient_code is not None:
+        db.get_patient(patient_code)  # an unknown patient: the one "not found" message
+        if session_label is not None:
+            db.get_session(patient_code, session_label)  # its sessions listed
     rows = db.list_maps(patient_code, session_label, kind, since, until)
     if not rows:
         raise StorageError("No map matches these filters; nothing exported.")

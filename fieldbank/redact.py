@@ -146,17 +146,15 @@ def redact(message: str, *urls: object) -> str:
 
 def mask_port(port: str) -> str:
     """A robot port as messages may show it: a URL (``socket://``, ``sim://``) as
-    :func:`mask_url` shows it; a device path by its directory only (``/dev/serial/by-id/…``),
-    since a device name can carry a serial number or a token."""
+    :func:`mask_url` shows it (its secrets masked); a device path whole (``/dev/ttyUSB9``):
+    it holds no secret, and a mistyped one must be seen to be corrected."""
     if "://" in port:
         return mask_url(port)
-    head, sep, name = port.rpartition("/")
-    return f"{head}{sep}…" if name else port
+    return port
 
 
 def redact_port(message: str, port: str) -> str:
-    """``message`` with the port (a device path whole, a URL's secrets) shown as
-    :func:`mask_port` shows it."""
+    """``message`` with a URL port's secrets masked (:func:`mask_port`)."""
     if "://" in port:
         return redact(message, port)
-    return message.replace(port, mask_port(port)) if port else message
+    return message

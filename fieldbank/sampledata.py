@@ -17,7 +17,9 @@ the truth with the catalogue's own effect at those weeks - for all patients but 
 model's postural map on 25 scattered reachable positions and stiffness maps on 9, static and at
 a moving endpoint, the same positions in both sessions, with 5 % Gaussian noise (plus a small
 floor) and the matching standard deviations. The files come in every format ingest reads: CSV in
-SI units, CSV in lab units (mm, kgf, N/mm), MATLAB v5, MATLAB v7.3 and fieldbank HDF5.
+SI units, CSV in lab units (mm, kgf, N/mm), MATLAB v5, MATLAB v7.3 and fieldbank HDF5; and one
+file as a lab's own software writes it, without metadata and with its own column names
+(:data:`LAB_EXPORT`, listed under ``lab_exports`` in the manifest).
 """
 
 from __future__ import annotations
@@ -159,6 +161,36 @@ def lab_units_csv(m: FieldMap) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: A lab's own export of SYN-001's first session: no metadata, the lab's column names
+#: (:func:`lab_export_csv`); ingest reads it with --kind, --frame, --sign and --column.
+LAB_EXPORT = "lab-export.csv"
+LAB_EXPORT_COLUMNS = {"x_mm": "PosX", "y_mm": "PosY", "fx_n": "FX", "fy_n": "FY"}
+
+
+def lab_export_csv(m: FieldMap) -> str:
+    """A postural map as a lab's software exports it: no ``# key: value`` lines, its own
+    column names (:data:`LAB_EXPORT_COLUMNS`), positions in mm, forces in N, no sd."""
+    lines = [",".join(LAB_EXPORT_COLUMNS.values())]
+    lines += [f"{x * 1e3:.1f},{y * 1e3:.1f},{fx:.4f},{fy:.4f}"
+              for (x, y), (fx, fy) in zip(m.positions_m, m.values.reshape(m.n, 2), strict=True)]
+    return "\n".join(lines) + "\n"
+
+
+def _write_lab_export(base: Path, seed: int) -> dict[str, str]:
+    """SYN-001's pre-BoNT postural map measured again and exported by a lab's own software
+    (a stream of its own, so the other files do not change with it)."""
+    rng = np.random.default_rng([seed, 1])
+    pat = PATIENTS[0]
+    arm = Arm.from_params(pat.params())
+    m = _noisy(postural_map(arm, scattered_positions(arm, N_POSTURAL, rng)), FORCE_FLOOR_N, rng)
+    rel = f"{pat.code}/{LAB_EXPORT}"
+    (base / rel).write_text(lab_export_csv(m), encoding="utf-8")
+    return {"file": rel, "format": "csv", "kinds": "postural", "session": PRE_SESSION,
+            "columns": ",".join(f"{k}={v}" for k, v in LAB_EXPORT_COLUMNS.items()),
+            "note": "a lab's export without metadata: give --kind postural --frame shoulder "
+                    "--sign arm-on-handle and a --column for each column"}
+
+
 def write_samples(root: str | Path, *, treatment: Treatment,
                   seed: int = 20240601) -> dict[str, Any]:
     """Write the sample set under ``root``; returns the manifest (also in manifest.json).
@@ -229,13 +261,16 @@ def write_samples(root: str | Path, *, treatment: Treatment,
                                       "params": f"{pat.code}/params-{label}.json",
                                       "files": files})
         manifest["patients"].append(entry)
+    manifest["lab_exports"] = [_write_lab_export(base, seed)]
     (base / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
     (base / "README.txt").write_text(
         "SYNTHETIC SAMPLE DATA - NOT PATIENT DATA.\n"
         f"Written by fieldbank.sampledata (seed {seed}): maps of made-up patients computed from "
         "the arm model with 5 % noise. manifest.json lists patients, sessions (with dates) and "
         "files, and the treatment each patient was given between the sessions; params-*.json "
-        "hold the true model parameters of each session.\n",
+        f"hold the true model parameters of each session. {PATIENTS[0].code}/{LAB_EXPORT} is "
+        "the same arm's postural map as a lab's own software exports it (no metadata; columns "
+        + ", ".join(LAB_EXPORT_COLUMNS.values()) + " in mm and N).\n",
         encoding="utf-8",
     )
     return manifest

@@ -92,13 +92,20 @@ class RobotLink:
         self.tx_dropped = 0
 
     @classmethod
-    def open(cls, url: str, baudrate: int = DEFAULT_BAUDRATE) -> RobotLink:
-        """Open ``url`` (``sim://…``, ``/dev/ttyUSB0``, a pty path, ``socket://…``)."""
+    def open(cls, url: str, baudrate: int = DEFAULT_BAUDRATE,
+             shown: str | None = None) -> RobotLink:
+        """Open ``url`` (``sim://…``, ``/dev/ttyUSB0``, a pty path, ``socket://…``).
+
+        ``shown``: the port as the user gave it, quoted in messages instead of ``url`` (a
+        simulated robot's URL filled in with the details of the simulation)."""
         try:
             port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0.05)
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise HapticError(f"cannot open robot port {mask_port(url)!r}: "
-                              f"{redact_port(str(exc), url)}") from None
+            why = redact_port(str(exc), url)
+            if shown is not None and shown != url:
+                why = why.replace(mask_port(url), mask_port(shown))
+            raise HapticError(f"cannot open robot port {mask_port(shown or url)!r}: "
+                              f"{why}") from None
         if hasattr(port, "set_low_latency_mode"):
             try:
                 port.set_low_latency_mode(True)  # FTDI latency timer 16 ms -> 1 ms

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fieldbank.errors import ParameterError
+from fieldbank.errors import ParameterError, StorageError
 from fieldbank.files import write_new
 from fieldbank.haptic.errors import HapticError, LinkDown
 from fieldbank.haptic.link import RobotLink
@@ -115,9 +115,15 @@ def _approach(start: tuple[float, float], to: tuple[float, float], speed: float)
     return Segment("move", 0.0, max(0.5, 1.875 * d / speed), start, to)
 
 
+#: Robot time done, s, and the whole, s (the approach included): called twice a robot second.
+Progress = Callable[[float, float], None]
+
+
 def run_protocol(url: str, plan: ProtocolPlan, config: MeasureConfig | None = None,
-                 clock: object = time.perf_counter) -> tuple[Recording, np.ndarray]:
+                 clock: object = time.perf_counter,
+                 progress: Progress | None = None) -> tuple[Recording, np.ndarray]:
     """Drive the robot at ``url`` through ``plan``; the recording and the commanded forces.
+    ``progress`` hears how much robot time is done, twice a robot second.
 
     Raises :class:`MeasurementAborted` (with the samples so far) on a safety fault,
     :class:`HapticError` when the robot cannot be used (no handshake, no force sensor).
@@ -125,7 +131,7 @@ def run_protocol(url: str, plan: ProtocolPlan, config: MeasureConfig | None = No
     cfg = config or MeasureConfig()
     link = RobotLink.open(url)
     try:
-        return _run(link, url, plan, cfg, clock)
+        return _run(link, url, plan, cfg, clock, progress)
     finally:
         try:
             link.send_force(0.0, 0.0)
@@ -136,7 +142,7 @@ def run_protocol(url: str, plan: ProtocolPlan, config: MeasureConfig | None = No
 
 
 def _run(link: RobotLink, url: str, plan: ProtocolPlan, cfg: MeasureConfig,
-         clock: object) -> tuple[Recording, np.ndarray]:
+         clock: object, progress: Progress | None = None) -> tuple[Recording, np.ndarray]:
     dt = 1.0 / cfg.rate_hz
     link.handshake(cfg.rate_hz, round(cfg.safety.state_timeout_ms) or 20)
     link.heartbeat()
@@ -159,8 +165,11 @@ def _run(link: RobotLink, url: str, plan: ProtocolPlan, cfg: MeasureConfig,
     n = 0
     realtime = not url.startswith("sim://") or "realtime" in url
     t_wall0 = clock()  # type: ignore[operator]
+    every = max(1, cfg.rate_hz // 2)
     for k in range(n_ticks):
         t = k * dt
+        if progress is not None and k % every == 0:
+            progress(t, total)
         if t < t_off:
             rx, ry, rvx, rvy = approach.reference(t)
         else:
@@ -260,7 +269,8 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
                     protocol: ProtocolConfig, config: MeasureConfig | None = None,
                     raw_out: str | Path | None = None, session_date: date | None = None,
                     force: bool = False, must_see: Sequence[str] = (),
-                    report: Callable[[str], None] | None = None) -> MeasureResult:
+                    report: Callable[[str], None] | None = None,
+                    progress: Progress | None = None) -> MeasureResult:
     """Measure a patient on the robot and store the maps (raw recording kept).
 
     The raw recording is written as NWB (:mod:`fieldbank.measure.nwbraw`) to ``raw_out``
@@ -272,10 +282,20 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
 
     Before the robot moves, what the protocol sees of each muscle group goes to ``report``
     line by line; a group of ``must_see`` it would not see refuses the measurement
-    (:class:`fieldbank.measure.visibility.ProtocolBlind`, with a suggestion).
+    (:class:`fieldbank.measure.visibility.ProtocolBlind`, with a suggestion). While the robot
+    moves, ``progress`` hears the robot time done and the whole (:func:`run_protocol`).
     """
     cfg = config or MeasureConfig()
+    if not session_label.strip():  # before the robot moves, not after
+        raise ParameterError("A session label must not be empty.")
     patient = db.get_patient(patient_code)
+    known = {s.label: s for s in db.list_sessions(patient_code)}
+    was = known.get(session_label)
+    if was is not None and None not in (session_date, was.session_date) \
+            and was.session_date != session_date:
+        raise StorageError(f"Session {session_label!r} of patient {patient_code!r} is dated "
+                          f"{was.session_date}; got {session_date}. Give its date or "
+                          "another session label.")
     arm = Arm.from_params(patient.arm_params())
     the_plan = plan(protocol, arm)
     check_plan_fits(the_plan, cfg)
@@ -294,7 +314,7 @@ def measure_session(db: Database, url: str, patient_code: str, session_label: st
     if out.exists() and not force:  # before the robot moves, not after
         raise HapticError(f"{out}: exists; give another --raw file or --force")
     try:
-        rec, commanded = run_protocol(url, the_plan, cfg)
+        rec, commanded = run_protocol(url, the_plan, cfg, progress=progress)
     except MeasurementAborted as exc:
         if exc.recording is not None:
             _write_raw(out, write_recording(exc.recording, info, exc.commanded,

@@ -31,7 +31,7 @@ from collections.abc import Callable
 
 from fieldbank.haptic.errors import CommandError, LinkDown
 from fieldbank.haptic.port import RobotPort
-from fieldbank.haptic.protocol import FLAG_FAULT, FaultCode
+from fieldbank.haptic.protocol import FLAG_FAULT, FLAG_WATCHDOG, FaultCode, device_report
 from fieldbank.haptic.safety import Mode, Safety, SafetyConfig
 
 #: Told of each fault tripped: its code, and whether it was not latched before.
@@ -157,13 +157,13 @@ class SafetyMonitor:
             self.trip(FaultCode.TIMEOUT, f"no STATE for {self.stale} ticks")
         if st.device_faults != self._device_faults_seen:
             self._device_faults_seen = st.device_faults
-            self.trip(FaultCode.DEVICE, f"device fault code {st.last_device_fault}")
+            self.trip(FaultCode.DEVICE, device_report(st.last_device_fault, 0))
         if st.fault_flag_frames != self._fault_flags_seen:
             self._fault_flags_seen = st.fault_flag_frames
-            self.trip(FaultCode.DEVICE, "the robot's STATE reports a device fault")
+            self.trip(FaultCode.DEVICE, device_report(0, FLAG_FAULT))
         if st.watchdog_flag_frames != self._watchdog_flags_seen:
             self._watchdog_flags_seen = st.watchdog_flag_frames
-            self.trip(FaultCode.DEVICE, "device watchdog tripped")
+            self.trip(FaultCode.DEVICE, device_report(0, FLAG_WATCHDOG))
         code, msg = safety.check_handle(st.x, st.y, st.vx, st.vy)
         if code:
             self.trip(code, msg)

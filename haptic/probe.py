@@ -114,7 +114,7 @@ def probe(params: ArmParams, motion: str = "pull", robot: str | None = None,
     wandering by ``wander_m``."""
     if motion not in MOTIONS:
         raise ParameterError(f"unknown motion {motion!r}; known: {', '.join(MOTIONS)}")
-    url = robot or "sim://"
+    url = given = robot or "sim://"
     simulated = url.startswith("sim://")
     if simulated:
         extra = {"motion_path": path_text} if motion == "path" else {}
@@ -122,7 +122,7 @@ def probe(params: ArmParams, motion: str = "pull", robot: str | None = None,
             extra["operator_wander_m"] = f"{wander_m:g}"
         url = sim_url(params, motion, offset_m, url, seed, extra)
     lockstep = simulated and "mode=realtime" not in url
-    link = RobotLink.open(url)
+    link = RobotLink.open(url, shown=given)
     try:
         link.handshake(rate_hz, 20)
         cfg = RendererConfig(rate_hz=rate_hz, state_wait_s=0.05 if lockstep else 0.0,

@@ -61,10 +61,39 @@ class FaultCode(IntEnum):
     OPERATOR = 10      # stop requested (emergency stop, control channel)
 
 
+#: Each fault code in words (messages; the FAULT frame's code and the traces keep the number).
+FAULT_WORDS: dict[int, str] = {
+    FaultCode.CRC: "damaged frames (CRC errors)",
+    FaultCode.TIMEOUT: "a timeout (no frame in time)",
+    FaultCode.SEQ_GAP: "lost frames (a sequence gap)",
+    FaultCode.NAN: "a value that is not a number",
+    FaultCode.WORKSPACE: "the handle outside the workspace",
+    FaultCode.SPEED: "the handle over the speed limit",
+    FaultCode.DISCONNECT: "a lost connection",
+    FaultCode.DEVICE: "a fault of its own",
+    FaultCode.MODEL: "a diverged model",
+    FaultCode.OPERATOR: "a stop asked for",
+}
+
 # flags in STATE
 FLAG_ARMED = 0x01
 FLAG_WATCHDOG = 0x02
 FLAG_FAULT = 0x04
+
+
+def device_report(fault_code: int, flags: int) -> str:
+    """What the robot reported, in words: its watchdog (STATE flag bit 1), a fault of its own
+    (bit 2), a FAULT frame's code - never "code 0, flags 2"."""
+    parts = []
+    if flags & FLAG_WATCHDOG:
+        parts.append("its watchdog tripped (no force command reached it in time)")
+    if flags & FLAG_FAULT:
+        parts.append("it reports a fault of its own")
+    if fault_code:
+        words = FAULT_WORDS.get(fault_code, "an unknown fault")
+        parts.append(f"it sent a FAULT frame: {words} (code {fault_code})")
+    return "the robot stopped itself: " + ("; ".join(parts) if parts else
+                                           "it reported a fault and gave no reason")
 
 _HEADER = struct.Struct("<BBH")
 _CRC = struct.Struct("<H")

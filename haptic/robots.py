@@ -81,12 +81,15 @@ def adapter_for(url: str) -> EntryPoint | None:
     return found[0]
 
 
-def open_robot(url: str, rate_hz: int, watchdog_ms: int) -> RobotPort:
+def open_robot(url: str, rate_hz: int, watchdog_ms: int,
+               shown: str | None = None) -> RobotPort:
     """The robot ``url`` names, connected and its handshake done at ``rate_hz`` with the
-    robot's watchdog asked for ``watchdog_ms``; not armed. Close it with ``close()``."""
+    robot's watchdog asked for ``watchdog_ms``; not armed. Close it with ``close()``.
+    ``shown``: the URL as the user gave it, for messages (a simulated robot's URL is filled in
+    with the details of the simulation)."""
     ep = adapter_for(url)
     if ep is None:
-        link = RobotLink.open(url)
+        link = RobotLink.open(url, shown=shown)
         try:
             link.handshake(rate_hz, watchdog_ms)
         except BaseException:

@@ -267,7 +267,7 @@ def serve(robot: str, before: ArmParams, after: ArmParams, *,
     given = robot
     if robot.startswith("sim://"):
         robot = sim_url(before, SIM_MOTION, cfg.shoulder_offset_m, robot)
-    port = open_robot(robot, cfg.rate_hz, watchdog_ms)
+    port = open_robot(robot, cfg.rate_hz, watchdog_ms, shown=given)
     try:
         device = port.device
         assert device is not None  # open_robot refuses a robot that does not say what it is

@@ -16,7 +16,10 @@ def _pct(v: float | None) -> str:
     return "–" if v is None else f"{100.0 * v:.0f}%"
 
 
+#: One name per group wherever results are shown: the true group (rows) and the answer
+#: (columns; the seed's third button, 'both', names the muscles that cross both joints).
 _GROUP_WORDS = {"shoulder": "shoulder", "elbow": "elbow", "biarticular": "bi-articular"}
+_ANSWER_WORDS = {"shoulder": "shoulder", "elbow": "elbow", "both": "bi-articular"}
 
 _CSS = """
 .fb-training{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;color:#1d2330;
@@ -34,14 +37,32 @@ _CSS = """
 """
 
 
+def trainee_note(simulated: Sequence[int], people: Sequence[int]) -> str:
+    """Who answered: the sessions a simulated trainee ran (``haptic train simulate``) and those
+    a person did, said first on every page of results."""
+    def ids(xs: Sequence[int]) -> str:
+        return ", ".join(map(str, xs))
+    if simulated and not people:
+        return (f"Simulated trainee, not a person: session(s) {ids(simulated)} were answered by "
+                "the simulated trainee of 'fieldbank haptic train simulate' (the simulated "
+                "robot's operator, judging from templates of the force it felt).")
+    if simulated:
+        return (f"Session(s) {ids(simulated)} were answered by the simulated trainee, session(s) "
+                f"{ids(people)} by a person: the counts below pool both.")
+    return f"Answered by a person at the station: session(s) {ids(people)}."
+
+
 def results_html(summary: Mapping[str, Any], title: str = "Training results",
-                 note: str = "") -> str:
+                 note: str = "", who: str = "") -> str:
     """A self-contained HTML ``<section>`` (its own style) with the confusion matrix and the
-    accuracy per severity of :func:`summarise`."""
+    accuracy per severity of :func:`summarise`; ``who``: who answered (:func:`trainee_note`),
+    said under the title."""
     e = html.escape
     conf = summary["confusion"]
     cols = conf["columns"]
     out = [f'<section class="fb-training"><style>{_CSS}</style>', f"<h2>{e(title)}</h2>"]
+    if who:
+        out.append(f"<p><b>{e(who)}</b></p>")
     a = summary["accuracy"]
     out.append(f'<p>{a["correct"]} of {a["n"]} assessment answers correct '
                f'(<b>{_pct(a["accuracy"])}</b>; chance {_pct(summary["chance"])}).</p>')
@@ -49,7 +70,8 @@ def results_html(summary: Mapping[str, Any], title: str = "Training results",
         out.append(f'<p class="fb-note">{_flagged_text(summary)}</p>')
     out.append("<h3>Confusion matrix: true impaired group (rows) against the answer "
                "(columns)</h3><table><tr><th>true group</th>"
-               + "".join(f"<th>{e(c)}</th>" for c in cols) + "<th>n</th></tr>")
+               + "".join(f"<th>{e(_ANSWER_WORDS.get(c, c))}</th>" for c in cols)
+               + "<th>n</th></tr>")
     for g, row in zip(conf["rows"], conf["counts"], strict=True):
         n = sum(row)
         cells = []
@@ -80,8 +102,9 @@ def results_html(summary: Mapping[str, Any], title: str = "Training results",
     if rt is not None:
         out.append(f'<p class="fb-note">Median response time {rt:.1f} s (from the start of '
                    "the trial; the answer has no time limit).</p>")
-    out.append('<p class="fb-note">Answers: shoulder, elbow, or both (bi-articular muscles). '
-               "Severities on the seed's scale (Weber fraction 0.6 between levels).</p>")
+    out.append('<p class="fb-note">Groups: shoulder, elbow, bi-articular (the muscles that '
+               "cross both joints: the answer 'both', key 3, at the station). Severities on the "
+               "seed's scale (Weber fraction 0.6 between levels).</p>")
     if note:
         out.append(f'<p class="fb-note">{e(note)}</p>')
     out.append("</section>")
@@ -110,9 +133,10 @@ def accuracy_text(summary: Mapping[str, Any]) -> list[str]:
              f"{_pct(summary['chance'])})",
              *([_flagged_text(summary)] if summary.get("flagged") else []),
              "confusion (rows: true group, columns: answer):",
-             "  " + " " * 13 + "".join(f"{c:>10s}" for c in conf["columns"])]
+             "  " + " " * 13 + "".join(f"{_ANSWER_WORDS.get(c, c):>14s}"
+                                        for c in conf["columns"])]
     for g, row in zip(conf["rows"], conf["counts"], strict=True):
-        lines.append(f"  {_GROUP_WORDS.get(g, g):13s}" + "".join(f"{k:10d}" for k in row))
+        lines.append(f"  {_GROUP_WORDS.get(g, g):13s}" + "".join(f"{k:14d}" for k in row))
     lines.append("accuracy per severity:")
     for s, v in summary["by_severity"].items():
         lines.append(f"  {s:13s} {v['correct']:3d} / {v['n']:<3d} {_pct(v['accuracy']):>5s}")

@@ -363,7 +363,11 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
     # the held values kept (n+1…2n)
     sm = sample_metrics([before, *guessed, *plain], plan, cond, arms(before), memo=arms)
     drawn = intervals_of(_rows(sm, range(0, n + 1)), bands)
-    kept = intervals_of(_rows(sm, [0, *range(n + 1, 2 * n + 1)]))
+    kept_bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] | None = (
+        None if bands is None else {})
+    kept = intervals_of(_rows(sm, [0, *range(n + 1, 2 * n + 1)]), kept_bands)
+    if bands is not None and kept_bands:  # what the maps identified, drawn apart in figures
+        bands.update({f"{when} {IDENTIFIED}": per for when, per in kept_bands.items()})
     out = tuple(_with_identified(a, b) for a, b in zip(drawn, kept, strict=True))
     held = ", ".join(n for r in basis.ranges for n in r.names)
     note = (f"95% intervals over {n} parameter samples of fit {basis.fit_id}; the held "
@@ -469,8 +473,12 @@ class IntervalSet:
 
 
 #: Raised with every change of how intervals are computed; with
-#: :data:`fieldbank.fitchoices.MODEL_VERSION` part of :func:`interval_key`.
-INTERVALS_VERSION = 1
+#: :data:`fieldbank.fitchoices.MODEL_VERSION` part of :func:`interval_key`. 2: the bands of what
+#: the maps identified kept beside the bands with the guesses drawn.
+INTERVALS_VERSION = 2
+#: The suffix of a band of what the maps identified (``bands["after identified"]``): the
+#: samples with the guessed parameters at their held value.
+IDENTIFIED = "identified"
 
 
 def interval_key(basis: FitBasis, before: ArmParams, plan: Plan, n_samples: int) -> str:

@@ -60,12 +60,10 @@ class PlanSummary:
     @classmethod
     def of(cls, rec: PlanRecord) -> PlanSummary:
         plan = plan_of(rec)
-        given = rec.spec.get("given_on")
         accepted = rec.spec.get("accepted_poor_fit")
         return cls(rec.id, rec.patient_code, rec.label,
                    tuple(s.kind for s in plan.steps), tuple(s.describe() for s in plan.steps),
-                   rec.base_model_id, rec.result_model_id,
-                   date.fromisoformat(given) if isinstance(given, str) else None,
+                   rec.base_model_id, rec.result_model_id, rec.given_on,
                    rec.created_at, str(accepted) if accepted else None)
 
     def to_dict(self) -> dict[str, Any]:

@@ -29,7 +29,7 @@ exactly once. Everything here is a model prediction, not treatment advice.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import date
 from pathlib import Path
 from typing import Any
@@ -139,7 +139,7 @@ class WhatIf:
 
     def to_dict(self) -> dict[str, Any]:
         """The ``whatif --json`` document (without what the command line adds)."""
-        doc: dict[str, Any] = {"model": {"source": self.source.description,
+        doc: dict[str, Any] = {"model": {**self.source.to_dict(),
                                          "sha256": params_sha256(self.before)},
                                "summary": self.summary().to_dict()}
         if self.inverse is not None:
@@ -254,7 +254,7 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     if given_on is not None and save_to is None:
         raise InterventionError("what-if: a date the plan was given is stored with the plan; "
                                 "it needs --save.")
-    accepted = check_fit(FitBasis.of(source), accept_poor_fit)  # before any work or writing
+    check_fit(FitBasis.of(source), accept_poor_fit)  # before any work or writing
     arms = arms if arms is not None else ArmCache()
     arm_b = arms(source.params)
     cond = arms.derived(("conditions", source.params), lambda: Conditions.standard(arm_b))
@@ -282,11 +282,23 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
         write_atomic(d / "plan.json", plan.to_json() + "\n")
         write_atomic(d / "after.json", after.to_json() + "\n")
         write_atomic(d / "lineage.json", to_json(derivation) + "\n")
-    saved = None
+    res = WhatIf(source, plan, arm_b, arm_a, derivation, comparison, course, inverse,
+                 plot_path or None, out_dir or None, None,
+                 tuple(dose_warnings(plan, session_limit_units)), guesses)
     if save_to is not None:
         with save_to() as db:
-            saved = save_plan_result(db, source, after, derivation,
-                                     record_extras(given_on, accepted))
-    return WhatIf(source, plan, arm_b, arm_a, derivation, comparison, course, inverse,
-                  plot_path or None, out_dir or None, saved,
-                  tuple(dose_warnings(plan, session_limit_units)), guesses)
+            res = store_whatif(db, res, given_on)
+    return res
+
+
+def store_whatif(db: Database, res: WhatIf, given_on: date | None = None) -> WhatIf:
+    """Store what ``res`` computed (:func:`save_plan_result`: the after model and the plan,
+    with the day it was given and an accepted poor fit); ``res`` with the ids."""
+    if given_on is not None and given_on > date.today():
+        raise InterventionError(f"what-if: {given_on.isoformat()} is in the future; a plan is "
+                                "recorded as given on the day it was carried out.")
+    accepted = check_fit(FitBasis.of(res.source),
+                         res.guesses is not None and res.guesses.accepted_poor_fit)
+    saved = save_plan_result(db, res.source, res.after, res.derivation,
+                             record_extras(given_on, accepted))
+    return replace(res, saved=saved)

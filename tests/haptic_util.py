@@ -118,7 +118,8 @@ class ServeProcess:
         cmd = [sys.executable, "-m", "fieldbank.cli", "haptic", "serve",
                "--robot", robot, "--station",
                "--before-severity", "elbow=severe", "--after-severity", "elbow=mild",
-               "--duration-s", "240", "--socket", str(self.sock), "--db", self.db_url,
+               # long enough for a busy machine; the test stops it when it is done
+               "--duration-s", "3600", "--socket", str(self.sock), "--db", self.db_url,
                "--trace-dir", str(self.trace_dir), "--json", *args]
         env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,

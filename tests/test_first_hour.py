@@ -75,13 +75,28 @@ def test_a_bad_file_is_refused_naming_the_file_and_the_key(clean_env: Path) -> N
 def test_config_show_prints_each_value_and_its_source_without_secrets(clean_env: Path) -> None:
     Path("fieldbank.toml").write_text(
         'db = "postgresql+psycopg://ana:s3cret@db.example/fb"\n[ingest.limits]\nmax_rows = 5\n')
-    r = run("config", "show", env={"FIELDBANK_HOME": str(clean_env / "h")})
+    # a home deep enough that its path alone would push the row past 100 columns
+    home = clean_env / "clinic-data" / ("a-directory-with-a-long-name-" * 3) / "fieldbank-home"
+    assert len(str(home)) > 100
+    r = run("config", "show", env={"FIELDBANK_HOME": str(home)})
     assert r.exit_code == 0
     assert "s3cret" not in r.output
-    lines = {ln.split()[0]: ln for ln in r.stdout.splitlines()[1:]}
-    assert "ana:***@db.example" in lines["db"] and "fieldbank.toml" in lines["db"]
-    assert "variable FIELDBANK_HOME" in lines["home"]
-    assert "max_rows=5" in lines["ingest.limits"]
+    out = r.stdout.splitlines()
+    assert max(len(ln) for ln in out) <= 100
+    # each row's columns, with the lines a long cell wrapped onto (at the header's columns)
+    at_value, at_from = out[0].index("value"), out[0].index("from")
+    rows: dict[str, list[str]] = {}
+    last = ""
+    for ln in out[1:]:
+        if not ln.startswith(" "):
+            last = ln.split()[0]
+            rows[last] = ["", ""]
+        rows[last][0] += ln[at_value:at_from].strip()
+        rows[last][1] += " " + ln[at_from:].strip()
+    assert "ana:***@db.example" in rows["db"][0] and "fieldbank.toml" in rows["db"][1]
+    assert "variable FIELDBANK_HOME" in " ".join(rows["home"][1].split())
+    assert rows["home"][0] == str(home)  # wrapped whole, nothing cut or elided
+    assert "max_rows=5" in rows["ingest.limits"][0]
     doc = json.loads(run("config", "show", "--json").stdout)
     assert doc["file"].endswith("fieldbank.toml")
     assert {s["name"] for s in doc["settings"]} >= {"db", "home", "robot", "scheduler",
@@ -280,12 +295,14 @@ def test_a_password_with_query_characters_is_not_a_query() -> None:
     assert u.password == "p?a&s#s" and u.host == "db.example"
 
 
-def test_a_robot_device_path_is_not_echoed_whole(tmp_path: Path) -> None:
-    port = str(tmp_path / "usb-ACME_Robot_TOKEN-4f9c2e-if00")
+def test_a_robot_device_path_is_shown_whole_and_a_url_password_never(tmp_path: Path) -> None:
+    port = str(tmp_path / "ttyUSB9")
     r = run("haptic", "serve", "--robot", port, "--before-severity", "elbow=severe", "--no-db",
             "--duration-s", "0.1")
-    assert r.exit_code == 1 and "cannot open robot port" in r.stderr
-    assert "TOKEN-4f9c2e" not in r.output and f"{tmp_path}/…" in r.stderr
+    assert r.exit_code == 1 and f"cannot open robot port '{port}'" in r.stderr
+    r = run("haptic", "serve", "--robot", "socket://ana:s3cret@127.0.0.1:9", "--before-severity",
+            "elbow=severe", "--no-db", "--duration-s", "0.1")
+    assert r.exit_code == 1 and "s3cret" not in r.output and "ana:***@127.0.0.1" in r.stderr
 
 
 def test_a_sim_url_is_shown_as_given(tmp_path: Path) -> None:

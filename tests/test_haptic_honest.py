@@ -136,6 +136,13 @@ def test_a_fault_pauses_training_and_flags_its_trial(db: Database) -> None:
     out = CliRunner().invoke(cli, ["haptic", "sessions", "show", str(sid), "--db", url])
     assert out.exit_code == 0, out.output
     assert "FLAGGED, not counted: fault during the trial (NAN)" in out.output
+    # the reason on its own line under the trial's row, not run onto its trace window
+    shown = out.output.splitlines()
+    at = next(i for i, ln in enumerate(shown) if "FLAGGED" in ln)
+    assert shown[at].lstrip().startswith("FLAGGED, not counted: fault during the trial (NAN)")
+    assert shown[at - 1].split()[1] == "1"  # trial 1 (of its block)
+    assert shown[at - 1].rstrip().endswith(" s")
+    assert max(len(ln) for ln in shown) <= 100
     assert "assessment: 1 of 1 correct" in out.output and "1 answered trial (1) flagged" \
         in out.output
     assert "model A   1: m0" in out.output and "model B   5: m4" in out.output

@@ -510,6 +510,37 @@ def test_whatif_render_pushes_before_and_after(served, tmp_path: Path) -> None: 
     assert r.exit_code == 1 and "no renderer on" in r.output
 
 
+def test_whatif_render_stores_only_with_save_and_only_once_the_renderer_accepted(
+        served, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from fieldbank.cli.main import cli
+    from fieldbank.storage import Database
+
+    url = f"sqlite:///{tmp_path / 'fb.sqlite3'}"
+    with Database.open(url) as db:
+        db.add_patient("P-1", 70.0, 1.7, "right")
+        db.add_model(synthesize({"elbow": "severe"}), "synthetic", "elbow severe", "P-1")
+
+    def stored() -> tuple[int, int]:
+        with Database.open(url) as db:
+            return len(db.list_plans()), len(db.list_models())
+
+    base = ["whatif", "P-1", "--botox", "ef=200U", "--db", url, "--render"]
+    # no renderer: the command fails and stores nothing, with --save too
+    for extra in ([], ["--save"]):
+        r = CliRunner().invoke(cli, [*base, *extra, "--socket", str(tmp_path / "none.sock")])
+        assert r.exit_code == 1 and "no renderer on" in r.stderr
+        assert stored() == (0, 1)
+    _rd, sock = served
+    r = CliRunner().invoke(cli, [*base, "--socket", str(sock)])
+    assert r.exit_code == 0, r.output
+    assert "stored: nothing (--save stores the plan and its after model)" in r.stderr
+    assert stored() == (0, 1)
+    r = CliRunner().invoke(cli, [*base, "--save", "--socket", str(sock)])
+    assert r.exit_code == 0, r.output
+    assert "stored: after model 2 (parent 1), plan 1" in r.stderr
+    assert stored() == (1, 2)
+
+
 #: Modules a live command must not load (they take a large part of a second to import).
 HEAVY = ("numpy", "sqlalchemy", "matplotlib", "h5py")
 #: Runs ``python -m fieldbank.cli ARGS`` and, at exit, reports the heavy modules it loaded.

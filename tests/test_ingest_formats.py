@@ -198,5 +198,8 @@ def test_export_csv_round_trip(sample_dir: Path, tmp_path: Path) -> None:
         _same(m, inc.maps[0], rtol=1e-8)
     r = CliRunner().invoke(cli, ["export", "--db", url, "--patient", "NOBODY", "-o",
                                  str(tmp_path / "x.h5")])
+    assert r.exit_code == 1 and "No patient with code 'NOBODY'" in r.output
+    r = CliRunner().invoke(cli, ["export", "--db", url, "--patient", "SYN-003", "--kind",
+                                 "postural", "--since", "2030-01-01", "-o", str(tmp_path / "x.h5")])
     assert r.exit_code == 1 and "No map matches" in r.output
     db.close()

@@ -6,6 +6,14 @@ no answer is taken during the fault, and the trial that held it is stored flagge
 page itself: the six muscle bands named, the protocol's real name, nothing overlapping at
 800×600 and 1920×1080, no request answered 404.
 
+A busy machine causes faults of its own: a device process that misses its 1 kHz deadline (another
+SCHED_FIFO loop on its core; a core's real-time budget spent) makes the renderer latch TIMEOUT
+or the device's watchdog, at any moment of the test. The page is right to pause then - the
+answer buttons stay disabled until a re-arm, which is what a full run of the suite once met
+after the test's own re-arm. So the test re-arms every fault it did not cause, as the clinician
+would (:func:`_heal`), injects its own until that is the one the renderer latched, and waits
+without a bound on how long anything takes (the waits' limits only stop a hung run).
+
 Skipped only when no ``chromium`` is on PATH and FIELDBANK_REQUIRE_BROWSER is not "1".
 """
 
@@ -26,6 +34,11 @@ from fieldbank.model import Arm
 from fieldbank.storage import Database
 from tests.browser_util import chromium
 from tests.haptic_util import ServeProcess
+
+try:  # the browser tests skip (or fail in CI) without Playwright: tests/browser_util.py
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+except ImportError:  # pragma: no cover
+    PlaywrightTimeout = TimeoutError  # type: ignore[misc,assignment]
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage"]
@@ -87,14 +100,73 @@ def station(tmp_path: Path) -> Iterator[Station]:
         st.stop()
 
 
-def _wait(page, expr: str, timeout_s: float = 15.0) -> object:  # type: ignore[no-untyped-def]
-    deadline = time.time() + timeout_s
+#: Only stops a hung run: nothing the test asserts depends on how long anything takes. On a
+#: machine at load 17 the pty between the renderer and the device process (its kernel worker
+#: runs at normal priority) stalls for tens of ms every few seconds: TIMEOUT after TIMEOUT,
+#: and a step may take minutes to find the robot armed long enough.
+HANG_S = 900.0
+
+
+def _heal(st: Station, caused: str = "") -> list[str]:
+    """Re-arm a fault the test did not cause (``caused``: the fault the test itself holds
+    latched, left alone); returns the faults re-armed."""
+    s = st.client.request("status")
+    if s["mode"] != "FAULT" or caused in s["latched_faults"]:
+        return []
+    try:
+        st.client.request("arm")
+    except HapticError:
+        return []  # refused for now (no state yet, the handle moving): the next look tries again
+    HEALED.extend(s["latched_faults"])
+    return list(s["latched_faults"])
+
+
+#: The faults of the busy machine the test re-armed (said when the test fails).
+HEALED: list[str] = []
+
+
+def _wait(page, expr: str, st: Station | None = None,  # type: ignore[no-untyped-def]
+          caused: str = "") -> object:
+    """``expr`` true on the page; with ``st``, every fault the test did not cause re-armed
+    meanwhile. The status and the page's state are in the message of a hung run."""
+    deadline = time.time() + HANG_S
     while time.time() < deadline:
         v = page.evaluate(expr)
         if v:
             return v
+        if st is not None:
+            _heal(st, caused)
         time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {expr}")
+    raise _hung(page, st, expr)
+
+
+def _hung(page, st: Station | None, what: str) -> AssertionError:  # type: ignore[no-untyped-def]
+    status = st.client.request("status") if st is not None else {}
+    paused = page.evaluate("window.fb.paused")
+    return AssertionError(f"no {what} within {HANG_S:g} s; renderer {status.get('mode')}, "
+                          f"latched {status.get('latched_faults')}, training "
+                          f"{status.get('training')}; page paused {paused}; faults re-armed "
+                          f"{HEALED}")
+
+
+def _act(page, st: Station, selector: str, done: str) -> None:  # type: ignore[no-untyped-def]
+    """Click ``selector`` until ``done`` is true on the page, re-arming what the busy machine
+    faulted meanwhile: a click the page or the renderer refused in a fault is made again once
+    the page allows it (its frames lag the renderer: it is asked, not the status)."""
+    deadline = time.time() + HANG_S
+    clicked = 0.0
+    while time.time() < deadline:
+        if page.evaluate(done):
+            return
+        _heal(st)
+        if page.is_enabled(selector) and time.time() - clicked > 2.0:
+            try:
+                page.click(selector, timeout=2000)
+                clicked = time.time()
+            except PlaywrightTimeout:  # disabled again by a fault between look and click
+                pass
+        time.sleep(0.1)
+    raise _hung(page, st, done)
 
 
 #: Every box a person reads on the stage, and the panel: none may overlap another.
@@ -132,6 +204,7 @@ def _no_overlap(page) -> dict[str, list[float]]:  # type: ignore[no-untyped-def]
     return boxes  # type: ignore[no-any-return]
 
 
+@pytest.mark.timeout(3600)
 def test_a_fault_mid_training_pauses_it_and_the_page_says_why(station: Station,
                                                               tmp_path: Path) -> None:
     from playwright.sync_api import sync_playwright
@@ -153,25 +226,27 @@ def test_a_fault_mid_training_pauses_it_and_the_page_says_why(station: Station,
                            ("ef", "elbow flexors"), ("ee", "elbow extensors"),
                            ("bf", "bi-articular flexors"), ("be", "bi-articular extensors")):
             assert f"{code} {name}" in legend
-        for attempt in range(3):  # a fault the busy machine caused first is re-armed
-            st.armed()
-            page.click("#train-start")
-            try:
-                _wait(page, "window.fb.info && window.fb.info.training && "
-                            "window.fb.info.training.awaiting_answer")
-                break
-            except AssertionError:
-                if attempt == 2:
-                    raise AssertionError(f"training did not start: {st.client.request('status')}"
-                                         f" page: {page.inner_text('#message')}") from None
-                if st.client.request("status")["training"]:
-                    st.client.request("train", action="stop")
+        st.armed()
+        _act(page, st, "#train-start", "window.fb.info && window.fb.info.training")
+        _act(page, st, "#train-next", "window.fb.info.training.trial >= 1")
         assert "two-trials protocol" in page.inner_text("#protocol-name")
-        assert page.is_enabled(".train-answer[data-answer='elbow']")
-        # the robot faults mid-trial
-        st.robot.inject_device_fault(True)
-        _wait(page, "!document.getElementById('fault').hidden")
-        _wait(page, "document.getElementById('rearm-why').textContent.includes('device fault')")
+        # the robot faults mid-trial: injected until it is the fault the renderer latched (a
+        # fault of the busy machine that came first pauses the loop's device checks)
+        for _attempt in range(10):
+            _wait(page, "window.fb.info.training.awaiting_answer && "
+                        "!document.querySelector('.train-answer[data-answer=\"elbow\"]')"
+                        ".disabled", st)
+            st.robot.inject_device_fault(True)
+            _wait(page, "!document.getElementById('fault').hidden")
+            _wait(page, "document.getElementById('rearm-why').textContent.includes("
+                        "'device fault')")
+            if "DEVICE" in st.client.request("status")["latched_faults"]:
+                break
+            st.robot.inject_device_fault(False)
+            _wait(page, "!document.getElementById('rearm-why').textContent.includes("
+                        "'device fault')", st)
+        else:
+            raise AssertionError(f"the injected fault never latched first; re-armed {HEALED}")
         text = page.inner_text("#fault")
         assert "DEVICE" in text and "The robot stopped itself" in text
         assert "Make sure the robot shows no fault of its own, then re-arm." in text
@@ -202,16 +277,14 @@ def test_a_fault_mid_training_pauses_it_and_the_page_says_why(station: Station,
         st.robot.inject_device_fault(False)
         time.sleep(0.3)
         page.click("#btn-rearm")
-        _wait(page, "document.getElementById('fault').hidden")
-        _wait(page, "!document.querySelector('.train-answer[data-answer=\"elbow\"]').disabled")
-        page.click(".train-answer[data-answer='elbow']")
-        _wait(page, "window.fb.info.training.trial === 1 && "
-                    "!window.fb.info.training.awaiting_answer")
+        _wait(page, "document.getElementById('fault').hidden", st)
+        # from here every fault is the busy machine's: re-armed, as a clinician would
+        _act(page, st, ".train-answer[data-answer='elbow']",
+             "window.fb.info.training.trial === 1 && !window.fb.info.training.awaiting_answer")
         page.set_viewport_size({"width": 1920, "height": 1080})
-        page.click("#train-next")
-        _wait(page, "window.fb.info.training.awaiting_answer")
-        page.click(".train-answer[data-answer='both']")
-        _wait(page, "document.getElementById('train-result').textContent.includes('flagged')")
+        _act(page, st, "#train-next", "window.fb.info.training.trial === 2")
+        _act(page, st, ".train-answer[data-answer='both']",
+             "document.getElementById('train-result').textContent.includes('flagged')")
         result = page.inner_text("#train-result")
         assert "0 of 1 correct" in result or "1 of 1 correct" in result or "of 0" in result
         _no_overlap(page)

@@ -325,8 +325,8 @@ def test_a_partial_effect_is_said_and_contradicts_the_prediction(
                   str(plan_id))
     assert rep.exit_code == 0, rep.output
     html = (out / "report.html").read_text(encoding="utf-8")
-    assert ('<p class="warn">Checked against maps measured after the plan: partial effect.'
-            in html)
+    assert ('<p class="warn">Checked against maps measured after the plan: <span class="verdict '
+            'partial">! partial effect</span>' in html)
 
 
 def test_the_report_carries_the_same_check(samples_db: dict[str, Any], tmp_path: Path) -> None:

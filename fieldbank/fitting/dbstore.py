@@ -64,6 +64,8 @@ class DatabaseFitStore:
         return SavedFit(fit.id, model.id, created)
 
     def list_models(self, patient: str | None = None) -> Sequence[StoredModel]:
+        if patient is not None:
+            self.db.get_patient(patient)  # an unknown patient: the one "not found" message
         return self.db.list_models(patient_code=patient)
 
     def get_model(self, model_id: int | str) -> ModelDetail:

@@ -54,7 +54,7 @@ from fieldbank.measurechoices import (
 )
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import ArmParams
-from fieldbank.validation import Interval, check_fields
+from fieldbank.validation import Interval, check_fields, check_tuple
 
 #: The posture (shoulder, elbow), degrees, whose hand position centres the default grid.
 DEFAULT_CENTRE_POSTURE_DEG = (40.0, 80.0)
@@ -77,6 +77,8 @@ PROTOCOL_BOUNDS: dict[str, Interval] = {
     "ramp_s": Interval(0.05, 1.0, "s"),
     "pass_margin_m": Interval(0.0, 0.05, "m"),
 }
+#: Where the grid's centre may be, each coordinate (shoulder frame): within an arm's reach.
+CENTRE_BOUNDS = Interval(-1.0, 1.0, "m")
 
 
 @dataclass(frozen=True)
@@ -112,6 +114,9 @@ class ProtocolConfig:
             raise ParameterError(f"grid must be 1–15 by 1–15 postures; got {nx}×{ny}")
         check_fields(self, PROTOCOL_BOUNDS, what="protocol setting",
                      names=[n for n in PROTOCOL_BOUNDS if getattr(self, n) is not None])
+        if self.centre_m is not None:
+            check_tuple("centre_m", self.centre_m, 2, CENTRE_BOUNDS,
+                        labels=("centre x", "centre y"), what="protocol setting")
         if self.transient_s >= min(self.hold_s, self.postural_hold_s):
             raise ParameterError(f"transient_s ({self.transient_s:g} s) must be shorter than "
                                  "the holds it is cut from")
@@ -355,6 +360,7 @@ def _stretch(b: _Builder, postures: FloatArray, nx: int, ny: int, arm: Arm | Non
     left out of that stroke (from the far end), and said in the plan's notes."""
     c = b.c
     lead = min(0.05, 0.25 * c.ramp_s)
+    left_out: list[str] = []
     for col in range(nx):
         ys = sorted(float(y) for y in postures[col::nx, 1])
         x_col = float(postures[col, 0])
@@ -368,9 +374,8 @@ def _stretch(b: _Builder, postures: FloatArray, nx: int, ny: int, arm: Arm | Non
                 rows -= 1
             word = "away from the body" if direction > 0 else "toward the body"
             if rows < len(ys):
-                b.notes.append(f"column {col}, {word}: {len(ys) - rows} far posture(s) left "
-                               "out of the stretch (the stroke would leave the patient's "
-                               "reach)")
+                left_out.append(f"column {col} {'away' if direction > 0 else 'toward'} "
+                                f"{len(ys) - rows}")
             if rows == 0:
                 continue
             for off in (0.0, -c.stretch_offset_m, c.stretch_offset_m):
@@ -381,3 +386,7 @@ def _stretch(b: _Builder, postures: FloatArray, nx: int, ny: int, arm: Arm | Non
                 b.stroke(start, end, (c.ramp_s + lead, c.ramp_s + t_plateau),
                          f"column {col} {word} at {c.stretch_speed_m_per_s:g} m/s, "
                          f"offset {off * 1000:+.0f} mm")
+    if left_out:  # one note, not one per stroke
+        b.notes.append("far postures left out of the stretch, where the stroke would leave the "
+                       "patient's reach (postures per column, stroking away from the body or "
+                       "toward it): " + ", ".join(left_out))

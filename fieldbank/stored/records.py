@@ -118,6 +118,13 @@ class PlanRecord:
     spec: dict[str, Any]
     created_at: datetime
 
+    @property
+    def given_on(self) -> date | None:
+        """The day the plan was carried out (its document's ``given_on``); None for a plan
+        only explored."""
+        given = self.spec.get("given_on")
+        return date.fromisoformat(given) if isinstance(given, str) else None
+
 
 @dataclass(frozen=True)
 class JobRunRecord:

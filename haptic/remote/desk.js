@@ -6,7 +6,7 @@
 (() => {
   if (!STATION_CONFIG.remote) return;
   const $ = (id) => document.getElementById(id);
-  const GROUP_WORD = { shoulder: "Shoulder", elbow: "Elbow", biarticular: "Both (bi-articular)",
+  const GROUP_WORD = { shoulder: "Shoulder", elbow: "Elbow", biarticular: "Bi-articular",
                        unimpaired: "Unimpaired" };
   const fbr = window.fbRemote = { link: null, posterior: null, answers: [] };
   let link = null, post = null;
@@ -66,7 +66,12 @@
   function fmtP(p) { return p >= 0.995 ? "> 0.99" : p.toFixed(2); }
   function pIs(p) { return p >= 0.995 ? "p > 0.99" : `p = ${p.toFixed(2)}`; }
   const LEVEL_SHORT = { "very mild": "v. mild", moderate: "mod.", unimpaired: "none" };
-  const GROUP_SHORT = { shoulder: "Shoulder", elbow: "Elbow", biarticular: "Both" };
+  const GROUP_SHORT = { shoulder: "Shoulder", elbow: "Elbow", biarticular: "Bi-articular" };
+  // how the far site is re-armed, in words: its fault latches there and only there
+  const REARM_FAR = "Patient's robot: fault, force zero. To re-arm, at the patient's side: " +
+    "free the patient's arm, check the robot shows no fault of its own, then start the " +
+    "patient's site again ('fieldbank haptic remote patient …'); this site then reconnects " +
+    "when started again";
   const history = [];
 
   // --- link --------------------------------------------------------------------------------
@@ -78,7 +83,7 @@
     const st = $("link-state");
     let text, cls;
     if (!m.link_ok) { text = "Link lost: force ramped to zero"; cls = "bad"; }
-    else if (m.patient_fault) { text = "Patient's robot: fault (re-arm at the patient's side)"; cls = "bad"; }
+    else if (m.patient_fault) { text = REARM_FAR; cls = "bad"; }
     else if (m.engaged && m.patient_engaged) { text = "Linked: feeling the patient"; cls = "ok"; }
     else { text = "Link up, not engaged (arm the robot)"; cls = "warn"; }
     st.textContent = `${text} · ${m.dissipated_j.toFixed(3)} J dissipated`;

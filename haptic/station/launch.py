@@ -16,6 +16,7 @@ import ipaddress
 import json
 import os
 import select
+import signal
 import subprocess
 import sys
 import time
@@ -26,8 +27,9 @@ from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.station.config import STATION_BOUNDS, StationConfig, check_view, new_token
 from fieldbank.validation import check_fields
 
-#: Longest wait for the station process to listen, s.
-START_TIMEOUT_S = 20.0
+#: Longest wait for the station process to listen, s: starting Python and the page's web
+#: server takes about a second on an idle machine, and twenty or more on a busy one.
+START_TIMEOUT_S = 120.0
 #: The station's own program (``python -m``).
 STATION_PROGRAM = "fieldbank.haptic.station"
 
@@ -146,13 +148,19 @@ class StationProcess:
                                 env=env)
         self._proc = proc
         assert proc.stdin is not None and proc.stdout is not None
-        proc.stdin.write((json.dumps(self.config.to_dict()) + "\n").encode())
-        proc.stdin.flush()  # the pipe stays open: the station ends when it closes
-        line = _readline(proc.stdout, timeout_s)
+        try:
+            proc.stdin.write((json.dumps(self.config.to_dict()) + "\n").encode())
+            proc.stdin.flush()  # the pipe stays open: the station ends when it closes
+        except BrokenPipeError:
+            pass  # it ended before reading its settings: its status says why (below)
+        line, closed = _readline(proc.stdout, timeout_s)
         if not line.startswith(b"LISTENING "):
+            try:  # its output closed: it has ended (or is ending) - its status, not a guess
+                ended = proc.wait(timeout=10.0) if closed else proc.poll()
+            except subprocess.TimeoutExpired:
+                ended = None
             self.stop()
-            raise HapticError(f"the station process did not start (exit code "
-                              f"{proc.poll()}); its messages are above")
+            raise HapticError(_why_not_started(ended, line, timeout_s))
         _, host, port = line.decode().split()
         self.host, self.port = host, int(port)
         self.config = replace(self.config, port=self.port)
@@ -185,7 +193,31 @@ class StationProcess:
                    options.training, options.view, options.program, options.panel)
 
 
-def _readline(f: IO[bytes], timeout_s: float) -> bytes:
+def _why_not_started(ended: int | None, line: bytes, timeout_s: float) -> str:
+    """What happened to a station process that never said it was listening, in words."""
+    if ended is None:
+        return (f"the station process did not start listening within {timeout_s:g} s (it was "
+                "still starting: the machine may be very busy) and was stopped; the session "
+                "did not start. Try again, or run without --station.")
+    if ended < 0:
+        try:
+            name = signal.Signals(-ended).name
+        except ValueError:
+            name = f"signal {-ended}"
+        why = f"was ended by {name}" + (" (the system may have run out of memory)"
+                                        if -ended == signal.SIGKILL else "")
+    else:
+        why = f"ended with exit status {ended}"
+    said = line.decode(errors="replace").strip()
+    return (f"the station process {why} before it listened"
+            + (f"; it said: {said!r}" if said else "")
+            + (". Any error it printed is on the lines above" if ended > 0 else "")
+            + ". The session did not start.")
+
+
+def _readline(f: IO[bytes], timeout_s: float) -> tuple[bytes, bool]:
+    """The first line ``f`` gives within ``timeout_s`` and whether ``f`` closed (its writer
+    ended) before it."""
     deadline = time.monotonic() + timeout_s
     buf = b""
     fd = f.fileno()
@@ -195,6 +227,6 @@ def _readline(f: IO[bytes], timeout_s: float) -> bytes:
             break
         chunk = os.read(fd, 256)
         if not chunk:
-            break
+            return buf.strip(), True
         buf += chunk
-    return buf.strip()
+    return buf.strip(), False

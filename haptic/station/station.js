@@ -192,10 +192,17 @@ function muscleCurves(f) {
   return [out[0], out[3], out[1], out[4], out[2], out[5]];
 }
 
-function tensionColour(n) {
-  const t = Math.max(0, Math.min(1, n / 40));
-  const r = Math.round(214 + 10 * t), g = Math.round(188 - 150 * t), b = Math.round(190 - 160 * t);
-  return `rgba(${r},${g},${b},${0.55 + 0.45 * t})`;
+// One colour per muscle group (sf, se, ef, ee, bf, be: Okabe & Ito's palette, told apart with
+// every common colour-vision deficiency); the band's width and strength say its force.
+const MUSCLE_COLOURS = ["#E69F00", "#56B4E9", "#009E73", "#0072B2", "#D55E00", "#CC79A7"];
+const FULL_FORCE_N = 40;  // a band this strong is drawn widest and opaque
+
+function tension(n) { return Math.max(0, Math.min(1, n / FULL_FORCE_N)); }
+
+function muscleStyle(i, n) {
+  const t = tension(n);
+  return { colour: MUSCLE_COLOURS[i % MUSCLE_COLOURS.length], alpha: 0.6 + 0.4 * t,
+           width: 4 + 10 * t };
 }
 
 function drawArm(f) {
@@ -204,8 +211,10 @@ function drawArm(f) {
     ctx.lineCap = "round";
     bands = [];
     muscleCurves(f).forEach(([a, c, b], i) => {
-      ctx.lineWidth = Math.max(5, 0.016 * view.s); ctx.strokeStyle = tensionColour(f.muscles_n[i]);
+      const st = muscleStyle(i, f.muscles_n[i]);
+      ctx.globalAlpha = st.alpha; ctx.lineWidth = st.width; ctx.strokeStyle = st.colour;
       ctx.beginPath(); ctx.moveTo(...P(a)); ctx.quadraticCurveTo(...P(c), ...P(b)); ctx.stroke();
+      ctx.globalAlpha = 1;
       // points along the band, for the hover label
       const pa = P(a), pc = P(c), pb = P(b), pts = [];
       for (let k = 0; k <= 12; k++) {
@@ -225,31 +234,41 @@ function drawArm(f) {
   disc(H, 0.03 * view.s, "#39404f");
 }
 
+const HANDLE_R = 15;  // px: the handle's ring
+
 function drawHandle(f) {
-  // the handle (robot) the hand holds: an orange ring with a solid centre, drawn last
+  // the handle (robot) the hand holds: a dark ring with a yellow centre, over the arm
   const [hx, hy] = P(f.handle_m);
-  ctx.lineWidth = 4; ctx.strokeStyle = "#ff7a00";
-  ctx.beginPath(); ctx.arc(hx, hy, 15, 0, 2 * Math.PI); ctx.stroke();
-  ctx.fillStyle = "#ff7a00"; ctx.beginPath(); ctx.arc(hx, hy, 6, 0, 2 * Math.PI); ctx.fill();
+  ctx.lineWidth = 4; ctx.strokeStyle = "#1d2330";
+  ctx.beginPath(); ctx.arc(hx, hy, HANDLE_R, 0, 2 * Math.PI); ctx.stroke();
+  ctx.fillStyle = "#F0E442"; ctx.beginPath(); ctx.arc(hx, hy, 6, 0, 2 * Math.PI); ctx.fill();
   return [hx, hy];
 }
 
 function drawForce(f) {
+  // the force on the handle as an arrow from the ring's edge, drawn over the handle, so a
+  // small force is seen too: 10 N is 6 cm beyond the ring, and a short stub shows any force
   const [fx, fy] = f.force_n, n = Math.hypot(fx, fy);
-  const mPerN = 0.006;  // 10 N is drawn 6 cm long
-  const a = f.handle_m, b = [a[0] + mPerN * fx, a[1] + mPerN * fy];
-  const [ax, ay] = P(a), [bx, by] = P(b);
+  const mPerN = 0.006, stub = 10;
+  const [ax, ay] = P(f.handle_m);
+  const [tx, ty] = P([f.handle_m[0] + fx, f.handle_m[1] + fy]);
+  const ang = Math.atan2(ty - ay, tx - ax);
+  const len = stub + mPerN * n * view.s;
+  const sx = ax + (HANDLE_R + 3) * Math.cos(ang), sy = ay + (HANDLE_R + 3) * Math.sin(ang);
+  const bx = sx + len * Math.cos(ang), by = sy + len * Math.sin(ang);
   if (n > 0.05) {
-    ctx.lineWidth = 5; ctx.strokeStyle = "#c0392b"; ctx.lineCap = "round";
-    ctx.beginPath(); ctx.moveTo(ax, ay); ctx.lineTo(bx, by); ctx.stroke();
-    const ang = Math.atan2(by - ay, bx - ax);
-    ctx.fillStyle = "#c0392b"; ctx.beginPath(); ctx.moveTo(bx, by);
-    ctx.lineTo(bx - 16 * Math.cos(ang - 0.45), by - 16 * Math.sin(ang - 0.45));
-    ctx.lineTo(bx - 16 * Math.cos(ang + 0.45), by - 16 * Math.sin(ang + 0.45)); ctx.fill();
+    ctx.lineCap = "round";
+    for (const [w, c] of [[8, "#ffffff"], [4, "#1d2330"]]) {  // a white edge: seen on any band
+      ctx.lineWidth = w; ctx.strokeStyle = c;
+      ctx.beginPath(); ctx.moveTo(sx, sy); ctx.lineTo(bx, by); ctx.stroke();
+    }
+    ctx.fillStyle = "#1d2330"; ctx.beginPath();
+    ctx.moveTo(bx + 6 * Math.cos(ang), by + 6 * Math.sin(ang));
+    ctx.lineTo(bx - 12 * Math.cos(ang - 0.5), by - 12 * Math.sin(ang - 0.5));
+    ctx.lineTo(bx - 12 * Math.cos(ang + 0.5), by - 12 * Math.sin(ang + 0.5)); ctx.fill();
   }
-  ctx.font = "600 16px system-ui"; ctx.fillStyle = "#c0392b";
-  const off = Math.hypot(bx - ax, by - ay) < 20 ? 22 : 12;
-  ctx.fillText(`${n.toFixed(1)} N`, bx + off, by + 5);
+  ctx.font = "700 16px system-ui"; ctx.fillStyle = "#1d2330";
+  ctx.fillText(`${n.toFixed(1)} N`, Math.max(bx, ax + HANDLE_R) + 12, Math.max(by, ay) + 5);
 }
 
 let fpsCount = 0, fpsT0 = performance.now();
@@ -270,8 +289,8 @@ function draw() {
   drawPaths();
   if (window.fbExtra) window.fbExtra.draw(ctx, P, view);
   drawArm(f);
-  drawForce(f);
   const [px, py] = drawHandle(f);
+  drawForce(f);  // over the handle: a small force is not hidden under its ring
   if (f.seq !== drawnSeq) {
     drawnSeq = f.seq; fpsCount++; fb.drawn++;
     fb.last = { t_s: f.t_s, x: f.handle_m[0], y: f.handle_m[1], px, py };
@@ -322,13 +341,13 @@ function buildMuscleLegend() {
   $("muscle-legend").innerHTML = MUSCLES.map((m, i) =>
     `<span class="m" data-i="${i}" title="${esc(m.name)}"><span class="sw"></span>` +
     `<b>${esc(m.code)}</b> ${esc(m.name)}<span class="mf"></span></span>`).join("") +
-    '<span class="m">muscle force: pale 0 → red 40 N</span>';
+    `<span class="m">band width: the group's force, 0 → ${FULL_FORCE_N} N</span>`;
 }
 
 function updateMuscleLegend(f) {
   document.querySelectorAll("#muscle-legend .m[data-i]").forEach((el) => {
     const i = Number(el.dataset.i), n = f.muscles_n ? f.muscles_n[i] : null;
-    el.querySelector(".sw").style.background = n === null ? "#e4e6ea" : tensionColour(n);
+    el.querySelector(".sw").style.background = MUSCLE_COLOURS[i % MUSCLE_COLOURS.length];
     el.querySelector(".mf").textContent = n === null ? "" : ` ${n.toFixed(0)} N`;
   });
 }
@@ -448,7 +467,7 @@ function abxResult(r) {
 
 function trainingResult(s, tr) {
   const conf = s.confusion, names = { shoulder: "shoulder", elbow: "elbow", biarticular: "bi-articular" };
-  const head = conf.columns.map((c) => `<th>${c}</th>`).join("");
+  const head = conf.columns.map((c) => `<th>${names[c === "both" ? "biarticular" : c] || c}</th>`).join("");
   const rows = conf.rows.map((g, i) => {
     const n = conf.counts[i].reduce((a, b) => a + b, 0);
     const cells = conf.counts[i].map((k, j) => {

@@ -31,7 +31,7 @@ from typing import Any
 from fieldbank.evaluate.probing import STRETCHES
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES
 from fieldbank.evaluate.tone import GRADED_STRETCH
-from fieldbank.interventions.realised import CONTRADICTED
+from fieldbank.interventions.realised import CONFIRMED, FAILED, INCONCLUSIVE, PARTIAL
 from fieldbank.interventions.report.compute import COLUMNS, STRETCH_READOUTS, CaseResult
 from fieldbank.interventions.report.figures.common import pct
 from fieldbank.params import GROUPS
@@ -51,6 +51,15 @@ tr.treated td, tr.treated th { background: #fdf0e6; }
 .terms dt { font-weight: bold; margin-top: 0.4em; }
 .terms dd { margin: 0 0 0 1.5em; }
 .warn { color: #a00; font-weight: bold; font-size: 0.95em; }
+.guess { color: #666; font-style: italic; }
+.verdict { display: inline-block; font-weight: bold; border-radius: 3px; padding: 0 0.35em;
+           border: 1px solid; white-space: nowrap; }
+.verdict.ok { color: #00684a; background: #e3f4ee; border-color: #009E73; }
+.verdict.failed { color: #fff; background: #b03a00; border-color: #b03a00; }
+.verdict.partial { color: #6b3d00; background: #fdecd2; border-color: #D55E00; }
+.verdict.open { color: #444; background: #f0f0f4; border-color: #888; }
+p.checked { font-size: 1em; line-height: 1.7; }
+.checkitem { white-space: nowrap; }
 .rests { font-size: 0.92em; }
 .legend, .nochange { color: #555; font-size: 0.88em; max-width: 70em; }
 .nochange { border-left: 3px solid #ccd; padding-left: 0.6em; }
@@ -175,11 +184,12 @@ def _overview(results: Sequence[CaseResult], patient_ids: Mapping[str, str]) -> 
         extra = [str(row.get("plan_label") or "")]
         if row.get("fit_status") not in (None, "", "not fitted"):
             extra.append(f"fit {row['fit_status']}")
-        if row.get("validation") not in (None, "", "not checked"):
-            extra.append(str(row["validation"]))
         if row.get("warnings"):
             extra.append(f"{len(str(row['warnings']).split(' | '))} warning(s)")
+        checked = row.get("validation")
         out.append(f'<td class="t"><a href="#plan-{row["plan_id"]}">{row["plan_id"]}</a>'
+                   + (f"<br>{verdict_badge(str(checked))}"
+                      if checked not in (None, "", "not checked") else "")
                    + "".join(f'<br><span class="sub">{escape(e)}</span>' for e in extra if e)
                    + "</td>")
         out.append(f'<td class="t">{escape(str(row.get("kinds") or ""))}: '
@@ -300,12 +310,28 @@ def _trust(detail: Mapping[str, Any]) -> list[str]:
         out.append('<table class="clinical intervals"><tr><th class="t">95% intervals '
                    f'({escape(str(iv.get("samples")))} fit samples)</th><th>before</th>'
                    "<th>after</th><th>change</th></tr>")
+        guessed = False
         for name, m in metrics.items():
-            cells = [_iv(m.get(k), m.get(f"{k}_interval"), k == "change")
-                     for k in ("before", "after", "change")]
-            out.append(f'<tr><th class="t">{escape(name)} ({escape(str(m.get("unit")))})</th>'
-                       + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+            ident = m.get("without_guesses") if m.get("rests_on_guess") else None
+            cells = []
+            for k in ("before", "after", "change"):
+                if isinstance(ident, Mapping):  # identified first; the guess's apart, marked
+                    cells.append(_iv(m.get(k), ident.get(f"{k}_interval"), k == "change")
+                                 + '<br><span class="guess">* '
+                                 + _iv(m.get(k), m.get(f"{k}_interval"), k == "change")
+                                 .split(" ", 1)[1] + "</span>")
+                else:
+                    cells.append(_iv(m.get(k), m.get(f"{k}_interval"), k == "change"))
+            mark = " *" if m.get("rests_on_guess") else ""
+            guessed = guessed or bool(mark)
+            out.append(f'<tr><th class="t">{escape(name)} ({escape(str(m.get("unit")))})'
+                       f"{mark}</th>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
         out.append("</table>")
+        if guessed:
+            out.append('<p class="legend">* The interval rests on parameters the fit did not '
+                       "identify: the first line is what the maps identified (the guessed "
+                       "parameters at their held value), the second, marked *, the interval "
+                       "with them drawn from their whole prior range.</p>")
     elif iv.get("note"):
         out.append(f'<p class="legend">No intervals: {escape(str(iv["note"]))}.</p>')
     v = detail.get("validation")
@@ -314,9 +340,10 @@ def _trust(detail: Mapping[str, Any]) -> list[str]:
             out.append(f'<p class="legend">Prediction not checked: '
                        f'{escape(str(v["not_checked"]).rstrip("."))}.</p>')
         else:
-            cls = "warn" if v.get("verdict") in CONTRADICTED else "rests"
+            verdict = str(v.get("verdict"))
+            cls = "warn" if verdict in (FAILED, PARTIAL) else "checked"
             out.append(f'<p class="{cls}">Checked against maps measured after the plan: '
-                       f'{escape(str(v.get("verdict")))}.</p><ul class="steps">')
+                       f"{verdict_badge(verdict)}</p><ul class=\"steps\">")
             for sess in v.get("sessions") or []:
                 why = "; ".join(str(x) for x in sess.get("reasons") or [])
                 out.append(f"<li>{escape(str(sess.get('session')))} "
@@ -326,6 +353,18 @@ def _trust(detail: Mapping[str, Any]) -> list[str]:
                            + (f" - {escape(why)}" if why else "") + "</li>")
             out.append("</ul>")
     return out
+
+
+#: Each verdict of a check as the page marks it: a failed or partial prediction as plainly as
+#: a confirmed one (a coloured badge with a sign, readable without colour too).
+BADGES = {CONFIRMED: ("ok", "✓"), FAILED: ("failed", "✗"), PARTIAL: ("partial", "!"),
+          INCONCLUSIVE: ("open", "?")}
+
+
+def verdict_badge(verdict: str) -> str:
+    """A check's verdict as a badge (:data:`BADGES`)."""
+    cls, sign = BADGES.get(verdict, ("open", "?"))
+    return f'<span class="verdict {cls}">{sign} {escape(verdict)}</span>'
 
 
 def _figure(key: str, caption: str, svg: str) -> str:
@@ -392,9 +431,16 @@ def render(results: Sequence[CaseResult], inputs: Mapping[str, Any],
     out.append("</table>")
     groups = _patients(results)
     patient_ids = {code: f"patient-{i + 1}" for i, code in enumerate(groups)}
-    if summary:
+    checked = [r for r in results if r.row.get("validation") not in (None, "", "not checked")]
+    if summary or checked:
         out.append('<h2 id="summary">Summary</h2>')
-        out += [_figure(k, c, s) for k, c, s in summary]
+    if checked:  # every verdict at the top, a failed one as plain as a confirmed one
+        out.append('<p class="checked">Predictions checked against maps measured after the '
+                   "plan: " + "; ".join(
+                       f'<span class="checkitem">{verdict_badge(str(r.row["validation"]))} '
+                       f'<a href="#plan-{r.spec.plan_id}">{escape(r.spec.patient_code or "")} '
+                       f"plan {r.spec.plan_id}</a></span>" for r in checked) + ".</p>")
+    out += [_figure(k, c, s) for k, c, s in summary]
     out.append('<h2 id="contents">Contents</h2><ol class="toc">')
     for code, cases in groups.items():
         links = ", ".join(f'<a href="#plan-{r.spec.plan_id}">plan {r.spec.plan_id}: '

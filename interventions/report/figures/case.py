@@ -99,7 +99,9 @@ def case_figures(arm_b: Arm, arm_a: Arm, c: Comparison, plan: Plan | None,
     assert prof_b is not None and prof_a is not None
     bands = bands or {}
     pairs = [StretchPair(b, a, prof_b[(b.joint, b.direction)], prof_a[(a.joint, a.direction)],
-                         bands.get("after", {}).get(n), bands.get("before", {}).get(n))
+                         bands.get("after", {}).get(n), bands.get("before", {}).get(n),
+                         bands.get("after identified", {}).get(n),
+                         bands.get("before identified", {}).get(n))
              for n, b, a in c.stretch_rows()]
     b0 = pairs[0].before
     out = [CaseFigure(

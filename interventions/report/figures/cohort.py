@@ -19,6 +19,7 @@ from fieldbank.figures.style import (
     GREY,
     TEXT,
     limits,
+    text_width,
 )
 from fieldbank.interventions.report.figures.common import ACCENT_OK, WIDTH
 from fieldbank.interventions.validate import PlanValidation
@@ -41,7 +42,12 @@ def cohort_change_figure(points: Sequence[CohortPoint]) -> Scene:
     dependent) of the stretch the group is graded on, one dot per case, median marked."""
     labels = sorted({p.label for p in points})
     row_h = 26.0
-    label_w, pw, gap = 210.0, 360.0, 60.0
+    counts = {lab: sum(p.label == lab for p in points) for lab in labels}
+    # the row labels' column as wide as its longest label: none is cut at the figure's edge
+    label_w = max([text_width(f"{lab} (n={counts[lab]})", FONT) for lab in labels]
+                  + [120.0]) + 24.0
+    gap = 60.0
+    pw = min(360.0, (WIDTH - label_w - gap - 20.0) / 2)
     ph = row_h * max(len(labels), 1)
     scene = Scene(WIDTH, ph + 104, "change per intervention kind and muscle group")
     scene.data["figure"] = "cohort-change"
@@ -76,11 +82,20 @@ def cohort_change_figure(points: Sequence[CohortPoint]) -> Scene:
     return scene
 
 
+#: How a map measured after a plan stands against the prediction, as the figures mark it
+#: (marker, colour): it saw the predicted change and agrees; it agrees only because the change
+#: predicted for it is within its noise (it could not have seen it); it disagrees.
+AGREES, WITHIN_NOISE, DISAGREES = "agrees", "within noise", "poor"
+MARKS = {AGREES: ("circle", ACCENT_OK), WITHIN_NOISE: ("ring", GREY),
+         DISAGREES: ("triangle", AFTER)}
+
+
 @dataclass(frozen=True)
 class CheckPoint:
     """One map measured after a plan: RMS of the predicted and of the measured change (N or
-    N/m), the realised fraction f (measured along predicted) with its SE, and the verdict of
-    the map against the prediction."""
+    N/m), the realised fraction f (measured along predicted) with its SE, the verdict of the
+    map against the prediction, and whether the predicted change moves the map beyond its
+    noise (``seen``: by the check's minimum, 4 sd)."""
 
     case: str
     label: str
@@ -90,6 +105,16 @@ class CheckPoint:
     fraction: float | None
     fraction_se: float | None
     verdict: str
+    seen: bool = True
+    #: The row's name in a figure: 'SYN-001 plan 1 · post-BoNT map 12'.
+    short: str = ""
+
+    @property
+    def standing(self) -> str:
+        """:data:`AGREES`, :data:`WITHIN_NOISE` or :data:`DISAGREES`."""
+        if self.verdict != "good":
+            return DISAGREES
+        return AGREES if self.seen else WITHIN_NOISE
 
 
 def check_points(v: PlanValidation, case: str) -> list[CheckPoint]:
@@ -101,7 +126,9 @@ def check_points(v: PlanValidation, case: str) -> list[CheckPoint]:
             out.append(CheckPoint(case, f"{case}: {s.session} map {m.map_id} ({m.kind}, "
                                   f"{moving})", m.unit, m.predicted_change_rms,
                                   m.measured_change_rms, m.realised_fraction, m.realised_se,
-                                  m.prediction.verdict))
+                                  m.prediction.verdict,
+                                  m.sensitivity_sd >= s.rules.min_sensitivity,
+                                  f"{case} · {s.session} map {m.map_id}"))
     return out
 
 
@@ -112,13 +139,15 @@ def validation_figure(points: Sequence[CheckPoint], title: str,
     fraction per map (measured change along the predicted one, ±1 SE) against the tolerance
     of :mod:`fieldbank.interventions.validate`."""
     units = sorted({p.unit for p in points})
-    npanel = len(units) + 1
-    block = WIDTH / npanel
+    frac = [p for p in points if p.fraction is not None]
+    names = [p.short or p.label for p in frac]
+    label_w = max([text_width(n, FONT_SMALL) for n in names] + [0.0]) + 10.0
+    frac_w = 250.0 + label_w if frac else 0.0
+    block = (WIDTH - frac_w) / max(len(units), 1)
     left, ps = 78.0, min(230.0, block - 110.0)
-    scene = Scene(WIDTH, ps + 150, title)
+    scene = Scene(WIDTH, ps + 170, title)  # room for a legend of two rows
     scene.data["figure"] = "validation"
     scene.text(10, 20, title, FONT_TITLE, bold=True)
-    colour_of = {"good": ACCENT_OK, "poor": AFTER}
     for k, unit in enumerate(units):
         mine = [p for p in points if p.unit == unit]
         top = 1.1 * max([p.predicted_rms for p in mine] + [p.measured_rms for p in mine]
@@ -127,14 +156,15 @@ def validation_figure(points: Sequence[CheckPoint], title: str,
         panel = Panel.at(scene, (x0, 50, ps, ps), (0.0, top), (0.0, top))
         panel.frame("", f"predicted change, RMS ({unit})", f"measured change, RMS ({unit})")
         panel.line([0, top], [0, top], GREY, 1.0, (4, 3))
-        for verdict in sorted({p.verdict for p in mine}):
-            sel = [p for p in mine if p.verdict == verdict]
-            panel.markers([p.predicted_rms for p in sel], [p.measured_rms for p in sel],
-                          "circle", colour_of.get(verdict, TEXT), 5.0,
-                          {"verdict": verdict, "unit": unit, "maps": str(len(sel))})
-    frac = [p for p in points if p.fraction is not None]
-    x0 = len(units) * block + left + 40
-    pw = block - left - 60
+        for standing, (marker, colour) in MARKS.items():
+            sel = [p for p in mine if p.standing == standing]
+            if sel:
+                panel.markers([p.predicted_rms for p in sel], [p.measured_rms for p in sel],
+                              marker, colour, 5.0,
+                              {"standing": standing, "verdict": sel[0].verdict, "unit": unit,
+                               "maps": str(len(sel))})
+    x0 = len(units) * block + label_w + 20
+    pw = WIDTH - x0 - 20
     if frac:
         vals = [p.fraction for p in frac if p.fraction is not None]
         ses = [p.fraction_se or 0.0 for p in frac]
@@ -143,20 +173,27 @@ def validation_figure(points: Sequence[CheckPoint], title: str,
                         [1.0 - tolerance, 1.0 + tolerance, 0.0])
         panel = Panel.at(scene, (x0, 50, pw, ps), (lo, hi), (0.0, float(len(frac))))
         panel.frame("", "measured ÷ predicted change", "", yticks=[], grid=False)
+        # what the axis's two marks mean, on a line of its own: the panel is narrow
+        scene.text(x0 + pw / 2, 50 + ps + 42, "1: as predicted · 0: no change", FONT_SMALL,
+                   "middle", "hanging", colour=GREY)
         panel.band([1.0 - tolerance, 1.0 + tolerance], [0.0, 0.0],
                    [float(len(frac))] * 2, ACCENT_OK, 0.12)
         panel.vline(1.0, ACCENT_OK, 1.0, None)
         panel.vline(0.0, GREY, 1.0, (4, 3))
-        for i, p in enumerate(frac):
+        for i, (p, name) in enumerate(zip(frac, names, strict=True)):
             y = len(frac) - i - 0.5
             f, e = float(p.fraction or 0.0), float(p.fraction_se or 0.0)
-            colour = colour_of.get(p.verdict, TEXT)
+            marker, colour = MARKS[p.standing]
             panel.line([f - e, f + e], [y, y], colour, 1.5)
-            panel.markers([f], [y], "circle", colour, 4.5, {"map": p.label})
-        scene.text(x0, 42, "realised fraction per map (±1 SE)", FONT_SMALL, bold=True)
+            panel.markers([f], [y], marker, colour, 4.5, {"map": p.label})
+            scene.text(x0 - 6, float(panel.ty(y)), name, FONT_SMALL, "end", "middle")
+        scene.text(x0 - label_w, 42, "realised fraction per map (±1 SE)", FONT_SMALL,
+                   bold=True)
     scene.legend(left, ps + 128, [
-        ("map agrees with the prediction", {"marker": "circle", "colour": ACCENT_OK}),
-        ("map poor against the prediction", {"marker": "circle", "colour": AFTER}),
+        ("map saw the predicted change and agrees", {"marker": "circle", "colour": ACCENT_OK}),
+        ("agrees within noise: the change predicted for it is too small to see",
+         {"marker": "ring", "colour": GREY}),
+        ("map disagrees with the prediction", {"marker": "triangle", "colour": AFTER}),
         ("identity (measured = predicted)", {"stroke": GREY, "dash": (4, 3)}),
-        (f"tolerance 1 ± {tolerance:g}", {"fill": "#d4eee6"})])
+        (f"tolerance 1 ± {tolerance:g}", {"fill": "#d4eee6"})], max_width=WIDTH - left - 10)
     return scene
