@@ -37,8 +37,9 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.evaluate.classify import Classification, Observation, classify, predict_all
+from fieldbank.evaluate.classify import Classification, classify, predict_all
 from fieldbank.evaluate.design import NoiseModel, severity_candidates
+from fieldbank.evaluate.observation import Observation
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.remote.tap import TapReader
 from fieldbank.haptic.remote.tolerance import judgement_at_hand, table, warnings
