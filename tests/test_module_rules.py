@@ -161,12 +161,9 @@ def _all(tree: ast.Module) -> list[str]:
     return []
 
 
-#: Names passed on that are still allowed, with why: the haptic wing's, until each caller
-#: imports them from the module that defines them (none elsewhere).
-REEXPORT_ALLOWED: dict[tuple[str, str], str] = {
-    ("fieldbank.haptic.safety", "FaultCode"): "station/server.py takes the protocol's fault "
-                                              "codes from safety.py",
-}
+#: Names passed on that are allowed, with why (none: each caller imports a name from the module
+#: that defines it).
+REEXPORT_ALLOWED: dict[tuple[str, str], str] = {}
 
 
 def reexports(root: Path) -> list[str]:
