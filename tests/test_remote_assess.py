@@ -69,7 +69,7 @@ def test_the_desk_cuts_probes_from_the_link_and_names_the_elbow(tmp_path: Path) 
         desk.answer("elbow", "severe", "firm catch")
         with pytest.raises(AssessError, match="severity"):
             desk.answer("elbow", "extreme", "")
-        with pytest.raises(AssessError, match="muscle group is one of .*'knee'"):
+        with pytest.raises(AssessError, match=r"muscle group is one of .*'knee'"):
             desk.answer("knee", None, "")
         with pytest.raises(AssessError, match="at most 2000 characters; this one has 2001"):
             desk.answer(None, None, "x" * 2001)
