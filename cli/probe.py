@@ -12,12 +12,10 @@ import click
 from fieldbank import probechoices as pc
 from fieldbank.cli.options import (
     MODEL_ID,
-    SESSION_ID,
     db_option,
     emit,
     figure_path,
     json_option,
-    open_db,
     option_group,
     output_file,
     say,
@@ -34,27 +32,15 @@ if TYPE_CHECKING:  # typing only: the library loads when a command runs
     from fieldbank.evaluate.design import (
         Candidate,
         DesignReport,
-        NoiseModel,
-        Perception,
         ProbeLimits,
         ProbeSetScore,
     )
-    from fieldbank.evaluate.observation import Observation
     from fieldbank.evaluate.openset import OpenClassification
     from fieldbank.figures import Scene
 
 F = TypeVar("F", bound=Callable[..., Any])
-ALL_LEVELS = ("very mild", "mild", "moderate", "severe")
 
 
-
-
-def _list(text: str | None, canon: Callable[[str], str], every: tuple[str, ...]) -> list[str]:
-    if text is None:
-        return []
-    if text.strip().lower() == "all":
-        return list(every)
-    return [canon(t) for t in text.split(",") if t.strip()]
 
 
 def candidate_options(f: F) -> F:
@@ -131,22 +117,11 @@ def build_candidates(groups: str, levels: str | None, unimpaired: bool,
                          side, db_url)
 
 
-def build_noise(force_sd_n: float, correlation_s: float, direction_sd_deg: float,
-                length_sd: float, speed_sd: float, force_jnd: float, direction_jnd_deg: float,
-                free_exploration: bool) -> tuple[NoiseModel, Perception]:
-    from fieldbank.evaluate.design import NoiseModel, Perception
-
-    noise = NoiseModel(force_sd_n=force_sd_n, correlation_s=correlation_s,
-                       direction_sd_deg=direction_sd_deg, length_sd=length_sd,
-                       speed_sd=speed_sd)
-    perception = Perception.free_exploration() if free_exploration else \
-        Perception(force_jnd=force_jnd, direction_jnd_deg=direction_jnd_deg)
-    return noise, perception
-
-
 def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
                  shoulder_offset: str | None) -> tuple[ProbeLimits, tuple[float, float]]:
-    from fieldbank.evaluate.design import ProbeLimits
+    """The probe limits and the shoulder's offset the options give (``--workspace`` read as
+    XMIN,XMAX,YMIN,YMAX in metres)."""
+    from fieldbank.probeset import probe_limits
 
     offset = xy_metres(shoulder_offset, "--shoulder-offset")
     box = None
@@ -156,9 +131,8 @@ def build_limits(max_speed: float, force_limit_n: float, workspace: str | None,
         except ValueError:
             raise click.BadParameter(f"--workspace must read XMIN,XMAX,YMIN,YMAX in metres; "
                                      f"got {workspace!r}") from None
-        box = (x0 - offset[0], x1 - offset[0], y0 - offset[1], y1 - offset[1])
-    return ProbeLimits(max_speed_m_per_s=max_speed, force_limit_n=force_limit_n,
-                       workspace_m=box), offset
+        box = (x0, x1, y0, y1)
+    return probe_limits(max_speed, force_limit_n, box, offset), offset
 
 
 def _save_plot(fig: Scene, path: Path) -> None:
@@ -244,11 +218,13 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
     """Find the probing motions that best tell the candidate arms apart."""
     from fieldbank.evaluate.design import design_report
     from fieldbank.figures.probes import probe_figure
+    from fieldbank.probeset import noise_and_perception
 
     cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
                              side, db_url)
-    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
-                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    noise, perception = noise_and_perception(force_sd_n, correlation_s, direction_sd_deg,
+                                             length_sd, speed_sd, force_jnd, direction_jnd_deg,
+                                             free_exploration)
     limits, offset = build_limits(max_speed, force_limit_n, workspace, shoulder_offset)
     fam = family or ("circle" if criterion == "minmax" else "stroke")
     rep = design_report(cands, criterion=criterion, family=fam, target=target,
@@ -263,29 +239,6 @@ def design_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: t
         _save_plot(probe_figure(rep.design.score, cands, "designed probes"), plot_path)
     arm_side = "left" if cands[0].arm.mirror else "right"
     emit(doc, as_json, "\n".join([_design_text(rep, arm_side), *_notes(cands)]))
-
-
-def _read_observations(refs: tuple[str, ...], db_url: str | None, model: str | None,
-                       offset: tuple[float, float] | None) -> list[Observation]:
-    from fieldbank.evaluate.observation import Observation
-    from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
-    from fieldbank.haptic.probe import observation_from_trace
-    from fieldbank.haptic.recording import read_trace_h5
-
-    out = []
-    for ref in refs:
-        if ref.startswith(SESSION_PREFIX):
-            sid = SESSION_ID.convert(ref[len(SESSION_PREFIX):], None, None)
-            with open_db(db_url) as db:
-                trace = read_trace_db(db, sid)
-            out.append(observation_from_trace(trace, ref, ref, model))
-        elif not Path(ref).is_file():
-            raise click.BadParameter(f"no trace file {ref!r} (nor {SESSION_PREFIX}ID)")
-        elif Path(ref).suffix.lower() in (".h5", ".hdf5"):
-            out.append(observation_from_trace(read_trace_h5(ref), Path(ref).stem, ref, model))
-        else:
-            out.append(Observation.from_csv(ref, offset))
-    return out
 
 
 def _classification_text(cl: Classification) -> str:
@@ -356,6 +309,8 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
     """
     from fieldbank.evaluate.classify import classify
     from fieldbank.figures.probes import classification_figure
+    from fieldbank.haptic.probe import read_observations
+    from fieldbank.probeset import noise_and_perception
 
     if open_set:
         _open_classify(traces, levels, param_files, model_ids, mass, height, side, force_sd_n,
@@ -364,11 +319,12 @@ def classify_cmd(traces: tuple[str, ...], groups: str, levels: str | None, unimp
     cands = build_candidates(groups, levels if levels is not None else
                              (None if param_files or model_ids else "all"), unimpaired,
                              param_files, model_ids, mass, height, side, db_url)
-    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
-                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    noise, perception = noise_and_perception(force_sd_n, correlation_s, direction_sd_deg,
+                                             length_sd, speed_sd, force_jnd, direction_jnd_deg,
+                                             free_exploration)
     limits, offset = build_limits(max_speed, force_limit_n, workspace, shoulder_offset)
-    obs = _read_observations(traces, db_url, model,
-                             offset if shoulder_offset is not None else None)
+    obs = read_observations(traces, db_url, model,
+                            offset if shoulder_offset is not None else None)
     cl = classify(obs, cands, noise=noise, predictor=predictor, next_probe=not no_next,
                   perception=perception, limits=limits)
     if plot_path is not None:
@@ -384,6 +340,7 @@ def _open_classify(traces: tuple[str, ...], levels: str | None, param_files: tup
     from fieldbank import modelsource
     from fieldbank.evaluate.design import NoiseModel
     from fieldbank.evaluate.openset import classify_on_body
+    from fieldbank.haptic.probe import read_observations
 
     given = [name for name, v in (("--levels", levels), ("--candidate-params", param_files),
                                   ("--candidate-model", model_ids), ("--plot", plot_path))
@@ -392,8 +349,8 @@ def _open_classify(traces: tuple[str, ...], levels: str | None, param_files: tup
         raise click.UsageError(f"--open classifies among every state of every group of the "
                                f"body; {', '.join(given)} do not apply to it.")
     offset = xy_metres(shoulder_offset, "--shoulder-offset")
-    obs = _read_observations(traces, db_url, model,
-                             offset if shoulder_offset is not None else None)
+    obs = read_observations(traces, db_url, model,
+                            offset if shoulder_offset is not None else None)
     body = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
     cl = classify_on_body(obs, body, NoiseModel(force_sd_n=force_sd_n,
                                                 correlation_s=correlation_s))
@@ -447,11 +404,13 @@ def paths_cmd(groups: str, levels: str | None, unimpaired: bool, param_files: tu
     """The min-max and orientation paradigms on the seed's pull, semi-ellipse and circles."""
     from fieldbank.evaluate.design import circles, equilibrium, paradigms, seed_probes
     from fieldbank.figures.probes import probe_figure
+    from fieldbank.probeset import noise_and_perception
 
     cands = build_candidates(groups, levels, unimpaired, param_files, model_ids, mass, height,
                              side, db_url)
-    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
-                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    noise, perception = noise_and_perception(force_sd_n, correlation_s, direction_sd_deg,
+                                             length_sd, speed_sd, force_jnd, direction_jnd_deg,
+                                             free_exploration)
     limits, _offset = build_limits(max_speed, force_limit_n, workspace, shoulder_offset)
     try:
         radii = [float(r) / 100.0 for r in radii_cm.split(",") if r.strip()]
@@ -503,13 +462,15 @@ def trials_cmd(groups: str, levels: str, reps: int, draws: int, max_probes: int,
     from fieldbank.evaluate.design import severity_candidates
     from fieldbank.evaluate.severity import LEVELS, group_name, level_name
     from fieldbank.haptic.identify import designed_vs_seed
+    from fieldbank.probeset import ALL_LEVELS, named_list, noise_and_perception
 
-    gs = _list(groups, group_name, tuple(JOINT_GROUPS))
-    ls = _list(levels, level_name, ALL_LEVELS)
+    gs = named_list(groups, group_name, tuple(JOINT_GROUPS))
+    ls = named_list(levels, level_name, ALL_LEVELS)
     if not gs or not ls or LEVELS[0] in ls:
         raise ParameterError("Give impaired groups and levels from very mild to severe.")
-    noise, perception = build_noise(force_sd_n, correlation_s, direction_sd_deg, length_sd,
-                                    speed_sd, force_jnd, direction_jnd_deg, free_exploration)
+    noise, perception = noise_and_perception(force_sd_n, correlation_s, direction_sd_deg,
+                                             length_sd, speed_sd, force_jnd, direction_jnd_deg,
+                                             free_exploration)
     say("designing the probes, then the trials (a bar counts them on a terminal)")
     with counted("trials", "trial") as bar:
         rep, res = designed_vs_seed(

@@ -1,7 +1,8 @@
-"""The candidate arms a probe command works with (``fieldbank probe design|classify|paths``),
-from its options: severity levels of muscle groups (``--groups``, ``--levels``), the
-unimpaired arm, parameter files and stored models, each compiled once. A stored model that
-rests on guesses says so in its candidate's notes.
+"""What a probe command works with (``fieldbank probe design|classify|paths|trials``), from
+its options: the candidate arms - severity levels of muscle groups (``--groups``,
+``--levels``), the unimpaired arm, parameter files and stored models, each compiled once (a
+stored model that rests on guesses says so in its candidate's notes) -, the noise and the
+perception a design assumes, and the limits a probe keeps to.
 """
 
 from __future__ import annotations
@@ -11,7 +12,14 @@ from pathlib import Path
 
 from fieldbank import modelsource
 from fieldbank.evaluate.arms import ArmCache
-from fieldbank.evaluate.design import Candidate, check_candidates, severity_candidates
+from fieldbank.evaluate.design import (
+    Candidate,
+    NoiseModel,
+    Perception,
+    ProbeLimits,
+    check_candidates,
+    severity_candidates,
+)
 from fieldbank.evaluate.severity import group_name, level_name
 from fieldbank.params import JOINT_GROUPS, ArmParams
 from fieldbank.storage import Database
@@ -57,3 +65,31 @@ def candidate_set(groups: str, levels: str | None, unimpaired: bool = False,
                                      notes=tuple(f"rests on a guess: {g}"
                                                  for g in src.guesses)))
     return list(check_candidates(out, 2))
+
+
+def noise_and_perception(force_sd_n: float, correlation_s: float, direction_sd_deg: float,
+                         length_sd: float, speed_sd: float, force_jnd: float,
+                         direction_jnd_deg: float,
+                         free_exploration: bool = False) -> tuple[NoiseModel, Perception]:
+    """The noise of a recorded probe and the clinician's perception (the free-exploration
+    thresholds when ``free_exploration``, else ``force_jnd`` and ``direction_jnd_deg``)."""
+    noise = NoiseModel(force_sd_n=force_sd_n, correlation_s=correlation_s,
+                       direction_sd_deg=direction_sd_deg, length_sd=length_sd,
+                       speed_sd=speed_sd)
+    perception = Perception.free_exploration() if free_exploration else \
+        Perception(force_jnd=force_jnd, direction_jnd_deg=direction_jnd_deg)
+    return noise, perception
+
+
+def probe_limits(max_speed_m_per_s: float, force_limit_n: float,
+                 workspace_m: tuple[float, float, float, float] | None = None,
+                 shoulder_offset_m: tuple[float, float] = (0.0, 0.0)) -> ProbeLimits:
+    """The limits a probe keeps to; ``workspace_m`` (x min, x max, y min, y max) is in the
+    robot's frame, whose shoulder is at ``shoulder_offset_m``: the limits hold it in the
+    shoulder's."""
+    box = None
+    if workspace_m is not None:
+        (x0, x1, y0, y1), (ox, oy) = workspace_m, shoulder_offset_m
+        box = (x0 - ox, x1 - ox, y0 - oy, y1 - oy)
+    return ProbeLimits(max_speed_m_per_s=max_speed_m_per_s, force_limit_n=force_limit_n,
+                       workspace_m=box)

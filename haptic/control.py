@@ -18,9 +18,9 @@ callable given to the server sees every command before the renderer does (the se
 to check pushed model ids against the database).
 
 Pushed models are compiled in the connection's thread, never in the loop; the loop swaps them in
-at a tick boundary behind a fade. The client side is :mod:`haptic.client` (kept apart so the
-live commands load nothing heavy); :func:`push_models` and :class:`ControlClient` are re-exported
-here for callers of this module.
+at a tick boundary behind a fade. The client side, :class:`~haptic.client.ControlClient` and
+:func:`~haptic.client.push_models`, is :mod:`haptic.client` (kept apart so the live commands load
+nothing heavy).
 """
 
 from __future__ import annotations
@@ -38,26 +38,13 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from fieldbank.errors import FieldbankError
-from fieldbank.haptic.client import (
-    MAX_REQUEST_BYTES,
-    ControlClient,
-    data_home,
-    default_socket_path,
-    push_models,
-)
+from fieldbank.haptic.client import MAX_REQUEST_BYTES, default_socket_path
 from fieldbank.haptic.clock import keep_up_with_the_loop
 from fieldbank.haptic.commandbase import RendererCommand, Result
 from fieldbank.haptic.commands import Request, parse_request
 from fieldbank.haptic.errors import CommandError, ControlError
 
-__all__ = [
-    "CommandSink",
-    "ControlClient",
-    "ControlServer",
-    "data_home",
-    "default_socket_path",
-    "push_models",
-]
+__all__ = ["CommandSink", "ControlServer"]
 
 log = logging.getLogger("fieldbank.haptic.control")
 

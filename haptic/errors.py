@@ -10,8 +10,11 @@ Rooted in built-ins, so callers may catch either::
         ├── FrameError(HapticError, ValueError)     a wire frame that cannot be decoded (``kind``)
         ├── CommandError(HapticError, ValueError)   a renderer command that is malformed or not
         │                                           possible now (no A/B/X block, not running)
-        └── ControlError(HapticError)               the control channel failed: no renderer on
-                                                    the socket, a refused or broken connection
+        ├── ControlError(HapticError)               the control channel failed: no renderer on
+        │                                           the socket, a refused or broken connection
+        └── AssessError(HapticError, ValueError)    the clinician's prior or answer at the remote
+                                                    desk refused (an unknown group or severity,
+                                                    a note too long, a prior ruling out all)
 
 Parameter ranges of the loop's frozen configurations (``RendererConfig``, ``SafetyConfig``) are
 checked by :mod:`fieldbank.validation` and raise the core's ``ParameterError``; trace files and
@@ -58,3 +61,9 @@ class CommandError(HapticError, ValueError):
 
 class ControlError(HapticError):
     """The control channel failed: no renderer listening, a refused or broken connection."""
+
+
+class AssessError(HapticError, ValueError):
+    """The clinician's prior or answer at the remote desk is refused: a muscle group or
+    severity the scale does not have, a note too long, or a prior that rules out every
+    candidate."""

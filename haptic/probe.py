@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import math
 import urllib.parse
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,10 +29,11 @@ from fieldbank.errors import ParameterError
 from fieldbank.evaluate.observation import Observation
 from fieldbank.evaluate.probing import ProbeMotion
 from fieldbank.haptic.clock import VirtualClock
+from fieldbank.haptic.dbsink import SESSION_PREFIX, read_trace_db
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.motions import LEAD_IN_S, MOTIONS, format_path, motion_duration_s
-from fieldbank.haptic.recording import Trace
+from fieldbank.haptic.recording import Trace, read_trace_h5
 from fieldbank.haptic.renderer import Renderer
 from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
@@ -38,6 +41,7 @@ from fieldbank.model import Arm
 from fieldbank.params import ArmParams
 from fieldbank.probepath import ProbePath
 from fieldbank.redact import mask_url
+from fieldbank.storage import Database
 
 
 @dataclass(frozen=True)
@@ -210,3 +214,33 @@ def observation_from_trace(trace: Trace, name: str = "trace", source: str = "",
         np.c_[col["vx_m_per_s"], col["vy_m_per_s"]],
         force_limit_n=float(limit) if limit else None, reset_m=reset,
         source=source or name, output_gain=col["gain"], counted=counted[sl])
+
+
+#: The largest id a stored row holds (PostgreSQL's ``integer``).
+MAX_ID = 2**31 - 1
+
+
+def read_observations(refs: Sequence[str], db_url: str | None = None, model: str | None = None,
+                      offset_m: tuple[float, float] | None = None) -> list[Observation]:
+    """The recorded probing motions ``refs`` name, for the classifier: a haptic trace file
+    (``.h5``), a stored haptic session (``haptic_session:ID``, read from the database at
+    ``db_url``) or an observation CSV (:meth:`Observation.from_csv`, ``offset_m`` its shoulder
+    in the file's frame). ``model`` picks the ticks of a trace (:func:`observation_from_trace`).
+    A reference that names nothing is refused with its text."""
+    out = []
+    for ref in refs:
+        if ref.startswith(SESSION_PREFIX):
+            text = ref[len(SESSION_PREFIX):].strip()
+            if not (text.isascii() and text.isdigit() and 1 <= int(text) <= MAX_ID):
+                raise ParameterError(f"{ref!r} names no haptic session: ids are whole numbers "
+                                     f"from 1 to {MAX_ID}")
+            with Database.open(db_url, create=False) as db:
+                trace = read_trace_db(db, int(text))
+            out.append(observation_from_trace(trace, ref, ref, model))
+        elif not Path(ref).is_file():
+            raise ParameterError(f"no trace file {ref!r} (nor {SESSION_PREFIX}ID)")
+        elif Path(ref).suffix.lower() in (".h5", ".hdf5"):
+            out.append(observation_from_trace(read_trace_h5(ref), Path(ref).stem, ref, model))
+        else:
+            out.append(Observation.from_csv(ref, offset_m))
+    return out

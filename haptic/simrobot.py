@@ -68,6 +68,7 @@ SIM_BOUNDS: dict[str, Interval] = {
     "y0_m": Interval(None, None, "m"),
     "motion_duration_s": Interval(None, None, "s"),
     "motion_distance_m": Interval(None, None, "m"),
+    "seed": Interval.whole(None, None),
     "operator_wander_m": Interval(0.0, 0.1, "m"),
     "handle_mass_kg": Interval(0.0, None, "kg", low_closed=False),
     "viscous_n_s_per_m": Interval(None, None, "N·s/m"),

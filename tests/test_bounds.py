@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import pytest
@@ -10,6 +11,7 @@ from fieldbank.errors import ParameterError
 from fieldbank.evaluate.design import NoiseModel, Perception, ProbeLimits
 from fieldbank.haptic.measure import MeasureConfig
 from fieldbank.haptic.patient import PatientPlacement
+from fieldbank.haptic.remote.clinician_site import AssessOptions
 from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import SafetyConfig
 from fieldbank.haptic.session import ScheduledSwitch
@@ -52,8 +54,9 @@ def test_every_problem_in_one_message_and_whole_numbers_stay_whole() -> None:
      "renderer parameter"),
     (lambda: SafetyConfig(force_limit_n=0.0, rearm_ramp_s=-1.0),
      ("force_limit_n", "rearm_ramp_s"), "safety parameter"),
-    (lambda: SimRobotConfig(handle_mass_kg=0.0, watchdog_ms=-1.0),
-     ("handle_mass_kg", "watchdog_ms"), "sim parameter"),
+    (lambda: SimRobotConfig(handle_mass_kg=0.0, watchdog_ms=-1.0, seed=1.5),
+     ("handle_mass_kg", "watchdog_ms", "seed"), "sim parameter"),
+    (lambda: AssessOptions(force_sd_n=0.0), ("force_sd_n",), "assessment setting"),
     (lambda: TrainingProtocol(familiarisation_rounds=1.5, assessment_s=0.0),
      ("familiarisation_rounds", "assessment_s"), "training parameter"),
     (lambda: TraineeMotion(hold_s=-1.0, explore_s=0.0), ("hold_s", "explore_s"),
@@ -82,6 +85,22 @@ def test_each_configuration_names_every_field_out_of_bounds(make, fields_, what)
         make()
     for name in fields_:
         assert f"The '{name}' {what} must be a" in str(err.value), str(err.value)
+
+
+def test_an_assessment_names_what_it_does_not_know() -> None:
+    for make, words in (
+            (lambda: AssessOptions(levels=("mild", "extreme")),
+             "the assessment's severity is one of very mild, mild, moderate, severe; got "
+             "'extreme'"),
+            (lambda: AssessOptions(groups=("knee",)),
+             "the assessment's muscle group is one of shoulder, elbow, biarticular; got 'knee'"),
+            (lambda: AssessOptions(groups=(), unimpaired=False),
+             "the assessment needs a candidate"),
+            (lambda: AssessOptions(predictor="guess"),
+             "the assessment's predictor is one of replay, rigid, static; got 'guess'")):
+        with pytest.raises(ParameterError, match=re.escape(words)):
+            make()
+    assert AssessOptions(groups=(), unimpaired=True).to_dict()["groups"] == []
 
 
 def test_a_station_view_is_one_of_the_two() -> None:

@@ -22,8 +22,9 @@ from fieldbank.errors import ParameterError, StorageError
 from fieldbank.evaluate.severity import parse_severity_options, synthesize
 from fieldbank.haptic import motions
 from fieldbank.haptic.activities.abx import AbxBlock, AbxSession
+from fieldbank.haptic.client import ControlClient, push_models
 from fieldbank.haptic.clock import VirtualClock
-from fieldbank.haptic.control import ControlClient, ControlServer, push_models
+from fieldbank.haptic.control import ControlServer
 from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.link import RobotLink
 from fieldbank.haptic.probe import probe, sim_url

@@ -161,19 +161,9 @@ def _all(tree: ast.Module) -> list[str]:
     return []
 
 
-#: Names passed on that are still allowed, with why: the haptic wing's, until each caller
-#: imports them from the module that defines them (none elsewhere).
-REEXPORT_ALLOWED: dict[tuple[str, str], str] = {
-    ("fieldbank.evaluate.classify", "Observation"):
-        "haptic/remote/desk.py imports it from classify rather than evaluate.observation",
-    ("fieldbank.haptic.client", "data_home"): "haptic/control.py takes it from client",
-    ("fieldbank.haptic.control", "ControlClient"): "control lists the client's names in __all__",
-    ("fieldbank.haptic.control", "data_home"): "control lists the client's names in __all__",
-    ("fieldbank.haptic.control", "default_socket_path"): "control lists the client's names",
-    ("fieldbank.haptic.control", "push_models"): "control lists the client's names in __all__",
-    ("fieldbank.haptic.safety", "FaultCode"): "station/server.py takes the protocol's fault "
-                                              "codes from safety.py",
-}
+#: Names passed on that are allowed, with why (none: each caller imports a name from the module
+#: that defines it).
+REEXPORT_ALLOWED: dict[tuple[str, str], str] = {}
 
 
 def reexports(root: Path) -> list[str]:

@@ -137,6 +137,10 @@ def test_classify_an_exported_csv_in_the_robot_frame(trace_file: Path, tmp_path:
 def test_classify_errors_say_what_and_where(tmp_path: Path) -> None:
     r = _run("probe", "classify", str(tmp_path / "missing.h5"))
     assert r.exit_code != 0 and "no trace file" in r.output
+    for ref in ("haptic_session:abc", "haptic_session:0", "haptic_session:99999999999"):
+        r = _run("probe", "classify", ref, "--db", f"sqlite:///{tmp_path / 'none.db'}")
+        assert r.exit_code == 1 and f"{ref!r} names no haptic session" in r.output, r.output
+    assert not (tmp_path / "none.db").exists()  # refused before a database is opened
     bad = tmp_path / "bad.csv"
     bad.write_text("# frame: shoulder\n# sign: arm-on-handle\nt_s,x_m,y_m,fx_n,fy_n\n"
                    "0,0.1,0.5,0,0\n0.001,0.1,nan?,0,0\n", encoding="utf-8")

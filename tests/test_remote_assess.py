@@ -15,6 +15,7 @@ from click.testing import CliRunner
 from fieldbank.cli.main import cli
 from fieldbank.errors import StorageError
 from fieldbank.evaluate.severity import synthesize
+from fieldbank.haptic.errors import AssessError
 from fieldbank.haptic.remote.channel import Impairment
 from fieldbank.haptic.remote.clinician_site import AssessOptions, assessment_rows
 from fieldbank.haptic.remote.config import SiteConfig
@@ -66,12 +67,16 @@ def test_the_desk_cuts_probes_from_the_link_and_names_the_elbow(tmp_path: Path) 
         assert msg["group"] == "elbow" and msg["group_probability"] >= 0.9
         assert 95 <= desk.link["one_way_ms"] <= 105 and 0.02 < desk.link["loss"] < 0.09
         desk.answer("elbow", "severe", "firm catch")
-        with pytest.raises(ValueError, match="severity"):
+        with pytest.raises(AssessError, match="severity"):
             desk.answer("elbow", "extreme", "")
+        with pytest.raises(AssessError, match=r"muscle group is one of .*'knee'"):
+            desk.answer("knee", None, "")
+        with pytest.raises(AssessError, match="at most 2000 characters; this one has 2001"):
+            desk.answer(None, None, "x" * 2001)
         desk.set_prior(["shoulder", "biarticular"], ["severe"], unimpaired=False)
         cl2 = desk.classify(design_next=False)
         assert cl2 is not None and cl2.group_posterior.get("elbow", 0.0) == 0.0
-        with pytest.raises(ValueError, match="every candidate"):
+        with pytest.raises(AssessError, match="every candidate"):
             desk.set_prior([], [], unimpaired=False)
         desk.close()
     records = [json.loads(line) for line in log.read_text().splitlines()]

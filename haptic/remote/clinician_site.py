@@ -45,6 +45,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
+from fieldbank.errors import ParameterError
+from fieldbank.evaluate.design.config import NOISE_BOUNDS
+from fieldbank.evaluate.severity import LEVELS as SEVERITY_LEVELS
 from fieldbank.files import write_new
 from fieldbank.haptic.clock import VirtualClock
 from fieldbank.haptic.dbsink import SESSION_PREFIX, HapticStore
@@ -64,7 +67,9 @@ from fieldbank.haptic.rendererconfig import RendererConfig
 from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.session import SessionResult, serve
 from fieldbank.haptic.station.launch import StationOptions
-from fieldbank.params import ArmParams
+from fieldbank.params import JOINT_GROUPS, ArmParams
+from fieldbank.probechoices import PREDICTORS
+from fieldbank.validation import Interval, check_fields
 
 Say = Callable[[str], None]
 #: How often HELLO is repeated until the patient's site answers, s.
@@ -74,6 +79,8 @@ DESK_STATION = "fieldbank.haptic.remote.deskstation"
 #: The classifier's candidates by default: every group at every severity, and the unimpaired arm.
 GROUPS = ("shoulder", "elbow", "biarticular")
 LEVELS = ("very mild", "mild", "moderate", "severe")
+#: Ranges of the assessment's numbers: the force noise is the probe design's.
+ASSESS_BOUNDS: dict[str, Interval] = {"force_sd_n": NOISE_BOUNDS["force_sd_n"]}
 
 
 def _quiet(msg: str) -> None:
@@ -94,7 +101,8 @@ class AssessOptions:
         How a candidate predicts the patient's force (:mod:`fieldbank.evaluate.classify`;
         'rigid': a hand holding the arm, for forces measured on a patient).
     force_sd_n : float, N
-        The likelihood's force noise (model error and sensor noise).
+        The likelihood's force noise (model error and sensor noise); range in
+        :data:`ASSESS_BOUNDS`.
     """
 
     groups: tuple[str, ...] = GROUPS
@@ -102,6 +110,21 @@ class AssessOptions:
     unimpaired: bool = True
     predictor: str = "rigid"
     force_sd_n: float = 2.0
+
+    def __post_init__(self) -> None:
+        check_fields(self, ASSESS_BOUNDS, what="assessment setting")
+        for what, names, known in (("muscle group", self.groups, tuple(JOINT_GROUPS)),
+                                   ("severity", self.levels, SEVERITY_LEVELS[1:])):
+            unknown = [n for n in names if n not in known]
+            if unknown:
+                raise ParameterError(f"the assessment's {what} is one of {', '.join(known)}; "
+                                     f"got {', '.join(map(repr, unknown))}")
+        if not self.unimpaired and not (self.groups and self.levels):
+            raise ParameterError("the assessment needs a candidate: at least one muscle group "
+                                 "and severity, or the unimpaired arm")
+        if self.predictor not in PREDICTORS:
+            raise ParameterError(f"the assessment's predictor is one of {', '.join(PREDICTORS)}"
+                                 f"; got {self.predictor!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return {"groups": list(self.groups), "levels": list(self.levels),

@@ -37,14 +37,17 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.evaluate.classify import Classification, Observation, classify, predict_all
+from fieldbank.evaluate.classify import Classification, classify, predict_all
 from fieldbank.evaluate.design import NoiseModel, severity_candidates
-from fieldbank.haptic.errors import HapticError
+from fieldbank.evaluate.observation import Observation
+from fieldbank.haptic.errors import AssessError, HapticError
 from fieldbank.haptic.remote.tap import TapReader
 from fieldbank.haptic.remote.tolerance import judgement_at_hand, table, warnings
 from fieldbank.haptic.remote.wire import FLAG_ARMED, FLAG_FAULT
 from fieldbank.params import ArmParams
 
+#: The longest note the clinician may add to an answer, characters.
+MAX_NOTE_CHARS = 2000
 #: A probe starts when the patient's hand moves faster than this, m/s.
 START_SPEED = 0.03
 #: … and ends when it has been slower than this for REST_S, m/s.
@@ -228,7 +231,8 @@ class Desk:
     def prior(self) -> np.ndarray:
         w = np.array([self.weights[c.name] for c in self.candidates], dtype=float)
         if w.sum() <= 0:
-            raise ValueError("the prior rules out every candidate; keep at least one")
+            raise AssessError("the suspected impairments rule out every candidate: keep at "
+                              "least one muscle group and severity, or the unimpaired arm")
         return w / w.sum()
 
     def set_prior(self, groups: Sequence[str], levels: Sequence[str], unimpaired: bool) -> None:
@@ -309,12 +313,13 @@ class Desk:
     def answer(self, group: str | None, level: str | None, note: str) -> dict[str, Any]:
         """The clinician's own answer, logged beside the newest posterior."""
         if group is not None and group not in (*self.groups, "unimpaired"):
-            raise ValueError(f"the group is one of {', '.join(self.groups)} or unimpaired; got "
-                             f"{group!r}")
+            raise AssessError(f"the muscle group is one of {', '.join(self.groups)} or "
+                              f"unimpaired; got {group!r}")
         if level is not None and level not in self.levels:
-            raise ValueError(f"the severity is one of {', '.join(self.levels)}; got {level!r}")
-        if len(note) > 2000:
-            raise ValueError("the note is at most 2000 characters")
+            raise AssessError(f"the severity is one of {', '.join(self.levels)}; got {level!r}")
+        if len(note) > MAX_NOTE_CHARS:
+            raise AssessError(f"the note is at most {MAX_NOTE_CHARS} characters; this one has "
+                              f"{len(note)}")
         rec = {"kind": "answer", "group": group, "level": level, "note": note,
                "after_probe": len(self.probes), "t_s": self.link.get("t_s")}
         self._log(rec)

@@ -22,7 +22,7 @@ from importlib import resources
 from typing import Any
 
 from fieldbank.errors import FieldbankError
-from fieldbank.haptic.errors import HapticError
+from fieldbank.haptic.errors import AssessError, HapticError
 from fieldbank.haptic.remote.desk import Desk
 from fieldbank.haptic.station.__main__ import main as station_main
 from fieldbank.haptic.station.config import StationConfig
@@ -102,7 +102,7 @@ class DeskPanel:
                 return v
             try:
                 desk.set_prior(names("groups"), names("levels"), bool(args.get("unimpaired")))
-            except ValueError as exc:
+            except AssessError as exc:
                 raise FieldbankError(f"prior: {exc}") from None
             await self.reclassify()
             return {"weights": desk.weights}
@@ -114,7 +114,7 @@ class DeskPanel:
             raise FieldbankError('assess_answer: "note" must be text')
         try:
             return desk.answer(group, level, note)
-        except ValueError as exc:
+        except AssessError as exc:
             raise FieldbankError(f"assess_answer: {exc}") from None
 
     def close(self) -> None:

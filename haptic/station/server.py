@@ -50,7 +50,8 @@ from fieldbank.errors import FieldbankError
 from fieldbank.evaluate.severity import MUSCLE_GROUP_NAMES
 from fieldbank.haptic.client import ControlClient
 from fieldbank.haptic.errors import HapticError
-from fieldbank.haptic.safety import FaultCode, Mode
+from fieldbank.haptic.protocol import FaultCode
+from fieldbank.haptic.safety import Mode
 from fieldbank.haptic.snapshot import SnapshotReader
 from fieldbank.haptic.station.config import StationConfig
 from fieldbank.haptic.station.panel import Panel
