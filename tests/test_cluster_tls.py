@@ -146,7 +146,10 @@ def test_a_client_without_the_clusters_certificate_is_refused_and_runs_nothing(
         except (ssl.SSLError, ConnectionError) as exc:
             got, why = b"", str(exc)
         assert got == b"", "the scheduler answered a client without a certificate"
-        assert "CERTIFICATE_REQUIRED" in why or "reset" in why or "closed" in why, why
+        # the refusal as the client's TLS stack reports it: the alert itself, or the
+        # connection the server ended after it (reset, closed, or an EOF inside the record)
+        words = ("CERTIFICATE_REQUIRED", "reset", "closed", "EOF occurred")
+        assert any(w in why for w in words), why
     # a certificate of another authority (trusting the cluster's own): refused, nothing run
     exc = _stranger_runs(address, Security(
         tls_ca_file=str(certs / "ca.pem"), tls_client_cert=str(stranger / "client.pem"),

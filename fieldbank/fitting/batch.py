@@ -22,7 +22,6 @@ prior, uncertainty) are the command's for every task.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -90,9 +89,7 @@ def fit_session(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
         return Done("skipped", f"fit {found.fit_id} (model {found.model_id}) holds these maps "
                     f"under model version {MODEL_VERSION} already",
                     {"fit_id": found.fit_id, "model_id": found.model_id, "found": True})
-    c0 = time.thread_time()
     out = fit_patient(store, task.patient, task.session, fitter)
-    cpu = time.thread_time() - c0
     fid, mid = out.saved.fit_id, out.saved.model_id
     if not out.saved.created:
         return Done("skipped", f"fit {fid} (model {mid}) was stored meanwhile by another "
@@ -100,7 +97,7 @@ def fit_session(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
     return Done("done", f"fit {fid} -> model {mid}: {out.fitter.status_}, "
                 f"{len(ids)} maps, {out.fitter.time_s_:.1f} s",
                 {"fit_id": fid, "model_id": mid, "status": out.fitter.status_,
-                 "fit_s": round(out.fitter.time_s_, 4), "fit_cpu_s": round(cpu, 4)})
+                 "fit_s": round(out.fitter.time_s_, 4), "fit_cpu_s": round(out.fitter.cpu_s_, 4)})
 
 
 def fit_all(db: Database, options: Mapping[str, Any], *, patients: Sequence[str] = (),

@@ -89,8 +89,8 @@ GRADE_PERCENTILES = (2.5, 97.5)
 
 _RESULTS = ("held_", "hold_test_", "params_", "theta_", "cost_", "chi2_", "residuals_", "r2_",
             "uncertainty_", "relative_sd_", "residual_variance_", "unidentified_", "status_",
-            "at_bounds_", "n_evals_", "stop_reason_", "time_s_", "algorithm_", "seed_", "maps_",
-            "severity_", "problem_", "space_", "base_", "goodness_", "intervals_",
+            "at_bounds_", "n_evals_", "stop_reason_", "time_s_", "cpu_s_", "algorithm_", "seed_",
+            "maps_", "severity_", "problem_", "space_", "base_", "goodness_", "intervals_",
             "uncertainty_detail_", "prior_ranges_", "attribution_")
 
 
@@ -270,7 +270,7 @@ class ArmFitter:
         self.check_options()
         if not isinstance(base, ArmParams):
             raise FitError(f"base must be ArmParams; got {type(base).__name__}.")
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         arm = Arm.from_params(base)
         used = validate_maps(maps, arm, patient)
         space = ParamSpace.build(base, self.fit_kinds, self.bounds, self.prior_weight)
@@ -322,6 +322,7 @@ class ArmFitter:
         n_evals += unc.n_evals
         yhat = problem.predict(theta)
         self.time_s_ = time.perf_counter() - t0
+        self.cpu_s_ = time.thread_time() - c0  # this thread's CPU over the same span
         self.base_ = base
         self.space_ = space
         self.problem_ = problem
