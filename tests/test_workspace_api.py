@@ -79,7 +79,8 @@ def _cli_json(db_url: str, *args: str) -> dict[str, Any]:
 def _comparable(doc: dict[str, Any]) -> dict[str, Any]:
     """The ``whatif --json`` part of an API answer (without what the page adds)."""
     out = {k: v for k, v in doc.items() if k not in ("figure_svg", "plan_label")}
-    out["model"] = {k: v for k, v in doc["model"].items() if k in ("source", "sha256")}
+    # the model as whatif names it (what it is, its ids, what it stands on); the page adds "id"
+    out["model"] = {k: v for k, v in doc["model"].items() if k != "id"}
     return out
 
 
