@@ -85,3 +85,17 @@ def _isolated_home(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv("FIELDBANK_HOME", str(tmp_path / "fieldbank-home"))
     monkeypatch.delenv("FIELDBANK_DB", raising=False)
     monkeypatch.delenv("FIELDBANK_ARRAYS", raising=False)
+
+
+@pytest.fixture
+def clean_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """No fieldbank variable (but the test server's and the isolated home), no configuration
+    file found; the current directory an empty one of its own, returned."""
+    for k in list(os.environ):
+        if k.startswith("FIELDBANK_") and k not in ("FIELDBANK_TEST_PG_URL", "FIELDBANK_HOME"):
+            monkeypatch.delenv(k)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg-config"))
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    return work

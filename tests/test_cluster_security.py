@@ -7,7 +7,6 @@ run; a job the command gave up is not overwritten by a worker that finishes it l
 from __future__ import annotations
 
 import json
-import os
 import socket
 import stat
 from collections.abc import Iterator
@@ -28,19 +27,6 @@ from tests.cohort_helpers import store_sessions
 
 def run(*args: str, env: dict[str, str] | None = None) -> Result:
     return CliRunner().invoke(cli, list(args), env=env, catch_exceptions=False)
-
-
-@pytest.fixture
-def clean(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """No fieldbank variable, no configuration file found; an empty current directory."""
-    for k in list(os.environ):
-        if k.startswith("FIELDBANK_") and k not in ("FIELDBANK_TEST_PG_URL", "FIELDBANK_HOME"):
-            monkeypatch.delenv(k)
-    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg-config"))
-    work = tmp_path / "work"
-    work.mkdir()
-    monkeypatch.chdir(work)
-    return work
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +57,7 @@ def test_loopback_is_judged_from_the_text_alone() -> None:
 
 
 def test_plain_addresses_only_on_the_loopback_unless_the_risk_is_accepted(
-        clean: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+        clean_work: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert resolve_scheduler(None) is None
     assert resolve_scheduler("  ") is None
     s = resolve_scheduler("tcp://127.0.0.1:8786")
@@ -105,7 +91,7 @@ def test_plain_addresses_only_on_the_loopback_unless_the_risk_is_accepted(
 
 
 def test_tls_needs_the_three_files_and_checks_that_they_fit(
-        clean: Path, certs: Path, other_certs: Path, tmp_path: Path) -> None:
+        clean_work: Path, certs: Path, other_certs: Path, tmp_path: Path) -> None:
     with pytest.raises(ClusterError, match=r"needs the cluster's certificates.*missing: "
                                            r"tls_ca, tls_cert, tls_key\..*cluster certs"):
         resolve_scheduler("tls://sched.example:8786")
@@ -138,7 +124,7 @@ def test_tls_needs_the_three_files_and_checks_that_they_fit(
 
 
 def test_the_certificate_settings_come_from_flag_variable_or_file_and_config_show_says_which(
-        clean: Path, certs: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+        clean_work: Path, certs: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     Path("fieldbank.toml").write_text(
         f'[scheduler]\naddress = "tls://10.0.0.5:8786"\ntls_ca = "{certs / "ca.pem"}"\n'
         f'tls_cert = "{certs / "client.pem"}"\ntls_key = "{certs / "client-key.pem"}"\n')
@@ -162,7 +148,7 @@ def test_the_certificate_settings_come_from_flag_variable_or_file_and_config_sho
 
 
 def test_a_password_in_a_scheduler_address_is_never_echoed(
-        clean: Path, sqlite_url: str) -> None:
+        clean_work: Path, sqlite_url: str) -> None:
     bad = "tcp://u:s3cretpw@10.0.0.5:8786"
     r = run("fit", "--all", "--scheduler", bad, "--db", sqlite_url)
     assert r.exit_code == 1 and "without a user or a password" in r.output
@@ -213,7 +199,7 @@ def _connections(s: socket.socket) -> int:
 
 
 def test_a_plain_scheduler_on_another_host_is_refused_before_anything_is_sent(
-        clean: Path, listener: socket.socket, sqlite_url: str,
+        clean_work: Path, listener: socket.socket, sqlite_url: str,
         monkeypatch: pytest.MonkeyPatch) -> None:
     ip = _this_machines_address()
     port = listener.getsockname()[1]
@@ -239,7 +225,7 @@ def test_a_plain_scheduler_on_another_host_is_refused_before_anything_is_sent(
 
 
 def test_an_unreachable_scheduler_leaves_no_run_behind(
-        clean: Path, sqlite_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
+        clean_work: Path, sqlite_url: str, monkeypatch: pytest.MonkeyPatch) -> None:
     with socket.socket() as s:  # a free port on the loopback, closed again: nothing listens
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -291,7 +277,7 @@ def test_a_job_given_up_is_not_overwritten_by_its_worker_finishing_later(
 
 # --- fieldbank cluster certs -----------------------------------------------------------------
 def test_cluster_certs_writes_a_set_with_private_keys_and_never_overwrites_without_force(
-        clean: Path) -> None:
+        clean_work: Path) -> None:
     r = run("cluster", "certs", "--out", "certs", "--host", "10.0.0.5", "--json")
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
@@ -323,7 +309,7 @@ def test_cluster_certs_writes_a_set_with_private_keys_and_never_overwrites_witho
     assert sorted(p.name for p in d.iterdir()) == sorted(FILES)  # no temporary left
 
 
-def test_cluster_certs_refuses_clearly(clean: Path) -> None:
+def test_cluster_certs_refuses_clearly(clean_work: Path) -> None:
     r = run("cluster", "certs", "--out", "no/such/dir")
     assert r.exit_code == 1 and "the directory no/such does not exist" in r.output
     Path("file").write_text("x")

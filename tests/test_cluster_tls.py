@@ -67,23 +67,11 @@ def tls_cluster(certs: Path) -> Iterator[Any]:
         yield cluster
 
 
-@pytest.fixture
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    for k in list(os.environ):
-        if k.startswith("FIELDBANK_") and k not in ("FIELDBANK_TEST_PG_URL", "FIELDBANK_HOME"):
-            monkeypatch.delenv(k)
-    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg-config"))
-    work = tmp_path / "work"
-    work.mkdir()
-    monkeypatch.chdir(work)
-    return work
-
-
 def test_the_projects_certificates_run_a_batch_on_a_cluster_that_requires_tls(
-        tls_cluster: Any, certs: Path, workdir: Path) -> None:
+        tls_cluster: Any, certs: Path, clean_work: Path) -> None:
     address = tls_cluster.scheduler_address
     assert address.startswith("tls://127.0.0.1:")
-    url = f"sqlite:///{workdir / 'fb.sqlite'}"
+    url = f"sqlite:///{clean_work / 'fb.sqlite'}"
     with Database.open(url, create=True, upgrade="always") as db:
         store_sessions(db, 1, sessions=("pre",))
     Path("fieldbank.toml").write_text(
@@ -127,7 +115,7 @@ def _stranger_runs(address: str, security: Any, marker: Path) -> BaseException |
 
 
 def test_a_client_without_the_clusters_certificate_is_refused_and_runs_nothing(
-        tls_cluster: Any, certs: Path, stranger: Path, workdir: Path, tmp_path: Path) -> None:
+        tls_cluster: Any, certs: Path, stranger: Path, clean_work: Path, tmp_path: Path) -> None:
     from distributed import Security
 
     address = tls_cluster.scheduler_address
@@ -165,7 +153,7 @@ def test_a_client_without_the_clusters_certificate_is_refused_and_runs_nothing(
     with pytest.raises(ClusterError, match="cannot reach the Dask scheduler"):
         Scheduler(f"tcp://{host}:{port}", "test").connect(5)
     # fieldbank with the stranger's files: refused, and no run recorded
-    url = f"sqlite:///{workdir / 'fb.sqlite'}"
+    url = f"sqlite:///{clean_work / 'fb.sqlite'}"
     with Database.open(url, create=True, upgrade="always") as db:
         store_sessions(db, 1, sessions=("pre",))
     r = CliRunner().invoke(cli, [
