@@ -4,8 +4,6 @@ so their ``--help`` starts at once)."""
 
 from __future__ import annotations
 
-import logging
-import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +18,7 @@ from fieldbank.cli.options import (
     emit,
     from_top,
     json_option,
+    log_info_to_stderr,
     open_db,
     output_file,
     say,
@@ -143,14 +142,7 @@ def serve(robot: str | None, rate_hz: int, duration_s: float | None, before_file
         raise click.UsageError("no robot: give --robot PORT (e.g. /dev/ttyUSB0, or sim:// for "
                                "the simulation), or set FIELDBANK_ROBOT or robot in "
                                "fieldbank.toml.")
-    # fieldbank's own messages at INFO on stderr; other libraries' loggers (alembic's
-    # migration steps among them) keep their levels
-    log = logging.getLogger("fieldbank")
-    if not log.handlers:
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
-        log.addHandler(handler)
-        log.setLevel(logging.INFO)
+    log_info_to_stderr()
     before, after, ids, info = resolve_sources(db_url, (before_file, after_file),
                                                (before_severity, after_severity),
                                                (before_id, after_id))

@@ -235,6 +235,21 @@ def emit(data: Any, as_json: bool, human: str) -> None:
     click.echo(to_json(data) if as_json else "\n".join(fit_lines(human.splitlines())))
 
 
+def log_info_to_stderr() -> None:
+    """fieldbank's own log messages at INFO on stderr, as ``LEVEL message`` (for the commands
+    that run a service); other libraries' loggers (alembic's migration steps among them) keep
+    their levels. Once per process: a second call adds no second handler."""
+    import logging
+    import sys
+
+    log = logging.getLogger("fieldbank")
+    if not log.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+
+
 def say(msg: str) -> None:
     """A message for the person at the terminal: on stderr, so stdout stays the output; every
     line within 100 columns."""

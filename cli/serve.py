@@ -9,12 +9,9 @@ import each other.
 
 from __future__ import annotations
 
-import logging
-import sys
-
 import click
 
-from fieldbank.cli.options import db_option, open_db, say
+from fieldbank.cli.options import db_option, log_info_to_stderr, open_db, say
 from fieldbank.config import setting
 
 
@@ -45,12 +42,7 @@ def serve(host: str, port: int, tls_cert: str | None, tls_key: str | None, robot
 
     config = ServeConfig(host, port, tls_cert, tls_key)  # refused here, before anything binds
     config.ssl_context()
-    log = logging.getLogger("fieldbank")
-    if not log.handlers:
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
-        log.addHandler(handler)
-        log.setLevel(logging.INFO)
+    log_info_to_stderr()
     db = open_db(db_url)
     if not db.list_users():
         say("no accounts yet: add one with 'fieldbank users add NAME --role clinician'")
