@@ -114,3 +114,20 @@ def test_an_unknown_plan_is_named_as_before(batch: dict[str, Any]) -> None:
         plan = db.list_plans()[0].id
         with pytest.raises(StorageError, match="No plan with id 999999"):
             select_cases(db, Selection(plan_ids=(plan, 999999)))
+
+
+@pytest.mark.parametrize(("n", "sizes"), [(1, [1]), (5, [1] * 5), (20, [3] * 6 + [2]),
+                                          (64, [8] * 8), (100, [8] * 12 + [4])])
+def test_a_cluster_report_is_cut_into_tasks_of_up_to_eight_plans(n: int,
+                                                                 sizes: list[int]) -> None:
+    from types import SimpleNamespace
+    from typing import cast
+
+    from fieldbank.interventions.report.remote import report_tasks
+    from fieldbank.interventions.report.select import CaseSpec
+
+    cases = [cast(CaseSpec, SimpleNamespace(plan_id=i + 1, patient_code=f"P{i // 2:03d}"))
+             for i in range(n)]
+    tasks = report_tasks(cases)
+    assert [len(t.params["plan_ids"]) for t in tasks] == sizes
+    assert [i for t in tasks for i in t.params["plan_ids"]] == list(range(1, n + 1))
