@@ -381,12 +381,21 @@ class Arm:
         jl = self.jl
         lam = muscles.lengths(q, jl)
         ldot = velocities(qd, jl)
+        # the set of one drops its unit set axis for the arithmetic from the muscles to the
+        # hand: the same operations, without broadcasting every (N,) term against (1, N)
+        one = len(muscles) == 1
         if not derivatives:
-            fx, fy = hand_force(muscles.passive(lam) + muscles.reflex(lam, ldot), jl, *jinv)
+            f = muscles.passive(lam) + muscles.reflex(lam, ldot)
+            fx, fy = hand_force(f[0] if one else f, jl, *jinv)
+            force = np.stack([fx, fy], axis=-1)
             empty = np.empty((0, 2, 2))
-            return self._out_vec(np.stack([fx, fy], axis=-1)), empty, empty
-        force, stiff, damp = endpoint_field(*muscles.tensions(lam, ldot), jl,
-                                            self._jl_products, jac, jinv, qd)
+            return self._out_vec(force[None] if one else force), empty, empty
+        tensions = muscles.tensions(lam, ldot)
+        if one:
+            tensions = tuple(t[0] for t in tensions)
+        force, stiff, damp = endpoint_field(*tensions, jl, self._jl_products, jac, jinv, qd)
+        if one:
+            force, stiff, damp = force[None], stiff[None], damp[None]
         return self._out_vec(force), self._out_mat(stiff), self._out_mat(damp)
 
     def potential(self, x: ArrayLike) -> FloatArray:

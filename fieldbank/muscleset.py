@@ -122,7 +122,8 @@ class MuscleSet:
         :attr:`same_lengths` and shared angles, one set's lengths broadcast (read-only)."""
         if self.same_lengths and q.ndim == 2:
             lam = self.lam_rest[0] + (q - self.q_rest[0]) @ jl.T
-            return np.broadcast_to(lam, (len(self), *lam.shape))
+            n = len(self)  # a new unit axis is a broadcast one already, and costs less
+            return lam[None] if n == 1 else np.broadcast_to(lam, (n, *lam.shape))
         return self.lam_rest[:, None, :] + (q - self.q_rest[:, None, :]) @ jl.T
 
     def one(self, lam: FloatArray) -> bool:

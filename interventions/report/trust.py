@@ -36,7 +36,8 @@ from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
 from fieldbank.storage import Database
 
 #: Headline metrics with interval columns: metric of
-#: :func:`fieldbank.interventions.samplemetrics.headline_metrics_batch` -> (column stem, heading, unit).
+#: :func:`fieldbank.interventions.samplemetrics.headline_metrics_batch` -> (column stem,
+#: heading, unit).
 _INTERVALS: tuple[tuple[str, str, str, str], ...] = (
     ("pull peak force", "pull_peak", "pull peak", "N"),
     ("semi-ellipse peak force", "semi_ellipse_peak", "semi-ellipse peak", "N"),
