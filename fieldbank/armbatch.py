@@ -17,7 +17,7 @@ from dataclasses import fields as dataclass_fields
 from operator import attrgetter
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray
@@ -83,37 +83,6 @@ class ArmBatch:
 
     def __len__(self) -> int:
         return len(self.params)
-
-    @property
-    def q_rest(self) -> FloatArray:
-        """The rest postures (S, 2), rad."""
-        return self.muscles.q_rest
-
-    @property
-    def same_lengths(self) -> bool:
-        """Every set has the same rest posture, rest and slack lengths."""
-        return self.muscles.same_lengths
-
-    def muscle_lengths(self, q: ArrayLike) -> FloatArray:
-        """λ (S, N, 6), m, at joint angles q: (N, 2) shared by every set, or (S, N, 2)
-        (:meth:`MuscleSet.lengths`)."""
-        return self.muscles.lengths(np.asarray(q, dtype=float), self.geometry.jl)
-
-    def columns(self, lam: FloatArray, cols: NDArray[np.intp]) -> FloatArray:
-        """The muscles ``cols`` (indices, (k,)) of λ (S, N, 6): (S, N, k), broadcast as λ is."""
-        if self.muscles.one(lam):
-            return np.broadcast_to(lam[:1][..., cols], (*lam.shape[:2], len(cols)))
-        return lam[..., cols]
-
-    def passive_force(self, lam: FloatArray, groups: ArrayLike | None = None) -> FloatArray:
-        """Ψ (S, N, 6), N, for λ (S, N, 6): :meth:`Arm.passive_forces` of each set, value only.
-        ``groups`` (indices): λ holds only these muscle groups' columns, and so does Ψ."""
-        return self.muscles.passive(lam, None if groups is None else np.asarray(groups))
-
-    def reflex_force(self, lam: FloatArray, ldot: FloatArray) -> FloatArray:
-        """Φ (S, N, 6), N, for λ (S, N, 6) and λ̇ (N, 6) shared by every set: the value of
-        :meth:`Arm.reflex_forces` of each set (:meth:`MuscleSet.reflex`)."""
-        return self.muscles.reflex(lam, ldot)
 
     def endpoint_force(self, x: ArrayLike, v: ArrayLike | None = None) -> FloatArray:
         """Force each set's arm exerts on the handle, (S, N, 2), N, at hand positions x

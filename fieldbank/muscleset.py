@@ -130,6 +130,12 @@ class MuscleSet:
         """λ is one set's lengths broadcast to every set (:meth:`lengths`)."""
         return self.same_lengths and lam.ndim == 3 and lam.strides[0] == 0
 
+    def columns(self, lam: FloatArray, cols: NDArray[np.intp]) -> FloatArray:
+        """The muscles ``cols`` (indices, (k,)) of λ (S, N, 6): (S, N, k), broadcast as λ is."""
+        if self.one(lam):
+            return np.broadcast_to(lam[:1][..., cols], (*lam.shape[:2], len(cols)))
+        return lam[..., cols]
+
     def tensions(self, lam: FloatArray, ldot: FloatArray) -> tuple[FloatArray, ...]:
         """Ψ, ∂Ψ/∂λ, Φ, ∂Φ/∂λ, ∂Φ/∂λ̇, each (S, N, 6), for λ (S, N, 6) and λ̇ (N, 6)."""
         r = slice(0, 1) if self.one(lam) else slice(None)

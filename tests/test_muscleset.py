@@ -56,7 +56,7 @@ def test_each_arm_alone_equals_its_row_of_the_batch(side: str, moved: str) -> No
     sets = _family(side, rng, moved)
     batch = ArmBatch.from_params(sets)
     # Km, α, β alone: the lengths are computed once for every set (the broadcast path)
-    assert batch.same_lengths is (moved == "values")
+    assert batch.muscles.same_lengths is (moved == "values")
     x = _workspace(batch.geometry, rng)
     velocities = [None, (0.0, 0.0), tuple(rng.uniform(-1.5, 1.5, 2)),
                   rng.uniform(-1.5, 1.5, (len(x), 2))]
