@@ -114,6 +114,16 @@ class ArmBatch:
         return geo._out_vec(np.stack(out, axis=2))
 
 
+def by_geometry(arms: Sequence[Arm]) -> list[tuple[list[int], ArmBatch]]:
+    """``arms`` grouped by geometry, each group one batch over its first arm's compiled
+    geometry: (the group's indices into ``arms``, its batch), in order of first appearance."""
+    groups: dict[tuple[object, ...], list[int]] = {}
+    for i, a in enumerate(arms):
+        groups.setdefault(_geometry_key(a.params), []).append(i)
+    return [(idx, ArmBatch.from_params([arms[i].params for i in idx], arms[idx[0]]))
+            for idx in groups.values()]
+
+
 #: Every ArmParams field but the sampled ones and the document header.
 _GEOMETRY_FIELDS: tuple[str, ...] = tuple(
     f.name for f in dataclass_fields(ArmParams) if f.name not in SAMPLED_FIELDS)
