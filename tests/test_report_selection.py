@@ -131,3 +131,24 @@ def test_a_cluster_report_is_cut_into_tasks_of_up_to_eight_plans(n: int,
     tasks = report_tasks(cases)
     assert [len(t.params["plan_ids"]) for t in tasks] == sizes
     assert [i for t in tasks for i in t.params["plan_ids"]] == list(range(1, n + 1))
+
+
+@pytest.mark.parametrize(("codes", "whose"), [
+    (["P1"], "P1"), (["P1", "P2"], "P1, P2"),
+    ([f"FIT-C{i:04d}" for i in range(8)], "FIT-C0000 and 7 more"),
+    (["A" * 64, "B" * 64], "2 patients")])
+def test_a_task_names_its_patients_within_what_its_job_record_keeps(
+        codes: list[str], whose: str) -> None:
+    from types import SimpleNamespace
+    from typing import cast
+
+    from fieldbank.interventions.report.remote import WHOSE_MAX, _whose, report_tasks
+    from fieldbank.interventions.report.select import CaseSpec
+
+    assert _whose(codes) == whose
+    # a cohort of one plan per patient: eight patients to a task
+    cases = [cast(CaseSpec, SimpleNamespace(plan_id=i + 1, patient_code=f"FIT-C{i:04d}"))
+             for i in range(100)]
+    tasks = report_tasks(cases)
+    assert tasks[0].patient == "FIT-C0000 and 7 more"
+    assert all(len(t.patient) <= WHOSE_MAX for t in tasks)

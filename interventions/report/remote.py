@@ -48,9 +48,22 @@ def report_tasks(cases: list[CaseSpec], per_task: int = CASES_PER_TASK) -> list[
         part = cases[k:k + per_task]
         codes = sorted({c.patient_code or "-" for c in part})
         tasks.append(Task(f"plans {', '.join(str(c.plan_id) for c in part)}",
-                          codes[0] if len(codes) == 1 else ", ".join(codes), None,
-                          {"plan_ids": [c.plan_id for c in part]}))
+                          _whose(codes), None, {"plan_ids": [c.plan_id for c in part]}))
     return tasks
+
+
+#: Longest name of a task's patients (the job record keeps up to 64 characters).
+WHOSE_MAX = 64
+
+
+def _whose(codes: list[str]) -> str:
+    """A task's patients in at most :data:`WHOSE_MAX` characters: their codes, else the first
+    and how many more, else how many (the job's key names its plans)."""
+    for text in (", ".join(codes), f"{codes[0]} and {len(codes) - 1} more",
+                 f"{len(codes)} patients"):
+        if len(text) <= WHOSE_MAX:
+            return text
+    return f"{len(codes)} patients"
 
 
 def report_cases(db: Database, task: Task, options: Mapping[str, Any]) -> Done:
