@@ -45,10 +45,11 @@ DEFAULT_BAUDRATE = 1_000_000
 RESYNC_FRAMES = 3
 #: Offset of the flags byte in a STATE payload (t_us u32, x, y, vx, vy f32).
 STATE_FLAGS_AT = 20
-# the message types and flags the receive path tests, as plain ints (no enum look-up per frame)
+# what every tick's receive and send paths use, as plain names (no enum look-up per frame)
 _STATE, _SENSOR = int(P.MsgType.STATE), int(P.MsgType.SENSOR)
 _HELLO_ACK, _FAULT = int(P.MsgType.HELLO_ACK), int(P.MsgType.FAULT)
 _FLAG_FAULT, _FLAG_WATCHDOG = P.FLAG_FAULT, P.FLAG_WATCHDOG
+_FORCE, _pack_force = int(P.MsgType.FORCE), P.FORCE_FMT.pack
 
 
 class RobotLink:
@@ -166,7 +167,7 @@ class RobotLink:
 
     def send_force(self, fx_n: float, fy_n: float) -> int:
         """Send a FORCE frame; returns its sequence number."""
-        return self._send(P.MsgType.FORCE, P.FORCE_FMT.pack(fx_n, fy_n))
+        return self._send(_FORCE, _pack_force(fx_n, fy_n))
 
     def arm(self) -> None:
         self._send(P.MsgType.ARM)

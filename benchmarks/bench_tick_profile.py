@@ -14,7 +14,7 @@ Printed: the median of each part for ticks that read 0, 1, 2, … STATE frames a
 the ticks, then the mean of each part over the ticks between percentiles 95–99, 99–99.5 and
 99.5–100 (what makes the p99), with the load average.
 
-    python benchmarks/profile_tick.py [--seconds 8] [--rate 4000]
+    python benchmarks/bench_tick_profile.py [--seconds 8] [--rate 4000]
 """
 
 from __future__ import annotations
