@@ -2,14 +2,15 @@
 
 :class:`RobotLink` wraps any port :func:`serial.serial_for_url` returns (a USB serial device, a
 pty, ``socket://``, or the simulated robot ``sim://``). Reads never block the loop: each
-:meth:`RobotLink.poll` takes the bytes that have arrived, reassembles frames, keeps the newest
-STATE in its :class:`~haptic.port.HandleState`, and counts what went wrong (CRC and other
-decode errors, frames lost to sequence gaps, duplicates, device FAULT frames, STATE frames whose
-flags report a device fault or a tripped watchdog - each frame counted, even when a newer STATE
-of the same read replaces it; the fault flag even in a frame dropped as a duplicate). It is a
-:class:`~haptic.port.RobotPort` (and a :class:`~haptic.port.SensingPort`: :meth:`sensor_on`);
-judging its counts is the safety monitor's job
-(:mod:`haptic.monitor`); a port that fails raises :class:`LinkDown`.
+:meth:`RobotLink.poll` takes the bytes that have arrived (on a POSIX port only those the
+kernel holds ready: a read that finds bytes still in the tty layer's buffer waits for them),
+reassembles frames, unpacks the newest STATE into its :class:`~haptic.port.HandleState`, and
+counts what went wrong (CRC and other decode errors, frames lost to sequence gaps, duplicates,
+device FAULT frames, STATE frames whose flags report a device fault or a tripped watchdog -
+each frame counted, even when a newer STATE of the same read replaces it; the fault flag even
+in a frame dropped as a duplicate). It is a :class:`~haptic.port.RobotPort` (and a
+:class:`~haptic.port.SensingPort`: :meth:`sensor_on`); judging its counts is the safety
+monitor's job (:mod:`haptic.monitor`); a port that fails raises :class:`LinkDown`.
 
 Sequence numbers: a frame numbered behind the last one is a duplicate and dropped. One forged
 or corrupted-but-valid frame far ahead would then make every genuine frame look old and blind
