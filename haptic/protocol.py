@@ -131,6 +131,10 @@ class Frame(NamedTuple):
     payload: bytes
 
 
+#: Builds a :class:`Frame` from a tuple in C (a named tuple's own constructor is a Python call).
+_new_frame = tuple.__new__
+
+
 # --- CRC --------------------------------------------------------------------------------------
 def crc16_ccitt_false(data: bytes) -> int:
     """CRC-16/CCITT-FALSE of ``data`` (C implementation from the standard library)."""
@@ -171,8 +175,6 @@ def cobs_decode(data: bytes) -> bytes:
     n = len(data)
     if 0 in data:
         raise FrameError("cobs", "COBS data contains a zero byte")
-    if n and data[0] == n:
-        return bytes(data[1:])  # the common case: a short frame with no zero inside
     parts = []
     i = 0
     while i < n:
@@ -197,9 +199,12 @@ def encode_frame(msg_type: int, seq: int, payload: bytes = b"") -> bytes:
 
 def decode_frame(encoded: bytes) -> Frame:
     """Decode one frame (without its delimiter); raises :class:`FrameError`."""
-    if len(encoded) > MAX_FRAME_BYTES:
-        raise FrameError("length", f"frame of {len(encoded)} bytes exceeds {MAX_FRAME_BYTES}")
-    body = cobs_decode(encoded)
+    n = len(encoded)
+    if n > MAX_FRAME_BYTES:
+        raise FrameError("length", f"frame of {n} bytes exceeds {MAX_FRAME_BYTES}")
+    # the common case, without a call: a frame with no zero inside is its code byte and its body
+    body = bytes(encoded[1:]) if n and encoded[0] == n and 0 not in encoded else cobs_decode(
+        encoded)
     end = len(body) - 2  # where the CRC starts (single bytes and slices: no struct call)
     if end < _HEADER.size:
         raise FrameError("length", f"frame of {len(body)} bytes is shorter than header + CRC")
@@ -214,7 +219,7 @@ def decode_frame(encoded: bytes) -> Frame:
     if end - _HEADER.size != expected:
         raise FrameError("length", f"{MsgType(msg_type).name} payload of "
                                    f"{end - _HEADER.size} bytes, expected {expected}")
-    return Frame(msg_type, body[2] | body[3] << 8, body[_HEADER.size:end])
+    return _new_frame(Frame, (msg_type, body[2] | body[3] << 8, body[_HEADER.size:end]))
 
 
 class FrameReader:
