@@ -9,6 +9,10 @@ lengthening rates λ̇_max) and evaluates everything vectorised over N positions
 mutable state, so the fitter, the what-if module and the haptic loop share one instance; the
 simulation state lives in :class:`fieldbank.sim.ArmSim`.
 
+Its muscle values are a :class:`fieldbank.muscleset.MuscleSet` of one set: :meth:`Arm.field`
+is :meth:`Arm.field_of` its own set, the evaluation S parameter sets of the same geometry go
+through as well (:class:`fieldbank.armbatch.ArmBatch`: a fit's samples, the intervals).
+
 Conventions (BRIEF §3)
 ----------------------
 Shoulder frame: origin at the shoulder, +x to the patient's right, +y forward. Joint angles
