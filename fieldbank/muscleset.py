@@ -136,7 +136,8 @@ class MuscleSet:
             return np.broadcast_to(lam[:1][..., cols], (*lam.shape[:2], len(cols)))
         return lam[..., cols]
 
-    def tensions(self, lam: FloatArray, ldot: FloatArray) -> tuple[FloatArray, ...]:
+    def tensions(self, lam: FloatArray, ldot: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         """Ψ, ∂Ψ/∂λ, Φ, ∂Φ/∂λ, ∂Φ/∂λ̇, each (S, N, 6), for λ (S, N, 6) and λ̇ (N, 6)."""
         r = slice(0, 1) if self.one(lam) else slice(None)
         psi, dpsi = passive_tension(lam[r], self.lam_slack[r, None, :], self.km[:, None, :],
