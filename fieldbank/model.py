@@ -376,10 +376,7 @@ class Arm:
         derivatives : bool
             Skip K and B (returned as empty arrays) when False.
         """
-        force, stiff, damp = self.field_of(self.muscles, x, v, derivatives)
-        if not derivatives:
-            return force[0], stiff, damp
-        return force[0], stiff[0], damp[0]
+        return self._evaluate(self.muscles, x, v, derivatives)
 
     def field_of(self, muscles: MuscleSet, x: ArrayLike, v: ArrayLike | None = None,
                  derivatives: bool = True) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -388,26 +385,27 @@ class Arm:
         ``derivatives``). The one evaluation of the equations from the hand to the muscles
         and back: one arm is its set of one (:attr:`muscles`), a fit's samples S sets
         (:class:`fieldbank.armbatch.ArmBatch`)."""
+        force, stiff, damp = self._evaluate(muscles, x, v, derivatives)
+        if len(muscles) == 1:  # the set of one: its unit set axis back
+            force = force[None]
+            if derivatives:
+                stiff, damp = stiff[None], damp[None]
+        return force, stiff, damp
+
+    def _evaluate(self, muscles: MuscleSet, x: ArrayLike, v: ArrayLike | None,
+                  derivatives: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`field_of`, the set of one without its unit set axis: its row evaluated
+        (N, 6) against (6,) (:meth:`MuscleSet.against`), the arithmetic of one arm."""
         q, jac, jinv, qd = self.hand_state(x, v)
         jl = self.jl
         lam = muscles.lengths(q, jl)
         ldot = velocities(qd, jl)
-        # the set of one drops its unit set axis for the arithmetic from the muscles to the
-        # hand: the same operations, without broadcasting every (N,) term against (1, N)
-        one = len(muscles) == 1
         if not derivatives:
-            f = muscles.passive(lam) + muscles.reflex(lam, ldot)
-            fx, fy = hand_force(f[0] if one else f, jl, *jinv)
-            force = np.stack([fx, fy], axis=-1)
+            fx, fy = hand_force(muscles.forces(lam, ldot), jl, *jinv)
             empty = np.empty((0, 2, 2))
-            return self._out_vec(force[None] if one else force), empty, empty
-        psi, dpsi, phi, dphi_l, dphi_ld = muscles.tensions(lam, ldot)
-        if one:
-            psi, dpsi, phi, dphi_l, dphi_ld = psi[0], dpsi[0], phi[0], dphi_l[0], dphi_ld[0]
-        force, stiff, damp = endpoint_field(psi, dpsi, phi, dphi_l, dphi_ld, jl,
+            return self._out_vec(np.stack([fx, fy], axis=-1)), empty, empty
+        force, stiff, damp = endpoint_field(*muscles.tensions(lam, ldot), jl,
                                             self._jl_products, jac, jinv, qd)
-        if one:
-            force, stiff, damp = force[None], stiff[None], damp[None]
         return self._out_vec(force), self._out_mat(stiff), self._out_mat(damp)
 
     def potential(self, x: ArrayLike) -> FloatArray:
