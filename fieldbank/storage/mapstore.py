@@ -212,7 +212,7 @@ class MapStore(DatabaseCore):
     def maps_of(self, patient_codes: Sequence[str]) -> list[StoredMap]:
         """The maps of every patient of ``patient_codes``, ordered as :meth:`list_maps`
         orders them (by patient, session date and id), in one query per thousand patients."""
-        rows = []
+        rows: list[Row[*_MapListing]] = []
         try:
             with self.engine.connect() as conn:
                 for part in chunks(sorted(set(patient_codes))):
