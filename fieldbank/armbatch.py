@@ -6,6 +6,11 @@ same for all of them. :class:`ArmBatch` compiles that geometry once and evaluate
 forces with the equations of :mod:`fieldbank.model` (:func:`~fieldbank.model.passive_force`,
 :func:`~fieldbank.model.reflex_force`), so that S samples cost one vectorised pass instead of S
 compiled arms (the prediction intervals of a what-if and of a report).
+
+Sets given as arrays (:meth:`ArmBatch.from_arrays`: a fit's samples, the prior's table) are
+checked once, as arrays, against the bounds table of :class:`~fieldbank.params.ArmParams`
+(:data:`fieldbank.params.BOUNDS`) - the same bounds and messages a record would get, without a
+record per set.
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ from numpy.typing import ArrayLike, NDArray
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray, endpoint_field, hand_force
 from fieldbank.muscle import passive_force, passive_tension, reflex_force, reflex_tension
-from fieldbank.params import ArmParams
+from fieldbank.params import BOUNDS, ArmParams, field_label
+from fieldbank.validation import number_problem
 
 #: ArmParams fields that may differ between the parameter sets of one :class:`ArmBatch`: every
 #: muscle value a fit or its uncertainty can move (Km, α, β per group, slack offsets, rest
@@ -45,8 +51,8 @@ class ArmBatch:
     ----------
     geometry : Arm
         The compiled arm of the first parameter set.
-    params : tuple of ArmParams
-        The S parameter sets.
+    size : int
+        S, the number of parameter sets.
     q_rest : ndarray, shape (S, 2), rad
     lam_rest, lam_slack, lam_min, lam_max, excursion : ndarray, shape (S, 6), m
     km, alpha, beta : ndarray, shape (S, 6); N/m, N, dimensionless
@@ -60,7 +66,7 @@ class ArmBatch:
     """
 
     geometry: Arm
-    params: tuple[ArmParams, ...]
+    size: int
     q_rest: FloatArray
     lam_rest: FloatArray
     lam_slack: FloatArray
@@ -95,8 +101,59 @@ class ArmBatch:
                     f"ArmBatch: parameter set {k} differs from the geometry in "
                     f"{', '.join(other)}, not only in muscle values; compile it with "
                     "Arm.from_params.")
-        q_rest = np.array([p.q_rest_rad for p in sets], dtype=float)
-        lam_rest = np.array([p.rest_length_m for p in sets], dtype=float)
+        return cls._build(geo, {name: np.array([getattr(p, name) for p in sets], dtype=float)
+                                for name in SAMPLED_FIELDS})
+
+    @classmethod
+    def from_arrays(cls, geometry: Arm, size: int, **values: ArrayLike) -> ArmBatch:
+        """``size`` parameter sets of ``geometry``'s arm that differ from its parameters in the
+        fields of :data:`SAMPLED_FIELDS` given as arrays, (S, 6) or (S, 2) for ``q_rest_rad``
+        (a row per set; a single row is shared by every set); a field not given is the
+        geometry's own. Each value is checked against :data:`fieldbank.params.BOUNDS`, as
+        :class:`~fieldbank.params.ArmParams` checks it, once for all sets.
+
+        Raises
+        ------
+        ParameterError
+            An unknown field, an array of the wrong shape, a value outside its bounds (naming
+            the set, the field and the group), or a muscle reaching a non-positive length.
+        """
+        unknown = sorted(set(values) - set(SAMPLED_FIELDS))
+        if unknown:
+            raise ParameterError(f"ArmBatch: {', '.join(unknown)} cannot differ between the "
+                                 f"sets of one batch; only {', '.join(SAMPLED_FIELDS)} can.")
+        if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+            raise ParameterError(f"ArmBatch needs at least one parameter set; got {size!r}.")
+        p0 = geometry.params
+        arrays: dict[str, FloatArray] = {}
+        for name in SAMPLED_FIELDS:
+            own = np.asarray(getattr(p0, name), dtype=float)
+            given = values.get(name)
+            a = own[None, :] if given is None else np.asarray(given, dtype=float)
+            if a.ndim != 2 or a.shape[1] != own.size or a.shape[0] not in (1, size):
+                raise ParameterError(f"ArmBatch: {name} must have shape ({size}, {own.size}); "
+                                     f"got {np.shape(given)}.")
+            if given is not None:
+                _check_bounds(name, a)
+            arrays[name] = np.broadcast_to(a, (size, own.size))
+        if "q_rest_rad" in values:  # the relation a record checks: the rest posture in range
+            for j, rng in enumerate(("shoulder_range_rad", "elbow_range_rad")):
+                lo, hi = getattr(p0, rng)
+                bad = np.flatnonzero((arrays["q_rest_rad"][:, j] < lo)
+                                     | (arrays["q_rest_rad"][:, j] > hi))
+                if bad.size:
+                    k = int(bad[0])
+                    raise ParameterError(
+                        f"ArmBatch: parameter set {k}: the 'q_rest_rad[{j}]' parameter must lie "
+                        f"in the range of motion [{lo:g}, {hi:g}] rad; got "
+                        f"{arrays['q_rest_rad'][k, j]:g} instead.")
+        return cls._build(geometry, arrays)
+
+    @classmethod
+    def _build(cls, geo: Arm, values: dict[str, FloatArray]) -> ArmBatch:
+        """The batch of the sampled fields ``values`` ((S, k) each, checked) over ``geo``."""
+        q_rest = np.array(values["q_rest_rad"], dtype=float)
+        lam_rest = np.array(values["rest_length_m"], dtype=float)
         p0 = geo.params
         corners = np.array([[a, b] for a in p0.shoulder_range_rad for b in p0.elbow_range_rad])
         # as Arm.from_params, per set: λ is linear in q, its extremes lie at the box corners
@@ -111,20 +168,20 @@ class ArmBatch:
                 "motion.")
         arrays = {
             "q_rest": q_rest, "lam_rest": lam_rest,
-            "lam_slack": lam_rest + np.array([p.slack_offset_m for p in sets], dtype=float),
+            "lam_slack": lam_rest + np.asarray(values["slack_offset_m"], dtype=float),
             "lam_min": lam_min, "lam_max": lam_max, "excursion": lam_max - lam_min,
-            "km": np.array([p.km_n_per_m for p in sets], dtype=float),
-            "alpha": np.array([p.alpha_n for p in sets], dtype=float),
-            "beta": np.array([p.beta for p in sets], dtype=float),
+            "km": np.array(values["km_n_per_m"], dtype=float),
+            "alpha": np.array(values["alpha_n"], dtype=float),
+            "beta": np.array(values["beta"], dtype=float),
         }
         for a in arrays.values():
             a.setflags(write=False)
         same = all(np.array_equal(a, a[:1].repeat(len(a), axis=0))
                    for a in (q_rest, lam_rest, arrays["lam_slack"]))
-        return cls(geometry=geo, params=sets, same_lengths=same, **arrays)
+        return cls(geometry=geo, size=len(q_rest), same_lengths=same, **arrays)
 
     def __len__(self) -> int:
-        return len(self.params)
+        return self.size
 
     def muscle_lengths(self, q: ArrayLike) -> FloatArray:
         """λ (S, N, 6), m, at joint angles q: (N, 2) shared by every set, or (S, N, 2). With
@@ -132,7 +189,7 @@ class ArmBatch:
         qa = np.asarray(q, dtype=float)
         if self.same_lengths and qa.ndim == 2:
             lam = self.lam_rest[0] + (qa - self.q_rest[0]) @ self.geometry.jl.T
-            return np.broadcast_to(lam, (len(self.params), *lam.shape))
+            return np.broadcast_to(lam, (self.size, *lam.shape))
         return self.lam_rest[:, None, :] + (qa - self.q_rest[:, None, :]) @ self.geometry.jl.T
 
     def columns(self, lam: FloatArray, cols: NDArray[np.intp]) -> FloatArray:
@@ -163,7 +220,7 @@ class ArmBatch:
         lengthens at every point or none (a joint stretch), else the pairs by one flat index;
         each value the one the equations give for it."""
         g = self.geometry
-        s = len(self.params)
+        s = self.size
         live = ldot > 0
         one = self._one(lam)
         r = slice(0, 1) if one else slice(None)
@@ -248,3 +305,20 @@ _GEOMETRY_FIELDS: tuple[str, ...] = tuple(
 #: The geometry fields of a set, as one tuple (a copy made by ``with_group`` shares their
 #: objects, so comparing two keys is mostly identity checks).
 _geometry_key: Callable[[ArmParams], tuple[object, ...]] = attrgetter(*_GEOMETRY_FIELDS)
+
+
+def _check_bounds(name: str, values: FloatArray) -> None:
+    """Every entry of ``values`` (S, k) of field ``name`` inside its interval of
+    :data:`fieldbank.params.BOUNDS` (a NaN or an infinity is not); else the message a record
+    would give for the first bad entry, naming its set."""
+    iv = BOUNDS[name]
+    low = -np.inf if iv.low is None else iv.low
+    high = np.inf if iv.high is None else iv.high
+    ok = np.isfinite(values)
+    ok &= (values >= low) if iv.low_closed else (values > low)
+    ok &= (values <= high) if iv.high_closed else (values < high)
+    if ok.all():
+        return
+    k, i = (int(v) for v in np.argwhere(~ok)[0])
+    msg = number_problem(field_label(name, i), float(values[k, i]), iv)
+    raise ParameterError(f"ArmBatch: parameter set {k}: {msg}")

@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 
 from fieldbank.fitting import ArmFitter
-from fieldbank.fitting.problem import FitProblem, reference_kernels
+from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.reference import reference_kernels
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.fitting.synthetic import impaired_params, synthetic_patient
 from fieldbank.model import Arm

@@ -7,8 +7,8 @@ its cost was the interpreter's and numpy's fixed cost per call (≈ 300 µs over
 operations), not arithmetic. Here the same formulas run as compiled calls:
 
 * :func:`reflex_columns` - the reflex columns of the design matrix X (the α columns: the
-  tension per unit α at each measured value), :meth:`FitProblem._reflex_basis`'s formulas in
-  the same order;
+  tension per unit α at each measured value), :func:`fieldbank.fitting.reference.reflex_basis`'s
+  formulas in the same order;
 * :func:`solve_normal` - the whitened system and its normal equations with the prior (a
   Cholesky factorisation of the 12×12 Gram matrix in place of ``np.linalg.solve``) and the
   residuals; where a bound binds (α ≥ 0 of a quiet group), the same strictly convex problem
@@ -18,8 +18,8 @@ operations), not arithmetic. Here the same formulas run as compiled calls:
   from central differences of the reflex columns alone, as :meth:`FitProblem.
   design_derivatives` takes them.
 
-The numpy formulas stay in :mod:`fieldbank.fitting.problem` as the reference
-(:func:`~fieldbank.fitting.problem.reference_kernels`); ``tests/test_fitting_kernels.py``
+The numpy formulas stay in :mod:`fieldbank.fitting.reference` as the reference
+(:func:`~fieldbank.fitting.reference.reference_kernels`); ``tests/test_fitting_kernels.py``
 holds the two together (columns and costs to 1e-12 relative, optima and intervals of whole
 fits to 1e-6). IEEE double without fast-math; the machine code is cached on disk like the
 haptic tick's (:mod:`fieldbank.armkernel`); numba loads and compiles at the first evaluation

@@ -33,17 +33,20 @@ only on β_i, the passive column i only on δ_i).
 Noise: each value is whitened by its map's sd; where a map has no sd, by
 :data:`DEFAULT_RELATIVE_SD` (5%, an assumption) × the size of the measured force or stiffness at
 that position (:func:`relative_scale`).
+
+Evaluation: the reflex columns, the projection and the gradient over β run as compiled calls
+(:mod:`fieldbank.fitting.kernels`); a problem built inside
+:func:`fieldbank.fitting.reference.reference_kernels` evaluates with the numpy formulas of
+:mod:`fieldbank.fitting.reference` instead, the reference the compiled path is held to.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from fieldbank.fitting import kernels
+from fieldbank.fitting import kernels, reference
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.maps import FieldMap
 from fieldbank.model import Arm, FloatArray
@@ -85,23 +88,6 @@ def map_sd(m: FieldMap) -> FloatArray:
                        axis=1)
     rms = float(np.sqrt(np.mean(values**2))) or 1.0
     return np.asarray(np.maximum(sd, SD_FLOOR_FRACTION * rms), dtype=float)
-
-
-#: Whether new problems evaluate with the compiled kernels (:mod:`fieldbank.fitting.kernels`);
-#: :func:`reference_kernels` switches to the numpy reference path.
-_COMPILED = [True]
-
-
-@contextmanager
-def reference_kernels() -> Iterator[None]:
-    """Problems built inside evaluate with the numpy reference path, not the compiled kernels
-    (the tests hold the two together; the benchmark's baseline)."""
-    old = _COMPILED[0]
-    _COMPILED[0] = False
-    try:
-        yield
-    finally:
-        _COMPILED[0] = old
 
 
 #: Central-difference steps of the search's gradient (β, dimensionless; q_rest, rad; slack, m).
@@ -153,8 +139,8 @@ class FitProblem:
     n_evals: int = 0
     _xkm_cache: FloatArray | None = None
     #: Evaluate with the compiled kernels (:mod:`fieldbank.fitting.kernels`); False: the numpy
-    #: reference path (:func:`reference_kernels`).
-    compiled: bool = field(default_factory=lambda: _COMPILED[0])
+    #: reference path (:mod:`fieldbank.fitting.reference`).
+    compiled: bool = field(default_factory=lambda: not reference.active())
     _consts: dict[str, np.ndarray] | None = field(default=None, init=False, repr=False)
 
     # --- construction ---------------------------------------------------------------------
@@ -267,7 +253,7 @@ class FitProblem:
         pdb = (g * (sig - sp * 2.0 * d / (ell * ell)))[self.row_pt]
         return self.cf * pb + self.cl * pdb
 
-    def _kk(self, q_rest: FloatArray) -> FloatArray:
+    def kk(self, q_rest: FloatArray) -> FloatArray:
         """λ_rest/λ_max per group at the rest posture ``q_rest``, (6,)."""
         arm = self.arm
         lam_max = arm.lam_rest + self.corner_max - q_rest @ arm.jl.T
@@ -278,35 +264,17 @@ class FitProblem:
             out = np.empty((self.row_pt.size, 6))
             self._reflex_into(beta, q_rest, out, 0)
             return out
-        return self._reflex_basis_reference(beta, q_rest)
+        return reference.reflex_basis(self, beta, q_rest)
 
     def _reflex_into(self, beta: FloatArray, q_rest: FloatArray, out: FloatArray,
                      col0: int) -> None:
         """The compiled reflex columns for ``beta`` into ``out[:, col0:col0 + 6]``."""
         k = self.consts()
-        kk = k["kk"] if not self.space.fit_q_rest else self._kk(q_rest)
+        kk = k["kk"] if not self.space.fit_q_rest else self.kk(q_rest)
         reflex_columns = kernels.load()["reflex_columns"]
         reflex_columns(np.ascontiguousarray(beta, dtype=float), kk, self.lam_above_min,
                        k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl, self.cd, out,
                        col0)
-
-    def _reflex_basis_reference(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
-        """The reflex columns in numpy (the reference the compiled kernel is held to)."""
-        arm = self.arm
-        kk = self._kk(q_rest)
-        u = beta * self.c
-        ell = arm.excursion
-        gam = self.lam_above_min / ell - kk * (1.0 - u)
-        e = np.exp(-gam * gam)
-        h = u * gam * e
-        one = 1.0 - 2.0 * gam * gam
-        dh_dlam = u * e * one / ell
-        dh_du = gam * e + u * e * one * kk
-        on = (h > 0) | ((h == 0) & (dh_du > 0))
-        rf = np.where(h > 0, h, 0.0)[self.row_pt]
-        rl = np.where(on, dh_dlam, 0.0)[self.row_pt]
-        rd = np.where(on, dh_du * beta * self.dc, 0.0)[self.row_pt]
-        return self.cf * rf + self.cl * rl + self.cd * rd
 
     def consts(self) -> dict[str, np.ndarray]:
         """What the compiled kernels read that does not change during a fit (built once)."""
@@ -315,7 +283,7 @@ class FitProblem:
             free = s.fitted[:12]
             pw = s.prior_weight
             self._consts = {
-                "kk": self._kk(np.asarray(self.arm.q_rest, dtype=float)),
+                "kk": self.kk(np.asarray(self.arm.q_rest, dtype=float)),
                 "ell": np.ascontiguousarray(self.arm.excursion, dtype=float),
                 "row_pt": np.ascontiguousarray(self.row_pt, dtype=np.int64),
                 "w": np.ascontiguousarray(1.0 / self.sd),
@@ -407,34 +375,7 @@ class FitProblem:
         if self.compiled:
             return self._project_compiled(theta_nl, x)
         self.n_evals += 1
-        s = self.space
-        lin, beta, q_rest, slack = self.split(theta_nl)
-        if x is None:
-            x = self.design(beta, q_rest, slack)
-        free = s.fitted[:12]
-        w = self.w
-        lin = lin.copy()
-        rhs = (self.y - x[:, ~free] @ lin[~free]) * w
-        a = x[:, free] * w[:, None]
-        if free.any():
-            pw = s.prior_weight
-            mu = s.prior_mean[:12][free]
-            sdp = s.prior_sd[:12][free]
-            lo = s.lower[:12][free]
-            hi = s.upper[:12][free]
-            gram = a.T @ a + np.diag(pw / sdp**2)
-            rhs_n = a.T @ rhs + pw * mu / sdp**2
-            sol: FloatArray | None
-            try:
-                sol = np.linalg.solve(gram, rhs_n)
-            except np.linalg.LinAlgError:
-                sol = None
-            if sol is None or np.any(sol < lo) or np.any(sol > hi):
-                sol = _bounded_solve(a, rhs, pw, mu, sdp, lo, hi)
-            lin[free] = sol
-        theta = theta_nl.copy()
-        theta[:12] = lin
-        r = rhs - a @ lin[free] if free.any() else rhs
+        theta, r = reference.project(self, theta_nl, x)
         return Projection(float(r @ r) + self.prior_cost(theta), theta, r)
 
     def _project_compiled(self, theta_nl: FloatArray, x: FloatArray | None) -> Projection:
@@ -468,7 +409,7 @@ class FitProblem:
             ok = kern["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin, pw,
                                       k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r)
         if not ok:
-            sol = _bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
+            sol = reference.bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
             lin[free] = sol
             r = rhs - a @ sol
         return Projection(float(r @ r) + self.prior_cost(theta), theta, r)
@@ -577,20 +518,3 @@ class FitProblem:
         jac[:, ~self.space.fitted] = 0.0
         return jac
 
-
-def _bounded_solve(a: FloatArray, rhs: FloatArray, pw: float, mu: FloatArray, sdp: FloatArray,
-                   lo: FloatArray, hi: FloatArray) -> FloatArray:
-    """The projection's linear least squares with the prior, inside [lo, hi]."""
-    sq = np.sqrt(pw) / sdp
-    aa = np.vstack([a, np.diag(sq)])
-    bb = np.concatenate([rhs, sq * mu])
-    # Lower bounds are what binds (α >= 0 of quiet groups): NNLS on x - lo is ~15x
-    # faster than BVLS and solves the same strictly convex problem; BVLS only when
-    # an upper bound binds as well.
-    from scipy.optimize import lsq_linear, nnls  # heavy: where it solves
-
-    shifted, _ = nnls(aa, bb - aa @ lo)
-    sol = np.asarray(shifted + lo, dtype=float)
-    if np.any(sol > hi):
-        sol = np.asarray(lsq_linear(aa, bb, bounds=(lo, hi), method="bvls").x, dtype=float)
-    return sol
