@@ -43,6 +43,7 @@ Evaluation: the reflex columns, the projection and the gradient over β run as c
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -89,6 +90,9 @@ def map_sd(m: FieldMap) -> FloatArray:
     rms = float(np.sqrt(np.mean(values**2))) or 1.0
     return np.asarray(np.maximum(sd, SD_FLOOR_FRACTION * rms), dtype=float)
 
+
+#: No fixed block of the Gram matrix (:func:`fieldbank.fitting.kernels.solve_normal`).
+_NO_GRAM = np.zeros((0, 0))
 
 #: Central-difference steps of the search's gradient (β, dimensionless; q_rest, rad; slack, m).
 _H_BETA = 1e-6
@@ -141,7 +145,7 @@ class FitProblem:
     #: Evaluate with the compiled kernels (:mod:`fieldbank.fitting.kernels`); False: the numpy
     #: reference path (:mod:`fieldbank.fitting.reference`).
     compiled: bool = field(default_factory=lambda: not reference.active())
-    _consts: dict[str, np.ndarray] | None = field(default=None, init=False, repr=False)
+    _consts: dict[str, Any] | None = field(default=None, init=False, repr=False)
 
     # --- construction ---------------------------------------------------------------------
     @classmethod
@@ -273,17 +277,29 @@ class FitProblem:
         kk = k["kk"] if not self.space.fit_q_rest else self.kk(q_rest)
         reflex_columns = kernels.load()["reflex_columns"]
         reflex_columns(np.ascontiguousarray(beta, dtype=float), kk, self.lam_above_min,
-                       k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl, self.cd, out,
-                       col0)
+                       k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl, self.cd,
+                       k["still"], k["gam0"], k["e0"], out, col0)
 
-    def consts(self) -> dict[str, np.ndarray]:
-        """What the compiled kernels read that does not change during a fit (built once)."""
+    def consts(self) -> dict[str, Any]:
+        """What the compiled kernels read that does not change during a fit (built once):
+        among it, what the reflex columns do not recompute where a muscle does not lengthen
+        (:func:`fieldbank.fitting.kernels.still_terms`; nothing when q_rest is fitted)."""
         if self._consts is None:
             s = self.space
             free = s.fitted[:12]
             pw = s.prior_weight
+            kk = self.kk(np.asarray(self.arm.q_rest, dtype=float))
+            still = np.zeros(self.c.shape, dtype=np.bool_)
+            gam0 = np.zeros(self.c.shape)
+            e0 = np.zeros(self.c.shape)
+            if not s.fit_q_rest:
+                kernels.load()["still_terms"](kk, self.lam_above_min,
+                                              np.ascontiguousarray(self.arm.excursion,
+                                                                   dtype=float),
+                                              self.c, still, gam0, e0)
             self._consts = {
-                "kk": self.kk(np.asarray(self.arm.q_rest, dtype=float)),
+                "still": still, "gam0": gam0, "e0": e0,
+                "kk": kk,
                 "ell": np.ascontiguousarray(self.arm.excursion, dtype=float),
                 "row_pt": np.ascontiguousarray(self.row_pt, dtype=np.int64),
                 "w": np.ascontiguousarray(1.0 / self.sd),
@@ -297,8 +313,33 @@ class FitProblem:
                 "beta_fitted": np.array([i - 12 for i in range(12, 18) if s.fitted[i]],
                                         dtype=np.int64),
                 "pw": np.array(pw),
+                "b_lo": np.ascontiguousarray(s.lower[12:18]),
+                "b_hi": np.ascontiguousarray(s.upper[12:18]),
             }
         return self._consts
+
+    def _beta_args(self) -> tuple[Any, ...]:
+        """The arguments of the compiled evaluation over β alone besides β, the solved
+        vector and the buffers (:func:`fieldbank.fitting.kernels.project_reflex`), built once:
+        the fixed passive columns and the Gram matrix among the free ones
+        (:func:`fieldbank.fitting.kernels.passive_gram`)."""
+        k = self.consts()
+        args = k.get("beta_args")
+        if args is None:
+            if self._xkm_cache is None:
+                self._xkm_cache = self._passive_basis(
+                    np.asarray(self.arm.q_rest, dtype=float), self.base_slack)
+            xkm = np.ascontiguousarray(self._xkm_cache, dtype=float)
+            free = k["free"]
+            n_fixed = int(np.count_nonzero(free < 6))
+            gram0 = np.zeros((free.size, free.size))
+            kernels.load()["passive_gram"](xkm, k["w"], free, n_fixed, gram0)
+            args = ((k["kk"], self.lam_above_min, k["ell"], self.c, self.dc, k["row_pt"],
+                     self.cf, self.cl, self.cd, k["still"], k["gam0"], k["e0"], xkm, k["y"],
+                     k["w"], free),
+                    (float(k["pw"]), k["mu"], k["sdp"], k["lo"], k["hi"]), (gram0, n_fixed))
+            k["beta_args"] = args
+        return args
 
     def design(self, beta: FloatArray, q_rest: FloatArray,
                slack: FloatArray | None = None) -> FloatArray:
@@ -395,19 +436,15 @@ class FitProblem:
         pw = float(k["pw"])
         if x is None and not (s.fit_q_rest or s.fit_slack):
             # only β varies: the design and the solve in one compiled call
-            if self._xkm_cache is None:
-                self._xkm_cache = self._passive_basis(
-                    np.asarray(self.arm.q_rest, dtype=float), self.base_slack)
-            ok = kern["project_reflex"](theta[12:18], k["kk"], self.lam_above_min, k["ell"], self.c,
-                                self.dc, k["row_pt"], self.cf, self.cl, self.cd,
-                                self._xkm_cache, k["y"], k["w"], free, lin, pw, k["mu"],
-                                k["sdp"], k["lo"], k["hi"], a, rhs, r)
+            head, prior, fixed = self._beta_args()
+            ok = kern["project_reflex"](theta[12:18], *head, lin, *prior, a, rhs, r, *fixed)
         else:
             if x is None:
                 _, beta, q_rest, slack = self.split(theta)
                 x = self.design(beta, q_rest, slack)
             ok = kern["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin, pw,
-                                      k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r)
+                                      k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r,
+                                      _NO_GRAM, 0)
         if not ok:
             sol = reference.bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
             lin[free] = sol
@@ -486,19 +523,35 @@ class FitProblem:
 
     def _projected_cost_grad_compiled(self, phi: FloatArray
                                       ) -> tuple[float, FloatArray, Projection]:
-        """:meth:`projected_cost_grad` over β alone, the derivative columns compiled
-        (:func:`fieldbank.fitting.kernels.reflex_gradient`)."""
+        """:meth:`projected_cost_grad` over β alone: the projection and the derivative
+        columns in one compiled call (:func:`fieldbank.fitting.kernels.project_reflex_grad`),
+        the bounded fallback as :meth:`project`'s."""
         k = self.consts()
-        pr = self.project(self.full_from_nonlinear(phi))
         s = self.space
-        th = pr.theta
+        theta = s.base.copy()
+        theta[k["nl"]] = phi
         fitted = k["beta_fitted"]
         grad = np.empty(fitted.size)
-        reflex_gradient = kernels.load()["reflex_gradient"]
-        reflex_gradient(np.ascontiguousarray(th[12:18]), s.lower[12:18], s.upper[12:18],
-                        _H_BETA, k["kk"], self.lam_above_min, k["ell"], self.c, self.dc,
-                        k["row_pt"], self.cf, self.cl, self.cd, np.ascontiguousarray(th[6:12]),
-                        pr.r, k["w"], fitted, grad)
+        head, prior, fixed = self._beta_args()
+        m = self.row_pt.size
+        r = np.empty(m)
+        a = np.empty((m, k["free"].size))
+        rhs = np.empty(m)
+        self.n_evals += 1
+        if kernels.load()["project_reflex_grad"](
+                theta[12:18], *head, theta[:12], *prior, a, rhs, r, *fixed, k["b_lo"],
+                k["b_hi"], _H_BETA, fitted, grad):
+            pr = Projection(float(r @ r) + self.prior_cost(theta), theta, r)
+        else:
+            self.n_evals -= 1  # the projection below counts it
+            pr = self.project(theta)
+            th = pr.theta
+            kernels.load()["reflex_gradient"](
+                np.ascontiguousarray(th[12:18]), k["b_lo"], k["b_hi"], _H_BETA, k["kk"],
+                self.lam_above_min, k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl,
+                self.cd, k["still"], k["gam0"], k["e0"], np.ascontiguousarray(th[6:12]), pr.r,
+                k["w"], fitted, grad)
+        th = pr.theta
         idx = fitted + 12
         grad += 2.0 * s.prior_weight * (th[idx] - s.prior_mean[idx]) / s.prior_sd[idx] ** 2
         return pr.cost, grad, pr
