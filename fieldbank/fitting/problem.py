@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from fieldbank.fitting import kernels, reference
+from fieldbank.fitting.betapath import H_BETA, BetaPath
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.maps import FieldMap
 from fieldbank.model import Arm, FloatArray
@@ -94,8 +95,7 @@ def map_sd(m: FieldMap) -> FloatArray:
 #: No fixed block of the Gram matrix (:func:`fieldbank.fitting.kernels.solve_normal`).
 _NO_GRAM = np.zeros((0, 0))
 
-#: Central-difference steps of the search's gradient (β, dimensionless; q_rest, rad; slack, m).
-_H_BETA = 1e-6
+#: Central-difference steps of the search's gradient (q_rest, rad; slack, m; β: H_BETA).
 _H_Q = 1e-6
 _H_SLACK = 1e-7
 
@@ -146,6 +146,7 @@ class FitProblem:
     #: reference path (:mod:`fieldbank.fitting.reference`).
     compiled: bool = field(default_factory=lambda: not reference.active())
     _consts: dict[str, Any] | None = field(default=None, init=False, repr=False)
+    _beta: BetaPath | None = field(default=None, init=False, repr=False)
 
     # --- construction ---------------------------------------------------------------------
     @classmethod
@@ -318,28 +319,19 @@ class FitProblem:
             }
         return self._consts
 
-    def _beta_args(self) -> tuple[Any, ...]:
-        """The arguments of the compiled evaluation over β alone besides β, the solved
-        vector and the buffers (:func:`fieldbank.fitting.kernels.project_reflex`), built once:
-        the fixed passive columns and the Gram matrix among the free ones
-        (:func:`fieldbank.fitting.kernels.passive_gram`)."""
-        k = self.consts()
-        args = k.get("beta_args")
-        if args is None:
-            if self._xkm_cache is None:
-                self._xkm_cache = self._passive_basis(
-                    np.asarray(self.arm.q_rest, dtype=float), self.base_slack)
-            xkm = np.ascontiguousarray(self._xkm_cache, dtype=float)
-            free = k["free"]
-            n_fixed = int(np.count_nonzero(free < 6))
-            gram0 = np.zeros((free.size, free.size))
-            kernels.load()["passive_gram"](xkm, k["w"], free, n_fixed, gram0)
-            args = ((k["kk"], self.lam_above_min, k["ell"], self.c, self.dc, k["row_pt"],
-                     self.cf, self.cl, self.cd, k["still"], k["gam0"], k["e0"], xkm, k["y"],
-                     k["w"], free),
-                    (float(k["pw"]), k["mu"], k["sdp"], k["lo"], k["hi"]), (gram0, n_fixed))
-            k["beta_args"] = args
-        return args
+    def passive_columns(self) -> FloatArray:
+        """The passive (Km) columns of the design matrix at the base model's rest posture and
+        slack offsets, (M, 6): fixed during a fit over β alone (computed once)."""
+        if self._xkm_cache is None:
+            self._xkm_cache = self._passive_basis(np.asarray(self.arm.q_rest, dtype=float),
+                                                  self.base_slack)
+        return self._xkm_cache
+
+    def _beta_path(self) -> BetaPath:
+        """The compiled evaluation over β alone with what stays fixed kept (built once)."""
+        if self._beta is None:
+            self._beta = BetaPath.of(self)
+        return self._beta
 
     def design(self, beta: FloatArray, q_rest: FloatArray,
                slack: FloatArray | None = None) -> FloatArray:
@@ -422,10 +414,12 @@ class FitProblem:
     def _project_compiled(self, theta_nl: FloatArray, x: FloatArray | None) -> Projection:
         """:meth:`project` with the design and the normal equations compiled
         (:func:`fieldbank.fitting.kernels.solve_normal`); the bounded fallback as before."""
-        kern = kernels.load()
-        self.n_evals += 1
-        k = self.consts()
         s = self.space
+        self.n_evals += 1
+        if x is None and not (s.fit_q_rest or s.fit_slack):
+            # only β varies: the design and the solve in one compiled call
+            return Projection(*self._beta_path().project(theta_nl))
+        k = self.consts()
         theta = np.array(theta_nl, dtype=float)
         lin = theta[:12]  # a view: the solve writes the fitted Km and α into theta
         free = k["free"]
@@ -434,17 +428,12 @@ class FitProblem:
         rhs = np.empty(m)
         r = np.empty(m)
         pw = float(k["pw"])
-        if x is None and not (s.fit_q_rest or s.fit_slack):
-            # only β varies: the design and the solve in one compiled call
-            head, prior, fixed = self._beta_args()
-            ok = kern["project_reflex"](theta[12:18], *head, lin, *prior, a, rhs, r, *fixed)
-        else:
-            if x is None:
-                _, beta, q_rest, slack = self.split(theta)
-                x = self.design(beta, q_rest, slack)
-            ok = kern["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin, pw,
-                                      k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r,
-                                      _NO_GRAM, 0)
+        if x is None:
+            _, beta, q_rest, slack = self.split(theta)
+            x = self.design(beta, q_rest, slack)
+        ok = kernels.load()["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin,
+                                            pw, k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r,
+                                            _NO_GRAM, 0)
         if not ok:
             sol = reference.bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
             lin[free] = sol
@@ -463,7 +452,7 @@ class FitProblem:
         """
         s = self.space
         _, beta, q_rest, slack = self.split(theta)
-        h_beta = _H_BETA if step is None else step
+        h_beta = H_BETA if step is None else step
         h_q = _H_Q if step is None else step
         h_d = _H_SLACK if step is None else 0.1 * step
         out: dict[int, FloatArray] = {}
@@ -524,37 +513,10 @@ class FitProblem:
     def _projected_cost_grad_compiled(self, phi: FloatArray
                                       ) -> tuple[float, FloatArray, Projection]:
         """:meth:`projected_cost_grad` over β alone: the projection and the derivative
-        columns in one compiled call (:func:`fieldbank.fitting.kernels.project_reflex_grad`),
-        the bounded fallback as :meth:`project`'s."""
-        k = self.consts()
-        s = self.space
-        theta = s.base.copy()
-        theta[k["nl"]] = phi
-        fitted = k["beta_fitted"]
-        grad = np.empty(fitted.size)
-        head, prior, fixed = self._beta_args()
-        m = self.row_pt.size
-        r = np.empty(m)
-        a = np.empty((m, k["free"].size))
-        rhs = np.empty(m)
+        columns in one compiled call (:meth:`BetaPath.cost_grad`)."""
         self.n_evals += 1
-        if kernels.load()["project_reflex_grad"](
-                theta[12:18], *head, theta[:12], *prior, a, rhs, r, *fixed, k["b_lo"],
-                k["b_hi"], _H_BETA, fitted, grad):
-            pr = Projection(float(r @ r) + self.prior_cost(theta), theta, r)
-        else:
-            self.n_evals -= 1  # the projection below counts it
-            pr = self.project(theta)
-            th = pr.theta
-            kernels.load()["reflex_gradient"](
-                np.ascontiguousarray(th[12:18]), k["b_lo"], k["b_hi"], _H_BETA, k["kk"],
-                self.lam_above_min, k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl,
-                self.cd, k["still"], k["gam0"], k["e0"], np.ascontiguousarray(th[6:12]), pr.r,
-                k["w"], fitted, grad)
-        th = pr.theta
-        idx = fitted + 12
-        grad += 2.0 * s.prior_weight * (th[idx] - s.prior_mean[idx]) / s.prior_sd[idx] ** 2
-        return pr.cost, grad, pr
+        cost, theta, r, grad = self._beta_path().cost_grad(phi)
+        return cost, grad, Projection(cost, theta, r)
 
     def jacobian(self, theta: FloatArray, step: float | None = None) -> FloatArray:
         """∂r/∂θ of the whitened data residuals, shape (M, P) (zero columns where not fitted).
