@@ -132,7 +132,7 @@ class ArmBatch:
             a = own[None, :] if given is None else np.asarray(given, dtype=float)
             if a.ndim != 2 or a.shape[1] != own.size or a.shape[0] not in (1, size):
                 raise ParameterError(f"ArmBatch: {name} must have shape ({size}, {own.size}); "
-                                     f"got {np.shape(given)}.")
+                                     f"got {a.shape}.")
             if given is not None:
                 _check_bounds(name, a)
             arrays[name] = np.broadcast_to(a, (size, own.size))

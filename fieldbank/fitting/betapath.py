@@ -23,15 +23,31 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from fieldbank.fitting import kernels, reference
+from fieldbank.fitting import kernels
+from fieldbank.fitting.reference import bounded_solve
+from fieldbank.fitting.space import ParamSpace
 from fieldbank.model import FloatArray
 
-if TYPE_CHECKING:
-    from fieldbank.fitting.problem import FitProblem
+
+class FitProblem(Protocol):
+    """What :meth:`BetaPath.of` reads of a :class:`fieldbank.fitting.problem.FitProblem`."""
+
+    space: ParamSpace
+    row_pt: np.ndarray
+    cf: FloatArray
+    cl: FloatArray
+    cd: FloatArray
+    lam_above_min: FloatArray
+    c: FloatArray
+    dc: FloatArray
+
+    def consts(self) -> dict[str, Any]: ...
+
+    def passive_columns(self) -> FloatArray: ...
 
 #: Central-difference step of the gradient over β (as :meth:`FitProblem.design_derivatives`).
 H_BETA = 1e-6
@@ -100,7 +116,7 @@ class BetaPath:
         """The bounded solve where the compiled one gave up: the Km and α into ``theta``,
         the residuals returned."""
         pw, mu, sdp, lo, hi = self.prior
-        sol = reference.bounded_solve(a, rhs, pw, mu, sdp, lo, hi)
+        sol = bounded_solve(a, rhs, pw, mu, sdp, lo, hi)
         theta[self.head[-1]] = sol
         return np.asarray(rhs - a @ sol, dtype=float)
 

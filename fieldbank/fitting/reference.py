@@ -20,14 +20,38 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
-from fieldbank.model import FloatArray
+from fieldbank.fitting.space import ParamSpace
+from fieldbank.model import Arm, FloatArray
 
-if TYPE_CHECKING:
-    from fieldbank.fitting.problem import FitProblem
+
+class FitProblem(Protocol):
+    """What the reference reads of a :class:`fieldbank.fitting.problem.FitProblem`."""
+
+    arm: Arm
+    space: ParamSpace
+    y: FloatArray
+    row_pt: np.ndarray
+    cf: FloatArray
+    cl: FloatArray
+    cd: FloatArray
+    lam_above_min: FloatArray
+    c: FloatArray
+    dc: FloatArray
+
+    @property
+    def w(self) -> FloatArray: ...
+
+    def kk(self, q_rest: FloatArray) -> FloatArray: ...
+
+    def split(self, theta: FloatArray
+              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]: ...
+
+    def design(self, beta: FloatArray, q_rest: FloatArray,
+               slack: FloatArray | None = None) -> FloatArray: ...
 
 #: Whether problems built now evaluate on this path (:func:`reference_kernels`).
 _ACTIVE = [False]
