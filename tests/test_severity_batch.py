@@ -100,7 +100,7 @@ def test_batch_scores_with_the_rest_posture_per_set() -> None:
     arm = Arm.from_params(centre)
     arrays = _random_sets(centre, 12, seed=5, q_rest=True)
     batch = ArmBatch.from_arrays(arm, 12, **arrays)
-    assert not batch.same_lengths
+    assert not batch.muscles.same_lengths
     got = scores(batch, unimpaired_reference(arm))
     want = _one_by_one(arm, _as_params(centre, arrays))
     for key, w in want.items():
