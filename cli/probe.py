@@ -365,8 +365,10 @@ def _open_text(cl: OpenClassification) -> str:
     answer, p = cl.answer
     said = ("none of the candidates explains the recording" if answer == NONE_OF_THEM else
             "no group impaired" if answer == "unimpaired" else f"impaired: {answer}")
-    lines = [f"{said}  (p = {p:.2f})",
-             f"  {'group':<28} {'impaired':>8}   " + "  ".join(f"{k:>10}" for k in
+    lines = ["stated (per group, or partner groups the recording cannot tell apart):"]
+    lines += [f"  p = {s.probability:.2f}  {s.text}" for s in cl.statements()]
+    lines += [f"most probable set of groups: {said}  (p = {p:.2f})",
+              f"  {'group':<28} {'impaired':>8}   " + "  ".join(f"{k:>10}" for k in
                                                              ("spasticity", "stiffness",
                                                               "both", "contracture"))]
     for g, kinds in cl.group_kinds().items():
