@@ -110,6 +110,8 @@ def table(results: dict[tuple[str, float], list[Outcome]], sd: float, cal: Calib
     print("|---|---:|---:|---:|---:|---|" + ("---|" if baseline else ""))
     for family in FAMILIES:
         out = [o.restated(cal) for o in results.get((family, sd), [])]
+        if not out:
+            continue
         ps, rs = [o.probability for o in out], [o.right for o in out]
         line = (f"| {family} | {len(out)} | {100 * np.mean(rs):.0f}% | {_ece(ps, rs)} | "
                 f"{_sure(ps, rs)} | {_cells(reliability_bins(ps, rs))} |")

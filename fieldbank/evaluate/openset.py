@@ -186,7 +186,7 @@ class Calibration:
 
 #: The smallest fit-test p-value the misfit reads (12 decades: beyond it, misfit enough).
 MISFIT_FLOOR = 1e-12
-CALIBRATION_BOUNDS = {"power": Interval(0.0, 2.0, "", low_closed=False),
+CALIBRATION_BOUNDS = {"power": Interval(0.0, 4.0, "", low_closed=False),
                       "other": Interval(0.0, 1.0, "", high_closed=False),
                       "misfit_level": Interval(FIT_LEVEL, 0.5, ""),
                       "misfit_slope": Interval(0.0, 10.0, "")}

@@ -222,7 +222,7 @@ class Outcome:
 #: The calibrations :func:`fit_calibration` tries: the posterior's power, how fast it falls
 #: with the best arm's misfit, the share for an arm outside the set, the fit test's p-value
 #: below which the residual adds to that share.
-POWERS = tuple(round(0.1 * k, 1) for k in range(1, 21))
+POWERS = tuple(round(0.1 * k, 1) for k in range(1, 31))
 MISFIT_SLOPES = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
 OTHERS = tuple(round(0.02 * k, 2) for k in range(0, 21))
 MISFIT_LEVELS = (FIT_LEVEL, 0.003, 0.01, 0.03, 0.1)
