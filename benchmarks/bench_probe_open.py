@@ -145,10 +145,10 @@ def main() -> None:
                     help="leave out the joint-group classifier")
     ap.add_argument("--save", type=Path, help="write the trials' outcomes here (JSON)")
     ap.add_argument("--load", type=Path, help="print the tables of outcomes saved before")
-    ap.add_argument("--calibration", type=float, nargs=4,
-                    metavar=("POWER", "SLOPE", "OTHER", "LEVEL"),
+    ap.add_argument("--calibration", type=float, nargs=5,
+                    metavar=("POWER", "SLOPE", "UNSEEN", "OTHER", "LEVEL"),
                     help="state with this calibration instead of the classifier's own "
-                         "(power, misfit slope, share for none, misfit level)")
+                         "(power, misfit slope, unseen share, share for none, misfit level)")
     args = ap.parse_args()
     baseline = not args.no_baseline
     results: dict[tuple[str, float], list[Outcome]] = {}
@@ -186,13 +186,15 @@ def main() -> None:
               f"wall, {cpu:.0f} s CPU ({cpu / n_trials:.2f} s a trial) on {args.jobs} "
               f"processes; {load_line()}")
     stated = CALIBRATED if args.calibration is None else Calibration(
-        power=args.calibration[0], misfit_slope=args.calibration[1], other=args.calibration[2],
-        misfit_level=args.calibration[3])
+        power=args.calibration[0], misfit_slope=args.calibration[1],
+        unseen=args.calibration[2], other=args.calibration[3],
+        misfit_level=args.calibration[4])
     for sd in noise:
         for what, cal in (("raw: the posterior as the likelihood and prior give it", RAW),
                           (f"stated: calibrated (power {stated.power:g}, misfit slope "
-                           f"{stated.misfit_slope:g}, other {stated.other:g}, misfit level "
-                           f"{stated.misfit_level:g})", stated)):
+                           f"{stated.misfit_slope:g}, unseen {stated.unseen:g}, other "
+                           f"{stated.other:g}, misfit level {stated.misfit_level:g})",
+                           stated)):
             print(f"\n### force noise {sd:g} N per axis (τ 50 ms) - {what}\n")
             table(results, sd, cal, baseline)
 

@@ -86,7 +86,8 @@ def main() -> None:
     cal, score = fit_calibration(out)
     print(f"tune_open_calibration: {len(out)} trials ({', '.join(tuned)}; {source}), "
           f"{time.perf_counter() - t0:.0f} s wall; {load_line()}")
-    print(f"fitted: power {cal.power:g}, misfit slope {cal.misfit_slope:g}, other "
+    print(f"fitted: power {cal.power:g}, misfit slope {cal.misfit_slope:g}, unseen "
+          f"{cal.unseen:g}, other "
           f"{cal.other:g}, misfit level {cal.misfit_level:g}; mean log probability stated "
           f"for a group's truth {score:.4f}")
     for family in tuned:

@@ -244,6 +244,15 @@ def test_the_power_and_the_shares_on_numbers_worked_by_hand() -> None:
     assert c.any_impaired(("ef", "sf")) == pytest.approx(0.4046, abs=1e-4)
     with pytest.raises(ParameterError, match="'misfit_slope'"):
         Calibration(misfit_slope=-1.0)
+    # each group's share of an impairment the recording does not show, 0.1: ef held at
+    # 0.4046 → 1 − 0.5954 × 0.9 = 0.4641; ef or bf held at 0.8093 → 1 − 0.1907 × 0.81
+    c = _stated(("ef", "bf", "unimpaired"), (0.45, 0.45, 0.1), 0.1,
+                Calibration(power=1.0, misfit_slope=1.0, unseen=0.1))
+    assert c.group_probability["ef"] == pytest.approx(0.4641, abs=1e-4)
+    assert c.group_probability["sf"] == pytest.approx(0.1)
+    assert c.any_impaired(("ef", "bf")) == pytest.approx(1 - 0.1907 * 0.81, abs=1e-4)
+    with pytest.raises(ParameterError, match="'unseen'"):
+        Calibration(unseen=0.5)
 
 
 def test_partner_groups_the_recording_cannot_separate_are_stated_as_a_set() -> None:

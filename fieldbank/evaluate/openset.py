@@ -172,6 +172,11 @@ class Calibration:
     #: a partner group compensating), as below the fit test's own level.
     misfit_level: float = FIT_LEVEL
     misfit_slope: float = 0.0
+    #: Each group's probability of an impairment the recording does not show, whatever the
+    #: posterior says (a reflex raised by α or β alone, off the scale's path, changes a 2 N
+    #: recording by tenths of a newton yet is felt on the group's own stretch): "not impaired"
+    #: is stated with at most 1 − unseen.
+    unseen: float = 0.0
 
     def __post_init__(self) -> None:
         check_fields(self, CALIBRATION_BOUNDS, what="open-set calibration")
@@ -189,7 +194,8 @@ MISFIT_FLOOR = 1e-12
 CALIBRATION_BOUNDS = {"power": Interval(0.0, 4.0, "", low_closed=False),
                       "other": Interval(0.0, 1.0, "", high_closed=False),
                       "misfit_level": Interval(FIT_LEVEL, 0.5, ""),
-                      "misfit_slope": Interval(0.0, 10.0, "")}
+                      "misfit_slope": Interval(0.0, 10.0, ""),
+                      "unseen": Interval(0.0, 0.5, "", high_closed=False)}
 #: No calibration: the posterior as the likelihood and the prior give it.
 RAW = Calibration()
 #: The calibration the classifier states its answers with: fitted by
@@ -251,10 +257,13 @@ class OpenClassification:
 
     def any_impaired(self, groups: Sequence[str]) -> float:
         """The stated probability that at least one of ``groups`` is impaired, should the arm
-        be one of the set: the share of every label holding one of them."""
+        be one of the set: the share of every label holding one of them, and beside it each
+        group's share :attr:`Calibration.unseen` of an impairment the recording does not
+        show."""
         want = set(groups)
-        return float(sum(v for lab, v in zip(self.labels, self.label_share, strict=True)
+        held = float(sum(v for lab, v in zip(self.labels, self.label_share, strict=True)
                          if want & set(lab.split("+"))))
+        return 1.0 - (1.0 - held) * (1.0 - self.calibration.unseen) ** len(want)
 
     @property
     def group_probability(self) -> dict[str, float]:

@@ -55,7 +55,7 @@ from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import LEVELS, ratio_of_score, synthesize_ratios
 from fieldbank.evaluate.severity import classify as grade
 from fieldbank.evaluate.statements import Statement, state
-from fieldbank.model import Arm
+from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS, JOINT_GROUPS, ArmParams
 
 FAMILIES: tuple[str, ...] = ("between severities", "two groups", "reflex only",
@@ -236,20 +236,36 @@ def truth_groups(truth: str) -> frozenset[str]:
     return frozenset() if truth == "unimpaired" else frozenset(truth.split("+"))
 
 
-def _group_log_score(outcomes: Sequence[Outcome], power: float, slope: float) -> float:
+UNSEEN = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08)
+
+
+def _group_log_score(tables: Sequence[tuple[FloatArray, np.ndarray, np.ndarray, float]],
+                     power: float, slope: float, unseen: float) -> float:
     """Mean log probability stated for each group's truth (impaired or not), over every group
-    of every outcome, at the power ``power / (1 + slope · m)``."""
-    total = 0.0
+    of every outcome (``tables``: :func:`_group_tables`), at the power
+    ``power / (1 + slope · m)`` and the share ``unseen``."""
+    total, n = 0.0, 0
+    cal = Calibration(power, 0.0, FIT_LEVEL, slope)
+    for logp, held, truth, fit_p in tables:
+        q = np.exp(cal.power_at(fit_p) * logp)
+        pg = np.clip(q @ held / q.sum(), 0.0, 1.0)
+        pg = 1.0 - (1.0 - pg) * (1.0 - unseen)
+        total += float(np.log(np.maximum(np.where(truth, pg, 1.0 - pg), LOG_FLOOR)).sum())
+        n += len(truth)
+    return total / max(n, 1)
+
+
+def _group_tables(outcomes: Sequence[Outcome]
+                  ) -> list[tuple[FloatArray, np.ndarray, np.ndarray, float]]:
+    """Per outcome: the log posterior of each label (its most probable at 0), which groups
+    each label holds, which groups the truth holds, the fit test's p-value."""
+    out = []
     for o in outcomes:
         logp = np.log(np.maximum(np.asarray(o.label_probability, dtype=float), 1e-300))
-        a = Calibration(power, 0.0, FIT_LEVEL, slope).power_at(o.fit_p_value)
-        q = np.exp(a * (logp - logp.max()))
-        q /= q.sum()
-        held = np.array([[g in lab.split("+") for g in GROUPS] for lab in o.labels])
-        pg = np.clip(q @ held, 0.0, 1.0)
+        held = np.array([[g in lab.split("+") for g in GROUPS] for lab in o.labels], float)
         truth = np.array([g in truth_groups(o.truth) for g in GROUPS])
-        total += float(np.log(np.maximum(np.where(truth, pg, 1.0 - pg), LOG_FLOOR)).sum())
-    return total / max(len(outcomes) * len(GROUPS), 1)
+        out.append((logp - logp.max(), held, truth, o.fit_p_value))
+    return out
 
 
 def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
@@ -257,26 +273,29 @@ def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
     by a proper score (the mean log probability stated for the truth, each floored at
     :data:`LOG_FLOOR`), with that score for the groups:
 
-    * the power and its fall with the misfit (:data:`POWERS` × :data:`MISFIT_SLOPES`) by what
-      is stated per group - each group impaired or not, over every group of every outcome;
+    * the power, its fall with the misfit and each group's share of an impairment the
+      recording does not show (:data:`POWERS` × :data:`MISFIT_SLOPES` × :data:`UNSEEN`) by
+      what is stated per group - each group impaired or not, over every group of every
+      outcome;
     * the share for an arm outside the set and the misfit level (:data:`OTHERS` ×
       :data:`MISFIT_LEVELS`) by the statement that none of the candidates explains the
       recording, right for an arm outside the candidates and wrong for every other."""
-    power, slope, score = 1.0, 0.0, -math.inf
-    for a, b in itertools.product(POWERS, MISFIT_SLOPES):
-        s = _group_log_score(outcomes, a, b)
+    tables = _group_tables(outcomes)
+    power, slope, unseen, score = 1.0, 0.0, 0.0, -math.inf
+    for a, b, u in itertools.product(POWERS, MISFIT_SLOPES, UNSEEN):
+        s = _group_log_score(tables, a, b, u)
         if s > score:
-            power, slope, score = a, b, s
+            power, slope, unseen, score = a, b, u, s
     other, level, best = 0.0, FIT_LEVEL, -math.inf
     for o_share, lv in itertools.product(OTHERS, MISFIT_LEVELS):
-        cal = Calibration(power, o_share, lv, slope)
+        cal = Calibration(power, o_share, lv, slope, unseen)
         s = 0.0
         for o in outcomes:
             q = o.classification(cal).other_probability
             s += math.log(max(q if o.family == OUTSIDE else 1.0 - q, LOG_FLOOR))
         if s > best:
             other, level, best = o_share, lv, s
-    return Calibration(power, other, level, slope), score
+    return Calibration(power, other, level, slope, unseen), score
 
 
 def stated_claims(outcomes: Sequence[Outcome], calibration: Calibration
@@ -418,7 +437,27 @@ def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[i
     return sum(not o.right for o in sure), len(sure)
 
 
-__all__ = ["BINS", "FAMILIES", "LOG_FLOOR", "MISFIT_LEVELS", "MISFIT_SLOPES", "OTHERS",
-           "OUTSIDE", "POWERS", "Outcome", "ReliabilityBin", "TrialArm", "calibration_error",
-           "ece_noise_floor", "family_arms", "fit_calibration", "reliability_bins",
-           "run_trials", "stated_claims", "truth_groups", "truth_label", "wrong_when_sure"]
+__all__ = [
+    "BINS",
+    "FAMILIES",
+    "LOG_FLOOR",
+    "MISFIT_LEVELS",
+    "MISFIT_SLOPES",
+    "OTHERS",
+    "OUTSIDE",
+    "POWERS",
+    "UNSEEN",
+    "Outcome",
+    "ReliabilityBin",
+    "TrialArm",
+    "calibration_error",
+    "ece_noise_floor",
+    "family_arms",
+    "fit_calibration",
+    "reliability_bins",
+    "run_trials",
+    "stated_claims",
+    "truth_groups",
+    "truth_label",
+    "wrong_when_sure",
+]
