@@ -199,10 +199,12 @@ CALIBRATION_BOUNDS = {"power": Interval(0.0, 4.0, "", low_closed=False),
 #: No calibration: the posterior as the likelihood and the prior give it.
 RAW = Calibration()
 #: The calibration the classifier states its answers with: fitted by
-#: ``benchmarks/tune_open_calibration.py`` (72 trials: between severities, two groups and
-#: outside the candidates at seed 7; mean log probability of the truth −0.686): the posterior
-#: tempered to the power 0.6, a fit test below p = 0.01 read as a residual beyond the model.
-CALIBRATED = Calibration(power=0.6, other=0.0, misfit_level=0.01)
+#: ``benchmarks/tune_open_calibration.py`` on 75 trials of every family at seed 7 (the
+#: benchmark's are seed 31; mean log probability stated for a group's truth −0.219): the
+#: posterior tempered to the power 0.5 - no fall with the misfit and no unseen share improved
+#: the score on these trials -, 8 % set aside for an arm outside the set, a fit test below
+#: p = 0.1 read as a residual beyond the model.
+CALIBRATED = Calibration(power=0.5, other=0.08, misfit_level=0.1)
 
 
 @dataclass(frozen=True, eq=False)
