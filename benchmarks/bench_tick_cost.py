@@ -193,6 +193,9 @@ class InstantPort:
     def send_force(self, fx_n: float, fy_n: float) -> None:
         pass
 
+    def heartbeat(self) -> None:
+        pass
+
     def arm(self) -> None:
         pass
 

@@ -69,28 +69,28 @@ def stretch_torques(batch: ArmBatch, joint: str, direction: str,
         raise ParameterError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
     if direction not in DIRECTION_SIGN:
         raise ParameterError(f"direction must be 'flexion' or 'extension'; got {direction!r}.")
-    geo = batch.geometry
+    geo, m = batch.geometry, batch.muscles
     j = JOINTS.index(joint)
     sign = DIRECTION_SIGN[direction]
     lo, hi = (geo.params.shoulder_range_rad, geo.params.elbow_range_rad)[j]
     angles = np.linspace(lo, hi, samples) if sign > 0 else np.linspace(hi, lo, samples)
     # the other joint at each set's rest posture (one posture when the sets share it)
-    q = np.repeat(batch.q_rest[:1 if batch.same_lengths else None, None, :], samples, axis=1)
+    q = np.repeat(m.q_rest[:1 if m.same_lengths else None, None, :], samples, axis=1)
     q[:, :, j] = angles
     if hold_rad is not None:
         q[:, :, 1 - j] = hold_rad
-    lam = batch.muscle_lengths(q[0] if batch.same_lengths else q)
+    lam = m.lengths(q[0] if m.same_lengths else q, geo.jl)
     lever = sign * geo.jl[:, j]
 
     def reflex(speed: float) -> FloatArray:
         qdot = np.zeros((samples, 2))
         qdot[:, j] = sign * speed
-        return np.asarray(batch.reflex_force(lam, geo.muscle_velocities(qdot)) * lever)
+        return np.asarray(m.reflex(lam, geo.muscle_velocities(qdot)) * lever)
 
     # the groups this joint moves: the others add exactly 0 N·m (a zero lever)
     moved = np.flatnonzero(lever)
     passive = np.zeros_like(lam)
-    passive[..., moved] = batch.passive_force(batch.columns(lam, moved), moved) * lever[moved]
+    passive[..., moved] = m.passive(m.columns(lam, moved), moved) * lever[moved]
     slow = (passive + reflex(slow_speed_rad_s)).sum(axis=-1)
     fast = (passive + reflex(fast_speed_rad_s)).sum(axis=-1)
     return StretchTorques(joint, direction, angles, slow, fast)
