@@ -37,6 +37,7 @@ from fieldbank.evaluate.reliability import (
 )
 from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import synthesize, synthesize_ratios
+from fieldbank.evaluate.statements import open_report, state
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.sim import ArmSim
@@ -121,11 +122,11 @@ def test_groups_between_the_steps_are_named_and_an_arm_outside_is_flagged(
                           trace=OpenTrace.of(obs, openset, noise))
         # what is stated: each impaired group named impaired (alone or with its partner),
         # no other group
-        said = [st for st in c.statements() if st.groups]
+        said = [st for st in state(c) if st.groups]
         held = {g for st in said if st.impaired for g in st.groups}
-        assert set(truth.split("+")) <= held, (truth, c.to_dict()["statements"])
+        assert set(truth.split("+")) <= held, (truth, open_report(c)["statements"])
         assert all(st.right(set(truth.split("+")), outside=False) for st in said
-                   if st.impaired), (truth, c.to_dict()["statements"])
+                   if st.impaired), (truth, open_report(c)["statements"])
         assert c.labels[int(np.argmax(c.label_probability))] == truth, c.to_dict()
         assert c.explains
     outside = synthesize({"sf": "severe", "ee": "severe", "bf": "severe"}, BODY)
@@ -268,27 +269,27 @@ def test_partner_groups_the_recording_cannot_separate_are_stated_as_a_set() -> N
     than its groups is not stated; a residual beyond the noise states none of the
     candidates first."""
     c = _stated(("ef", "bf", "unimpaired"), (0.45, 0.45, 0.1), 0.5, RAW)
-    got = {st.groups: (st.impaired, round(st.probability, 6)) for st in c.statements()}
+    got = {st.groups: (st.impaired, round(st.probability, 6)) for st in state(c)}
     assert got == {("sf",): (False, 1.0), ("se",): (False, 1.0), ("ef", "bf"): (True, 0.9),
                    ("ee",): (False, 1.0), ("be",): (False, 1.0)}
-    pair = next(st for st in c.statements() if st.kind == "partners")
+    pair = next(st for st in state(c) if st.kind == "partners")
     assert pair.right({"bf"}, outside=False) and pair.right({"ef", "bf"}, outside=False)
     assert not pair.right(set(), outside=False) and not pair.right({"ee"}, outside=False)
     assert "elbow flexors (ef) or bi-articular flexors (bf)" in pair.text
     assert "cannot tell which" in pair.text and "elbow extension" in pair.text
     # ef alone undecided, bf decided: ef stated alone at 0.6
     c = _stated(("ef", "unimpaired"), (0.6, 0.4), 0.5, RAW)
-    assert [(st.groups, st.impaired, st.probability) for st in c.statements()
+    assert [(st.groups, st.impaired, st.probability) for st in state(c)
             if st.groups == ("ef",)] == [(("ef",), True, pytest.approx(0.6))]
     # both together or neither: the union (0.5) tells no more than each group - stated alone
     c = _stated(("ef+bf", "unimpaired"), (0.5, 0.5), 0.5, RAW)
-    assert {st.groups for st in c.statements()} == {(g,) for g in GROUPS}
+    assert {st.groups for st in state(c)} == {(g,) for g in GROUPS}
     # the fit test at 1e-4 under the level 0.001: none of the candidates, p = 0.9
     c = _stated(("ef", "bf", "unimpaired"), (0.45, 0.45, 0.1), 1e-4, RAW)
-    first = c.statements()[0]
+    first = state(c)[0]
     assert first.kind == "none" and first.probability == pytest.approx(0.9)
     assert first.right(set(), outside=True) and not first.right({"ef"}, outside=False)
-    assert c.to_dict()["statements"][0]["says"] == first.text
+    assert open_report(c)["statements"][0]["says"] == first.text
 
 
 def test_the_noise_floor_of_the_calibration_error() -> None:

@@ -39,7 +39,6 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -57,9 +56,6 @@ from fieldbank.evaluate.severity import ratio_of_score, synthesize_ratios
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.validation import Interval, check_fields
-
-if TYPE_CHECKING:
-    from fieldbank.evaluate.statements import Statement
 
 #: Severity scores of a group's passive, reflex or both states (half Weber steps).
 SCORES: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5)
@@ -298,18 +294,10 @@ class OpenClassification:
                       for k, v in zip(KINDS, row, strict=True)}
         return out
 
-    def statements(self) -> tuple[Statement, ...]:
-        """What is stated: per group, partner groups as a set, none of the candidates
-        (:func:`fieldbank.evaluate.statements.state`)."""
-        from fieldbank.evaluate.statements import state
-
-        return state(self)
-
     def to_dict(self) -> dict[str, object]:
         answer, p = self.answer
         q = self.label_probability
-        return {"statements": [s.to_dict() for s in self.statements()],
-                "answer": answer, "probability": p,
+        return {"answer": answer, "probability": p,
                 "labels": {lab: float(f"{v:.6g}") for lab, v in
                            zip(self.labels[:10], q[:10], strict=False)},
                 "none_of_the_candidates": round(self.other_probability, 6),

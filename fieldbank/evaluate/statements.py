@@ -109,4 +109,10 @@ def state(c: OpenClassification, decided: float = DECIDED) -> tuple[Statement, .
     return tuple(out)
 
 
-__all__ = ["DECIDED", "PARTNERS", "Statement", "state"]
+def open_report(c: OpenClassification) -> dict[str, object]:
+    """The classification ``c`` as a document: what is stated first (``statements``), then
+    :meth:`~fieldbank.evaluate.openset.OpenClassification.to_dict`."""
+    return {"statements": [s.to_dict() for s in state(c)], **c.to_dict()}
+
+
+__all__ = ["DECIDED", "PARTNERS", "Statement", "open_report", "state"]
