@@ -9,6 +9,10 @@ lengthening rates λ̇_max) and evaluates everything vectorised over N positions
 mutable state, so the fitter, the what-if module and the haptic loop share one instance; the
 simulation state lives in :class:`fieldbank.sim.ArmSim`.
 
+Its muscle values are a :class:`fieldbank.muscleset.MuscleSet` of one set: :meth:`Arm.field`
+is :meth:`Arm.field_of` its own set, the evaluation S parameter sets of the same geometry go
+through as well (:class:`fieldbank.armbatch.ArmBatch`: a fit's samples, the intervals).
+
 Conventions (BRIEF §3)
 ----------------------
 Shoulder frame: origin at the shoulder, +x to the patient's right, +y forward. Joint angles
@@ -38,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from dataclasses import field as dataclass_field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -104,22 +109,28 @@ class Arm:
     params: ArmParams
     l1: float
     l2: float
-    q_rest: FloatArray
     jl: FloatArray
-    lam_rest: FloatArray
-    lam_slack: FloatArray
-    lam_min: FloatArray
-    lam_max: FloatArray
-    excursion: FloatArray
     ldot_max: FloatArray
-    km: FloatArray
-    alpha: FloatArray
-    beta: FloatArray
     w: float
     mirror: bool
     muscles: MuscleSet
     _pot_total: FloatArray  # ∫_{-∞}^{∞} of the smoothing correction per muscle (unit Km)
     _jl_products: FloatArray  # (6, 3): J_λ[:,0]², J_λ[:,0]·J_λ[:,1], J_λ[:,1]²
+    # row 0 of ``muscles`` (read-only views, set from it: not given to the constructor)
+    q_rest: FloatArray = dataclass_field(init=False)
+    lam_rest: FloatArray = dataclass_field(init=False)
+    lam_slack: FloatArray = dataclass_field(init=False)
+    lam_min: FloatArray = dataclass_field(init=False)
+    lam_max: FloatArray = dataclass_field(init=False)
+    excursion: FloatArray = dataclass_field(init=False)
+    km: FloatArray = dataclass_field(init=False)
+    alpha: FloatArray = dataclass_field(init=False)
+    beta: FloatArray = dataclass_field(init=False)
+
+    def __post_init__(self) -> None:
+        m = self.muscles
+        for name in _ROWS:
+            object.__setattr__(self, name, getattr(m, name)[0])
 
     @classmethod
     def from_params(cls, p: ArmParams) -> Arm:
@@ -143,7 +154,7 @@ class Arm:
             a.setflags(write=False)
         return cls(params=p, l1=p.upper_arm_length_m, l2=p.forearm_length_m, jl=jl,
                    ldot_max=ldot_max, w=w, mirror=p.side == "left", muscles=muscles,
-                   _pot_total=pot_total, _jl_products=products, **_rows(muscles))
+                   _pot_total=pot_total, _jl_products=products)
 
     #: ArmParams fields an arm's compiled geometry does not depend on (:meth:`with_muscles`).
     MUSCLE_FIELDS = ("km_n_per_m", "alpha_n", "beta", "slack_offset_m")
@@ -166,7 +177,7 @@ class Arm:
                 f"with_muscles: the parameters differ in {', '.join(other)}, not only in "
                 "muscle values; compile them with Arm.from_params.")
         muscles = self.muscles.with_values(p)
-        return replace(self, params=p, muscles=muscles, **_rows(muscles))
+        return replace(self, params=p, muscles=muscles)
 
     # --- frames ---------------------------------------------------------------------------
     def _in(self, x: ArrayLike, name: str = "positions") -> FloatArray:
@@ -365,10 +376,7 @@ class Arm:
         derivatives : bool
             Skip K and B (returned as empty arrays) when False.
         """
-        force, stiff, damp = self.field_of(self.muscles, x, v, derivatives)
-        if not derivatives:
-            return force[0], stiff, damp
-        return force[0], stiff[0], damp[0]
+        return self._evaluate(self.muscles, x, v, derivatives)
 
     def field_of(self, muscles: MuscleSet, x: ArrayLike, v: ArrayLike | None = None,
                  derivatives: bool = True) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -377,25 +385,27 @@ class Arm:
         ``derivatives``). The one evaluation of the equations from the hand to the muscles
         and back: one arm is its set of one (:attr:`muscles`), a fit's samples S sets
         (:class:`fieldbank.armbatch.ArmBatch`)."""
+        force, stiff, damp = self._evaluate(muscles, x, v, derivatives)
+        if len(muscles) == 1:  # the set of one: its unit set axis back
+            force = force[None]
+            if derivatives:
+                stiff, damp = stiff[None], damp[None]
+        return force, stiff, damp
+
+    def _evaluate(self, muscles: MuscleSet, x: ArrayLike, v: ArrayLike | None,
+                  derivatives: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`field_of`, the set of one without its unit set axis: its row evaluated
+        (N, 6) against (6,) (:meth:`MuscleSet.against`), the arithmetic of one arm."""
         q, jac, jinv, qd = self.hand_state(x, v)
         jl = self.jl
         lam = muscles.lengths(q, jl)
         ldot = velocities(qd, jl)
-        # the set of one drops its unit set axis for the arithmetic from the muscles to the
-        # hand: the same operations, without broadcasting every (N,) term against (1, N)
-        one = len(muscles) == 1
         if not derivatives:
-            f = muscles.passive(lam) + muscles.reflex(lam, ldot)
-            fx, fy = hand_force(f[0] if one else f, jl, *jinv)
-            force = np.stack([fx, fy], axis=-1)
+            fx, fy = hand_force(muscles.forces(lam, ldot), jl, *jinv)
             empty = np.empty((0, 2, 2))
-            return self._out_vec(force[None] if one else force), empty, empty
-        tensions = muscles.tensions(lam, ldot)
-        if one:
-            tensions = tuple(t[0] for t in tensions)
-        force, stiff, damp = endpoint_field(*tensions, jl, self._jl_products, jac, jinv, qd)
-        if one:
-            force, stiff, damp = force[None], stiff[None], damp[None]
+            return self._out_vec(np.stack([fx, fy], axis=-1)), empty, empty
+        force, stiff, damp = endpoint_field(*muscles.tensions(lam, ldot), jl,
+                                            self._jl_products, jac, jinv, qd)
         return self._out_vec(force), self._out_mat(stiff), self._out_mat(damp)
 
     def potential(self, x: ArrayLike) -> FloatArray:
@@ -415,11 +425,9 @@ class Arm:
         return self.fk(self.q_rest)[0]
 
 
-def _rows(m: MuscleSet) -> dict[str, FloatArray]:
-    """The one arm's muscle arrays: row 0 of the set of one (views, read-only)."""
-    return {"q_rest": m.q_rest[0], "lam_rest": m.lam_rest[0], "lam_slack": m.lam_slack[0],
-            "lam_min": m.lam_min[0], "lam_max": m.lam_max[0], "excursion": m.excursion[0],
-            "km": m.km[0], "alpha": m.alpha[0], "beta": m.beta[0]}
+#: The muscle arrays of one arm: row 0 of its set of one (:attr:`Arm.muscles`).
+_ROWS = ("q_rest", "lam_rest", "lam_slack", "lam_min", "lam_max", "excursion", "km", "alpha",
+         "beta")
 
 
 def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatArray]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -67,6 +68,10 @@ class MuscleSet:
     ldot_max: FloatArray
     w: float
     same_lengths: bool
+    _row: dict[str, FloatArray] = dataclass_field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_row", {n: getattr(self, n)[0] for n in _MUSCLE_ARRAYS})
 
     @classmethod
     def of(cls, sets: Sequence[ArmParams], jl: FloatArray, ldot_max: FloatArray) -> MuscleSet:
@@ -136,16 +141,39 @@ class MuscleSet:
             return np.broadcast_to(lam[:1][..., cols], (*lam.shape[:2], len(cols)))
         return lam[..., cols]
 
-    def tensions(self, lam: FloatArray, ldot: FloatArray) -> tuple[FloatArray, ...]:
-        """Ψ, ∂Ψ/∂λ, Φ, ∂Φ/∂λ, ∂Φ/∂λ̇, each (S, N, 6), for λ (S, N, 6) and λ̇ (N, 6)."""
+    def against(self, lam: FloatArray) -> tuple[FloatArray, dict[str, FloatArray]]:
+        """λ (S, N, 6) as the equations take it, and the muscle arrays (name -> array) that
+        broadcast against it: the set of one its row (6,) against (N, 6) - no unit set axis
+        to broadcast, the arithmetic of one arm -; S sets (S, 1, 6) against (S, N, 6), the
+        terms of the lengths alone once, (1, 1, 6) against (1, N, 6), when λ is one set's
+        broadcast (:meth:`lengths`)."""
+        if len(self.km) == 1:
+            return lam[0], self._row
         r = slice(0, 1) if self.one(lam) else slice(None)
-        psi, dpsi = passive_tension(lam[r], self.lam_slack[r, None, :], self.km[:, None, :],
-                                    self.excursion[r, None, :], self.w)
-        phi, dphi_l, dphi_ld = reflex_tension(
-            lam[r], ldot, self.ldot_max, self.alpha[:, None, :], self.beta[:, None, :],
-            self.excursion[r, None, :], self.lam_rest[r, None, :], self.lam_min[r, None, :],
-            self.lam_max[r, None, :])
+        arrays = {n: getattr(self, n)[r, None, :] for n in _LENGTH_ARRAYS}
+        arrays.update((n, getattr(self, n)[:, None, :]) for n in _VALUE_ARRAYS)
+        return lam[r], arrays
+
+    def tensions(self, lam: FloatArray, ldot: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Ψ, ∂Ψ/∂λ, Φ, ∂Φ/∂λ, ∂Φ/∂λ̇ for λ (S, N, 6) and λ̇ (N, 6): each (S, N, 6), or (N, 6)
+        for the set of one (:meth:`against`)."""
+        lam, a = self.against(lam)
+        psi, dpsi = passive_tension(lam, a["lam_slack"], a["km"], a["excursion"], self.w)
+        phi, dphi_l, dphi_ld = reflex_tension(lam, ldot, self.ldot_max, a["alpha"], a["beta"],
+                                              a["excursion"], a["lam_rest"], a["lam_min"],
+                                              a["lam_max"])
         return psi, dpsi, phi, dphi_l, dphi_ld
+
+    def forces(self, lam: FloatArray, ldot: FloatArray) -> FloatArray:
+        """Ψ + Φ, N, value only, for λ (S, N, 6) and λ̇ (N, 6): (S, N, 6), or (N, 6) for the
+        set of one (whose few points gain nothing from :meth:`reflex`'s selection)."""
+        if len(self.km) > 1:
+            return self.passive(lam) + self.reflex(lam, ldot)
+        lam, a = self.against(lam)
+        return (passive_force(lam, a["lam_slack"], a["km"], a["excursion"], self.w)
+                + reflex_force(lam, ldot, self.ldot_max, a["alpha"], a["beta"], a["excursion"],
+                               a["lam_rest"], a["lam_min"], a["lam_max"]))
 
     def passive(self, lam: FloatArray, groups: NDArray[np.intp] | None = None) -> FloatArray:
         """Ψ (S, N, 6), N, for λ (S, N, 6), value only. ``groups`` (indices): λ holds only
@@ -184,6 +212,12 @@ class MuscleSet:
             self.ldot_max[m], self.alpha[:, m], self.beta[:, m], self.excursion[r, m],
             self.lam_rest[r, m], self.lam_min[r, m], self.lam_max[r, m])
         return phi
+
+
+#: The muscle arrays of a set that depend on the lengths alone, and the muscle values.
+_LENGTH_ARRAYS = ("lam_rest", "lam_slack", "lam_min", "lam_max", "excursion")
+_VALUE_ARRAYS = ("km", "alpha", "beta")
+_MUSCLE_ARRAYS = _LENGTH_ARRAYS + _VALUE_ARRAYS
 
 
 def _values(sets: Sequence[ArmParams]) -> dict[str, FloatArray]:
