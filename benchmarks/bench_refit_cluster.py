@@ -277,7 +277,9 @@ def _jobs(url: str, first: int | None = None) -> tuple[list[float], list[float],
 
 
 def measure(url: str, certs: Path, workers: int, log: Path,
-            stop_after: float | None = None) -> Run:
+            stop_after: float | None = None, stop_at: float | None = None) -> Run:
+    """One refit on a fresh cluster of ``workers`` workers, stopped after ``stop_after``
+    seconds or at the epoch time ``stop_at``, whichever comes first."""
     with cluster(certs, workers, log) as (addr, sched, worker_ps, nanny_ps):
         warm = subprocess.run(_fit_command(url, addr, certs, 1000 + workers, "R00000-0000"),
                               capture_output=True, text=True)
@@ -295,6 +297,9 @@ def measure(url: str, certs: Path, workers: int, log: Path,
         _children_cpu_delta()  # the warm-up's
         task0 = _task_cpu(addr, certs)
         w0, n0, s0 = _cpu(worker_ps), _cpu(nanny_ps), _cpu([sched])
+        if stop_at is not None:
+            left = max(0.0, stop_at - time.time())
+            stop_after = left if stop_after is None else min(stop_after, left)
         t = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True)
@@ -327,6 +332,16 @@ def measure(url: str, certs: Path, workers: int, log: Path,
         raise SystemExit(f"{bad} jobs not done")
     return Run(workers, len(cpus), wall, w1 - w0, n1 - n0, s1 - s0, command_cpu,
                task1 - task0, cpus, fits, walls, idle_w, idle_s, shown, load_start, load_end)
+
+
+def _utc_today(hhmm: str) -> float:
+    """The epoch time of ``HH:MM`` UTC next to come."""
+    from datetime import UTC, datetime, timedelta
+
+    now = datetime.now(UTC)
+    h, m = (int(x) for x in hhmm.split(":"))
+    at = now.replace(hour=h, minute=m, second=0, microsecond=0)
+    return (at if at > now else at + timedelta(days=1)).timestamp()
 
 
 _CHILDREN = [0.0]
@@ -431,11 +446,16 @@ def main() -> int:
     ap.add_argument("--stop-after", type=float, default=None, metavar="SECONDS",
                     help="stop each refit after this long and count the sessions done by then "
                          "(a run too long for the time at hand)")
+    ap.add_argument("--stop-at", default=None, metavar="HH:MM",
+                    help="stop any refit still running at this UTC time of day, as --stop-after "
+                         "does (the configurations after it start and stop at once)")
     args = ap.parse_args()
     if not args.db:
         print("give --db or set FIELDBANK_TEST_PG_URL (scripts/pg-test-server starts a server)")
         return 2
     from fieldbank.clustercerts import CertOptions, write_certs
+
+    stop_at = _utc_today(args.stop_at) if args.stop_at else None
 
     print(f"at start: {load_line()}", flush=True)
     url = ensure_database(args.db, args.database)
@@ -449,10 +469,16 @@ def main() -> int:
         log = Path(args.log) if args.log else Path(d) / "cluster.log"
         _children_cpu_delta()
         for w in args.workers:
-            runs.append(measure(url, certs, w, log, args.stop_after))
-            r = runs[-1]
+            r = measure(url, certs, w, log, args.stop_after, stop_at)
             print(f"{w} worker(s): {r.sessions} sessions in {r.wall_s:.0f} s, workers' CPU "
                   f"{r.worker_cpu_s:.0f} s, {load_line()}", flush=True)
+            if r.sessions:
+                runs.append(r)
+                if len(runs) < len(args.workers):
+                    report(runs)  # so far: a later configuration may not finish
+    if not runs:
+        print("no session was refitted")
+        return 1
     report(runs)
     print(f"at end: {load_line()}")
     return 0
