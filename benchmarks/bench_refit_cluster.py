@@ -56,7 +56,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple
@@ -149,12 +149,15 @@ def _cpu(procs: Sequence[object]) -> float:
 
 
 @contextmanager
-def cluster(certs: Path, workers: int, log: Path) -> Iterator[tuple[str, object, list[object],
-                                                                      list[object]]]:
+def cluster(certs: Path, workers: int, log: Path, dask_env: Mapping[str, str] | None = None,
+            ) -> Iterator[tuple[str, object, list[object], list[object]]]:
     """A TLS scheduler and ``workers`` worker processes (one thread each, under a nanny), as
-    processes of their own. Yields the address, the scheduler's process, the workers' and the
-    nannies'."""
+    processes of their own, with the ``DASK_*`` variables of ``dask_env`` (none: Dask's
+    defaults). Yields the address, the scheduler's process, the workers' and the nannies'."""
     import psutil
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DASK_")}
+    env.update(dask_env or {})
 
     port = _free_port()
     addr = f"tls://127.0.0.1:{port}"
@@ -163,12 +166,12 @@ def cluster(certs: Path, workers: int, log: Path) -> Iterator[tuple[str, object,
         [str(BIN / "dask"), "scheduler", "--protocol", "tls", "--host", "127.0.0.1",
          "--port", str(port), "--no-dashboard", "--tls-ca-file", str(certs / "ca.pem"),
          "--tls-cert", str(certs / "scheduler.pem"), "--tls-key",
-         str(certs / "scheduler-key.pem")], stdout=out, stderr=out)
+         str(certs / "scheduler-key.pem")], stdout=out, stderr=out, env=env)
     nannies = [subprocess.Popen(
         [str(BIN / "dask"), "worker", addr, "--nworkers", "1", "--nthreads", "1",
          "--no-dashboard", "--name", f"w{i}", "--tls-ca-file", str(certs / "ca.pem"),
          "--tls-cert", str(certs / "worker.pem"), "--tls-key", str(certs / "worker-key.pem")],
-        stdout=out, stderr=out) for i in range(workers)]
+        stdout=out, stderr=out, env=env) for i in range(workers)]
     try:
         client = _client(addr, certs)
         client.wait_for_workers(workers, timeout=300)
