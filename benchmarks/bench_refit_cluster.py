@@ -9,7 +9,9 @@ here is its own process, started as docs/scale-out.md tells a clinic to start th
 * the cluster's certificates from :func:`fieldbank.clustercerts.write_certs` (what
   ``fieldbank cluster certs`` writes);
 * ``dask scheduler --protocol tls`` with the scheduler's certificate, and W ``dask worker``
-  processes (one thread each, each under its nanny) with the workers' certificate;
+  processes (one thread each, each under its nanny) with the workers' certificate, all with
+  ``DASK_CONFIG`` naming the ``dask.yaml`` written beside the certificates
+  (``--dask-defaults``: without it, Dask's defaults);
 * the refit itself: ``fieldbank fit --all --scheduler tls://… --tls-ca … --tls-cert …
   --tls-key … --seed S --db URL``, the command a user types, as a process.
 
@@ -40,6 +42,7 @@ and from the scheduler Dask's own count of the CPU of the threads that ran the t
 
 Run: python benchmarks/bench_refit_cluster.py [--sessions 50] [--workers 1 2]
                                               [--database fbrefit] [--db SERVER_URL]
+                                              [--dask-defaults] [--stop-at HH:MM]
 """
 
 from __future__ import annotations
@@ -280,10 +283,11 @@ def _jobs(url: str, first: int | None = None) -> tuple[list[float], list[float],
 
 
 def measure(url: str, certs: Path, workers: int, log: Path,
-            stop_after: float | None = None, stop_at: float | None = None) -> Run:
+            stop_after: float | None = None, stop_at: float | None = None,
+            dask_env: Mapping[str, str] | None = None) -> Run:
     """One refit on a fresh cluster of ``workers`` workers, stopped after ``stop_after``
     seconds or at the epoch time ``stop_at``, whichever comes first."""
-    with cluster(certs, workers, log) as (addr, sched, worker_ps, nanny_ps):
+    with cluster(certs, workers, log, dask_env) as (addr, sched, worker_ps, nanny_ps):
         warm = subprocess.run(_fit_command(url, addr, certs, 1000 + workers, "R00000-0000"),
                               capture_output=True, text=True)
         if warm.returncode != 0:
@@ -449,6 +453,9 @@ def main() -> int:
     ap.add_argument("--stop-after", type=float, default=None, metavar="SECONDS",
                     help="stop each refit after this long and count the sessions done by then "
                          "(a run too long for the time at hand)")
+    ap.add_argument("--dask-defaults", action="store_true",
+                    help="start the scheduler and the workers with Dask's defaults, without "
+                         "the dask.yaml of 'fieldbank cluster certs'")
     ap.add_argument("--stop-at", default=None, metavar="HH:MM",
                     help="stop any refit still running at this UTC time of day, as --stop-after "
                          "does (the configurations after it start and stop at once)")
@@ -457,6 +464,7 @@ def main() -> int:
         print("give --db or set FIELDBANK_TEST_PG_URL (scripts/pg-test-server starts a server)")
         return 2
     from fieldbank.clustercerts import CertOptions, write_certs
+    from fieldbank.clusterconfig import CONFIG_FILE
 
     stop_at = _utc_today(args.stop_at) if args.stop_at else None
 
@@ -470,9 +478,13 @@ def main() -> int:
         certs = Path(d) / "certs"
         write_certs(certs, CertOptions(days=2, hosts=("127.0.0.1",)))
         log = Path(args.log) if args.log else Path(d) / "cluster.log"
+        dask_env = {} if args.dask_defaults else {"DASK_CONFIG": str(certs / CONFIG_FILE)}
+        print("the scheduler and the workers run with " + (
+            "Dask's defaults" if args.dask_defaults else f"fieldbank's {CONFIG_FILE}"),
+            flush=True)
         _children_cpu_delta()
         for w in args.workers:
-            r = measure(url, certs, w, log, args.stop_after, stop_at)
+            r = measure(url, certs, w, log, args.stop_after, stop_at, dask_env)
             print(f"{w} worker(s): {r.sessions} sessions in {r.wall_s:.0f} s, workers' CPU "
                   f"{r.worker_cpu_s:.0f} s, {load_line()}", flush=True)
             if r.sessions:
