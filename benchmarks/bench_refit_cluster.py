@@ -199,7 +199,7 @@ def _client(addr: str, certs: Path) -> object:
 
     sec = Security(tls_ca_file=str(certs / "ca.pem"), tls_client_cert=str(certs / "client.pem"),
                    tls_client_key=str(certs / "client-key.pem"), require_encryption=True)
-    return Client(addr, security=sec, timeout=60, set_as_default=False)
+    return Client(addr, security=sec, timeout=300, set_as_default=False)  # a loaded machine
 
 
 def _task_cpu(addr: str, certs: Path) -> float:

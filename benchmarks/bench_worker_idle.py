@@ -12,7 +12,7 @@ profiler, TLS. Variants:
 * Dask's defaults (the baseline: a cluster started without ``DASK_CONFIG``);
 * fieldbank's ``dask.yaml`` (``DASK_CONFIG=…/dask.yaml`` for the scheduler and the worker);
 * each of its settings alone (its ``DASK_…`` environment variable), so that each is seen to
-  pay for what it costs, and the settings measured and not shipped (``--each``).
+  pay for what it costs (``--each``).
 
 The variants are run in turn, ``--rounds`` times, so that a change of the machine's load
 falls on all of them; the table gives each variant's median over the rounds, and beside it
@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_refit_cluster import _client, _cpu, cluster
 from benchmarks.timing import load_line
-from fieldbank.clusterconfig import CONFIG_FILE, NOT_SHIPPED, SETTINGS
+from fieldbank.clusterconfig import CONFIG_FILE, SETTINGS
 
 
 class Idle(NamedTuple):
@@ -48,7 +48,7 @@ class Idle(NamedTuple):
 
 def _worker_config(addr: str, certs: Path) -> dict[str, object]:
     client = _client(addr, certs)
-    keys = [s.key for s in (*SETTINGS, *NOT_SHIPPED)]
+    keys = [s.key for s in SETTINGS]
 
     def read() -> dict[str, object]:
         import dask
@@ -95,8 +95,6 @@ def main() -> int:
         if args.each:
             variants += [(f"only {s.key}: {s.env_value}", {s.env_name: s.env_value})
                          for s in SETTINGS]
-            variants += [(f"only {s.key}: {s.env_value} (not shipped)",
-                          {s.env_name: s.env_value}) for s in NOT_SHIPPED]
         runs: dict[str, list[Idle]] = {name: [] for name, _ in variants}
         for r in range(args.rounds):
             for name, env in variants:

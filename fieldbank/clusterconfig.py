@@ -3,7 +3,7 @@
 A Dask scheduler, worker and nanny each wake up many times a second when they have nothing to
 do: an event-loop health check every 20 ms, a system monitor (CPU, memory, network and disk
 counters through psutil) every 500 ms, and in the worker a statistical profiler that looks at
-every task thread every 10 ms. A fit keeps
+every task thread every 10 ms and a memory check every 100 ms (in its nanny too). A fit keeps
 a worker busy for under a second of CPU; on a shared or loaded machine that background is
 paid for every second of wall time, and it was most of the overhead per task of a cohort
 refit (docs/scale-out.md, "Measured"). The settings here make those timers less frequent or
@@ -64,16 +64,11 @@ SETTINGS: tuple[Setting, ...] = (
             "scheduler, workers and nannies",
             "the dashboard's CPU, memory and network plots of each process get a point every "
             "2 s instead of every 0.5 s"),
-)
-#: Measured (``bench_worker_idle.py --each``) and left at Dask's default: the memory monitor
-#: saved no CPU an idle worker and nanny showed, and slowing it lets a task overshoot the
-#: memory limits by more.
-NOT_SHIPPED: tuple[Setting, ...] = (
     Setting("distributed.worker.memory.monitor-interval", "500ms", "100ms",
             "workers and nannies",
             "a worker is paused, spilled or restarted for its memory up to 0.5 s after it "
             "crosses the threshold instead of 0.1 s: a task that allocates faster than that "
-            "overshoots by what it allocates in 0.4 s"),
+            "overshoots by what it allocates in 0.4 s (a fit holds a few MB)"),
 )
 
 

@@ -18,12 +18,12 @@ import pytest
 import yaml
 
 from fieldbank.clustercerts import CertOptions, write_certs
-from fieldbank.clusterconfig import CONFIG_FILE, NOT_SHIPPED, SETTINGS, as_nested, dask_yaml
+from fieldbank.clusterconfig import CONFIG_FILE, SETTINGS, as_nested, dask_yaml
 
 BIN = Path(sys.executable).parent
 # What a fresh process sees for each key, as JSON (Dask parses "500ms" at use, not here).
 READ = ("import json, dask, distributed; print(json.dumps({k: dask.config.get(k) for k in "
-        + repr([s.key for s in (*SETTINGS, *NOT_SHIPPED)]) + "}))")
+        + repr([s.key for s in SETTINGS]) + "}))")
 
 
 def _clean_env(**extra: str) -> dict[str, str]:
@@ -51,23 +51,21 @@ def test_the_file_holds_every_setting_and_nothing_else() -> None:
     assert sum(1 for line in text.splitlines() if line.lstrip().startswith("# Dask's default")) \
         == len(SETTINGS)
     assert len({s.key for s in SETTINGS}) == len(SETTINGS)
-    for s in (*SETTINGS, *NOT_SHIPPED):  # each changes something, and says what it costs
+    for s in SETTINGS:  # each changes something, and says what it costs
         assert s.value != s.dask_default and len(s.cost) > 40, s.key
-    assert not {s.key for s in SETTINGS} & {s.key for s in NOT_SHIPPED}
 
 
 def test_dask_reads_the_file_only_when_asked_and_a_users_variable_wins(certs: Path) -> None:
     defaults = _seen(_clean_env())
-    # Dask's own, as recorded (the keys the benchmark tries too)
-    assert defaults == {s.key: s.dask_default for s in (*SETTINGS, *NOT_SHIPPED)}
+    # Dask's own, as recorded
+    assert defaults == {s.key: s.dask_default for s in SETTINGS}
     path = str(certs / CONFIG_FILE)
-    assert _seen(_clean_env(DASK_CONFIG=path)) == {**defaults,
-                                                   **{s.key: s.value for s in SETTINGS}}
+    assert _seen(_clean_env(DASK_CONFIG=path)) == {s.key: s.value for s in SETTINGS}
     first = SETTINGS[0]
     mine = _seen(_clean_env(DASK_CONFIG=path, **{first.env_name: repr(first.dask_default)}))
     assert mine[first.key] == first.dask_default
     assert all(mine[s.key] == s.value for s in SETTINGS[1:])
-    for s in (*SETTINGS, *NOT_SHIPPED):  # each variable alone sets its key alone (the benchmark)
+    for s in SETTINGS:  # each variable alone sets its key alone (the benchmark)
         alone = _seen(_clean_env(**{s.env_name: s.env_value}))
         assert alone == {**defaults, s.key: s.value}, s.key
 
@@ -127,5 +125,4 @@ def test_a_worker_started_with_the_file_runs_quieter_and_one_without_is_unchange
     assert default["monitor"] == 500 and default["memory_monitor"] == 100
     assert "profile" not in quiet and "profile-cycle" not in quiet
     assert quiet["tick"] == 500 and quiet["monitor"] == 2000
-    # what the file does not name is Dask's: the memory monitor
-    assert quiet["memory_monitor"] == default["memory_monitor"] == 100
+    assert quiet["memory_monitor"] == 500
