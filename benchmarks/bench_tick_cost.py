@@ -193,6 +193,9 @@ class InstantPort:
     def send_force(self, fx_n: float, fy_n: float) -> None:
         pass
 
+    def heartbeat(self) -> None:
+        pass
+
     def arm(self) -> None:
         pass
 
@@ -328,8 +331,8 @@ def whole_tick(rate_hz: int, seconds: float, back_to_back: int,
     skip = rate_hz // 10
     cpu_rt = np.array(rd.cpu_ns[skip:], dtype=np.float64) / 1e3
     wall_rt = np.array(rd.times.tick_ns[skip:], dtype=np.float64) / 1e3
-    c50, c99, cmax = np.percentile(cpu_rt, [50, 99, 100])
-    w50, w99, wmax = np.percentile(wall_rt, [50, 99, 100])
+    c50, c99, c999, cmax = np.percentile(cpu_rt, [50, 99, 99.9, 100])
+    w50, w99, w999, wmax = np.percentile(wall_rt, [50, 99, 99.9, 100])
     b50, b99 = np.percentile(cpu, [50, 99])
     pe = st.get("period_error_us") or {}
     what = (f"beside {busy} busy process{'es' if busy != 1 else ''} (together "
@@ -337,10 +340,12 @@ def whole_tick(rate_hz: int, seconds: float, back_to_back: int,
     print(f"Part 4 - the whole tick at {rate_hz} Hz ({period_us:.0f} µs), {what}; device in "
           f"its own process ({robot.grant.text() if robot.grant else 'grant unknown'}), loop "
           f"{st.get('realtime')}; {seconds:g} s real time, {cpu_rt.size} ticks ({load}):")
-    print(f"  CPU  per tick p50 {c50:6.1f} µs  p99 {c99:6.1f} µs  max {cmax:7.1f} µs: p99 = "
-          f"{100 * c99 / period_us:.1f}% of the period")
-    print(f"  wall per tick p50 {w50:6.1f} µs  p99 {w99:6.1f} µs  max {wmax:7.1f} µs: p99 = "
-          f"{100 * w99 / period_us:.1f}% of the period (wall p99 / CPU p99 {w99 / c99:.1f}×)")
+    print(f"  CPU  per tick p50 {c50:6.1f} µs  p99 {c99:6.1f} µs  p99.9 {c999:7.1f} µs  max "
+          f"{cmax:7.1f} µs: p99 = {100 * c99 / period_us:.1f}%, p99.9 = "
+          f"{100 * c999 / period_us:.1f}% of the period")
+    print(f"  wall per tick p50 {w50:6.1f} µs  p99 {w99:6.1f} µs  p99.9 {w999:7.1f} µs  max "
+          f"{wmax:7.1f} µs: p99 = {100 * w99 / period_us:.1f}% of the period (wall p99 / CPU "
+          f"p99 {w99 / c99:.1f}×)")
     print(f"  period error p50 {pe.get('p50', 0):.1f} µs  p99 {pe.get('p99', 0):.1f} µs; "
           f"overruns {st.get('overruns')}; skipped ticks {rd.times.skipped_ticks}; faults "
           f"{len(trace.faults)}")
@@ -351,7 +356,8 @@ def whole_tick(rate_hz: int, seconds: float, back_to_back: int,
           f"tick p50 {b50:.1f} µs  p99 {b99:.1f} µs ({100 * b99 / period_us:.1f}% of the period)"
           f"; the fixed arithmetic between them p50 {f50:.1f} µs  p99 {f99:.1f} µs (p99 / p50: "
           f"tick {b99 / b50:.1f}×, fixed work {f99 / f50:.1f}×)")
-    return {"cpu_p50": c50, "cpu_p99": c99, "wall_p50": w50, "wall_p99": w99,
+    return {"cpu_p50": c50, "cpu_p99": c99, "cpu_p99.9": c999, "wall_p50": w50,
+            "wall_p99": w99, "wall_p99.9": w999,
             "b2b_p99": b99, "fixed_p99": f99, "period_us": period_us}
 
 
@@ -366,7 +372,8 @@ def judge(base: dict[str, float], busy: dict[str, float] | None, n_busy: int) ->
     if busy is not None:
         print("  busy / baseline, same run: " + ", ".join(
             f"{k.replace('_', ' ')} {busy[k] / base[k]:.2f}×"
-            for k in ("cpu_p50", "cpu_p99", "wall_p50", "wall_p99", "b2b_p99", "fixed_p99")))
+            for k in ("cpu_p50", "cpu_p99", "cpu_p99.9", "wall_p50", "wall_p99", "wall_p99.9",
+                      "b2b_p99", "fixed_p99")))
 
 
 def main() -> int:

@@ -66,14 +66,14 @@ def main() -> None:
           f"{'OK' if course <= 0.5 else 'OVER'}")
     print(f"inverse   3-group dose split (COBYLA)         {inv:8.3f} s  median (no target)")
     basis = _basis(before, 40)
-    ivs, _ = timeit(lambda: prediction_intervals(basis, before, plan, cond, ArmCache()), 3)
+    ivs, _ = timeit(lambda: prediction_intervals(basis, arm, plan, cond, ArmCache()), 3)
     print(f"intervals 40 fit samples through the plan     {ivs:8.3f} s  median (no target; "
           f"{ivs / one:.1f}x one compare)")
     # a fit that held the reflexes of four groups: drawn from their prior range, and the same
     # samples with the held values kept, in one pass (twice the sets) plus the prior's table
     held = dataclasses.replace(basis, ranges=full_ranges(
         [f"{k}_{g}" for g in ("sf", "se", "bf", "be") for k in ("alpha", "beta")]))
-    ivg, _ = timeit(lambda: prediction_intervals(held, before, plan, cond, ArmCache()), 3)
+    ivg, _ = timeit(lambda: prediction_intervals(held, arm, plan, cond, ArmCache()), 3)
     print(f"intervals with 4 held reflexes drawn          {ivg:8.3f} s  median (no target; "
           f"{ivg / ivs:.1f}x the intervals without)")
 

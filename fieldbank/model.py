@@ -9,6 +9,10 @@ lengthening rates λ̇_max) and evaluates everything vectorised over N positions
 mutable state, so the fitter, the what-if module and the haptic loop share one instance; the
 simulation state lives in :class:`fieldbank.sim.ArmSim`.
 
+Its muscle values are a :class:`fieldbank.muscleset.MuscleSet` of one set: :meth:`Arm.field`
+is :meth:`Arm.field_of` its own set, the evaluation S parameter sets of the same geometry go
+through as well (:class:`fieldbank.armbatch.ArmBatch`: a fit's samples, the intervals).
+
 Conventions (BRIEF §3)
 ----------------------
 Shoulder frame: origin at the shoulder, +x to the patient's right, +y forward. Joint angles
@@ -38,12 +42,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from dataclasses import field as dataclass_field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fieldbank.errors import ParameterError, UnreachableError
 from fieldbank.muscle import passive_tension, reflex_tension
+from fieldbank.muscleset import MuscleSet, endpoint_field, hand_force, velocities
 from fieldbank.params import GROUP_SIGN, ArmParams
 
 FloatArray = NDArray[np.float64]
@@ -95,26 +101,36 @@ class Arm:
         N/m, N, dimensionless.
     w : float
         Passive smoothing width, m.
+    muscles : MuscleSet
+        The muscle values as the set of one (each row above is its row 0): what
+        :meth:`field` evaluates, with the code that evaluates S sets (:meth:`field_of`).
     """
 
     params: ArmParams
     l1: float
     l2: float
-    q_rest: FloatArray
     jl: FloatArray
-    lam_rest: FloatArray
-    lam_slack: FloatArray
-    lam_min: FloatArray
-    lam_max: FloatArray
-    excursion: FloatArray
     ldot_max: FloatArray
-    km: FloatArray
-    alpha: FloatArray
-    beta: FloatArray
     w: float
     mirror: bool
+    muscles: MuscleSet
     _pot_total: FloatArray  # ∫_{-∞}^{∞} of the smoothing correction per muscle (unit Km)
     _jl_products: FloatArray  # (6, 3): J_λ[:,0]², J_λ[:,0]·J_λ[:,1], J_λ[:,1]²
+    # row 0 of ``muscles`` (read-only views, set from it: not given to the constructor)
+    q_rest: FloatArray = dataclass_field(init=False)
+    lam_rest: FloatArray = dataclass_field(init=False)
+    lam_slack: FloatArray = dataclass_field(init=False)
+    lam_min: FloatArray = dataclass_field(init=False)
+    lam_max: FloatArray = dataclass_field(init=False)
+    excursion: FloatArray = dataclass_field(init=False)
+    km: FloatArray = dataclass_field(init=False)
+    alpha: FloatArray = dataclass_field(init=False)
+    beta: FloatArray = dataclass_field(init=False)
+
+    def __post_init__(self) -> None:
+        m = self.muscles
+        for name in _ROWS:
+            object.__setattr__(self, name, getattr(m, name)[0])
 
     @classmethod
     def from_params(cls, p: ArmParams) -> Arm:
@@ -126,51 +142,19 @@ class Arm:
                 )
             ]
         )
-        q_rest = np.array(p.q_rest_rad)
-        lam_rest = np.array(p.rest_length_m)
-        corners = np.array(
-            [[a, b] for a in p.shoulder_range_rad for b in p.elbow_range_rad]
-        )  # λ is linear in q, so its extremes over the box are at corners
-        lam_corners = lam_rest[None, :] + (corners - q_rest) @ jl.T
-        lam_min = lam_corners.min(axis=0)
-        lam_max = lam_corners.max(axis=0)
-        if np.any(lam_min <= 0):
-            i = int(np.argmin(lam_min))
-            raise ParameterError(
-                f"Muscle {i} would reach a non-positive length ({lam_min[i]:.4g} m) within the "
-                "range of motion; raise rest_length_m or shrink the range."
-            )
-        excursion = lam_max - lam_min
-        w = p.passive_smoothing_m
-        arrays = {
-            "q_rest": q_rest,
-            "jl": jl,
-            "lam_rest": lam_rest,
-            "lam_slack": lam_rest + np.array(p.slack_offset_m),
-            "lam_min": lam_min,
-            "lam_max": lam_max,
-            "excursion": excursion,
-            "km": np.array(p.km_n_per_m),
-            "alpha": np.array(p.alpha_n),
-            "beta": np.array(p.beta),
-        }
         ldot_max = _circle_ldot_max(p, jl)
-        arrays["ldot_max"] = ldot_max
-        pot_total = _smoothing_integral(np.full(6, np.inf), excursion, w)
-        arrays["_pot_total"] = pot_total
-        arrays["_jl_products"] = np.stack(
-            [jl[:, 0] * jl[:, 0], jl[:, 0] * jl[:, 1], jl[:, 1] * jl[:, 1]], axis=1
-        )
-        for a in arrays.values():
+        jl.setflags(write=False)
+        ldot_max.setflags(write=False)
+        muscles = MuscleSet.of([p], jl, ldot_max)  # the set of one
+        w = p.passive_smoothing_m
+        products = np.stack([jl[:, 0] * jl[:, 0], jl[:, 0] * jl[:, 1], jl[:, 1] * jl[:, 1]],
+                            axis=1)
+        pot_total = _smoothing_integral(np.full(6, np.inf), muscles.excursion[0], w)
+        for a in (products, pot_total):
             a.setflags(write=False)
-        return cls(
-            params=p,
-            l1=p.upper_arm_length_m,
-            l2=p.forearm_length_m,
-            w=w,
-            mirror=p.side == "left",
-            **arrays,
-        )
+        return cls(params=p, l1=p.upper_arm_length_m, l2=p.forearm_length_m, jl=jl,
+                   ldot_max=ldot_max, w=w, mirror=p.side == "left", muscles=muscles,
+                   _pot_total=pot_total, _jl_products=products)
 
     #: ArmParams fields an arm's compiled geometry does not depend on (:meth:`with_muscles`).
     MUSCLE_FIELDS = ("km_n_per_m", "alpha_n", "beta", "slack_offset_m")
@@ -192,12 +176,8 @@ class Arm:
             raise ParameterError(
                 f"with_muscles: the parameters differ in {', '.join(other)}, not only in "
                 "muscle values; compile them with Arm.from_params.")
-        arrays = {"lam_slack": self.lam_rest + np.array(p.slack_offset_m),
-                  "km": np.array(p.km_n_per_m), "alpha": np.array(p.alpha_n),
-                  "beta": np.array(p.beta)}
-        for a in arrays.values():
-            a.setflags(write=False)
-        return replace(self, params=p, **arrays)
+        muscles = self.muscles.with_values(p)
+        return replace(self, params=p, muscles=muscles)
 
     # --- frames ---------------------------------------------------------------------------
     def _in(self, x: ArrayLike, name: str = "positions") -> FloatArray:
@@ -396,17 +376,35 @@ class Arm:
         derivatives : bool
             Skip K and B (returned as empty arrays) when False.
         """
+        return self._evaluate(self.muscles, x, v, derivatives)
+
+    def field_of(self, muscles: MuscleSet, x: ArrayLike, v: ArrayLike | None = None,
+                 derivatives: bool = True) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`field` of every set of ``muscles`` over this arm's geometry: force
+        (S, N, 2), stiffness and damping (S, N, 2, 2) (empty (0, 2, 2) without
+        ``derivatives``). The one evaluation of the equations from the hand to the muscles
+        and back: one arm is its set of one (:attr:`muscles`), a fit's samples S sets
+        (:class:`fieldbank.armbatch.ArmBatch`)."""
+        force, stiff, damp = self._evaluate(muscles, x, v, derivatives)
+        if len(muscles) == 1:  # the set of one: its unit set axis back
+            force = force[None]
+            if derivatives:
+                stiff, damp = stiff[None], damp[None]
+        return force, stiff, damp
+
+    def _evaluate(self, muscles: MuscleSet, x: ArrayLike, v: ArrayLike | None,
+                  derivatives: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`field_of`, the set of one without its unit set axis: its row evaluated
+        (N, 6) against (6,) (:meth:`MuscleSet.against`), the arithmetic of one arm."""
         q, jac, jinv, qd = self.hand_state(x, v)
         jl = self.jl
-        lam = self.lam_rest + (q - self.q_rest) @ jl.T
-        ldot = np.outer(qd[0], jl[:, 0]) + np.outer(qd[1], jl[:, 1])
-        psi, dpsi = self.passive_forces(lam)
-        phi, dphi_l, dphi_ld = self.reflex_forces(lam, ldot)
+        lam = muscles.lengths(q, jl)
+        ldot = velocities(qd, jl)
         if not derivatives:
-            fx, fy = hand_force(psi + phi, jl, *jinv)
+            fx, fy = hand_force(muscles.forces(lam, ldot), jl, *jinv)
             empty = np.empty((0, 2, 2))
-            return self._out_vec(np.stack([fx, fy], axis=1)), empty, empty
-        force, stiff, damp = endpoint_field(psi, dpsi, phi, dphi_l, dphi_ld, jl,
+            return self._out_vec(np.stack([fx, fy], axis=-1)), empty, empty
+        force, stiff, damp = endpoint_field(*muscles.tensions(lam, ldot), jl,
                                             self._jl_products, jac, jinv, qd)
         return self._out_vec(force), self._out_mat(stiff), self._out_mat(damp)
 
@@ -427,53 +425,9 @@ class Arm:
         return self.fk(self.q_rest)[0]
 
 
-def hand_force(f: FloatArray, jl: FloatArray, ia: FloatArray, ib: FloatArray, ic: FloatArray,
-                id_: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The hand force (F_x, F_y), N, of muscle tensions f (…, N, 6), N: τ = -J_λᵀ f, then
-    F = J⁻ᵀ τ with J⁻¹ = [[ia, ib], [ic, id]] (each (N,)); leading axes of f carry through."""
-    tau = -f @ jl
-    t1, t2 = tau[..., 0], tau[..., 1]
-    return ia * t1 + ic * t2, ib * t1 + id_ * t2
-
-
-def endpoint_field(psi: FloatArray, dpsi: FloatArray, phi: FloatArray, dphi_l: FloatArray,
-                   dphi_ld: FloatArray, jl: FloatArray, prod: FloatArray, jac: Quad, jinv: Quad,
-                   qd: tuple[FloatArray, FloatArray]
-                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Hand force F (…, N, 2), stiffness K = -∂F/∂x and damping B = -∂F/∂v (…, N, 2, 2), model
-    frame, of muscle tensions Ψ + Φ and their slopes (each (…, N, 6)) at the joint state of
-    :meth:`Arm.hand_state` (``jac``, ``jinv``, ``qd``: each entry (N,)); ``prod`` the products
-    of J_λ's columns (``Arm._jl_products``). Leading axes of the tensions carry through, so
-    one arm (N, 6) and S parameter sets of one geometry (S, N, 6) share the arithmetic."""
-    a, b, c, d = jac
-    ia, ib, ic, id_ = jinv
-    qd1, qd2 = qd
-    fx, fy = hand_force(psi + phi, jl, ia, ib, ic, id_)
-    force = np.stack([fx, fy], axis=-1)
-    # J_λᵀ diag(g) J_λ as (g @ P) with P the products of J_λ's columns
-    a00, a01, a11 = np.moveaxis((dpsi + dphi_l) @ prod, -1, 0)
-    b00, b01, b11 = np.moveaxis(dphi_ld @ prod, -1, 0)
-    # ∂J/∂q1 = [[-c, -d], [a, b]], ∂J/∂q2 = [[-d, -d], [b, b]]
-    # (∂J/∂q_k) q̇ and then Q = -J⁻¹ [(∂J/∂q1) q̇, (∂J/∂q2) q̇]
-    u1x, u1y = -c * qd1 - d * qd2, a * qd1 + b * qd2
-    u2x, u2y = -d * (qd1 + qd2), b * (qd1 + qd2)
-    q11 = -(ia * u1x + ib * u1y)
-    q21 = -(ic * u1x + id_ * u1y)
-    q12_ = -(ia * u2x + ib * u2y)
-    q22 = -(ic * u2x + id_ * u2y)
-    # ∂τ/∂q = -A - B Q ; G column k = (∂J/∂q_k)ᵀ F ; inner = ∂τ/∂q - G
-    g11 = -c * fx + a * fy
-    g21 = -d * fx + b * fy
-    g12 = -d * fx + b * fy
-    g22 = -d * fx + b * fy
-    m11 = -a00 - (b00 * q11 + b01 * q21) - g11
-    m12 = -a01 - (b00 * q12_ + b01 * q22) - g12
-    m21 = -a01 - (b01 * q11 + b11 * q21) - g21
-    m22 = -a11 - (b01 * q12_ + b11 * q22) - g22
-    # K = -J⁻ᵀ M J⁻¹ ; B = J⁻ᵀ Bm J⁻¹  (J⁻ᵀ = [[ia, ic], [ib, id]])
-    stiff = -_sandwich(ia, ib, ic, id_, m11, m12, m21, m22)
-    damp = _sandwich(ia, ib, ic, id_, b00, b01, b01, b11)
-    return force, stiff, damp
+#: The muscle arrays of one arm: row 0 of its set of one (:attr:`Arm.muscles`).
+_ROWS = ("q_rest", "lam_rest", "lam_slack", "lam_min", "lam_max", "excursion", "km", "alpha",
+         "beta")
 
 
 def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatArray]:
@@ -484,22 +438,6 @@ def _ik_flexed(xm: FloatArray, l1: float, l2: float) -> tuple[FloatArray, FloatA
     q1 = np.arctan2(xm[:, 1], xm[:, 0]) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
     q1 = (q1 + np.pi) % (2 * np.pi) - np.pi
     return np.stack([q1, q2], axis=1), cos2
-
-
-def _sandwich(ia: FloatArray, ib: FloatArray, ic: FloatArray, id_: FloatArray,
-              m11: FloatArray, m12: FloatArray, m21: FloatArray, m22: FloatArray) -> FloatArray:
-    """J⁻ᵀ M J⁻¹ for J⁻¹ = [[ia, ib], [ic, id]], component-wise, shape (…, N, 2, 2)."""
-    # R = M J⁻¹
-    r11 = m11 * ia + m12 * ic
-    r12 = m11 * ib + m12 * id_
-    r21 = m21 * ia + m22 * ic
-    r22 = m21 * ib + m22 * id_
-    out = np.empty((*np.broadcast_shapes(ia.shape, r11.shape), 2, 2))
-    out[..., 0, 0] = ia * r11 + ic * r21
-    out[..., 0, 1] = ia * r12 + ic * r22
-    out[..., 1, 0] = ib * r11 + id_ * r21
-    out[..., 1, 1] = ib * r12 + id_ * r22
-    return out
 
 
 def _smoothing_integral(d: FloatArray, ell: FloatArray, w: float) -> FloatArray:

@@ -2,14 +2,15 @@
 
 :class:`RobotLink` wraps any port :func:`serial.serial_for_url` returns (a USB serial device, a
 pty, ``socket://``, or the simulated robot ``sim://``). Reads never block the loop: each
-:meth:`RobotLink.poll` takes the bytes that have arrived, reassembles frames, keeps the newest
-STATE in its :class:`~haptic.port.HandleState`, and counts what went wrong (CRC and other
-decode errors, frames lost to sequence gaps, duplicates, device FAULT frames, STATE frames whose
-flags report a device fault or a tripped watchdog - each frame counted, even when a newer STATE
-of the same read replaces it; the fault flag even in a frame dropped as a duplicate). It is a
-:class:`~haptic.port.RobotPort` (and a :class:`~haptic.port.SensingPort`: :meth:`sensor_on`);
-judging its counts is the safety monitor's job
-(:mod:`haptic.monitor`); a port that fails raises :class:`LinkDown`.
+:meth:`RobotLink.poll` takes the bytes that have arrived (on a POSIX port only those the
+kernel holds ready: a read that finds bytes still in the tty layer's buffer waits for them),
+reassembles frames, unpacks the newest STATE into its :class:`~haptic.port.HandleState`, and
+counts what went wrong (CRC and other decode errors, frames lost to sequence gaps, duplicates,
+device FAULT frames, STATE frames whose flags report a device fault or a tripped watchdog -
+each frame counted, even when a newer STATE of the same read replaces it; the fault flag even
+in a frame dropped as a duplicate). It is a :class:`~haptic.port.RobotPort` (and a
+:class:`~haptic.port.SensingPort`: :meth:`sensor_on`); judging its counts is the safety
+monitor's job (:mod:`haptic.monitor`); a port that fails raises :class:`LinkDown`.
 
 Sequence numbers: a frame numbered behind the last one is a duplicate and dropped. One forged
 or corrupted-but-valid frame far ahead would then make every genuine frame look old and blind
@@ -20,9 +21,12 @@ sequence gap, which the safety layer turns into a fault.
 
 from __future__ import annotations
 
+import array
 import os
 import select
 import time
+from fcntl import ioctl
+from termios import FIONREAD
 from typing import Any
 
 import serial
@@ -42,6 +46,11 @@ DEFAULT_BAUDRATE = 1_000_000
 RESYNC_FRAMES = 3
 #: Offset of the flags byte in a STATE payload (t_us u32, x, y, vx, vy f32).
 STATE_FLAGS_AT = 20
+# what every tick's receive and send paths use, as plain names (no enum look-up per frame)
+_STATE, _SENSOR = int(P.MsgType.STATE), int(P.MsgType.SENSOR)
+_HELLO_ACK, _FAULT = int(P.MsgType.HELLO_ACK), int(P.MsgType.FAULT)
+_FLAG_FAULT, _FLAG_WATCHDOG = P.FLAG_FAULT, P.FLAG_WATCHDOG
+_FORCE, _pack_force = int(P.MsgType.FORCE), P.FORCE_FMT.pack
 
 
 class RobotLink:
@@ -90,6 +99,7 @@ class RobotLink:
         if self._fd is not None and type(port).__module__ == "serial.serialposix":
             self._raw_fd = self._fd
         self.tx_dropped = 0
+        self._ready = array.array("i", [0])  # FIONREAD's answer: bytes ready to read
 
     @classmethod
     def open(cls, url: str, baudrate: int = DEFAULT_BAUDRATE,
@@ -158,7 +168,7 @@ class RobotLink:
 
     def send_force(self, fx_n: float, fy_n: float) -> int:
         """Send a FORCE frame; returns its sequence number."""
-        return self._send(P.MsgType.FORCE, P.FORCE_FMT.pack(fx_n, fy_n))
+        return self._send(_FORCE, _pack_force(fx_n, fy_n))
 
     def arm(self) -> None:
         self._send(P.MsgType.ARM)
@@ -178,17 +188,26 @@ class RobotLink:
 
     # --- receiving --------------------------------------------------------------------------
     def poll(self) -> int:
-        """Read what has arrived without blocking; return the number of new STATE frames."""
+        """Read what has arrived without blocking; return the number of new STATE frames.
+
+        Every frame read is checked (CRC, sequence number) and counted, and the flags of every
+        STATE frame are judged; of several STATE frames read at once (a backlog after a stall)
+        only the newest is unpacked into :attr:`state`, the others have nothing the loop uses.
+        """
         fd = self._raw_fd
         if fd is not None:
             try:
+                # a read that finds bytes still on their way through the kernel's tty buffer
+                # waits for them (≈ 25 µs of this thread's CPU, measured): read only what is
+                # ready; the rest is there on the next poll
+                ioctl(fd, FIONREAD, self._ready, True)
+                if not self._ready[0]:
+                    return 0
                 data = os.read(fd, 4096)
             except BlockingIOError:
                 return 0
-            except OSError as exc:
+            except OSError as exc:  # a hang-up: EIO
                 raise LinkDown(f"robot port read failed: {exc}") from None
-            if not data:
-                return 0  # a tty in raw mode (VMIN = 0) reads 0 bytes when idle; a hang-up is EIO
         else:
             port = self.port
             try:
@@ -198,16 +217,17 @@ class RobotLink:
                 raise LinkDown(f"robot port read failed: {exc}") from None
         if not data:
             return 0
+        frames = self.reader.feed(data)
+        self.frames_rx += len(frames)
         new = 0
+        newest = None
         st = self.state
-        errors = self.reader.errors
-        for frame in self.reader.feed(data):
-            self.frames_rx += 1
-            seq = frame.seq
-            if frame.type == P.MsgType.STATE and frame.payload[STATE_FLAGS_AT] & P.FLAG_FAULT:
+        rx = self._rx_seq
+        for t, seq, payload in frames:
+            if t == _STATE and payload[STATE_FLAGS_AT] & _FLAG_FAULT:
                 st.fault_flag_frames += 1  # every one counts, even a frame dropped below
-            if self._rx_seq >= 0:
-                lost = (seq - self._rx_seq - 1) & 0xFFFF
+            if rx >= 0:
+                lost = (seq - rx - 1) & 0xFFFF
                 if lost >= 0x8000:  # behind the last frame: a duplicate, unless a run of them
                     run = self._resync_run + 1 if seq == self._resync_next else 1
                     self._resync_next = (seq + 1) & 0xFFFF
@@ -222,25 +242,26 @@ class RobotLink:
                     self.frames_lost += lost
                     if lost > st.max_gap:
                         st.max_gap = lost
-            self._rx_seq = seq
-            t = frame.type
-            if t == P.MsgType.STATE:
-                (st.t_us, st.x, st.y, st.vx, st.vy, st.flags,
-                 self.echo_seq) = P.STATE_FMT.unpack(frame.payload)
-                st.states += 1
+            rx = seq
+            if t == _STATE:
+                newest = payload
                 new += 1
-                if st.flags & P.FLAG_WATCHDOG:
+                if payload[STATE_FLAGS_AT] & _FLAG_WATCHDOG:
                     st.watchdog_flag_frames += 1
-            elif t == P.MsgType.SENSOR:
-                self.sensor_t_us, st.sensor_fx, st.sensor_fy = P.SENSOR_FMT.unpack(
-                    frame.payload)
+            elif t == _SENSOR:
+                self.sensor_t_us, st.sensor_fx, st.sensor_fy = P.SENSOR_FMT.unpack(payload)
                 st.sensors += 1
-            elif t == P.MsgType.HELLO_ACK:
-                self.device = P.DeviceInfo.from_payload(frame.payload)
-            elif t == P.MsgType.FAULT:
+            elif t == _HELLO_ACK:
+                self.device = P.DeviceInfo.from_payload(payload)
+            elif t == _FAULT:
                 st.device_faults += 1
-                st.last_device_fault = P.FAULT_FMT.unpack(frame.payload)[0]
-        st.crc_errors = errors.get("crc", 0)
+                st.last_device_fault = P.FAULT_FMT.unpack(payload)[0]
+        self._rx_seq = rx
+        if newest is not None:
+            (st.t_us, st.x, st.y, st.vx, st.vy, st.flags,
+             self.echo_seq) = P.STATE_FMT.unpack(newest)
+            st.states += new
+        st.crc_errors = self.reader.errors.get("crc", 0)
         return new
 
     def wait_state(self, timeout_s: float, spin_s: float = 0.0) -> int:

@@ -50,11 +50,11 @@ import numpy as np
 
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.files import write_new
-from fieldbank.haptic.errors import HapticError, LinkDown
-from fieldbank.haptic.link import RobotLink
+from fieldbank.haptic.errors import HapticError
 from fieldbank.haptic.monitor import SafetyMonitor
+from fieldbank.haptic.port import RobotPort
 from fieldbank.haptic.protocol import FaultCode
-from fieldbank.haptic.robots import with_force_sensor
+from fieldbank.haptic.robots import open_robot, with_force_sensor
 from fieldbank.haptic.safety import Mode, SafetyConfig
 from fieldbank.home import data_home
 from fieldbank.ingest import IngestReport, ingest_data
@@ -125,30 +125,34 @@ def run_protocol(url: str, plan: ProtocolPlan, config: MeasureConfig | None = No
     """Drive the robot at ``url`` through ``plan``; the recording and the commanded forces.
     ``progress`` hears how much robot time is done, twice a robot second.
 
+    The robot is opened by :func:`fieldbank.haptic.robots.open_robot` (a built-in scheme or a
+    robot adapter's) and driven through its port alone; measuring needs a force sensor
+    (:class:`fieldbank.haptic.port.SensingPort`).
+
     Raises :class:`MeasurementAborted` (with the samples so far) on a safety fault,
     :class:`HapticError` when the robot cannot be used (no handshake, no force sensor).
     """
     cfg = config or MeasureConfig()
-    link = RobotLink.open(url)
+    robot = open_robot(url, cfg.rate_hz, round(cfg.safety.state_timeout_ms) or 20)
     try:
-        return _run(link, url, plan, cfg, clock, progress)
+        return _run(robot, url, plan, cfg, clock, progress)
     finally:
         try:
-            link.send_force(0.0, 0.0)
-            link.disarm()
-        except (LinkDown, OSError):
+            robot.send_force(0.0, 0.0)
+            robot.disarm()
+        except (HapticError, OSError):  # LinkDown among them: the robot is gone already
             pass
-        link.close()
+        robot.close()
 
 
-def _run(link: RobotLink, url: str, plan: ProtocolPlan, cfg: MeasureConfig,
+def _run(robot: RobotPort, url: str, plan: ProtocolPlan, cfg: MeasureConfig,
          clock: object, progress: Progress | None = None) -> tuple[Recording, np.ndarray]:
     dt = 1.0 / cfg.rate_hz
-    link.handshake(cfg.rate_hz, round(cfg.safety.state_timeout_ms) or 20)
-    link.heartbeat()
-    st = with_force_sensor(link, url, "measuring", clock).state  # type: ignore[arg-type]
+    robot.heartbeat()
+    sensing = with_force_sensor(robot, url, "measuring", clock)  # type: ignore[arg-type]
+    st = sensing.state
     ox, oy = cfg.shoulder_offset_m
-    monitor = SafetyMonitor(link, cfg.safety, dt)
+    monitor = SafetyMonitor(sensing, cfg.safety, dt)
     monitor.arm(running=False)
     approach = _approach((st.x - ox, st.y - oy), plan.start_m, cfg.approach_speed_m_per_s)
     t_off = approach.duration_s

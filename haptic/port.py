@@ -130,6 +130,11 @@ class RobotPort(Protocol):
         """Command the force on the handle, N, robot frame (already limited by the loop)."""
         ...
 
+    def heartbeat(self) -> None:
+        """Tell the robot that the host is alive while no force is due (a robot with a
+        watchdog restarts it; one without has nothing to do)."""
+        ...
+
     def arm(self) -> None:
         """Let the robot apply forces (the loop ramps them in)."""
         ...

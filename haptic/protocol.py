@@ -131,6 +131,10 @@ class Frame(NamedTuple):
     payload: bytes
 
 
+#: Builds a :class:`Frame` from a tuple in C (a named tuple's own constructor is a Python call).
+_new_frame = tuple.__new__
+
+
 # --- CRC --------------------------------------------------------------------------------------
 def crc16_ccitt_false(data: bytes) -> int:
     """CRC-16/CCITT-FALSE of ``data`` (C implementation from the standard library)."""
@@ -171,8 +175,6 @@ def cobs_decode(data: bytes) -> bytes:
     n = len(data)
     if 0 in data:
         raise FrameError("cobs", "COBS data contains a zero byte")
-    if n and data[0] == n:
-        return bytes(data[1:])  # the common case: a short frame with no zero inside
     parts = []
     i = 0
     while i < n:
@@ -197,25 +199,27 @@ def encode_frame(msg_type: int, seq: int, payload: bytes = b"") -> bytes:
 
 def decode_frame(encoded: bytes) -> Frame:
     """Decode one frame (without its delimiter); raises :class:`FrameError`."""
-    if len(encoded) > MAX_FRAME_BYTES:
-        raise FrameError("length", f"frame of {len(encoded)} bytes exceeds {MAX_FRAME_BYTES}")
-    body = cobs_decode(encoded)
-    if len(body) < _HEADER.size + _CRC.size:
+    n = len(encoded)
+    if n > MAX_FRAME_BYTES:
+        raise FrameError("length", f"frame of {n} bytes exceeds {MAX_FRAME_BYTES}")
+    # the common case, without a call: a frame with no zero inside is its code byte and its body
+    body = bytes(encoded[1:]) if n and encoded[0] == n and 0 not in encoded else cobs_decode(
+        encoded)
+    end = len(body) - 2  # where the CRC starts (single bytes and slices: no struct call)
+    if end < _HEADER.size:
         raise FrameError("length", f"frame of {len(body)} bytes is shorter than header + CRC")
-    (crc,) = _CRC.unpack_from(body, len(body) - 2)
-    if binascii.crc_hqx(body[:-2], 0xFFFF) != crc:
+    if binascii.crc_hqx(body[:end], 0xFFFF) != body[end] | body[end + 1] << 8:
         raise FrameError("crc", "CRC mismatch")
-    version, msg_type, seq = _HEADER.unpack_from(body, 0)
+    version, msg_type = body[0], body[1]
     if version != PROTOCOL_VERSION:
         raise FrameError("version", f"protocol version {version}, expected {PROTOCOL_VERSION}")
-    payload = body[_HEADER.size:-2]
     expected = _SIZES.get(msg_type)
     if expected is None:
         raise FrameError("type", f"unknown message type 0x{msg_type:02x}")
-    if len(payload) != expected:
-        raise FrameError("length", f"{MsgType(msg_type).name} payload of {len(payload)} "
-                                   f"bytes, expected {expected}")
-    return Frame(msg_type, seq, payload)
+    if end - _HEADER.size != expected:
+        raise FrameError("length", f"{MsgType(msg_type).name} payload of "
+                                   f"{end - _HEADER.size} bytes, expected {expected}")
+    return _new_frame(Frame, (msg_type, body[2] | body[3] << 8, body[_HEADER.size:end]))
 
 
 class FrameReader:
@@ -236,19 +240,17 @@ class FrameReader:
     def feed(self, data: bytes) -> list[Frame]:
         """Add bytes; return the frames completed by them (bad frames are counted, not raised)."""
         buf = self._buf
-        buf += data
-        frames: list[Frame] = []
-        if 0 not in data:
-            if len(buf) > MAX_FRAME_BYTES:
-                self.errors["length"] = self.errors.get("length", 0) + 1
-                buf.clear()
-            return frames
-        parts = bytes(buf).split(b"\x00")
-        buf.clear()
-        buf += parts.pop()
-        if len(buf) > MAX_FRAME_BYTES:
-            self.errors["length"] = self.errors.get("length", 0) + 1
+        if buf:  # the start of a frame from an earlier read
+            buf += data
+            data = bytes(buf)
             buf.clear()
+        parts = data.split(b"\x00")
+        rest = parts.pop()  # after the last delimiter: a frame still arriving
+        if len(rest) > MAX_FRAME_BYTES:
+            self.errors["length"] = self.errors.get("length", 0) + 1
+        elif rest:
+            buf += rest
+        frames: list[Frame] = []
         for part in parts:
             if not part:
                 continue  # back-to-back delimiters are idle fill

@@ -20,7 +20,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from fieldbank.armbatch import ArmBatch
 from fieldbank.evaluate.arms import ArmCache
+from fieldbank.evaluate.batch import standard_stretch_torques
 from fieldbank.evaluate.compare import (
     Comparison,
     Conditions,
@@ -148,7 +150,8 @@ def stretch_course(arm: Arm, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
     0) times 1 - e_g(w). One set of stretch profiles therefore gives every week exactly
     (``tests/test_report_figures.py`` checks it against :func:`time_course`). A plan stored
     before the recalibration (``scale_beta``) also scales β, where this does not hold; its
-    weeks are then evaluated one by one.
+    weeks are then evaluated together, one parameter set each, in one pass
+    (:func:`fieldbank.evaluate.batch.standard_stretch_torques`).
     """
     w = _check(plan, weeks)
     compiled = arms if arms is not None else ArmCache()
@@ -161,9 +164,11 @@ def stretch_course(arm: Arm, plan: Plan, weeks: ArrayLike = DEFAULT_WEEKS,
     vel = {n: np.zeros(w.size) for n in names}
     slow = {n: np.zeros(w.size) for n in names}
     if any(s.scale_beta for s in bots):
-        for i, week in enumerate(w):
-            prof = stretch_profiles(compiled(plan.at_week(float(week)).apply(arm.params)))
-            _read_week(prof, np.ones(6), i, fast, vel, slow)
+        sets = [plan.at_week(float(week)).apply(arm.params) for week in w]
+        for st in standard_stretch_torques(ArmBatch.from_params(sets, arm)):
+            fast[st.name][:] = st.fast_n_m.max(axis=1)
+            vel[st.name][:] = (st.fast_n_m - st.slow_n_m).max(axis=1)
+            slow[st.name][:] = st.slow_n_m.max(axis=1)
     else:
         untreated = Plan(tuple(s.at_week(0.0) if isinstance(s, Botulinum) else s
                                for s in plan.steps), plan.label)

@@ -30,11 +30,13 @@ what-if must say:
   also holds (the held values are the range's unimpaired end), and a metric whose interval
   the guesses widen by more than :data:`GUESS_WIDENING` says it rests on a guess
   (``rests_on_guess``, ``*`` in the text). The
-  samples run in one vectorised pass (:func:`sample_metrics`, :class:`fieldbank.model.ArmBatch`:
-  the geometry compiled once, every muscle value - Km, α, β, slack offset, rest length, rest
-  posture - free per sample); :func:`sample_metrics_per_sample` is the one-arm-per-sample
-  reference it is tested against. :class:`IntervalSet` is what a report keeps with the fit
-  under :func:`interval_key`.
+  samples run in one vectorised pass (:func:`sample_metrics`, :class:`fieldbank.armbatch.ArmBatch`:
+  the model before's geometry, every muscle value - Km, α, β, slack offset, rest length, rest
+  posture - free per sample). :class:`IntervalSet` is what a report keeps with the fit under
+  :func:`interval_key`.
+
+The model before is compiled once by the caller and passed down as an :class:`Arm`: its
+parameters (``arm.params``) and its geometry go together to every step.
 
 Which parameters a step acts on follows from the catalogue's public contract (``targets()``
 and ``EFFECTS``): a change of α or β scales the group's reflex force, which rests on both α
@@ -321,12 +323,13 @@ def plan_warnings(plan: Plan, basis: FitBasis | None, params: ArmParams) -> tupl
     return tuple(out)
 
 
-def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
+def prediction_intervals(basis: FitBasis | None, before: Arm, plan: Plan,
                          cond: Conditions, arms: ArmCache,
                          n_samples: int = DEFAULT_INTERVAL_SAMPLES,
                          bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]]
                          | None = None) -> tuple[tuple[Interval, ...], str, int]:
-    """The plan applied to each of the fit's samples: (intervals, note, samples used).
+    """The plan applied to each of the fit's samples of the model ``before``: (intervals,
+    note, samples used). ``arms`` keeps what depends on the fit and the model before only.
 
     ``bands``, when given, receives the 95% band of each fast-stretch torque curve before and
     after: ``{"before" | "after": {stretch name: (low, high)}}`` (N·m along the angle).
@@ -340,28 +343,28 @@ def prediction_intervals(basis: FitBasis | None, before: ArmParams, plan: Plan,
                     "earlier plans: intervals need the fitted model itself"), 0
     # what depends on the fit and the model before only is derived once per use case
     # (ArmCache.derived): a composer changing doses on one model reuses it
-    fit = (basis.fit_id, basis.fitted_model_id, basis.same_model, basis.seed, before,
-           n_samples)
+    p0 = before.params
+    fit = (basis.fit_id, basis.fitted_model_id, basis.same_model, basis.seed, p0, n_samples)
     samples = basis.samples
     if not basis.ranges:
-        plain = arms.derived(("fit samples", *fit), lambda: samples.params(before, n_samples))
+        plain = arms.derived(("fit samples", *fit), lambda: samples.params(p0, n_samples))
         # the model itself rides along as set 0: its metrics are the point predictions
-        sm = sample_metrics([before, *plain], plan, cond, arms(before), memo=arms)
+        sm = sample_metrics([p0, *plain], plan, cond, before, memo=arms)
         note = (f"95% intervals over {len(plain)} parameter samples of fit {basis.fit_id}; "
                 "the fit held no parameter at a guessed value")
         return intervals_of(sm, bands), note, len(plain)
-    prior = arms.derived(("prior", before), lambda: Prior.for_arm(arms(before)))
+    prior = arms.derived(("prior", p0), lambda: Prior.for_arm(before))
     # as many draws as asked for: the fit's replicates are cycled when fewer, the guesses
     # drawn afresh for each
     ranges, seed = basis.ranges, basis.seed
     guessed = arms.derived(("drawn guesses", *fit), lambda: draw(
-        samples, ranges, prior, n_samples, seed=seed).params(before))
+        samples, ranges, prior, n_samples, seed=seed).params(p0))
     plain = arms.derived(("held guesses", *fit), lambda: draw(
-        samples, (), prior, n_samples).params(before))
+        samples, (), prior, n_samples).params(p0))
     n = len(guessed)
     # one pass: the model (set 0), the samples with the guesses drawn (1…n), the samples with
     # the held values kept (n+1…2n)
-    sm = sample_metrics([before, *guessed, *plain], plan, cond, arms(before), memo=arms)
+    sm = sample_metrics([p0, *guessed, *plain], plan, cond, before, memo=arms)
     drawn = intervals_of(_rows(sm, range(0, n + 1)), bands)
     kept_bands: dict[str, dict[str, tuple[FloatArray, FloatArray]]] | None = (
         None if bands is None else {})
@@ -495,7 +498,7 @@ def interval_key(basis: FitBasis, before: ArmParams, plan: Plan, n_samples: int)
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode("utf-8")).hexdigest()
 
 
-def interval_set(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
+def interval_set(basis: FitBasis | None, before: Arm, plan: Plan, cond: Conditions,
                  arms: ArmCache, n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> IntervalSet:
     """:func:`prediction_intervals` with its bands, as one :class:`IntervalSet`."""
     if n_samples <= 0:
@@ -506,29 +509,22 @@ def interval_set(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Co
     return IntervalSet(intervals, note, used, bands)
 
 
-def examine(source: ModelSource, plan: Plan, cond: Conditions, arms: ArmCache, *,
-            accept_poor_fit: bool = False,
-            n_samples: int = DEFAULT_INTERVAL_SAMPLES) -> Guesses:
-    """Everything above for one what-if (raises :class:`PoorFitError` first)."""
-    return examine_basis(FitBasis.of(source), source.params, plan, cond, arms,
-                         accept_poor_fit=accept_poor_fit, n_samples=n_samples)
-
-
-def examine_basis(basis: FitBasis | None, before: ArmParams, plan: Plan, cond: Conditions,
-                  arms: ArmCache, *, accept_poor_fit: bool = False,
-                  n_samples: int = DEFAULT_INTERVAL_SAMPLES,
-                  known: IntervalSet | None = None) -> Guesses:
-    """:func:`examine` for a model ``before`` whose fit basis is known (reports); ``known``:
-    its intervals read from the fit's stored documents (:func:`interval_key`), used instead
-    of computing them."""
+def examine(basis: FitBasis | None, before: Arm, plan: Plan, cond: Conditions,
+            arms: ArmCache, *, accept_poor_fit: bool = False,
+            n_samples: int = DEFAULT_INTERVAL_SAMPLES,
+            known: IntervalSet | None = None) -> Guesses:
+    """Everything above for one what-if on the model ``before`` whose fit basis is
+    ``basis`` (:meth:`FitBasis.of` its source; raises :class:`PoorFitError` first); ``known``:
+    its intervals read from the fit's stored documents (:func:`interval_key`, reports), used
+    instead of computing them."""
     note = check_fit(basis, accept_poor_fit)
     iv = known if known is not None else interval_set(basis, before, plan, cond, arms,
                                                       n_samples)
-    warn = list(plan_warnings(plan, basis, before))
+    warn = list(plan_warnings(plan, basis, before.params))
     if note:
         warn.insert(0, note)
-    return Guesses(basis, guesses(basis, before), tuple(warn), iv.intervals, iv.note,
-                   iv.n_samples, note is not None, unseen_reflexes(basis, arms(before)),
+    return Guesses(basis, guesses(basis, before.params), tuple(warn), iv.intervals, iv.note,
+                   iv.n_samples, note is not None, unseen_reflexes(basis, before),
                    bands=iv.bands)
 
 

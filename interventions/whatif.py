@@ -254,9 +254,10 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     if given_on is not None and save_to is None:
         raise InterventionError("what-if: a date the plan was given is stored with the plan; "
                                 "it needs --save.")
-    check_fit(FitBasis.of(source), accept_poor_fit)  # before any work or writing
+    basis = FitBasis.of(source)
+    check_fit(basis, accept_poor_fit)  # before any work or writing
     arms = arms if arms is not None else ArmCache()
-    arm_b = arms(source.params)
+    arm_b = arms(source.params)  # the model before, compiled once: every step below takes it
     cond = arms.derived(("conditions", source.params), lambda: Conditions.standard(arm_b))
     inverse = None
     if search is not None:
@@ -271,7 +272,7 @@ def run_whatif(source: ModelSource, plan: Plan | None, *, search: DoseSearch | N
     before_ev = arms.derived(("evaluation", cond, unid),
                              lambda: evaluate_arm(arm_b, cond, unid))
     comparison = compare_evaluations(before_ev, evaluate_arm(arm_a, cond, unid))
-    guesses = examine(source, plan, cond, arms, accept_poor_fit=accept_poor_fit,
+    guesses = examine(basis, arm_b, plan, cond, arms, accept_poor_fit=accept_poor_fit,
                       n_samples=interval_samples)
     course = time_course(arm_b, plan, conditions=cond, arms=arms) if timecourse else None
     if plot_path:

@@ -29,18 +29,15 @@ from fieldbank.fitting.uncertainty import FitSamples
 from fieldbank.interventions.catalogue import Botulinum
 from fieldbank.interventions.guesses import (
     FitBasis,
-    examine_basis,
+    examine,
     interval_key,
     summary_lines,
 )
 from fieldbank.interventions.plan import Plan
-from fieldbank.interventions.samplemetrics import (
-    headline_metrics,
-    sample_metrics,
-    sample_metrics_per_sample,
-)
+from fieldbank.interventions.samplemetrics import sample_metrics
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
+from tests.sample_reference import headline_metrics, sample_metrics_per_sample
 
 BASE = ArmParams.from_anthropometry()
 PLAN = Plan.of(Botulinum({"ef": 150.0}))
@@ -145,7 +142,7 @@ def test_a_postural_only_fit_gives_intervals_that_hold_the_unmeasured_reflex(
     assert report["intervals"]["alpha_ef"]["high"] > 1000.0
     basis = FitBasis.from_report(1, 1, True, report)
     cond = Conditions.standard(Arm.from_params(fit.params_))
-    g = examine_basis(basis, fit.params_, PLAN, cond, ArmCache(), n_samples=40)
+    g = examine(basis, Arm.from_params(fit.params_), PLAN, cond, ArmCache(), n_samples=40)
     iv = {i.metric: i for i in g.intervals}
     true_before = headline_metrics(Arm.from_params(truth), cond)
     true_after = headline_metrics(Arm.from_params(PLAN.apply(truth)), cond)

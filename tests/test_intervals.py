@@ -27,9 +27,10 @@ from fieldbank.interventions.guesses import (
     intervals_of,
 )
 from fieldbank.interventions.plan import Plan
-from fieldbank.interventions.samplemetrics import sample_metrics, sample_metrics_per_sample
+from fieldbank.interventions.samplemetrics import sample_metrics
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
+from tests.sample_reference import sample_metrics_per_sample
 
 RTOL = 1e-12
 
@@ -128,7 +129,7 @@ def test_interval_set_round_trips_exactly_and_keys_change_with_inputs(before: Ar
     plan = Plan.of(Botulinum({"ef": 150.0}))
     basis = _basis(before)
     cond = Conditions.standard(Arm.from_params(before))
-    iv = interval_set(basis, before, plan, cond, ArmCache(), 16)
+    iv = interval_set(basis, Arm.from_params(before), plan, cond, ArmCache(), 16)
     assert iv.n_samples == 16 and iv.intervals and set(iv.bands) == {"before", "after"}
     back = IntervalSet.from_document(*iv.to_document())
     assert back.intervals == iv.intervals and back.note == iv.note

@@ -229,6 +229,9 @@ class _Handle:
     def wait_state(self, timeout_s: float, spin_s: float = 0.0) -> int:
         return self.poll()
 
+    def heartbeat(self) -> None:
+        pass
+
     def send_force(self, fx_n: float, fy_n: float) -> None:
         pass
 

@@ -148,7 +148,7 @@ def test_open_robot_says_why_it_refuses() -> None:
         def poll(self) -> int:
             return 0
 
-    assert "missing: wait_state, send_force, arm, disarm, counters, close" in str(
+    assert "missing: wait_state, send_force, heartbeat, arm, disarm, counters, close" in str(
         _refusal(Half(), 1000))
 
     class NoDevice(Half):
@@ -156,6 +156,7 @@ def test_open_robot_says_why_it_refuses() -> None:
             return 0
 
         def send_force(self, fx_n: float, fy_n: float) -> None: ...
+        def heartbeat(self) -> None: ...
         def arm(self) -> None: ...
         def disarm(self) -> None: ...
 

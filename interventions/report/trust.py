@@ -27,7 +27,7 @@ from fieldbank.interventions.guesses import (
     FitBasis,
     Guesses,
     IntervalSet,
-    examine_basis,
+    examine,
     interval_key,
 )
 from fieldbank.interventions.report.select import CaseSpec
@@ -36,7 +36,8 @@ from fieldbank.interventions.whatifchoices import DEFAULT_INTERVAL_SAMPLES
 from fieldbank.storage import Database
 
 #: Headline metrics with interval columns: metric of
-#: :func:`fieldbank.interventions.guesses.headline_metrics` -> (column stem, heading, unit).
+#: :func:`fieldbank.interventions.samplemetrics.headline_metrics_batch` -> (column stem,
+#: heading, unit).
 _INTERVALS: tuple[tuple[str, str, str, str], ...] = (
     ("pull peak force", "pull_peak", "pull peak", "N"),
     ("semi-ellipse peak force", "semi_ellipse_peak", "semi-ellipse peak", "N"),
@@ -125,8 +126,8 @@ def case_trust(spec: CaseSpec, cond: Conditions, arms: ArmCache) -> CaseTrust:
     basis = basis_of(spec)
     g = v = None
     if spec.plan is not None:
-        g = examine_basis(basis, spec.before, spec.plan, cond, arms,
-                          accept_poor_fit=spec.accept_poor_fit, known=spec.intervals)
+        g = examine(basis, arms(spec.before), spec.plan, cond, arms,
+                    accept_poor_fit=spec.accept_poor_fit, known=spec.intervals)
         detail.update(g.to_dict())
         row["fit_status"] = (basis.status + (" (accepted)" if g.accepted_poor_fit else "")
                              if basis is not None else "not fitted")

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from fieldbank.armbatch import by_geometry
 from fieldbank.dynamics import hand_inertial_force
 from fieldbank.evaluate.design.candidates import Candidate
 from fieldbank.evaluate.design.config import NoiseModel, ProbeLimits
@@ -105,18 +106,19 @@ def predict(candidates: Sequence[Candidate], positions_m: FloatArray,
     x = positions_m.reshape(-1, 2)
     v = velocities_m_per_s.reshape(-1, 2)
     acc = None if accelerations_m_per_s2 is None else accelerations_m_per_s2.reshape(-1, 2)
-    out = np.empty((len(candidates), *shape))
+    arms = [c.arm for c in candidates]
+    out = np.empty((len(arms), *shape))
     inertial: dict[tuple[object, ...], FloatArray] = {}
-    for i, c in enumerate(candidates):
-        f = c.arm.endpoint_force(x, v)
-        if acc is not None:
-            key = _inertia_key(c.arm)
-            if key not in inertial:
-                inertial[key] = hand_inertial_force(c.arm, x, v, acc)
-            f = f + inertial[key]
-        f = f.reshape(shape)
-        out[i] = f if force_limit_n is None else saturate(f, force_limit_n)
-    return out
+    for idx, batch in by_geometry(arms):  # the candidates of one geometry in one pass
+        forces = batch.endpoint_force(x, v)
+        for i, f in zip(idx, forces, strict=True):
+            if acc is not None:
+                key = _inertia_key(arms[i])
+                if key not in inertial:
+                    inertial[key] = hand_inertial_force(arms[i], x, v, acc)
+                f = f + inertial[key]
+            out[i] = f.reshape(shape)
+    return out if force_limit_n is None else saturate(out, force_limit_n)
 
 
 def _inertia_key(arm: Arm) -> tuple[object, ...]:
