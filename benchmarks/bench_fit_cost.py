@@ -12,7 +12,7 @@ positions and 9 stiffness positions static and at ±1 m/s, 5 % noise), three fig
 * **search alone** - :func:`fieldbank.fitting.search.run_nlopt` on the patient's problem (the
   global search, the polish and the coordinate scans); target ≤ 0.2 s CPU.
 
-The baseline is the reference path of the same code (:func:`fieldbank.fitting.problem.
+The baseline is the reference path of the same code (:func:`fieldbank.fitting.reference.
 reference_kernels`: the numpy evaluation of the cost the compiled kernels replaced), run in
 this process on the same patients, so the ratio is the gain of the kernels alone. Each figure
 is the median of ``--repeat`` runs after one warm-up; the optimum's cost of both paths is
@@ -43,9 +43,9 @@ import numpy as np
 from timing import load_line, per_call
 
 from fieldbank.fitting import ArmFitter
-from fieldbank.fitting import problem as problem_mod
 from fieldbank.fitting.fitter import validate_maps
 from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.reference import reference_kernels
 from fieldbank.fitting.search import run_nlopt
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.fitting.synthetic import impaired_params, synthetic_patient
@@ -92,7 +92,7 @@ def per_evaluation(base: ArmParams) -> None:
     maps = synthetic_patient(impaired_params("elbow", "severe", base), seed=0).maps
     arm = Arm.from_params(base)
     used = validate_maps(maps, arm)
-    with problem_mod.reference_kernels():
+    with reference_kernels():
         ref = FitProblem.from_maps(used, arm, ParamSpace.build(base))
     new = FitProblem.from_maps(used, arm, ParamSpace.build(base))
     phi = np.full(6, 0.5)
@@ -144,7 +144,7 @@ def main() -> None:
         patient = synthetic_patient(impaired_params(group, level, base), seed=seed)
         todo = cases(patient.maps, base, seed)
         for name, fn in todo.items():
-            with problem_mod.reference_kernels():
+            with reference_kernels():
                 ref = measure(fn, args.repeat)
             new = measure(fn, args.repeat)
             if name in worst:
@@ -161,7 +161,7 @@ def main() -> None:
         group, level, seed = PATIENTS[0]
         patient = synthetic_patient(impaired_params(group, level, base), seed=seed)
         fn = cases(patient.maps, base, seed)["fit + uncertainty"]
-        with problem_mod.reference_kernels():
+        with reference_kernels():
             fn()
             print(f"\n== profile, reference path: one default fit ({group} {level}) ==")
             print(top10(fn))

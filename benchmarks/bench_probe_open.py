@@ -27,7 +27,7 @@ import json
 import sys
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -40,62 +40,81 @@ from fieldbank.evaluate.openset import CALIBRATED, RAW, Calibration
 from fieldbank.evaluate.reliability import (
     FAMILIES,
     Outcome,
+    ReliabilityBin,
     calibration_error,
+    ece_noise_floor,
     family_arms,
     reliability_bins,
     run_trials,
-    wrong_when_sure,
+    stated_claims,
 )
-from fieldbank.params import GROUPS
 
 
-def job(args: tuple[str, int, int, float, int, int, bool]
+def job(args: tuple[str, int, int, float, int, int, int, bool]
         ) -> tuple[str, float, list[Outcome], float]:
-    family, n, draws, sd, seed, part, baseline = args
-    arms = family_arms(family, n, seed)[part::2]
+    family, n, draws, sd, seed, part, parts, baseline = args
+    arms = family_arms(family, n, seed)[part::parts]
     c0 = time.process_time()
     out = run_trials(arms, NoiseModel(force_sd_n=sd), draws=draws, seed=seed + part,
                      baseline=baseline, calibration=RAW)
     return family, sd, out, time.process_time() - c0
 
 
-def per_group(out: Sequence[Outcome], cal: Calibration) -> tuple[list[float], list[bool]]:
-    """Every group of every trial: the stated probability of the group's verdict (impaired
-    when its probability is at least one half) and whether the verdict is the truth's."""
-    stated, right = [], []
-    for o in out:
-        gp = o.classification(cal).group_probability
-        truth = set(o.truth.split("+"))
-        for g in GROUPS:
-            p = gp[g]
-            stated.append(max(p, 1.0 - p))
-            right.append((p >= 0.5) == (g in truth))
-    return stated, right
+def _cells(bins: Sequence[ReliabilityBin]) -> str:
+    return "; ".join(f"[{b.low:.2f}, {b.high:.2f}{']' if b.high == 1 else ')'} "
+                     f"{b.n}, {b.stated:.3f}, {b.observed:.3f}" for b in bins if b.n)
+
+
+def _ece(stated: Sequence[float], right: Sequence[bool]) -> str:
+    """ECE (points) with the noise floor of a calibrated classifier on the same stated
+    probabilities (mean, 95th percentile)."""
+    bins = reliability_bins(stated, right)
+    mean, p95 = ece_noise_floor(stated)
+    return f"{100 * calibration_error(bins):.1f} ({100 * mean:.1f}, {100 * p95:.1f})"
+
+
+def _sure(stated: Sequence[float], right: Sequence[bool]) -> str:
+    wrong = sum(not r for p, r in zip(stated, right, strict=True) if p >= 0.95)
+    sure = sum(p >= 0.95 for p in stated)
+    return f"{wrong}/{sure} ({100 * wrong / max(sure, 1):.1f}%)"
 
 
 def table(results: dict[tuple[str, float], list[Outcome]], sd: float, cal: Calibration,
           baseline: bool) -> None:
-    print("| family | trials | right | ECE (points) | wrong at p ≥ 0.95 | said none | "
-          "per group: ECE, wrong at p ≥ 0.95 | stated p: n, stated, right per bin |"
-          + (" baseline: right, ECE, wrong at p ≥ 0.95 |" if baseline else ""))
-    print("|---|---:|---:|---:|---:|---:|---|---|" + ("---|" if baseline else ""))
+    print("What is stated - per group, or partner groups as a set "
+          "(fieldbank.evaluate.statements):\n")
+    print("| family | trials | statements (sets of partners) | ECE (floor: mean, 95th pct) | "
+          "wrong at p ≥ 0.95 | stated p: n, stated, right per bin |")
+    print("|---|---:|---:|---:|---:|---|")
     for family in FAMILIES:
-        raw = results[(family, sd)]
-        out = [o.restated(cal) for o in raw]
-        bins = reliability_bins([o.probability for o in out], [o.right for o in out])
-        wrong, sure = wrong_when_sure(out)
-        cells = "; ".join(f"[{b.low:.2f}, {b.high:.2f}{']' if b.high == 1 else ')'} "
-                          f"{b.n}, {b.stated:.2f}, {b.observed:.2f}" for b in bins if b.n)
-        gs, gr = per_group(raw, cal)
-        gbins = reliability_bins(gs, gr)
-        gw = sum(not r for s, r in zip(gs, gr, strict=True) if s >= 0.95)
-        gn = sum(s >= 0.95 for s in gs)
-        line = (f"| {family} | {len(out)} | {100 * np.mean([o.right for o in out]):.0f}% | "
-                f"{100 * calibration_error(bins):.1f} | {wrong}/{sure} "
-                f"({100 * wrong / max(sure, 1):.0f}%) | "
-                f"{sum(o.answer == 'none of the candidates' for o in out)} | "
-                f"{100 * calibration_error(gbins):.1f}, {gw}/{gn} "
-                f"({100 * gw / max(gn, 1):.1f}%) | {cells} |")
+        claims = [(st, r) for _o, st, r in stated_claims(results.get((family, sd), []), cal)
+                  if st.groups]
+        ps, rs = [st.probability for st, _r in claims], [r for _st, r in claims]
+        pairs = sum(st.kind == "partners" for st, _r in claims)
+        print(f"| {family} | {len(results.get((family, sd), []))} | {len(claims)} ({pairs}) | "
+              f"{_ece(ps, rs)} | {_sure(ps, rs)} | {_cells(reliability_bins(ps, rs))} |")
+    print("\n\"None of the candidates explains this recording\" (stated when its "
+          "probability is above one half; right for an arm outside the candidates):\n")
+    print("| family | trials | said none | of which right | its p: n, stated, right per bin |")
+    print("|---|---:|---:|---:|---|")
+    for family in FAMILIES:
+        none = [(st, r) for _o, st, r in stated_claims(results.get((family, sd), []), cal)
+                if not st.groups]
+        bins = reliability_bins([st.probability for st, _r in none], [r for _st, r in none])
+        print(f"| {family} | {len(results.get((family, sd), []))} | {len(none)} | "
+              f"{sum(r for _st, r in none)} | {_cells(bins)} |")
+    print("\nThe most probable set of impaired groups (the joint answer, for comparison):\n")
+    print("| family | trials | right | ECE (floor: mean, 95th pct) | wrong at p ≥ 0.95 | "
+          "stated p: n, stated, right per bin |"
+          + (" baseline: right, ECE, wrong at p ≥ 0.95 |" if baseline else ""))
+    print("|---|---:|---:|---:|---:|---|" + ("---|" if baseline else ""))
+    for family in FAMILIES:
+        out = [o.restated(cal) for o in results.get((family, sd), [])]
+        if not out:
+            continue
+        ps, rs = [o.probability for o in out], [o.right for o in out]
+        line = (f"| {family} | {len(out)} | {100 * np.mean(rs):.0f}% | {_ece(ps, rs)} | "
+                f"{_sure(ps, rs)} | {_cells(reliability_bins(ps, rs))} |")
         if baseline:
             base = reliability_bins([o.baseline_probability for o in out],
                                     [o.baseline_right for o in out])
@@ -104,13 +123,13 @@ def table(results: dict[tuple[str, float], list[Outcome]], sd: float, cal: Calib
             line += (f" {100 * np.mean([o.baseline_right for o in out]):.0f}%, "
                      f"{100 * calibration_error(base):.1f}, {bw}/{bs} |")
         print(line)
-    misses = [o.restated(cal) for f in FAMILIES for o in results[(f, sd)]]
-    misses = [o for o in misses if not o.right and o.probability >= 0.95]
+    misses = [(o, st) for f in FAMILIES for o, st, r in stated_claims(results.get((f, sd), []), cal)
+              if not r and st.probability >= 0.95]
     if misses:
-        print("\nwrong at p ≥ 0.95:")
-        for o in misses:
-            print(f"  {o.family}: {o.arm} (truth {o.truth}) answered {o.answer} at "
-                  f"p = {o.probability:.3f}")
+        print("\nstatements wrong at p ≥ 0.95:")
+        for o, st in misses:
+            print(f"  {o.family}: {o.arm} (truth {o.truth}; fit p {o.fit_p_value:.2g}) - "
+                  f"{st.text} at p = {st.probability:.3f}")
 
 
 def main() -> None:
@@ -119,11 +138,17 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=3, help="sensor-noise draws per execution")
     ap.add_argument("--noise", type=float, nargs="+", default=[2.0])
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--parts", type=int, default=2,
+                    help="split each family's arms into this many jobs")
     ap.add_argument("--seed", type=int, default=31)
     ap.add_argument("--no-baseline", action="store_true",
                     help="leave out the joint-group classifier")
     ap.add_argument("--save", type=Path, help="write the trials' outcomes here (JSON)")
     ap.add_argument("--load", type=Path, help="print the tables of outcomes saved before")
+    ap.add_argument("--calibration", type=float, nargs=5,
+                    metavar=("POWER", "SLOPE", "UNSEEN", "OTHER", "LEVEL"),
+                    help="state with this calibration instead of the classifier's own "
+                         "(power, misfit slope, unseen share, share for none, misfit level)")
     args = ap.parse_args()
     baseline = not args.no_baseline
     results: dict[tuple[str, float], list[Outcome]] = {}
@@ -139,28 +164,37 @@ def main() -> None:
               f"{args.load.name}; {load_line()}")
     else:
         noise = args.noise
-        jobs = [(f, args.arms, args.draws, sd, args.seed, part, baseline) for sd in noise
-                for f in FAMILIES for part in (0, 1)]
+        # part by part over every family, the outcomes saved as each part ends: a run stopped
+        # early still holds every family
+        jobs = [(f, args.arms, args.draws, sd, args.seed, part, args.parts, baseline)
+                for sd in noise for part in range(args.parts) for f in FAMILIES]
         t0 = time.perf_counter()
         cpu = 0.0
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            for family, sd, out, c in pool.map(job, jobs):
+            for done in as_completed([pool.submit(job, j) for j in jobs]):
+                family, sd, out, c = done.result()
                 results.setdefault((family, sd), []).extend(out)
                 cpu += c
+                if args.save is not None:
+                    args.save.write_text(json.dumps(
+                        [{**dataclasses.asdict(o), "noise_n": sd}
+                         for (_f, sd), v in results.items() for o in v]))
         wall = time.perf_counter() - t0
         n_trials = sum(len(v) for v in results.values())
         print(f"bench_probe_open: {len(FAMILIES)} families × {args.arms} arms × {args.draws} "
               f"noise draws × {len(noise)} noise level(s) = {n_trials} trials; {wall:.0f} s "
               f"wall, {cpu:.0f} s CPU ({cpu / n_trials:.2f} s a trial) on {args.jobs} "
               f"processes; {load_line()}")
-        if args.save is not None:
-            args.save.write_text(json.dumps(
-                [{**dataclasses.asdict(o), "noise_n": sd} for (_f, sd), v in results.items()
-                 for o in v]))
+    stated = CALIBRATED if args.calibration is None else Calibration(
+        power=args.calibration[0], misfit_slope=args.calibration[1],
+        unseen=args.calibration[2], other=args.calibration[3],
+        misfit_level=args.calibration[4])
     for sd in noise:
         for what, cal in (("raw: the posterior as the likelihood and prior give it", RAW),
-                          (f"stated: calibrated (power {CALIBRATED.power:g}, other "
-                           f"{CALIBRATED.other:g})", CALIBRATED)):
+                          (f"stated: calibrated (power {stated.power:g}, misfit slope "
+                           f"{stated.misfit_slope:g}, unseen {stated.unseen:g}, other "
+                           f"{stated.other:g}, misfit level {stated.misfit_level:g})",
+                           stated)):
             print(f"\n### force noise {sd:g} N per axis (τ 50 ms) - {what}\n")
             table(results, sd, cal, baseline)
 

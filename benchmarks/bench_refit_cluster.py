@@ -9,7 +9,9 @@ here is its own process, started as docs/scale-out.md tells a clinic to start th
 * the cluster's certificates from :func:`fieldbank.clustercerts.write_certs` (what
   ``fieldbank cluster certs`` writes);
 * ``dask scheduler --protocol tls`` with the scheduler's certificate, and W ``dask worker``
-  processes (one thread each, each under its nanny) with the workers' certificate;
+  processes (one thread each, each under its nanny) with the workers' certificate, all with
+  ``DASK_CONFIG`` naming the ``dask.yaml`` written beside the certificates
+  (``--dask-defaults``: without it, Dask's defaults);
 * the refit itself: ``fieldbank fit --all --scheduler tls://… --tls-ca … --tls-cert …
   --tls-key … --seed S --db URL``, the command a user types, as a process.
 
@@ -40,6 +42,7 @@ and from the scheduler Dask's own count of the CPU of the threads that ran the t
 
 Run: python benchmarks/bench_refit_cluster.py [--sessions 50] [--workers 1 2]
                                               [--database fbrefit] [--db SERVER_URL]
+                                              [--dask-defaults] [--stop-at HH:MM]
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import NamedTuple
@@ -149,12 +152,15 @@ def _cpu(procs: Sequence[object]) -> float:
 
 
 @contextmanager
-def cluster(certs: Path, workers: int, log: Path) -> Iterator[tuple[str, object, list[object],
-                                                                      list[object]]]:
+def cluster(certs: Path, workers: int, log: Path, dask_env: Mapping[str, str] | None = None,
+            ) -> Iterator[tuple[str, object, list[object], list[object]]]:
     """A TLS scheduler and ``workers`` worker processes (one thread each, under a nanny), as
-    processes of their own. Yields the address, the scheduler's process, the workers' and the
-    nannies'."""
+    processes of their own, with the ``DASK_*`` variables of ``dask_env`` (none: Dask's
+    defaults). Yields the address, the scheduler's process, the workers' and the nannies'."""
     import psutil
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DASK_")}
+    env.update(dask_env or {})
 
     port = _free_port()
     addr = f"tls://127.0.0.1:{port}"
@@ -163,12 +169,12 @@ def cluster(certs: Path, workers: int, log: Path) -> Iterator[tuple[str, object,
         [str(BIN / "dask"), "scheduler", "--protocol", "tls", "--host", "127.0.0.1",
          "--port", str(port), "--no-dashboard", "--tls-ca-file", str(certs / "ca.pem"),
          "--tls-cert", str(certs / "scheduler.pem"), "--tls-key",
-         str(certs / "scheduler-key.pem")], stdout=out, stderr=out)
+         str(certs / "scheduler-key.pem")], stdout=out, stderr=out, env=env)
     nannies = [subprocess.Popen(
         [str(BIN / "dask"), "worker", addr, "--nworkers", "1", "--nthreads", "1",
          "--no-dashboard", "--name", f"w{i}", "--tls-ca-file", str(certs / "ca.pem"),
          "--tls-cert", str(certs / "worker.pem"), "--tls-key", str(certs / "worker-key.pem")],
-        stdout=out, stderr=out) for i in range(workers)]
+        stdout=out, stderr=out, env=env) for i in range(workers)]
     try:
         client = _client(addr, certs)
         client.wait_for_workers(workers, timeout=300)
@@ -193,7 +199,7 @@ def _client(addr: str, certs: Path) -> object:
 
     sec = Security(tls_ca_file=str(certs / "ca.pem"), tls_client_cert=str(certs / "client.pem"),
                    tls_client_key=str(certs / "client-key.pem"), require_encryption=True)
-    return Client(addr, security=sec, timeout=60, set_as_default=False)
+    return Client(addr, security=sec, timeout=300, set_as_default=False)  # a loaded machine
 
 
 def _task_cpu(addr: str, certs: Path) -> float:
@@ -277,8 +283,11 @@ def _jobs(url: str, first: int | None = None) -> tuple[list[float], list[float],
 
 
 def measure(url: str, certs: Path, workers: int, log: Path,
-            stop_after: float | None = None) -> Run:
-    with cluster(certs, workers, log) as (addr, sched, worker_ps, nanny_ps):
+            stop_after: float | None = None, stop_at: float | None = None,
+            dask_env: Mapping[str, str] | None = None) -> Run:
+    """One refit on a fresh cluster of ``workers`` workers, stopped after ``stop_after``
+    seconds or at the epoch time ``stop_at``, whichever comes first."""
+    with cluster(certs, workers, log, dask_env) as (addr, sched, worker_ps, nanny_ps):
         warm = subprocess.run(_fit_command(url, addr, certs, 1000 + workers, "R00000-0000"),
                               capture_output=True, text=True)
         if warm.returncode != 0:
@@ -295,6 +304,9 @@ def measure(url: str, certs: Path, workers: int, log: Path,
         _children_cpu_delta()  # the warm-up's
         task0 = _task_cpu(addr, certs)
         w0, n0, s0 = _cpu(worker_ps), _cpu(nanny_ps), _cpu([sched])
+        if stop_at is not None:
+            left = max(0.0, stop_at - time.time())
+            stop_after = left if stop_after is None else min(stop_after, left)
         t = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True)
@@ -327,6 +339,16 @@ def measure(url: str, certs: Path, workers: int, log: Path,
         raise SystemExit(f"{bad} jobs not done")
     return Run(workers, len(cpus), wall, w1 - w0, n1 - n0, s1 - s0, command_cpu,
                task1 - task0, cpus, fits, walls, idle_w, idle_s, shown, load_start, load_end)
+
+
+def _utc_today(hhmm: str) -> float:
+    """The epoch time of ``HH:MM`` UTC next to come."""
+    from datetime import UTC, datetime, timedelta
+
+    now = datetime.now(UTC)
+    h, m = (int(x) for x in hhmm.split(":"))
+    at = now.replace(hour=h, minute=m, second=0, microsecond=0)
+    return (at if at > now else at + timedelta(days=1)).timestamp()
 
 
 _CHILDREN = [0.0]
@@ -431,11 +453,20 @@ def main() -> int:
     ap.add_argument("--stop-after", type=float, default=None, metavar="SECONDS",
                     help="stop each refit after this long and count the sessions done by then "
                          "(a run too long for the time at hand)")
+    ap.add_argument("--dask-defaults", action="store_true",
+                    help="start the scheduler and the workers with Dask's defaults, without "
+                         "the dask.yaml of 'fieldbank cluster certs'")
+    ap.add_argument("--stop-at", default=None, metavar="HH:MM",
+                    help="stop any refit still running at this UTC time of day, as --stop-after "
+                         "does (the configurations after it start and stop at once)")
     args = ap.parse_args()
     if not args.db:
         print("give --db or set FIELDBANK_TEST_PG_URL (scripts/pg-test-server starts a server)")
         return 2
     from fieldbank.clustercerts import CertOptions, write_certs
+    from fieldbank.clusterconfig import CONFIG_FILE
+
+    stop_at = _utc_today(args.stop_at) if args.stop_at else None
 
     print(f"at start: {load_line()}", flush=True)
     url = ensure_database(args.db, args.database)
@@ -447,12 +478,22 @@ def main() -> int:
         certs = Path(d) / "certs"
         write_certs(certs, CertOptions(days=2, hosts=("127.0.0.1",)))
         log = Path(args.log) if args.log else Path(d) / "cluster.log"
+        dask_env = {} if args.dask_defaults else {"DASK_CONFIG": str(certs / CONFIG_FILE)}
+        print("the scheduler and the workers run with " + (
+            "Dask's defaults" if args.dask_defaults else f"fieldbank's {CONFIG_FILE}"),
+            flush=True)
         _children_cpu_delta()
         for w in args.workers:
-            runs.append(measure(url, certs, w, log, args.stop_after))
-            r = runs[-1]
+            r = measure(url, certs, w, log, args.stop_after, stop_at, dask_env)
             print(f"{w} worker(s): {r.sessions} sessions in {r.wall_s:.0f} s, workers' CPU "
                   f"{r.worker_cpu_s:.0f} s, {load_line()}", flush=True)
+            if r.sessions:
+                runs.append(r)
+                if len(runs) < len(args.workers):
+                    report(runs)  # so far: a later configuration may not finish
+    if not runs:
+        print("no session was refitted")
+        return 1
     report(runs)
     print(f"at end: {load_line()}")
     return 0

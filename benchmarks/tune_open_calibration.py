@@ -1,24 +1,31 @@
 """Fit the open-set classifier's calibration on arms of its own, never the benchmark's.
 
 The posterior over the sets of impaired groups rests on a grid of states and on a model of
-the misfit that leaves it over-confident on arms between the grid's states or with a partner
-group compensating, and on arms the set does not hold. :func:`fieldbank.evaluate.reliability.
-fit_calibration` chooses the power of the posterior and the share set aside for "none of the
-candidates" under which the truth is most probable (a proper score) over the tuning arms:
+the misfit that leaves it over-confident on arms between the grid's states, with a partner
+group compensating, or outside the set, and under-confident on others.
+:func:`fieldbank.evaluate.reliability.fit_calibration` chooses, by a proper score (the mean
+log probability stated for the truth):
 
-* families **between severities**, **two groups** and **outside the candidates**, seed 7 (the
-  benchmark, ``benchmarks/bench_probe_open.py``, uses seed 31: other bodies, other arms);
-* families **reflex only** and **contracture only** are held out altogether: the benchmark
-  measures the calibration on them as on families it never saw.
+* the power of the posterior and how fast it falls with the best arm's misfit, by what is
+  stated per group (each group impaired or not);
+* the share set aside for "none of the candidates" and the misfit level, by that statement.
+
+Tuning arms: every family (between severities, two groups, reflex only, contracture only,
+outside the candidates) at seed 7 - other bodies and arms than the benchmark's seed 31
+(``benchmarks/bench_probe_open.py``). ``--hold-out "reflex only" "contracture only"`` leaves
+families out of the fit, so that the benchmark measures the calibration on families it never
+saw. ``--load`` fits on trials saved by ``bench_probe_open.py --seed 7 --save``.
 
 The result is :data:`fieldbank.evaluate.openset.CALIBRATED`.
 
-Run: python benchmarks/tune_open_calibration.py [--arms 8] [--draws 3] [--seed 7] [--jobs 2]
+Run: python benchmarks/tune_open_calibration.py [--arms 10] [--draws 3] [--seed 7] [--jobs 2]
+     [--hold-out FAMILY ...] [--load outcomes.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -32,15 +39,15 @@ from benchmarks.timing import load_line
 from fieldbank.evaluate.design import NoiseModel
 from fieldbank.evaluate.openset import RAW
 from fieldbank.evaluate.reliability import (
+    FAMILIES,
     Outcome,
     calibration_error,
     family_arms,
     fit_calibration,
     reliability_bins,
     run_trials,
+    stated_claims,
 )
-
-TUNING_FAMILIES = ("between severities", "two groups", "outside the candidates")
 
 
 def job(args: tuple[str, int, int, int, int]) -> list[Outcome]:
@@ -51,31 +58,49 @@ def job(args: tuple[str, int, int, int, int]) -> list[Outcome]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--arms", type=int, default=8, help="arms per family")
+    ap.add_argument("--arms", type=int, default=10, help="arms per family")
     ap.add_argument("--draws", type=int, default=3)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--hold-out", nargs="*", default=[], choices=FAMILIES, metavar="FAMILY",
+                    help="families left out of the fit")
+    ap.add_argument("--load", type=Path, help="fit on trials saved before (bench_probe_open "
+                                              "--save, at a seed other than the benchmark's)")
     args = ap.parse_args()
+    tuned = tuple(f for f in FAMILIES if f not in args.hold_out)
     t0 = time.perf_counter()
     out: list[Outcome] = []
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        for o in pool.map(job, [(f, args.arms, args.draws, args.seed, part)
-                                for f in TUNING_FAMILIES for part in (0, 1)]):
-            out.extend(o)
+    if args.load is not None:
+        for row in json.loads(args.load.read_text()):
+            row.pop("noise_n", None)
+            out.append(Outcome(**{**row, "labels": tuple(row["labels"]),
+                                  "label_probability": tuple(row["label_probability"])}))
+        out = [o for o in out if o.family in tuned]
+        source = args.load.name
+    else:
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            for o in pool.map(job, [(f, args.arms, args.draws, args.seed, part)
+                                    for f in tuned for part in (0, 1)]):
+                out.extend(o)
+        source = f"seed {args.seed}"
     cal, score = fit_calibration(out)
-    print(f"tune_open_calibration: {len(out)} trials ({', '.join(TUNING_FAMILIES)}; seed "
-          f"{args.seed}), {time.perf_counter() - t0:.0f} s wall; {load_line()}")
-    raw = float(np.mean([np.log(max(o.truth_probability(RAW), 1e-6)) for o in out]))
-    print(f"fitted: power {cal.power:g}, other {cal.other:g}; mean log probability of the "
-          f"truth {score:.3f} (raw {raw:.3f})")
-    for family in TUNING_FAMILIES:
+    print(f"tune_open_calibration: {len(out)} trials ({', '.join(tuned)}; {source}), "
+          f"{time.perf_counter() - t0:.0f} s wall; {load_line()}")
+    print(f"fitted: power {cal.power:g}, misfit slope {cal.misfit_slope:g}, unseen "
+          f"{cal.unseen:g}, other "
+          f"{cal.other:g}, misfit level {cal.misfit_level:g}; mean log probability stated "
+          f"for a group's truth {score:.4f}")
+    for family in tuned:
         for name, c in (("raw", RAW), ("fitted", cal)):
-            got = [o.restated(c) for o in out if o.family == family]
-            bins = reliability_bins([o.probability for o in got], [o.right for o in got])
-            print(f"  {family:<24} {name:<7} right {100 * np.mean([o.right for o in got]):3.0f}%"
-                  f"  ECE {100 * calibration_error(bins):5.1f}  wrong at p ≥ 0.95 "
-                  f"{sum(not o.right for o in got if o.probability >= 0.95)}/"
-                  f"{sum(o.probability >= 0.95 for o in got)}")
+            claims = [(st, r) for o, st, r in stated_claims(out, c)
+                      if o.family == family and st.groups]
+            bins = reliability_bins([st.probability for st, _r in claims],
+                                    [r for _st, r in claims])
+            sure = [r for st, r in claims if st.probability >= 0.95]
+            print(f"  {family:<24} {name:<7} statements {len(claims):4d}  right "
+                  f"{100 * np.mean([r for _st, r in claims]):3.0f}%  ECE "
+                  f"{100 * calibration_error(bins):5.1f}  wrong at p ≥ 0.95 "
+                  f"{sum(not r for r in sure)}/{len(sure)}")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,8 @@ def cluster() -> None:
 @json_option
 def certs(out_dir: str, hosts: tuple[str, ...], days: int, force: bool, as_json: bool) -> None:
     """Make a certificate authority for one cluster and the scheduler's, the workers' and the
-    clients' certificates and keys (keys 0600), and say where each goes.
+    clients' certificates and keys (keys 0600), with fieldbank's Dask settings (dask.yaml),
+    and say where each goes.
 
     The authority's own key is never written: no file can issue another certificate the
     cluster trusts. Every holder of one of these certificates can run code on the workers.
@@ -52,11 +53,13 @@ def certs(out_dir: str, hosts: tuple[str, ...], days: int, force: bool, as_json:
     say(f"wrote {len(done.files)} files to {d} (keys readable by you only); the authority's "
         f"SHA-256 fingerprint {done.ca_fingerprint}; valid until "
         f"{done.not_after:%Y-%m-%d}.\n"
-        f"\nThe scheduler's machine (ca.pem, scheduler.pem, scheduler-key.pem):\n"
+        f"\nThe scheduler's machine (ca.pem, scheduler.pem, scheduler-key.pem, dask.yaml):\n"
+        f"  DASK_CONFIG={f('dask.yaml')} \\\n"
         f"  dask scheduler --protocol tls --host {host} --port 8786 "
         f"--dashboard-address 127.0.0.1:8787 \\\n    --tls-ca-file {f('ca.pem')} "
         f"--tls-cert {f('scheduler.pem')} --tls-key {f('scheduler-key.pem')}\n"
-        f"\nEach worker machine (ca.pem, worker.pem, worker-key.pem):\n"
+        f"\nEach worker machine (ca.pem, worker.pem, worker-key.pem, dask.yaml):\n"
+        f"  DASK_CONFIG={f('dask.yaml')} \\\n"
         f"  dask worker {addr} --nworkers auto --nthreads 1 \\\n"
         f"    --tls-ca-file {f('ca.pem')} --tls-cert {f('worker.pem')} "
         f"--tls-key {f('worker-key.pem')}\n"
@@ -66,4 +69,6 @@ def certs(out_dir: str, hosts: tuple[str, ...], days: int, force: bool, as_json:
         f"  tls_cert = {toml('client.pem')}\n  tls_key = {toml('client-key.pem')}\n"
         "\nCopy each key only to the machines that need it, readable by the user that runs "
         "Dask there (chmod 600): whoever holds any of these keys can run code on the "
-        "workers.")
+        "workers. dask.yaml makes the cluster's idle timers less frequent and stops the "
+        "workers' profiler (docs/scale-out.md, \"Quieter workers\"); leave DASK_CONFIG out "
+        "to keep Dask's defaults.")

@@ -340,6 +340,7 @@ def _open_classify(traces: tuple[str, ...], levels: str | None, param_files: tup
     from fieldbank import modelsource
     from fieldbank.evaluate.design import NoiseModel
     from fieldbank.evaluate.openset import classify_on_body
+    from fieldbank.evaluate.statements import open_report
     from fieldbank.haptic.probe import read_observations
 
     given = [name for name, v in (("--levels", levels), ("--candidate-params", param_files),
@@ -354,19 +355,22 @@ def _open_classify(traces: tuple[str, ...], levels: str | None, param_files: tup
     body = modelsource.synthetic([], body_mass_kg=mass, height_m=height, side=side).params
     cl = classify_on_body(obs, body, NoiseModel(force_sd_n=force_sd_n,
                                                 correlation_s=correlation_s))
-    emit(cl.to_dict(), as_json, _open_text(cl))
+    emit(open_report(cl), as_json, _open_text(cl))
 
 
 def _open_text(cl: OpenClassification) -> str:
     from fieldbank.evaluate.classify import FIT_LEVEL
     from fieldbank.evaluate.openset import KINDS, NONE_OF_THEM
+    from fieldbank.evaluate.statements import state
     from fieldbank.params import GROUP_NAMES
 
     answer, p = cl.answer
     said = ("none of the candidates explains the recording" if answer == NONE_OF_THEM else
             "no group impaired" if answer == "unimpaired" else f"impaired: {answer}")
-    lines = [f"{said}  (p = {p:.2f})",
-             f"  {'group':<28} {'impaired':>8}   " + "  ".join(f"{k:>10}" for k in
+    lines = ["stated (per group, or partner groups the recording cannot tell apart):"]
+    lines += [f"  p = {s.probability:.2f}  {s.text}" for s in state(cl)]
+    lines += [f"most probable set of groups: {said}  (p = {p:.2f})",
+              f"  {'group':<28} {'impaired':>8}   " + "  ".join(f"{k:>10}" for k in
                                                              ("spasticity", "stiffness",
                                                               "both", "contracture"))]
     for g, kinds in cl.group_kinds().items():

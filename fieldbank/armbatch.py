@@ -7,6 +7,11 @@ muscles as one :class:`~fieldbank.muscleset.MuscleSet`, evaluated with the code 
 (:meth:`fieldbank.model.Arm.field_of`: one arm is the set of one), so that S samples cost one
 vectorised pass instead of S compiled arms (the prediction intervals of a what-if and of a
 report, the prior's table, the spread of a fit's predictions).
+
+Sets given as arrays (:meth:`ArmBatch.from_arrays`: a fit's samples, the prior's table) are
+checked once, as arrays, against the bounds table of :class:`~fieldbank.params.ArmParams`
+(:data:`fieldbank.params.BOUNDS`) - the same bounds and messages a record would get, without a
+record per set.
 """
 
 from __future__ import annotations
@@ -22,7 +27,8 @@ from numpy.typing import ArrayLike
 from fieldbank.errors import ParameterError
 from fieldbank.model import Arm, FloatArray
 from fieldbank.muscleset import MuscleSet, hand_force, velocities
-from fieldbank.params import ArmParams
+from fieldbank.params import BOUNDS, ArmParams, field_label
+from fieldbank.validation import number_problem
 
 #: ArmParams fields that may differ between the parameter sets of one :class:`ArmBatch`: every
 #: muscle value a fit or its uncertainty can move (Km, α, β per group, slack offsets, rest
@@ -39,14 +45,15 @@ class ArmBatch:
     The geometry (``geometry``: J_λ, λ̇_max, segment lengths, the range of motion) is compiled
     once; the muscle values of :data:`SAMPLED_FIELDS` are the rows of ``muscles``. What each
     set gives is what :meth:`Arm.from_params` of that set would give, evaluated by the same
-    code (:meth:`Arm.field_of`). Build with :meth:`from_params`; every array is read-only.
+    code (:meth:`Arm.field_of`). Build with :meth:`from_params` or :meth:`from_arrays`; every
+    array is read-only.
 
     Attributes
     ----------
     geometry : Arm
         The compiled arm of the first parameter set.
     params : tuple of ArmParams
-        The S parameter sets.
+        The S parameter sets (empty when the sets were given as arrays, :meth:`from_arrays`).
     muscles : MuscleSet
         Their muscle values, (S, 6) each (:attr:`MuscleSet.same_lengths`: every set has the
         same rest posture, rest and slack lengths).
@@ -81,8 +88,55 @@ class ArmBatch:
                     "Arm.from_params.")
         return cls(geometry=geo, params=sets, muscles=MuscleSet.of(sets, geo.jl, geo.ldot_max))
 
+    @classmethod
+    def from_arrays(cls, geometry: Arm, size: int, **values: ArrayLike) -> ArmBatch:
+        """``size`` parameter sets of ``geometry``'s arm that differ from its parameters in the
+        fields of :data:`SAMPLED_FIELDS` given as arrays, (S, 6) or (S, 2) for ``q_rest_rad``
+        (a row per set; a single row is shared by every set); a field not given is the
+        geometry's own. Each value is checked against :data:`fieldbank.params.BOUNDS`, as
+        :class:`~fieldbank.params.ArmParams` checks it, once for all sets.
+
+        Raises
+        ------
+        ParameterError
+            An unknown field, an array of the wrong shape, a value outside its bounds (naming
+            the set, the field and the group), or a muscle reaching a non-positive length.
+        """
+        unknown = sorted(set(values) - set(SAMPLED_FIELDS))
+        if unknown:
+            raise ParameterError(f"ArmBatch: {', '.join(unknown)} cannot differ between the "
+                                 f"sets of one batch; only {', '.join(SAMPLED_FIELDS)} can.")
+        if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+            raise ParameterError(f"ArmBatch needs at least one parameter set; got {size!r}.")
+        p0 = geometry.params
+        arrays: dict[str, FloatArray] = {}
+        for name in SAMPLED_FIELDS:
+            own = np.asarray(getattr(p0, name), dtype=float)
+            given = values.get(name)
+            a = own[None, :] if given is None else np.asarray(given, dtype=float)
+            if a.ndim != 2 or a.shape[1] != own.size or a.shape[0] not in (1, size):
+                raise ParameterError(f"ArmBatch: {name} must have shape ({size}, {own.size}); "
+                                     f"got {a.shape}.")
+            if given is not None:
+                _check_bounds(name, a)
+            arrays[name] = np.broadcast_to(a, (size, own.size))
+        if "q_rest_rad" in values:  # the relation a record checks: the rest posture in range
+            for j, rng in enumerate(("shoulder_range_rad", "elbow_range_rad")):
+                lo, hi = getattr(p0, rng)
+                q = arrays["q_rest_rad"][:, j]
+                bad = np.flatnonzero((q < lo) | (q > hi))
+                if bad.size:
+                    k = int(bad[0])
+                    raise ParameterError(
+                        f"ArmBatch: parameter set {k}: the 'q_rest_rad[{j}]' parameter must lie "
+                        f"in the range of motion [{lo:g}, {hi:g}] rad; got {q[k]:g} instead.")
+        named = {"km": arrays["km_n_per_m"], "alpha": arrays["alpha_n"],
+                 "beta": arrays["beta"], **arrays}
+        return cls(geometry=geometry, params=(),
+                   muscles=MuscleSet.from_values(p0, named, geometry.jl, geometry.ldot_max))
+
     def __len__(self) -> int:
-        return len(self.params)
+        return len(self.muscles)
 
     def endpoint_force(self, x: ArrayLike, v: ArrayLike | None = None) -> FloatArray:
         """Force each set's arm exerts on the handle, (S, N, 2), N, at hand positions x
@@ -132,3 +186,20 @@ _GEOMETRY_FIELDS: tuple[str, ...] = tuple(
 #: The geometry fields of a set, as one tuple (a copy made by ``with_group`` shares their
 #: objects, so comparing two keys is mostly identity checks).
 _geometry_key: Callable[[ArmParams], tuple[object, ...]] = attrgetter(*_GEOMETRY_FIELDS)
+
+
+def _check_bounds(name: str, values: FloatArray) -> None:
+    """Every entry of ``values`` (S, k) of field ``name`` inside its interval of
+    :data:`fieldbank.params.BOUNDS` (a NaN or an infinity is not); else the message a record
+    would give for the first bad entry, naming its set."""
+    iv = BOUNDS[name]
+    low = -np.inf if iv.low is None else iv.low
+    high = np.inf if iv.high is None else iv.high
+    ok = np.isfinite(values)
+    ok &= (values >= low) if iv.low_closed else (values > low)
+    ok &= (values <= high) if iv.high_closed else (values < high)
+    if ok.all():
+        return
+    k, i = (int(v) for v in np.argwhere(~ok)[0])
+    msg = number_problem(field_label(name, i), float(values[k, i]), iv)
+    raise ParameterError(f"ArmBatch: parameter set {k}: {msg}")

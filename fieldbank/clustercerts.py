@@ -11,6 +11,8 @@ signatures come from it, never from code written here):
 ``scheduler.pem``, ``scheduler-key.pem``  the scheduler's machine (TLS server and client)
 ``worker.pem``, ``worker-key.pem``      every worker machine (workers listen and connect)
 ``client.pem``, ``client-key.pem``      where fieldbank's batch commands run (client only)
+``dask.yaml``                           the scheduler's and the workers' machines: fieldbank's
+                                        Dask settings (:mod:`fieldbank.clusterconfig`)
 =====================================  =========================================================
 
 Keys are ECDSA P-256, written 0600 from their creation; certificates 0644. The authority's
@@ -24,6 +26,10 @@ Dask checks that a peer's certificate comes from the authority, not which host i
 expects addresses to be IPs): every holder of any of these certificates is a member of the
 cluster and can run code on its workers. The scheduler's certificate names the hosts given
 (``--host``) anyway, so that standard tools can check them.
+
+``dask.yaml`` is no secret: it makes the cluster's idle timers less frequent and stops the
+workers' profiler, and is read only by the processes started with ``DASK_CONFIG`` naming it
+(the commands ``fieldbank cluster certs`` prints).
 
 The files are written together (:func:`fieldbank.files.write_directory`): a failure leaves
 none of them, and a set in place is replaced only with ``force``.
@@ -41,6 +47,7 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any, ClassVar
 
+from fieldbank.clusterconfig import CONFIG_FILE, dask_yaml
 from fieldbank.errors import FileRefused, ParameterError
 from fieldbank.files import DISK_FULL_ERRNOS, disk_full_message, write_directory
 from fieldbank.validation import Interval, check_fields
@@ -50,6 +57,8 @@ ROLES = ("scheduler", "worker", "client")
 CA_FILE = "ca.pem"
 #: Every file a set holds.
 FILES = (CA_FILE, *(f for r in ROLES for f in (f"{r}.pem", f"{r}-key.pem")))
+#: Every file written: the set and fieldbank's Dask settings.
+WRITTEN = (*FILES, CONFIG_FILE)
 #: The private keys among them (written 0600).
 KEY_FILES = tuple(f"{r}-key.pem" for r in ROLES)
 #: Slack for clocks that disagree: certificates are valid from this long before now.
@@ -174,8 +183,8 @@ def make_certs(options: CertOptions) -> tuple[dict[str, bytes], str, datetime]:
 
 
 def write_certs(out_dir: str | Path, options: CertOptions, force: bool = False) -> CertSet:
-    """Make a set (:func:`make_certs`) and write it into ``out_dir`` (created 0700 when it
-    does not exist; its parent must).
+    """Make a set (:func:`make_certs`) and write it, with ``dask.yaml``, into ``out_dir``
+    (created 0700 when it does not exist; its parent must).
 
     Raises
     ------
@@ -189,19 +198,20 @@ def write_certs(out_dir: str | Path, options: CertOptions, force: bool = False) 
     if not out.parent.is_dir():
         raise FileRefused(f"the directory {out.parent} does not exist; create it first (or "
                           "choose another --out).")
-    there = [f for f in FILES if os.path.lexists(out / f)]
+    there = [f for f in WRITTEN if os.path.lexists(out / f)]
     if there and not force:
         raise FileRefused(
             f"{out} already holds {', '.join(there)}; replacing them shuts out "
             "every machine that has the old files until it gets the new ones. Give --force to "
             "replace them, or choose another --out.")
     pems, fingerprint, end = make_certs(options)
-    modes: Mapping[str, int] = {f: 0o600 if f in KEY_FILES else 0o644 for f in FILES}
+    files: dict[str, bytes | str] = {**pems, CONFIG_FILE: dask_yaml()}
+    modes: Mapping[str, int] = {f: 0o600 if f in KEY_FILES else 0o644 for f in WRITTEN}
     try:
-        write_directory(out, pems, modes=modes, private=True)
+        write_directory(out, files, modes=modes, private=True)
     except OSError as exc:
         if exc.errno in DISK_FULL_ERRNOS:
             raise FileRefused(disk_full_message(out, exc)) from None
         raise FileRefused(f"cannot write the certificates into {out}: "
                           f"{exc.strerror or exc}; nothing was written.") from None
-    return CertSet(out, tuple(out / f for f in FILES), fingerprint, end, options.hosts)
+    return CertSet(out, tuple(out / f for f in WRITTEN), fingerprint, end, options.hosts)

@@ -83,9 +83,27 @@ class MuscleSet:
         ParameterError
             A muscle would reach a non-positive length within the range of motion.
         """
-        p0 = sets[0]
-        q_rest = np.array([p.q_rest_rad for p in sets], dtype=float)
-        lam_rest = np.array([p.rest_length_m for p in sets], dtype=float)
+        return cls.from_values(sets[0], {
+            "q_rest_rad": np.array([p.q_rest_rad for p in sets], dtype=float),
+            "rest_length_m": np.array([p.rest_length_m for p in sets], dtype=float),
+            "slack_offset_m": np.array([p.slack_offset_m for p in sets], dtype=float),
+            **_values(sets)}, jl, ldot_max)
+
+    @classmethod
+    def from_values(cls, p0: ArmParams, values: dict[str, FloatArray], jl: FloatArray,
+                    ldot_max: FloatArray) -> MuscleSet:
+        """The muscles of the sets whose values are ``values`` - ``q_rest_rad`` (S, 2),
+        ``rest_length_m`` and ``slack_offset_m`` (S, 6), ``km``, ``alpha``, ``beta`` (S, 6),
+        checked already - over the geometry of ``p0`` (its range of motion and smoothing
+        width), ``jl`` and ``ldot_max`` (:meth:`of`).
+
+        Raises
+        ------
+        ParameterError
+            A muscle would reach a non-positive length within the range of motion.
+        """
+        q_rest = np.array(values["q_rest_rad"], dtype=float)
+        lam_rest = np.array(values["rest_length_m"], dtype=float)
         corners = np.array([[a, b] for a in p0.shoulder_range_rad for b in p0.elbow_range_rad])
         # λ is linear in q, so its extremes over the box are at corners
         lam_corners = lam_rest[:, None, :] + (corners[None, :, :] - q_rest[:, None, :]) @ jl.T
@@ -93,14 +111,14 @@ class MuscleSet:
         lam_max = lam_corners.max(axis=1)
         if np.any(lam_min <= 0):
             k, i = np.unravel_index(int(np.argmin(lam_min)), lam_min.shape)
-            where = f"In parameter set {int(k)}, muscle" if len(sets) > 1 else "Muscle"
+            where = f"In parameter set {int(k)}, muscle" if len(q_rest) > 1 else "Muscle"
             raise ParameterError(
                 f"{where} {int(i)} would reach a non-positive length ({lam_min[k, i]:.4g} m) "
                 "within the range of motion; raise rest_length_m or shrink the range.")
-        slack = lam_rest + np.array([p.slack_offset_m for p in sets], dtype=float)
+        slack = lam_rest + np.asarray(values["slack_offset_m"], dtype=float)
         arrays = {"q_rest": q_rest, "lam_rest": lam_rest, "lam_slack": slack,
                   "lam_min": lam_min, "lam_max": lam_max, "excursion": lam_max - lam_min,
-                  **_values(sets)}
+                  **{k: np.array(values[k], dtype=float) for k in ("km", "alpha", "beta")}}
         for a in arrays.values():
             a.setflags(write=False)
         same = all(np.array_equal(a, a[:1].repeat(len(a), axis=0))

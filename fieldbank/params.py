@@ -131,7 +131,9 @@ _SIX = ("moment_arm_shoulder_m", "moment_arm_elbow_m", "rest_length_m", "km_n_pe
 _PAIRS = ("q_rest_rad", "shoulder_range_rad", "elbow_range_rad", "circle_centre_rad")
 
 
-def _label(name: str, index: int | None) -> str:
+def field_label(name: str, index: int | None) -> str:
+    """How messages name entry ``index`` of field ``name``: ``beta[2] (ef)`` for a per-group
+    field, ``q_rest_rad[1]`` for a pair, the name alone for a number (``index`` None)."""
     if index is None:
         return name
     if name in _SIX:
@@ -142,7 +144,7 @@ def _label(name: str, index: int | None) -> str:
 def _check_value(name: str, value: Any, index: int | None = None) -> float:
     if type(value) is float and BOUNDS[name].contains(value):
         return value  # the common case, checked without building a message
-    return check_number(_label(name, index), value, BOUNDS[name])
+    return check_number(field_label(name, index), value, BOUNDS[name])
 
 
 def _check_tuple(name: str, value: Any, length: int) -> tuple[float, ...]:
@@ -153,7 +155,7 @@ def _check_tuple(name: str, value: Any, length: int) -> tuple[float, ...]:
             type(v) is float and interval.contains(v) for v in value):
         return value
     return check_tuple(name, value, length, interval,
-                       labels=[_label(name, i) for i in range(length)])
+                       labels=[field_label(name, i) for i in range(length)])
 
 
 _is_float = frozenset((float,)).__contains__

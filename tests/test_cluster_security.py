@@ -17,7 +17,7 @@ from click.testing import CliRunner, Result
 
 from fieldbank import engine
 from fieldbank.cli.main import cli
-from fieldbank.clustercerts import FILES, KEY_FILES, CertOptions, write_certs
+from fieldbank.clustercerts import FILES, KEY_FILES, WRITTEN, CertOptions, write_certs
 from fieldbank.engine import Done, Task, Where, _execute_with, _lost
 from fieldbank.errors import ClusterError, ConfigError, FileRefused, ParameterError
 from fieldbank.scheduler import SchedulerFlags, is_loopback, resolve_scheduler
@@ -282,13 +282,15 @@ def test_cluster_certs_writes_a_set_with_private_keys_and_never_overwrites_witho
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
     d = Path("certs")
-    assert sorted(p.name for p in d.iterdir()) == sorted(FILES)
+    assert sorted(p.name for p in d.iterdir()) == sorted(WRITTEN)
     assert stat.S_IMODE(d.stat().st_mode) == 0o700
-    for name in FILES:
+    for name in WRITTEN:
         mode = stat.S_IMODE((d / name).stat().st_mode)
         assert mode & 0o077 == 0 if name in KEY_FILES else mode & 0o022 == 0, name
     assert not any("ca-key" in p.name for p in d.iterdir())  # the authority's key: never
     assert "dask scheduler --protocol tls" in r.stderr and "tls_cert = " in r.stderr
+    assert r.stderr.count(f"DASK_CONFIG={(d / 'dask.yaml').resolve()}") == 2  # both commands
+    assert doc["files"][-1].endswith("dask.yaml")
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
 
@@ -304,9 +306,15 @@ def test_cluster_certs_writes_a_set_with_private_keys_and_never_overwrites_witho
     r = run("cluster", "certs", "--out", "certs")
     assert r.exit_code == 1 and "already holds ca.pem" in r.output and "--force" in r.output
     assert {n: (d / n).read_bytes() for n in FILES} == before
+    for name in FILES:  # a dask.yaml alone in the directory is not replaced either
+        (d / name).unlink()
+    (d / "dask.yaml").write_text("distributed: {}\n")
+    r = run("cluster", "certs", "--out", "certs")
+    assert r.exit_code == 1 and "already holds dask.yaml" in r.output
+    assert (d / "dask.yaml").read_text() == "distributed: {}\n" and len(list(d.iterdir())) == 1
     assert run("cluster", "certs", "--out", "certs", "--force").exit_code == 0
     assert all((d / n).read_bytes() != before[n] for n in FILES)
-    assert sorted(p.name for p in d.iterdir()) == sorted(FILES)  # no temporary left
+    assert sorted(p.name for p in d.iterdir()) == sorted(WRITTEN)  # no temporary left
 
 
 def test_cluster_certs_refuses_clearly(clean_work: Path) -> None:

@@ -23,7 +23,8 @@ import numpy as np
 import pytest
 
 from fieldbank.fitting import ArmFitter
-from fieldbank.fitting.problem import FitProblem, reference_kernels
+from fieldbank.fitting.problem import FitProblem
+from fieldbank.fitting.reference import reference_kernels
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.fitting.synthetic import impaired_params, synthetic_patient
 from fieldbank.model import Arm
@@ -132,3 +133,38 @@ def test_default_fit_same_optimum_and_intervals(group: str, level: str, seed: in
         assert abs(b["low"] - a["low"]) <= 0.2 * width, name
         assert abs(b["high"] - a["high"]) <= 0.2 * width, name
         assert b["sd"] == pytest.approx(a["sd"], rel=0.15), name
+
+
+def test_what_the_beta_path_keeps_changes_no_number() -> None:
+    """The evaluation over β alone keeps what does not move with β - the reflex terms of the
+    muscles that do not lengthen at a point, the Gram matrix of the passive columns - and
+    skips the zero entries of the reflex columns; it gives the numbers of the evaluation that
+    recomputes everything, to the bit."""
+    from fieldbank.fitting import kernels
+
+    _, new = _pair(("km", "alpha", "beta"), seed=4)
+    k = new.consts()
+    assert k["still"].mean() > 0.5  # most (point, muscle) pairs do not lengthen
+    reflex_columns = kernels.load()["reflex_columns"]
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        theta = _random_theta(new, rng)
+        beta = np.ascontiguousarray(theta[12:18])
+        kept = np.empty((new.row_pt.size, 6))
+        fresh = np.empty((new.row_pt.size, 6))
+        reflex_columns(beta, k["kk"], new.lam_above_min, k["ell"], new.c, new.dc, k["row_pt"],
+                       new.cf, new.cl, new.cd, k["still"], k["gam0"], k["e0"], kept, 0)
+        reflex_columns(beta, k["kk"], new.lam_above_min, k["ell"], new.c, new.dc, k["row_pt"],
+                       new.cf, new.cl, new.cd, np.zeros_like(k["still"]), k["gam0"], k["e0"],
+                       fresh, 0)
+        np.testing.assert_array_equal(kept, fresh)
+        # the β path against the general compiled solve on the whole design matrix
+        x = new.design(theta[12:18], new.arm.q_rest, new.base_slack)
+        fast, full = new.project(theta), new.project(theta, x)
+        assert fast.cost == full.cost
+        np.testing.assert_array_equal(fast.theta, full.theta)
+        np.testing.assert_array_equal(fast.r, full.r)
+        # the gradient's call gives the projection's numbers too
+        cost, _, pr = new.projected_cost_grad(theta[new.nonlinear_index()])
+        assert cost == fast.cost
+        np.testing.assert_array_equal(pr.theta, fast.theta)

@@ -16,7 +16,7 @@ from fieldbank.evaluate.observation import Observation, with_force_noise
 from fieldbank.evaluate.severity import synthesize
 from fieldbank.haptic.probe import probe_path
 from fieldbank.haptic.recording import write_trace_h5
-from fieldbank.params import ArmParams
+from fieldbank.params import GROUPS, ArmParams
 from fieldbank.probepath import ProbePath
 from fieldbank.storage import Database
 from tests.haptic_util import mild_shoulder_trace
@@ -251,10 +251,28 @@ def test_classify_open_says_per_group_how_it_is_impaired_and_when_no_state_expla
     assert sum(kinds.values()) == pytest.approx(g["impaired"], abs=1e-5)
     assert all(doc["groups"][o]["impaired"] < 0.2 for o in ("sf", "se", "ee")), doc["groups"]
     assert doc["explains_recording"] and doc["none_of_the_candidates"] < 0.5
+    # what is stated: one claim a group, or partner groups the recording cannot tell apart
+    said = {tuple(st["groups"]): st for st in doc["statements"]}
+    assert sorted(g for gs in said for g in gs) == sorted(GROUPS), said
+    ef = next(st for gs, st in said.items() if "ef" in gs)
+    assert ef["impaired"] and ef["probability"] >= g["impaired"] - 1e-6, said
+    for gs, st in said.items():
+        assert 0.5 <= st["probability"] <= 1.0
+        if len(gs) == 1:
+            p = doc["groups"][gs[0]]["impaired"]
+            assert st["probability"] == pytest.approx(max(p, 1 - p), abs=1e-5)
+    assert not any(st["impaired"] for gs, st in said.items() if gs and set(gs) <= {"sf", "se"})
     text = _run("probe", "classify", *files, "--open", *body)
     assert text.exit_code == 0, text.output
-    assert "impaired: ef" in text.stdout and "elbow flexors (ef)" in text.stdout
+    assert "most probable set of groups: impaired: ef" in text.stdout
+    assert "elbow flexors (ef)" in text.stdout
     assert "none of the candidates: p = " in text.stdout
+    assert text.stdout.startswith("stated (per group")
+    # one "p = …" line a statement, before the table (long ones wrapped)
+    head = text.stdout.split("most probable set of groups")[0]
+    assert head.count("\n  p = ") == len(said), text.stdout
+    said_ef = f"p = {ef['probability']:.2f} {ef['says']}"
+    assert " ".join(said_ef.split()) in " ".join(head.split()), text.stdout
     three = tmp_path / "three"
     three.mkdir()
     files = _stretch_csvs(synthesize({"sf": "severe", "ee": "severe", "bf": "severe"}, base),
@@ -264,6 +282,9 @@ def test_classify_open_says_per_group_how_it_is_impaired_and_when_no_state_expla
     doc = json.loads(r.stdout)
     assert doc["answer"] == "none of the candidates" and doc["probability"] > 0.9, doc
     assert not doc["explains_recording"]
+    assert doc["statements"][0]["groups"] == [] and doc["statements"][0]["says"] == (
+        "none of the candidates explains this recording")
+    assert doc["statements"][0]["probability"] == pytest.approx(doc["probability"])
     # the candidate lists of the joint-group classifier do not apply to the open set
     r = _run("probe", "classify", *files, "--open", "--levels", "severe")
     assert r.exit_code != 0 and "--levels do not apply" in r.output

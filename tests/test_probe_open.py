@@ -29,6 +29,7 @@ from fieldbank.evaluate.openset import (
 from fieldbank.evaluate.reliability import (
     Outcome,
     calibration_error,
+    ece_noise_floor,
     family_arms,
     fit_calibration,
     reliability_bins,
@@ -36,6 +37,7 @@ from fieldbank.evaluate.reliability import (
 )
 from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import synthesize, synthesize_ratios
+from fieldbank.evaluate.statements import open_report, state
 from fieldbank.model import Arm
 from fieldbank.params import GROUPS, ArmParams
 from fieldbank.sim import ArmSim
@@ -104,9 +106,9 @@ def _trace(params: ArmParams, openset: OpenSet) -> list[Observation]:
 @pytest.mark.slow
 def test_groups_between_the_steps_are_named_and_an_arm_outside_is_flagged(
         openset: OpenSet) -> None:
-    """An elbow-extensor reflex alone and two groups at scores off the grid are named with
-    their groups; three severe groups at once are none of the candidates - at 2 N of
-    noise."""
+    """An elbow-extensor reflex alone and two groups at scores off the grid are stated with
+    their groups (and are the most probable set); three severe groups at once are none of
+    the candidates - at 2 N of noise."""
     rng = np.random.default_rng(3)
     noise = NoiseModel(force_sd_n=2.0)
     arms = {
@@ -118,8 +120,14 @@ def test_groups_between_the_steps_are_named_and_an_arm_outside_is_flagged(
         obs = _trace(params, openset)
         c = classify_open([with_force_noise(o, noise, rng) for o in obs], openset,
                           trace=OpenTrace.of(obs, openset, noise))
-        answer, p = c.answer
-        assert answer == truth and p > 0.5, (truth, c.to_dict())
+        # what is stated: each impaired group named impaired (alone or with its partner),
+        # no other group
+        said = [st for st in state(c) if st.groups]
+        held = {g for st in said if st.impaired for g in st.groups}
+        assert set(truth.split("+")) <= held, (truth, open_report(c)["statements"])
+        assert all(st.right(set(truth.split("+")), outside=False) for st in said
+                   if st.impaired), (truth, open_report(c)["statements"])
+        assert c.labels[int(np.argmax(c.label_probability))] == truth, c.to_dict()
         assert c.explains
     outside = synthesize({"sf": "severe", "ee": "severe", "bf": "severe"}, BODY)
     c = classify_open([with_force_noise(o, noise, rng) for o in _trace(outside, openset)],
@@ -196,7 +204,7 @@ def test_the_fitted_calibration_states_what_happens() -> None:
     """A posterior that says 0.99 where the truth is so four times in five: the fit tempers it
     to 0.8 (0.99^a / (0.99^a + 0.01^a) = 0.8 at a = ln 4 / ln 99 ≈ 0.30) and sets nothing
     aside for arms the set holds."""
-    out = [Outcome("two groups", f"arm {k}", "ef" if k % 5 else "ee", "ef", 0.99, True, 0.5,
+    out = [Outcome("two groups", f"arm {k}", "ef" if k % 5 else "ee", "ef", 0.99, True, 1.0,
                    labels=("ef", "ee"), label_probability=(0.99, 0.01)) for k in range(100)]
     cal, _score = fit_calibration(out)
     assert cal == Calibration(power=0.3, other=0.0)
@@ -208,3 +216,92 @@ def test_the_fitted_calibration_states_what_happens() -> None:
                                    truth="ef+bf+ee" if k % 4 == 0 else o.truth)
                for k, o in enumerate(out)]
     assert fit_calibration(outside)[0].other > 0.1
+
+
+def test_the_tempering_falls_with_the_misfit() -> None:
+    """Where the best arm fits (p = 1), 0.99 is right 99 times in 100; where it misfits
+    (p = 0.002, 2.7 decades) 0.99 is right four times in five: the fitted power falls with
+    the misfit, and each is stated as often right as it is."""
+    good = [Outcome("two groups", f"good {k}", "ef" if k % 100 else "ee", "ef", 0.99, True,
+                    1.0, labels=("ef", "ee"), label_probability=(0.99, 0.01))
+            for k in range(200)]
+    poor = [dataclasses.replace(o, arm=f"poor {k}", fit_p_value=0.002,
+                                truth="ef" if k % 5 else "ee") for k, o in enumerate(good)]
+    cal, _score = fit_calibration(good + poor)
+    assert cal.misfit_slope > 0.0 and cal.other == 0.0, cal
+    assert good[0].classification(cal).group_probability["ef"] == pytest.approx(0.99,
+                                                                                abs=0.006)
+    assert 0.72 < poor[0].classification(cal).group_probability["ef"] < 0.88, cal
+
+
+def test_the_power_and_the_shares_on_numbers_worked_by_hand() -> None:
+    """power 0.6, slope 1: at p = 0.01 (2 decades) the power is 0.6 / 3 = 0.2, at p = 1 it is
+    0.6, and an unknown fit reads no misfit. raw 0.45, 0.45, 0.1 at p = 0.1 (1 decade) with
+    power 1, slope 1: the power 0.5, √ of them over their sum (0.6708, 0.6708, 0.3162 over
+    1.6579)."""
+    cal = Calibration(power=0.6, misfit_slope=1.0)
+    assert cal.power_at(0.01) == pytest.approx(0.2)
+    assert cal.power_at(1.0) == pytest.approx(0.6)
+    assert cal.power_at(float("nan")) == pytest.approx(0.6)
+    assert cal.power_at(0.0) == pytest.approx(0.6 / 13.0)  # floored at 12 decades
+    c = _stated(("ef", "bf", "unimpaired"), (0.45, 0.45, 0.1), 0.1,
+                Calibration(power=1.0, misfit_slope=1.0))
+    np.testing.assert_allclose(c.label_share, [0.4046, 0.4046, 0.1907], atol=1e-4)
+    assert c.any_impaired(("ef", "bf")) == pytest.approx(0.8093, abs=1e-4)
+    assert c.any_impaired(("ef", "sf")) == pytest.approx(0.4046, abs=1e-4)
+    with pytest.raises(ParameterError, match="'misfit_slope'"):
+        Calibration(misfit_slope=-1.0)
+    # each group's share of an impairment the recording does not show, 0.1: ef held at
+    # 0.4046 → 1 − 0.5954 × 0.9 = 0.4641; ef or bf held at 0.8093 → 1 − 0.1907 × 0.81
+    c = _stated(("ef", "bf", "unimpaired"), (0.45, 0.45, 0.1), 0.1,
+                Calibration(power=1.0, misfit_slope=1.0, unseen=0.1))
+    assert c.group_probability["ef"] == pytest.approx(0.4641, abs=1e-4)
+    assert c.group_probability["sf"] == pytest.approx(0.1)
+    assert c.any_impaired(("ef", "bf")) == pytest.approx(1 - 0.1907 * 0.81, abs=1e-4)
+    with pytest.raises(ParameterError, match="'unseen'"):
+        Calibration(unseen=0.5)
+
+
+def test_partner_groups_the_recording_cannot_separate_are_stated_as_a_set() -> None:
+    """ef and bf each at 0.45 (the recording fits either), unimpaired at 0.1: neither can be
+    stated alone, their union can - "ef or bf" at 0.9 -, every other group not impaired at
+    1.0. A group undecided with no undecided partner is stated alone; a union no more decided
+    than its groups is not stated; a residual beyond the noise states none of the
+    candidates first."""
+    c = _stated(("ef", "bf", "unimpaired"), (0.45, 0.45, 0.1), 0.5, RAW)
+    got = {st.groups: (st.impaired, round(st.probability, 6)) for st in state(c)}
+    assert got == {("sf",): (False, 1.0), ("se",): (False, 1.0), ("ef", "bf"): (True, 0.9),
+                   ("ee",): (False, 1.0), ("be",): (False, 1.0)}
+    pair = next(st for st in state(c) if st.kind == "partners")
+    assert pair.right({"bf"}, outside=False) and pair.right({"ef", "bf"}, outside=False)
+    assert not pair.right(set(), outside=False) and not pair.right({"ee"}, outside=False)
+    assert "elbow flexors (ef) or bi-articular flexors (bf)" in pair.text
+    assert "cannot tell which" in pair.text and "elbow extension" in pair.text
+    # ef alone undecided, bf decided: ef stated alone at 0.6
+    c = _stated(("ef", "unimpaired"), (0.6, 0.4), 0.5, RAW)
+    assert [(st.groups, st.impaired, st.probability) for st in state(c)
+            if st.groups == ("ef",)] == [(("ef",), True, pytest.approx(0.6))]
+    # both together or neither: the union (0.5) tells no more than each group - stated alone
+    c = _stated(("ef+bf", "unimpaired"), (0.5, 0.5), 0.5, RAW)
+    assert {st.groups for st in state(c)} == {(g,) for g in GROUPS}
+    # the fit test at 1e-4 under the level 0.001: none of the candidates, p = 0.9
+    c = _stated(("ef", "bf", "unimpaired"), (0.45, 0.45, 0.1), 1e-4, RAW)
+    first = state(c)[0]
+    assert first.kind == "none" and first.probability == pytest.approx(0.9)
+    assert first.right(set(), outside=True) and not first.right({"ef"}, outside=False)
+    assert open_report(c)["statements"][0]["says"] == first.text
+
+
+def test_the_noise_floor_of_the_calibration_error() -> None:
+    """A calibrated classifier's ECE by sampling alone, on numbers worked by hand: one answer
+    at 0.5 is right or wrong, |1 − 0.5| or |0 − 0.5| - always 0.5; answers stated at 1 are
+    always right - 0; two answers at 0.5 in one bin: both right or both wrong (half the
+    time) 0.5, one of each 0 - mean 0.25, 95th percentile 0.5."""
+    assert ece_noise_floor([0.5]) == (pytest.approx(0.5), pytest.approx(0.5))
+    assert ece_noise_floor([1.0] * 10) == (0.0, 0.0)
+    mean, p95 = ece_noise_floor([0.5, 0.5], repeats=20000)
+    assert mean == pytest.approx(0.25, abs=0.01) and p95 == pytest.approx(0.5)
+    # bins apart: 0.5 (always 0.5 off) and 1.0 (never off), over two answers: 0.25 always
+    assert ece_noise_floor([0.5, 1.0]) == (pytest.approx(0.25), pytest.approx(0.25))
+    # more answers, a smaller floor
+    assert ece_noise_floor([0.8] * 400)[0] < ece_noise_floor([0.8] * 25)[0] / 3

@@ -8,6 +8,8 @@ sample axis:
 
 * :func:`stretch_torques` - the slow and fast joint stretches of
   :func:`fieldbank.evaluate.probing.stretch_profile`, the torque resisting each, per sample;
+  :func:`group_stretch` - the same stretch per muscle group (what the severity grades of
+  many samples rest on, :mod:`fieldbank.evaluate.gradebatch`);
 * :func:`probe_forces` - the force felt along a probing motion
   (:func:`fieldbank.evaluate.probing.profile`), per sample;
 * :func:`rms_forces` - the RMS endpoint force over a grid, for sets of velocities.
@@ -57,14 +59,37 @@ class StretchTorques:
         return f"{self.joint} {self.direction}"
 
 
-def stretch_torques(batch: ArmBatch, joint: str, direction: str,
-                    fast_speed_rad_s: float = STRETCH_SPEED_RAD_S,
-                    slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S,
-                    samples: int = STRETCH_SAMPLES,
-                    hold_rad: float | None = None) -> StretchTorques:
-    """:func:`fieldbank.evaluate.probing.stretch_profile` of every set: ``joint`` swept
-    through its range in ``direction``, the other joint held at ``hold_rad`` (default: each
-    set's rest posture)."""
+@dataclass(frozen=True, eq=False)
+class GroupStretch:
+    """One joint stretch of every set of a batch, per muscle group (N·m against the motion,
+    as :class:`fieldbank.evaluate.probing.StretchProfile` holds it for one arm).
+
+    angles_rad : (T,) rad, in the order of travel
+    passive_n_m : (S, T, 6) each group's passive torque
+    reflex_slow_n_m, reflex_fast_n_m : (S, T, 6) each group's reflex torque at each speed
+    """
+
+    joint: str
+    direction: str
+    angles_rad: FloatArray
+    passive_n_m: FloatArray
+    reflex_slow_n_m: FloatArray
+    reflex_fast_n_m: FloatArray
+
+    @property
+    def velocity_dependent_n_m(self) -> FloatArray:
+        """Each group's velocity-dependent torque, fast minus slow, (S, T, 6), N·m."""
+        return np.asarray(self.reflex_fast_n_m - self.reflex_slow_n_m)
+
+
+def group_stretch(batch: ArmBatch, joint: str, direction: str,
+                  fast_speed_rad_s: float = STRETCH_SPEED_RAD_S,
+                  slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S,
+                  samples: int = STRETCH_SAMPLES,
+                  hold_rad: float | None = None) -> GroupStretch:
+    """:func:`fieldbank.evaluate.probing.stretch_profile` of every set, per muscle group:
+    ``joint`` swept through its range in ``direction``, the other joint held at ``hold_rad``
+    (default: each set's rest posture)."""
     if joint not in JOINTS:
         raise ParameterError(f"joint must be one of {', '.join(JOINTS)}; got {joint!r}.")
     if direction not in DIRECTION_SIGN:
@@ -91,9 +116,23 @@ def stretch_torques(batch: ArmBatch, joint: str, direction: str,
     moved = np.flatnonzero(lever)
     passive = np.zeros_like(lam)
     passive[..., moved] = m.passive(m.columns(lam, moved), moved) * lever[moved]
-    slow = (passive + reflex(slow_speed_rad_s)).sum(axis=-1)
-    fast = (passive + reflex(fast_speed_rad_s)).sum(axis=-1)
-    return StretchTorques(joint, direction, angles, slow, fast)
+    return GroupStretch(joint, direction, angles, passive, reflex(slow_speed_rad_s),
+                        reflex(fast_speed_rad_s))
+
+
+def stretch_torques(batch: ArmBatch, joint: str, direction: str,
+                    fast_speed_rad_s: float = STRETCH_SPEED_RAD_S,
+                    slow_speed_rad_s: float = SLOW_STRETCH_SPEED_RAD_S,
+                    samples: int = STRETCH_SAMPLES,
+                    hold_rad: float | None = None) -> StretchTorques:
+    """:func:`fieldbank.evaluate.probing.stretch_profile` of every set: ``joint`` swept
+    through its range in ``direction``, the other joint held at ``hold_rad`` (default: each
+    set's rest posture); the groups' torques summed (:func:`group_stretch`)."""
+    g = group_stretch(batch, joint, direction, fast_speed_rad_s, slow_speed_rad_s, samples,
+                      hold_rad)
+    slow = (g.passive_n_m + g.reflex_slow_n_m).sum(axis=-1)
+    fast = (g.passive_n_m + g.reflex_fast_n_m).sum(axis=-1)
+    return StretchTorques(joint, direction, g.angles_rad, slow, fast)
 
 
 def standard_stretch_torques(batch: ArmBatch) -> tuple[StretchTorques, ...]:

@@ -44,7 +44,6 @@ from fieldbank.evaluate.observation import Observation, with_force_noise
 from fieldbank.evaluate.openset import (
     KINDS,
     NONE_OF_THEM,
-    RAW,
     Calibration,
     OpenClassification,
     OpenSet,
@@ -55,11 +54,13 @@ from fieldbank.evaluate.openset import (
 from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import LEVELS, ratio_of_score, synthesize_ratios
 from fieldbank.evaluate.severity import classify as grade
-from fieldbank.model import Arm
+from fieldbank.evaluate.statements import Statement, state
+from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS, JOINT_GROUPS, ArmParams
 
 FAMILIES: tuple[str, ...] = ("between severities", "two groups", "reflex only",
                              "contracture only", "outside the candidates")
+OUTSIDE = "outside the candidates"
 #: Sample period of the simulated recordings, s (the renderer's 1 kHz).
 SAMPLE_S = 1e-3
 #: Bins of the stated probability (the last closed at 1).
@@ -218,26 +219,118 @@ class Outcome:
                            else 0.0)
 
 
-#: The calibrations :func:`fit_calibration` tries: the posterior's power, the share for an
-#: arm outside the set, the fit test's p-value below which the residual adds to that share.
-POWERS = tuple(round(0.1 * k, 1) for k in range(1, 21))
+#: The calibrations :func:`fit_calibration` tries: the posterior's power, how fast it falls
+#: with the best arm's misfit, the share for an arm outside the set, the fit test's p-value
+#: below which the residual adds to that share.
+POWERS = tuple(round(0.1 * k, 1) for k in range(1, 31))
+MISFIT_SLOPES = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
 OTHERS = tuple(round(0.02 * k, 2) for k in range(0, 21))
 MISFIT_LEVELS = (FIT_LEVEL, 0.003, 0.01, 0.03, 0.1)
+#: A stated probability is floored at this in the log score (one confident miss costs
+#: ln 1e-6, not infinity).
+LOG_FLOOR = 1e-6
+
+
+def truth_groups(truth: str) -> frozenset[str]:
+    """The impaired groups of a truth label ('ef+bf' → {'ef', 'bf'}; 'unimpaired' → {})."""
+    return frozenset() if truth == "unimpaired" else frozenset(truth.split("+"))
+
+
+UNSEEN = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08)
+
+
+def _group_log_score(tables: Sequence[tuple[FloatArray, np.ndarray, np.ndarray, float]],
+                     power: float, slope: float, unseen: float) -> float:
+    """Mean log probability stated for each group's truth (impaired or not), over every group
+    of every outcome (``tables``: :func:`_group_tables`), at the power
+    ``power / (1 + slope · m)`` and the share ``unseen``."""
+    total, n = 0.0, 0
+    cal = Calibration(power, 0.0, FIT_LEVEL, slope)
+    for logp, held, truth, fit_p in tables:
+        q = np.exp(cal.power_at(fit_p) * logp)
+        pg = np.clip(q @ held / q.sum(), 0.0, 1.0)
+        pg = 1.0 - (1.0 - pg) * (1.0 - unseen)
+        total += float(np.log(np.maximum(np.where(truth, pg, 1.0 - pg), LOG_FLOOR)).sum())
+        n += len(truth)
+    return total / max(n, 1)
+
+
+def _group_tables(outcomes: Sequence[Outcome]
+                  ) -> list[tuple[FloatArray, np.ndarray, np.ndarray, float]]:
+    """Per outcome: the log posterior of each label (its most probable at 0), which groups
+    each label holds, which groups the truth holds, the fit test's p-value."""
+    out = []
+    for o in outcomes:
+        logp = np.log(np.maximum(np.asarray(o.label_probability, dtype=float), 1e-300))
+        held = np.array([[g in lab.split("+") for g in GROUPS] for lab in o.labels], float)
+        truth = np.array([g in truth_groups(o.truth) for g in GROUPS])
+        out.append((logp - logp.max(), held, truth, o.fit_p_value))
+    return out
 
 
 def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
-    """The calibration of :data:`POWERS` × :data:`OTHERS` × :data:`MISFIT_LEVELS` under which
-    the truth is most probable over ``outcomes`` (the mean log probability of the truth, each
-    floored at 1e-6: a proper score, so the stated probabilities come out as often right as
-    they say), with that mean log score."""
-    best, score = RAW, -math.inf
-    for power, other, level in itertools.product(POWERS, OTHERS, MISFIT_LEVELS):
-        cal = Calibration(power, other, level)
-        s = float(np.mean([math.log(max(o.truth_probability(cal), 1e-6))
-                           for o in outcomes]))
+    """The calibration under which the stated probabilities are as often right as they say,
+    by a proper score (the mean log probability stated for the truth, each floored at
+    :data:`LOG_FLOOR`), with that score for the groups:
+
+    * the power, its fall with the misfit and each group's share of an impairment the
+      recording does not show (:data:`POWERS` × :data:`MISFIT_SLOPES` × :data:`UNSEEN`) by
+      what is stated per group - each group impaired or not, over every group of every
+      outcome;
+    * the share for an arm outside the set and the misfit level (:data:`OTHERS` ×
+      :data:`MISFIT_LEVELS`) by the statement that none of the candidates explains the
+      recording, right for an arm outside the candidates and wrong for every other."""
+    tables = _group_tables(outcomes)
+    power, slope, unseen, score = 1.0, 0.0, 0.0, -math.inf
+    for a, b, u in itertools.product(POWERS, MISFIT_SLOPES, UNSEEN):
+        s = _group_log_score(tables, a, b, u)
         if s > score:
-            best, score = cal, s
-    return best, score
+            power, slope, unseen, score = a, b, u, s
+    other, level, best = 0.0, FIT_LEVEL, -math.inf
+    for o_share, lv in itertools.product(OTHERS, MISFIT_LEVELS):
+        cal = Calibration(power, o_share, lv, slope, unseen)
+        s = 0.0
+        for o in outcomes:
+            q = o.classification(cal).other_probability
+            s += math.log(max(q if o.family == OUTSIDE else 1.0 - q, LOG_FLOOR))
+        if s > best:
+            other, level, best = o_share, lv, s
+    return Calibration(power, other, level, slope, unseen), score
+
+
+def stated_claims(outcomes: Sequence[Outcome], calibration: Calibration
+                  ) -> list[tuple[Outcome, Statement, bool]]:
+    """Every statement (:func:`fieldbank.evaluate.statements.state`) of every outcome under
+    ``calibration``, with whether it was right."""
+    out = []
+    for o in outcomes:
+        truth = truth_groups(o.truth)
+        for st in state(o.classification(calibration)):
+            out.append((o, st, st.right(truth, o.family == OUTSIDE)))
+    return out
+
+
+def ece_noise_floor(stated: Sequence[float], bins: Sequence[tuple[float, float]] = BINS,
+                    repeats: int = 2000, seed: int = 0) -> tuple[float, float]:
+    """The expected calibration error a perfectly calibrated classifier shows on these stated
+    probabilities by sampling alone: outcomes drawn right with the stated probability, binned
+    as :func:`reliability_bins` bins them, ``repeats`` times; (mean, 95th percentile)."""
+    s = np.asarray(stated, dtype=float)
+    if s.size == 0:
+        return math.nan, math.nan
+    rng = np.random.default_rng(seed)
+    drawn = rng.random((repeats, s.size)) < s[None, :]
+    which = np.full(s.size, -1)
+    for k, (lo, hi) in enumerate(bins):
+        top = k == len(bins) - 1
+        which[(s >= lo) & ((s <= hi) if top else (s < hi))] = k
+    gap = np.zeros(repeats)
+    for k in range(len(bins)):
+        m = which == k
+        if m.any():
+            gap += np.abs(drawn[:, m].sum(axis=1) - s[m].sum())
+    ece = gap / s.size
+    return float(ece.mean()), float(np.quantile(ece, 0.95))
 
 
 def run_trials(arms: Sequence[TrialArm], noise: NoiseModel, draws: int = 4, seed: int = 0,
@@ -344,7 +437,27 @@ def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[i
     return sum(not o.right for o in sure), len(sure)
 
 
-__all__ = ["BINS", "FAMILIES", "MISFIT_LEVELS", "OTHERS", "POWERS", "Outcome",
-           "ReliabilityBin", "TrialArm", "calibration_error", "family_arms", "fit_calibration",
-           "reliability_bins", "run_trials",
-           "truth_label", "wrong_when_sure"]
+__all__ = [
+    "BINS",
+    "FAMILIES",
+    "LOG_FLOOR",
+    "MISFIT_LEVELS",
+    "MISFIT_SLOPES",
+    "OTHERS",
+    "OUTSIDE",
+    "POWERS",
+    "UNSEEN",
+    "Outcome",
+    "ReliabilityBin",
+    "TrialArm",
+    "calibration_error",
+    "ece_noise_floor",
+    "family_arms",
+    "fit_calibration",
+    "reliability_bins",
+    "run_trials",
+    "stated_claims",
+    "truth_groups",
+    "truth_label",
+    "wrong_when_sure",
+]

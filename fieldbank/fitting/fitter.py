@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from fieldbank.errors import FitError, ParameterError
+from fieldbank.armbatch import ArmBatch
+from fieldbank.errors import FitError
+from fieldbank.evaluate.gradebatch import scores
 from fieldbank.evaluate.probing import stretch_profiles, unimpaired_reference
 from fieldbank.evaluate.severity import (
-    COMPONENTS,
     SCALE,
-    GroupSeverity,
     classify,
     ratio_of_score,
     severity_dict,
@@ -359,7 +359,7 @@ class ArmFitter:
         self.seed_ = seed
         samples = draw(FitSamples(unc.names, unc.samples), self.prior_ranges_, prior, seed=seed)
         self.severity_ = _severity(self.params_, [u.name for u in self.unidentified_],
-                                   samples.params(self.params_))
+                                   samples)
         self.prior_ = prior
         return self
 
@@ -429,30 +429,21 @@ class ArmFitter:
 
 
 def _severity(params: ArmParams, unidentified: Sequence[str],
-              samples: Sequence[ArmParams] = ()) -> dict[str, Any]:
+              samples: FitSamples | None = None) -> dict[str, Any]:
     """Severity per muscle group, passive and dynamic
     (:func:`fieldbank.evaluate.severity.classify`), as plain values; each grade lists the
     parameters behind it that the maps did not identify and, over the fit's parameter samples
-    (held parameters drawn from their prior range), the 95% range of its score and levels."""
+    (held parameters drawn from their prior range), the 95% range of its score and levels -
+    the samples graded together, as arrays (:func:`fieldbank.evaluate.gradebatch.scores`)."""
     arm = Arm.from_params(params)
     ref = unimpaired_reference(arm)
     ref_prof = stretch_profiles(ref)
     out = severity_dict(classify(arm, unidentified, ref, reference_profiles=ref_prof))
-    if not samples:
+    if samples is None or samples.values.shape[0] == 0:
         return out
-    scores: dict[tuple[str, str], list[float]] = {}
-    for p in samples:
-        try:
-            trial = arm.with_muscles(p)
-        except ParameterError:  # a sample with its own rest posture
-            trial = Arm.from_params(p)
-        graded: dict[str, GroupSeverity] = classify(trial, reference=ref,
-                                                    reference_profiles=ref_prof)
-        for g, sev in graded.items():
-            for c in COMPONENTS:
-                scores.setdefault((g, c), []).append(sev.component(c).score)
+    batch = ArmBatch.from_arrays(arm, samples.values.shape[0], **samples.arrays(params))
     lo_p, hi_p = GRADE_PERCENTILES
-    for (g, c), vals in scores.items():
+    for (g, c), vals in scores(batch, ref, reference_profiles=ref_prof).items():
         grade = out[g][c]
         assert isinstance(grade, dict)
         # the fitted model's own grade belongs to the range (held parameters: its unimpaired

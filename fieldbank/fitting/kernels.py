@@ -7,8 +7,8 @@ its cost was the interpreter's and numpy's fixed cost per call (≈ 300 µs over
 operations), not arithmetic. Here the same formulas run as compiled calls:
 
 * :func:`reflex_columns` - the reflex columns of the design matrix X (the α columns: the
-  tension per unit α at each measured value), :meth:`FitProblem._reflex_basis`'s formulas in
-  the same order;
+  tension per unit α at each measured value), :func:`fieldbank.fitting.reference.reflex_basis`'s
+  formulas in the same order;
 * :func:`solve_normal` - the whitened system and its normal equations with the prior (a
   Cholesky factorisation of the 12×12 Gram matrix in place of ``np.linalg.solve``) and the
   residuals; where a bound binds (α ≥ 0 of a quiet group), the same strictly convex problem
@@ -18,8 +18,8 @@ operations), not arithmetic. Here the same formulas run as compiled calls:
   from central differences of the reflex columns alone, as :meth:`FitProblem.
   design_derivatives` takes them.
 
-The numpy formulas stay in :mod:`fieldbank.fitting.problem` as the reference
-(:func:`~fieldbank.fitting.problem.reference_kernels`); ``tests/test_fitting_kernels.py``
+The numpy formulas stay in :mod:`fieldbank.fitting.reference` as the reference
+(:func:`~fieldbank.fitting.reference.reference_kernels`); ``tests/test_fitting_kernels.py``
 holds the two together (columns and costs to 1e-12 relative, optima and intervals of whole
 fits to 1e-6). IEEE double without fast-math; the machine code is cached on disk like the
 haptic tick's (:mod:`fieldbank.armkernel`); numba loads and compiles at the first evaluation
@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 
 #: The kernels, in the order numba compiles them (each calls only those before it).
-KERNELS = ("reflex_columns", "_cholesky_solve", "_box_qp", "solve_normal", "reflex_gradient",
-           "project_reflex")
+KERNELS = ("still_terms", "reflex_columns", "_cholesky_solve", "_box_qp", "solve_normal",
+           "passive_gram", "reflex_gradient", "project_reflex", "project_reflex_grad")
 _LOADED: dict[str, Any] = {}
 
 
@@ -54,15 +54,36 @@ def load() -> dict[str, Any]:
     return _LOADED
 
 
+def still_terms(kk: np.ndarray, lam_above_min: np.ndarray, ell: np.ndarray, c: np.ndarray,
+                still: np.ndarray, gam0: np.ndarray, e0: np.ndarray) -> None:
+    """Where a muscle does not lengthen at a measured point (``c`` = 0: a static map, or a
+    muscle shortening), u = β·c is 0 whatever β: Γ and e^(-Γ²) of :func:`reflex_columns` do
+    not change during a fit (``kk`` fixed). Marks those entries in ``still`` and keeps their Γ
+    and e^(-Γ²) in ``gam0`` and ``e0`` (N, 6), computed with the same operations, so that
+    :func:`reflex_columns` reading them gives the same numbers to the last bit."""
+    for n in range(c.shape[0]):
+        for i in range(6):
+            if c[n, i] == 0.0:
+                u = 0.0
+                gam = lam_above_min[n, i] / ell[i] - kk[i] * (1.0 - u)
+                still[n, i] = True
+                gam0[n, i] = gam
+                e0[n, i] = math.exp(-gam * gam)
+            else:
+                still[n, i] = False
+
+
 def reflex_columns(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
                    ell: np.ndarray, c: np.ndarray, dc: np.ndarray, row_pt: np.ndarray,
-                   cf: np.ndarray, cl: np.ndarray, cd: np.ndarray,
-                   out: np.ndarray, col0: int) -> None:
+                   cf: np.ndarray, cl: np.ndarray, cd: np.ndarray, still: np.ndarray,
+                   gam0: np.ndarray, e0: np.ndarray, out: np.ndarray, col0: int) -> None:
     """Write the reflex columns for ``beta`` (6,) into ``out[:, col0:col0 + 6]``.
 
     ``kk`` (6,) is λ_rest/λ_max at the fit's rest posture; ``lam_above_min``, ``c``, ``dc``
     (N, 6) per measured point; ``cf``, ``cl``, ``cd`` (M, 6) per measured value and
-    ``row_pt`` (M,) its point (see :class:`~fieldbank.fitting.problem.FitProblem`).
+    ``row_pt`` (M,) its point (see :class:`~fieldbank.fitting.problem.FitProblem`);
+    ``still``, ``gam0``, ``e0`` what does not depend on β (:func:`still_terms`; ``still``
+    all False when ``kk`` is not the one they were computed with).
     """
     n_pts = lam_above_min.shape[0]
     rf = np.empty((n_pts, 6))
@@ -71,8 +92,12 @@ def reflex_columns(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
     for n in range(n_pts):
         for i in range(6):
             u = beta[i] * c[n, i]
-            gam = lam_above_min[n, i] / ell[i] - kk[i] * (1.0 - u)
-            e = math.exp(-gam * gam)
+            if still[n, i]:
+                gam = gam0[n, i]
+                e = e0[n, i]
+            else:
+                gam = lam_above_min[n, i] / ell[i] - kk[i] * (1.0 - u)
+                e = math.exp(-gam * gam)
             h = u * gam * e
             one = 1.0 - 2.0 * gam * gam
             dh_dlam = u * e * one / ell[i]
@@ -221,8 +246,15 @@ def _box_qp(g: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
 def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
                  lin: np.ndarray, pw: float, mu: np.ndarray, sdp: np.ndarray,
                  lo: np.ndarray, hi: np.ndarray, a: np.ndarray, rhs: np.ndarray,
-                 r: np.ndarray) -> bool:
+                 r: np.ndarray, gram0: np.ndarray, n_fixed: int) -> bool:
     """The unbounded projection at a fixed design ``x`` (M, 12).
+
+    ``gram0`` (F, F) holds the data part of the Gram matrix among the first ``n_fixed`` free
+    columns when those do not change between calls (:func:`passive_gram`: the passive
+    columns of a fit over β alone), summed as here; the rest of it is summed here, skipping
+    the zero entries (the reflex columns are zero wherever the reflex is off - some nine in
+    ten of them): adding a product with a zero changes no sum, so the numbers are those of
+    the dense sums.
 
     Fills ``a`` (M, F) = the whitened free columns and ``rhs`` (M,) = the whitened data less
     the held linear terms; solves the normal equations with the prior (``mu``, ``sdp``: the
@@ -250,11 +282,18 @@ def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
             r[m] = rhs[m]
         return True
     gram = np.zeros((nf, nf))
+    for j in range(n_fixed):
+        for k in range(j + 1):
+            gram[j, k] = gram0[j, k]
     bn = np.zeros(nf)
     for m in range(m_rows):
         for j in range(nf):
             aj = a[m, j]
             bn[j] += aj * rhs[m]
+        for j in range(n_fixed, nf):
+            aj = a[m, j]
+            if aj == 0.0:  # most reflex entries: the reflex is off at most points
+                continue
             for k in range(j + 1):
                 gram[j, k] += aj * a[m, k]
     for j in range(nf):
@@ -276,16 +315,33 @@ def solve_normal(x: np.ndarray, y: np.ndarray, w: np.ndarray, free: np.ndarray,
     for m in range(m_rows):
         t = rhs[m]
         for j in range(nf):
-            t -= a[m, j] * sol[j]
+            if a[m, j] != 0.0:
+                t -= a[m, j] * sol[j]
         r[m] = t
     return True
+
+
+def passive_gram(xkm: np.ndarray, w: np.ndarray, free: np.ndarray, n_fixed: int,
+                 gram0: np.ndarray) -> None:
+    """The Gram matrix of the first ``n_fixed`` free (passive) columns of ``xkm`` whitened by
+    ``w``, into ``gram0``'s lower triangle: what :func:`solve_normal` would sum for them, in
+    the same order, kept for the fit's evaluations in which they do not change."""
+    for j in range(n_fixed):
+        for k in range(j + 1):
+            gram0[j, k] = 0.0
+    for m in range(xkm.shape[0]):
+        for j in range(n_fixed):
+            aj = xkm[m, free[j]] * w[m]
+            for k in range(j + 1):
+                gram0[j, k] += aj * (xkm[m, free[k]] * w[m])
 
 
 def reflex_gradient(beta: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray, h: float,
                     kk: np.ndarray, lam_above_min: np.ndarray, ell: np.ndarray, c: np.ndarray,
                     dc: np.ndarray, row_pt: np.ndarray, cf: np.ndarray, cl: np.ndarray,
-                    cd: np.ndarray, alpha: np.ndarray, r: np.ndarray, w: np.ndarray,
-                    fitted: np.ndarray, grad: np.ndarray) -> None:
+                    cd: np.ndarray, still: np.ndarray, gam0: np.ndarray, e0: np.ndarray,
+                    alpha: np.ndarray, r: np.ndarray, w: np.ndarray, fitted: np.ndarray,
+                    grad: np.ndarray) -> None:
     """-2 rᵀ W (∂X/∂β_i) θ_lin for each fitted β_i (``fitted``: indices 0-5), into ``grad``:
     the data part of the projected cost's gradient, ∂X/∂β_i by central differences of step
     ``h`` kept inside [``b_lo``, ``b_hi``]."""
@@ -297,8 +353,10 @@ def reflex_gradient(beta: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray, h: flo
         bm[i] = max(beta[i] - h, b_lo[i])
     xp = np.empty((m_rows, 6))
     xm = np.empty((m_rows, 6))
-    reflex_columns(bp, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, xp, 0)
-    reflex_columns(bm, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, xm, 0)
+    reflex_columns(bp, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, still, gam0, e0, xp,
+                   0)
+    reflex_columns(bm, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, still, gam0, e0, xm,
+                   0)
     for n in range(fitted.shape[0]):
         i = fitted[n]
         step = bp[i] - bm[i]
@@ -310,10 +368,11 @@ def reflex_gradient(beta: np.ndarray, b_lo: np.ndarray, b_hi: np.ndarray, h: flo
 
 def project_reflex(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
                    ell: np.ndarray, c: np.ndarray, dc: np.ndarray, row_pt: np.ndarray,
-                   cf: np.ndarray, cl: np.ndarray, cd: np.ndarray, xkm: np.ndarray,
-                   y: np.ndarray, w: np.ndarray, free: np.ndarray, lin: np.ndarray, pw: float,
-                   mu: np.ndarray, sdp: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                   a: np.ndarray, rhs: np.ndarray, r: np.ndarray) -> bool:
+                   cf: np.ndarray, cl: np.ndarray, cd: np.ndarray, still: np.ndarray,
+                   gam0: np.ndarray, e0: np.ndarray, xkm: np.ndarray, y: np.ndarray,
+                   w: np.ndarray, free: np.ndarray, lin: np.ndarray, pw: float, mu: np.ndarray,
+                   sdp: np.ndarray, lo: np.ndarray, hi: np.ndarray, a: np.ndarray,
+                   rhs: np.ndarray, r: np.ndarray, gram0: np.ndarray, n_fixed: int) -> bool:
     """:func:`reflex_columns` beside the fixed passive columns ``xkm`` (M, 6), then
     :func:`solve_normal`, in one call: the evaluation when only β varies (the default fit)."""
     m_rows = row_pt.shape[0]
@@ -321,5 +380,27 @@ def project_reflex(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
     for m in range(m_rows):
         for j in range(6):
             x[m, j] = xkm[m, j]
-    reflex_columns(beta, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, x, 6)
-    return solve_normal(x, y, w, free, lin, pw, mu, sdp, lo, hi, a, rhs, r)
+    reflex_columns(beta, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, still, gam0, e0,
+                   x, 6)
+    return solve_normal(x, y, w, free, lin, pw, mu, sdp, lo, hi, a, rhs, r, gram0, n_fixed)
+
+
+def project_reflex_grad(beta: np.ndarray, kk: np.ndarray, lam_above_min: np.ndarray,
+                        ell: np.ndarray, c: np.ndarray, dc: np.ndarray, row_pt: np.ndarray,
+                        cf: np.ndarray, cl: np.ndarray, cd: np.ndarray, still: np.ndarray,
+                        gam0: np.ndarray, e0: np.ndarray, xkm: np.ndarray, y: np.ndarray,
+                        w: np.ndarray, free: np.ndarray, lin: np.ndarray, pw: float,
+                        mu: np.ndarray, sdp: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                        a: np.ndarray, rhs: np.ndarray, r: np.ndarray, gram0: np.ndarray,
+                        n_fixed: int, b_lo: np.ndarray, b_hi: np.ndarray, h: float,
+                        fitted: np.ndarray, grad: np.ndarray) -> bool:
+    """:func:`project_reflex`, then :func:`reflex_gradient` at the solved α, in one call (the
+    search's and the refits' evaluation with its gradient). False as :func:`solve_normal`:
+    nothing solved, ``grad`` unset."""
+    if not project_reflex(beta, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd, still,
+                          gam0, e0, xkm, y, w, free, lin, pw, mu, sdp, lo, hi, a, rhs, r,
+                          gram0, n_fixed):
+        return False
+    reflex_gradient(beta, b_lo, b_hi, h, kk, lam_above_min, ell, c, dc, row_pt, cf, cl, cd,
+                    still, gam0, e0, lin[6:12], r, w, fitted, grad)
+    return True

@@ -276,9 +276,16 @@ class Prior:
                       for g in POSITIONED_STRETCH]
         added_on: dict[tuple[str, tuple[str, str]], FloatArray] = {}
         for stretch, hold, moved in stretches:
-            sets = [p0] + [p0.with_group(g, alpha_n=float(a), beta=float(b))
-                           for g in moved for a, b in zip(alpha, beta, strict=True)]
-            st = stretch_torques(ArmBatch.from_params(sets, ref), *stretch, hold_rad=hold)
+            # the reference (set 0), then each moved group along the path, the others at p0
+            size = 1 + len(moved) * s.size
+            alpha_sets = np.tile(np.asarray(p0.alpha_n, dtype=float), (size, 1))
+            beta_sets = np.tile(np.asarray(p0.beta, dtype=float), (size, 1))
+            for k, g in enumerate(moved):
+                rows = slice(1 + k * s.size, 1 + (k + 1) * s.size)
+                alpha_sets[rows, GROUP_INDEX[g]] = alpha
+                beta_sets[rows, GROUP_INDEX[g]] = beta
+            st = stretch_torques(ArmBatch.from_arrays(ref, size, alpha_n=alpha_sets,
+                                                      beta=beta_sets), *stretch, hold_rad=hold)
             v_all = st.fast_n_m - st.slow_n_m
             prof = stretch_profile(ref, *stretch, hold_rad=hold)
             for k, g in enumerate(moved):

@@ -33,17 +33,22 @@ only on β_i, the passive column i only on δ_i).
 Noise: each value is whitened by its map's sd; where a map has no sd, by
 :data:`DEFAULT_RELATIVE_SD` (5%, an assumption) × the size of the measured force or stiffness at
 that position (:func:`relative_scale`).
+
+Evaluation: the reflex columns, the projection and the gradient over β run as compiled calls
+(:mod:`fieldbank.fitting.kernels`); a problem built inside
+:func:`fieldbank.fitting.reference.reference_kernels` evaluates with the numpy formulas of
+:mod:`fieldbank.fitting.reference` instead, the reference the compiled path is held to.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from fieldbank.fitting import kernels
+from fieldbank.fitting import kernels, reference
+from fieldbank.fitting.betapath import H_BETA, BetaPath
 from fieldbank.fitting.space import ParamSpace
 from fieldbank.maps import FieldMap
 from fieldbank.model import Arm, FloatArray
@@ -87,25 +92,10 @@ def map_sd(m: FieldMap) -> FloatArray:
     return np.asarray(np.maximum(sd, SD_FLOOR_FRACTION * rms), dtype=float)
 
 
-#: Whether new problems evaluate with the compiled kernels (:mod:`fieldbank.fitting.kernels`);
-#: :func:`reference_kernels` switches to the numpy reference path.
-_COMPILED = [True]
+#: No fixed block of the Gram matrix (:func:`fieldbank.fitting.kernels.solve_normal`).
+_NO_GRAM = np.zeros((0, 0))
 
-
-@contextmanager
-def reference_kernels() -> Iterator[None]:
-    """Problems built inside evaluate with the numpy reference path, not the compiled kernels
-    (the tests hold the two together; the benchmark's baseline)."""
-    old = _COMPILED[0]
-    _COMPILED[0] = False
-    try:
-        yield
-    finally:
-        _COMPILED[0] = old
-
-
-#: Central-difference steps of the search's gradient (β, dimensionless; q_rest, rad; slack, m).
-_H_BETA = 1e-6
+#: Central-difference steps of the search's gradient (q_rest, rad; slack, m; β: H_BETA).
 _H_Q = 1e-6
 _H_SLACK = 1e-7
 
@@ -153,9 +143,10 @@ class FitProblem:
     n_evals: int = 0
     _xkm_cache: FloatArray | None = None
     #: Evaluate with the compiled kernels (:mod:`fieldbank.fitting.kernels`); False: the numpy
-    #: reference path (:func:`reference_kernels`).
-    compiled: bool = field(default_factory=lambda: _COMPILED[0])
-    _consts: dict[str, np.ndarray] | None = field(default=None, init=False, repr=False)
+    #: reference path (:mod:`fieldbank.fitting.reference`).
+    compiled: bool = field(default_factory=lambda: not reference.active())
+    _consts: dict[str, Any] | None = field(default=None, init=False, repr=False)
+    _beta: BetaPath | None = field(default=None, init=False, repr=False)
 
     # --- construction ---------------------------------------------------------------------
     @classmethod
@@ -267,7 +258,7 @@ class FitProblem:
         pdb = (g * (sig - sp * 2.0 * d / (ell * ell)))[self.row_pt]
         return self.cf * pb + self.cl * pdb
 
-    def _kk(self, q_rest: FloatArray) -> FloatArray:
+    def kk(self, q_rest: FloatArray) -> FloatArray:
         """λ_rest/λ_max per group at the rest posture ``q_rest``, (6,)."""
         arm = self.arm
         lam_max = arm.lam_rest + self.corner_max - q_rest @ arm.jl.T
@@ -278,44 +269,38 @@ class FitProblem:
             out = np.empty((self.row_pt.size, 6))
             self._reflex_into(beta, q_rest, out, 0)
             return out
-        return self._reflex_basis_reference(beta, q_rest)
+        return reference.reflex_basis(self, beta, q_rest)
 
     def _reflex_into(self, beta: FloatArray, q_rest: FloatArray, out: FloatArray,
                      col0: int) -> None:
         """The compiled reflex columns for ``beta`` into ``out[:, col0:col0 + 6]``."""
         k = self.consts()
-        kk = k["kk"] if not self.space.fit_q_rest else self._kk(q_rest)
+        kk = k["kk"] if not self.space.fit_q_rest else self.kk(q_rest)
         reflex_columns = kernels.load()["reflex_columns"]
         reflex_columns(np.ascontiguousarray(beta, dtype=float), kk, self.lam_above_min,
-                       k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl, self.cd, out,
-                       col0)
+                       k["ell"], self.c, self.dc, k["row_pt"], self.cf, self.cl, self.cd,
+                       k["still"], k["gam0"], k["e0"], out, col0)
 
-    def _reflex_basis_reference(self, beta: FloatArray, q_rest: FloatArray) -> FloatArray:
-        """The reflex columns in numpy (the reference the compiled kernel is held to)."""
-        arm = self.arm
-        kk = self._kk(q_rest)
-        u = beta * self.c
-        ell = arm.excursion
-        gam = self.lam_above_min / ell - kk * (1.0 - u)
-        e = np.exp(-gam * gam)
-        h = u * gam * e
-        one = 1.0 - 2.0 * gam * gam
-        dh_dlam = u * e * one / ell
-        dh_du = gam * e + u * e * one * kk
-        on = (h > 0) | ((h == 0) & (dh_du > 0))
-        rf = np.where(h > 0, h, 0.0)[self.row_pt]
-        rl = np.where(on, dh_dlam, 0.0)[self.row_pt]
-        rd = np.where(on, dh_du * beta * self.dc, 0.0)[self.row_pt]
-        return self.cf * rf + self.cl * rl + self.cd * rd
-
-    def consts(self) -> dict[str, np.ndarray]:
-        """What the compiled kernels read that does not change during a fit (built once)."""
+    def consts(self) -> dict[str, Any]:
+        """What the compiled kernels read that does not change during a fit (built once):
+        among it, what the reflex columns do not recompute where a muscle does not lengthen
+        (:func:`fieldbank.fitting.kernels.still_terms`; nothing when q_rest is fitted)."""
         if self._consts is None:
             s = self.space
             free = s.fitted[:12]
             pw = s.prior_weight
+            kk = self.kk(np.asarray(self.arm.q_rest, dtype=float))
+            still = np.zeros(self.c.shape, dtype=np.bool_)
+            gam0 = np.zeros(self.c.shape)
+            e0 = np.zeros(self.c.shape)
+            if not s.fit_q_rest:
+                kernels.load()["still_terms"](kk, self.lam_above_min,
+                                              np.ascontiguousarray(self.arm.excursion,
+                                                                   dtype=float),
+                                              self.c, still, gam0, e0)
             self._consts = {
-                "kk": self._kk(np.asarray(self.arm.q_rest, dtype=float)),
+                "still": still, "gam0": gam0, "e0": e0,
+                "kk": kk,
                 "ell": np.ascontiguousarray(self.arm.excursion, dtype=float),
                 "row_pt": np.ascontiguousarray(self.row_pt, dtype=np.int64),
                 "w": np.ascontiguousarray(1.0 / self.sd),
@@ -329,8 +314,24 @@ class FitProblem:
                 "beta_fitted": np.array([i - 12 for i in range(12, 18) if s.fitted[i]],
                                         dtype=np.int64),
                 "pw": np.array(pw),
+                "b_lo": np.ascontiguousarray(s.lower[12:18]),
+                "b_hi": np.ascontiguousarray(s.upper[12:18]),
             }
         return self._consts
+
+    def passive_columns(self) -> FloatArray:
+        """The passive (Km) columns of the design matrix at the base model's rest posture and
+        slack offsets, (M, 6): fixed during a fit over β alone (computed once)."""
+        if self._xkm_cache is None:
+            self._xkm_cache = self._passive_basis(np.asarray(self.arm.q_rest, dtype=float),
+                                                  self.base_slack)
+        return self._xkm_cache
+
+    def _beta_path(self) -> BetaPath:
+        """The compiled evaluation over β alone with what stays fixed kept (built once)."""
+        if self._beta is None:
+            self._beta = BetaPath.of(self)
+        return self._beta
 
     def design(self, beta: FloatArray, q_rest: FloatArray,
                slack: FloatArray | None = None) -> FloatArray:
@@ -407,43 +408,18 @@ class FitProblem:
         if self.compiled:
             return self._project_compiled(theta_nl, x)
         self.n_evals += 1
-        s = self.space
-        lin, beta, q_rest, slack = self.split(theta_nl)
-        if x is None:
-            x = self.design(beta, q_rest, slack)
-        free = s.fitted[:12]
-        w = self.w
-        lin = lin.copy()
-        rhs = (self.y - x[:, ~free] @ lin[~free]) * w
-        a = x[:, free] * w[:, None]
-        if free.any():
-            pw = s.prior_weight
-            mu = s.prior_mean[:12][free]
-            sdp = s.prior_sd[:12][free]
-            lo = s.lower[:12][free]
-            hi = s.upper[:12][free]
-            gram = a.T @ a + np.diag(pw / sdp**2)
-            rhs_n = a.T @ rhs + pw * mu / sdp**2
-            sol: FloatArray | None
-            try:
-                sol = np.linalg.solve(gram, rhs_n)
-            except np.linalg.LinAlgError:
-                sol = None
-            if sol is None or np.any(sol < lo) or np.any(sol > hi):
-                sol = _bounded_solve(a, rhs, pw, mu, sdp, lo, hi)
-            lin[free] = sol
-        theta = theta_nl.copy()
-        theta[:12] = lin
-        r = rhs - a @ lin[free] if free.any() else rhs
+        theta, r = reference.project(self, theta_nl, x)
         return Projection(float(r @ r) + self.prior_cost(theta), theta, r)
 
     def _project_compiled(self, theta_nl: FloatArray, x: FloatArray | None) -> Projection:
         """:meth:`project` with the design and the normal equations compiled
         (:func:`fieldbank.fitting.kernels.solve_normal`); the bounded fallback as before."""
-        kern = kernels.load()
-        self.n_evals += 1
-        k = self.consts()
         s = self.space
+        self.n_evals += 1
+        if x is None and not (s.fit_q_rest or s.fit_slack):
+            # only β varies: the design and the solve in one compiled call
+            return Projection(*self._beta_path().project(theta_nl))
+        k = self.consts()
         theta = np.array(theta_nl, dtype=float)
         lin = theta[:12]  # a view: the solve writes the fitted Km and α into theta
         free = k["free"]
@@ -452,23 +428,14 @@ class FitProblem:
         rhs = np.empty(m)
         r = np.empty(m)
         pw = float(k["pw"])
-        if x is None and not (s.fit_q_rest or s.fit_slack):
-            # only β varies: the design and the solve in one compiled call
-            if self._xkm_cache is None:
-                self._xkm_cache = self._passive_basis(
-                    np.asarray(self.arm.q_rest, dtype=float), self.base_slack)
-            ok = kern["project_reflex"](theta[12:18], k["kk"], self.lam_above_min, k["ell"], self.c,
-                                self.dc, k["row_pt"], self.cf, self.cl, self.cd,
-                                self._xkm_cache, k["y"], k["w"], free, lin, pw, k["mu"],
-                                k["sdp"], k["lo"], k["hi"], a, rhs, r)
-        else:
-            if x is None:
-                _, beta, q_rest, slack = self.split(theta)
-                x = self.design(beta, q_rest, slack)
-            ok = kern["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin, pw,
-                                      k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r)
+        if x is None:
+            _, beta, q_rest, slack = self.split(theta)
+            x = self.design(beta, q_rest, slack)
+        ok = kernels.load()["solve_normal"](np.ascontiguousarray(x), k["y"], k["w"], free, lin,
+                                            pw, k["mu"], k["sdp"], k["lo"], k["hi"], a, rhs, r,
+                                            _NO_GRAM, 0)
         if not ok:
-            sol = _bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
+            sol = reference.bounded_solve(a, rhs, pw, k["mu"], k["sdp"], k["lo"], k["hi"])
             lin[free] = sol
             r = rhs - a @ sol
         return Projection(float(r @ r) + self.prior_cost(theta), theta, r)
@@ -485,7 +452,7 @@ class FitProblem:
         """
         s = self.space
         _, beta, q_rest, slack = self.split(theta)
-        h_beta = _H_BETA if step is None else step
+        h_beta = H_BETA if step is None else step
         h_q = _H_Q if step is None else step
         h_d = _H_SLACK if step is None else 0.1 * step
         out: dict[int, FloatArray] = {}
@@ -545,22 +512,11 @@ class FitProblem:
 
     def _projected_cost_grad_compiled(self, phi: FloatArray
                                       ) -> tuple[float, FloatArray, Projection]:
-        """:meth:`projected_cost_grad` over β alone, the derivative columns compiled
-        (:func:`fieldbank.fitting.kernels.reflex_gradient`)."""
-        k = self.consts()
-        pr = self.project(self.full_from_nonlinear(phi))
-        s = self.space
-        th = pr.theta
-        fitted = k["beta_fitted"]
-        grad = np.empty(fitted.size)
-        reflex_gradient = kernels.load()["reflex_gradient"]
-        reflex_gradient(np.ascontiguousarray(th[12:18]), s.lower[12:18], s.upper[12:18],
-                        _H_BETA, k["kk"], self.lam_above_min, k["ell"], self.c, self.dc,
-                        k["row_pt"], self.cf, self.cl, self.cd, np.ascontiguousarray(th[6:12]),
-                        pr.r, k["w"], fitted, grad)
-        idx = fitted + 12
-        grad += 2.0 * s.prior_weight * (th[idx] - s.prior_mean[idx]) / s.prior_sd[idx] ** 2
-        return pr.cost, grad, pr
+        """:meth:`projected_cost_grad` over β alone: the projection and the derivative
+        columns in one compiled call (:meth:`BetaPath.cost_grad`)."""
+        self.n_evals += 1
+        cost, theta, r, grad = self._beta_path().cost_grad(phi)
+        return cost, grad, Projection(cost, theta, r)
 
     def jacobian(self, theta: FloatArray, step: float | None = None) -> FloatArray:
         """∂r/∂θ of the whitened data residuals, shape (M, P) (zero columns where not fitted).
@@ -577,20 +533,3 @@ class FitProblem:
         jac[:, ~self.space.fitted] = 0.0
         return jac
 
-
-def _bounded_solve(a: FloatArray, rhs: FloatArray, pw: float, mu: FloatArray, sdp: FloatArray,
-                   lo: FloatArray, hi: FloatArray) -> FloatArray:
-    """The projection's linear least squares with the prior, inside [lo, hi]."""
-    sq = np.sqrt(pw) / sdp
-    aa = np.vstack([a, np.diag(sq)])
-    bb = np.concatenate([rhs, sq * mu])
-    # Lower bounds are what binds (α >= 0 of quiet groups): NNLS on x - lo is ~15x
-    # faster than BVLS and solves the same strictly convex problem; BVLS only when
-    # an upper bound binds as well.
-    from scipy.optimize import lsq_linear, nnls  # heavy: where it solves
-
-    shifted, _ = nnls(aa, bb - aa @ lo)
-    sol = np.asarray(shifted + lo, dtype=float)
-    if np.any(sol > hi):
-        sol = np.asarray(lsq_linear(aa, bb, bounds=(lo, hi), method="bvls").x, dtype=float)
-    return sol

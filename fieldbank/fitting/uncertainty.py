@@ -186,25 +186,31 @@ class FitSamples:
             return None
         return cls(tuple(str(n) for n in names), arr)
 
+    def arrays(self, base: ArmParams, limit: int | None = None) -> dict[str, FloatArray]:
+        """The samples (the first ``limit``) as arrays of the ArmParams fields they change,
+        the others' entries as in ``base`` (the fitted model): {field: (S, 6) or (S, 2)}."""
+        rows = self.values if limit is None else self.values[:limit]
+        out: dict[str, FloatArray] = {}
+        for k, name in enumerate(self.names):
+            kind, _, which = name.rpartition("_")
+            if name.startswith("q_rest_"):
+                attr, col = "q_rest_rad", 0 if which == "shoulder" else 1
+            elif kind in PARAM_FIELD and which in GROUP_INDEX:
+                attr, col = PARAM_FIELD[kind], GROUP_INDEX[which]
+            else:
+                raise FitError(f"fit samples: unknown parameter {name!r}.")
+            if attr not in out:
+                out[attr] = np.tile(np.asarray(getattr(base, attr), dtype=float),
+                                    (rows.shape[0], 1))
+            out[attr][:, col] = rows[:, k]
+        return out
+
     def params(self, base: ArmParams, limit: int | None = None) -> list[ArmParams]:
         """Each sample (the first ``limit``) written into ``base`` (the fitted model)."""
-        rows = self.values if limit is None else self.values[:limit]
-        out = []
-        for row in rows:
-            fields: dict[str, list[float]] = {}
-            for name, v in zip(self.names, row, strict=True):
-                kind, _, which = name.rpartition("_")
-                if name.startswith("q_rest_"):
-                    field = fields.setdefault("q_rest_rad", list(base.q_rest_rad))
-                    field[0 if which == "shoulder" else 1] = float(v)
-                elif kind in PARAM_FIELD and which in GROUP_INDEX:
-                    attr = PARAM_FIELD[kind]
-                    field = fields.setdefault(attr, list(getattr(base, attr)))
-                    field[GROUP_INDEX[which]] = float(v)
-                else:
-                    raise FitError(f"fit samples: unknown parameter {name!r}.")
-            out.append(base.replace(**{k: tuple(v) for k, v in fields.items()}))
-        return out
+        arrays = self.arrays(base, limit)
+        size = (self.values if limit is None else self.values[:limit]).shape[0]
+        return [base.replace(**{f: tuple(a[k].tolist()) for f, a in arrays.items()})
+                for k in range(size)]
 
 
 def reduced_problem(problem: FitProblem, theta: FloatArray,
