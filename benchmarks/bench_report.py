@@ -28,9 +28,10 @@ Measured per cohort and number of patients, in a fresh SQLite database:
 With ``--cluster`` (the fitted cohort, in a scratch database on the PostgreSQL server of
 ``--db``, default ``$FIELDBANK_TEST_PG_URL``): the report with ``--jobs 1`` in this process,
 then - the kept intervals dropped - on a ``distributed.LocalCluster`` of one worker process
-speaking TLS with the certificates ``fieldbank cluster certs`` makes, twice (intervals
-computed, then kept). Per case: the worker's CPU time against ``--jobs 1`` in this process
-(the target), and beside it this process's main thread (the command: selecting, reading the
+speaking TLS with the certificates ``fieldbank cluster certs`` makes and the Dask settings of
+its ``dask.yaml`` (``--dask-defaults``: Dask's own), twice (intervals computed, then kept).
+Per case: the worker's CPU time against ``--jobs 1`` in this process (the target), and
+beside it this process's main thread (the command: selecting, reading the
 payloads back, writing), the two together, and the share of the worker's CPU that the same
 worker spends idle over the same wall time (Dask's heartbeats and system monitor, the TLS
 event loop; measured for ``IDLE_S`` seconds before the runs) - on a loaded machine a case
@@ -42,7 +43,7 @@ threads alone (the executor threads that run the tasks, each read from its own C
 idle process's rate is measured for ``IDLE_S`` seconds before the runs, in the same run.
 
 Run: python benchmarks/bench_report.py [--patients 20 100] [--jobs 2]
-         [--cohort fitted|synthetic|both] [--cluster] [--db URL]
+         [--cohort fitted|synthetic|both] [--cluster [--dask-defaults]] [--db URL]
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.timing import load_line
+from fieldbank.clusterconfig import SETTINGS
 from fieldbank.evaluate.arms import ArmCache
 from fieldbank.evaluate.compare import Conditions, compare
 from fieldbank.interventions.catalogue import Botulinum
@@ -185,9 +187,12 @@ def _forget_intervals(url: str) -> None:
 
 
 @contextmanager
-def tls_cluster(certs: Path) -> Iterator[tuple[Any, Any]]:
+def tls_cluster(certs: Path, dask_defaults: bool = False) -> Iterator[tuple[Any, Any]]:
     """A LocalCluster of one worker process, scheduler and worker speaking only TLS with the
-    cluster's certificates, and the project's scheduler setting for it."""
+    cluster's certificates, and the project's scheduler setting for it; run with the Dask
+    settings of the cluster's ``dask.yaml`` (:mod:`fieldbank.clusterconfig`), or with Dask's
+    own defaults (``dask_defaults``)."""
+    import dask
     from distributed import LocalCluster, Security
 
     from fieldbank.scheduler import SchedulerFlags, resolve_scheduler
@@ -200,7 +205,9 @@ def tls_cluster(certs: Path) -> Iterator[tuple[Any, Any]]:
                         tls_worker_cert=c("worker.pem"), tls_worker_key=c("worker-key.pem"),
                         tls_client_cert=c("client.pem"), tls_client_key=c("client-key.pem"),
                         require_encryption=True)
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, protocol="tls://",
+    settings = {} if dask_defaults else {s.key: s.value for s in SETTINGS}
+    with dask.config.set(settings), \
+            LocalCluster(n_workers=1, threads_per_worker=1, processes=True, protocol="tls://",
                       host="127.0.0.1", security=security, dashboard_address=None,
                       silence_logs=logging.ERROR, env={"FIELDBANK_DB": ""}) as cluster:
         sched = resolve_scheduler(SchedulerFlags(cluster.scheduler_address, c("ca.pem"),
@@ -234,7 +241,7 @@ def _task_cpu(client: Any) -> float:
     return float(sum(client.run(_executor_threads_cpu).values()))
 
 
-def run_worker(n: int, server_url: str, tmp: Path) -> list[Check]:
+def run_worker(n: int, server_url: str, tmp: Path, dask_defaults: bool = False) -> list[Check]:
     """The fitted cohort on PostgreSQL: ``--jobs 1`` here, then on one Dask worker."""
     from distributed import Client
 
@@ -262,7 +269,7 @@ def run_worker(n: int, server_url: str, tmp: Path) -> list[Check]:
         _forget_intervals(url)
         remote: dict[str, float] = {}
         tasks: dict[str, float] = {}
-        with tls_cluster(certs) as (cluster, sched), \
+        with tls_cluster(certs, dask_defaults) as (cluster, sched), \
                 Client(cluster, set_as_default=False) as client:
             # warmed up as this process was: one case through the command on the worker
             # (imports, its database, first compilations), then the metrics alone of every
@@ -324,6 +331,8 @@ def main() -> int:
                     help="also the fitted cohort on PostgreSQL, here and on a Dask worker")
     ap.add_argument("--db", default=os.environ.get("FIELDBANK_TEST_PG_URL"),
                     help="PostgreSQL server URL for --cluster (a scratch database is made)")
+    ap.add_argument("--dask-defaults", action="store_true",
+                    help="run the worker with Dask's own settings, not the cluster's dask.yaml")
     args = ap.parse_args()
     if args.cluster and not args.db:
         print("--cluster: give --db or set FIELDBANK_TEST_PG_URL")
@@ -336,7 +345,7 @@ def main() -> int:
             for kind in kinds:
                 checks += run_cohort(kind, n, args.jobs, Path(tmp))
             if args.cluster:
-                checks += run_worker(n, args.db, Path(tmp))
+                checks += run_worker(n, args.db, Path(tmp), args.dask_defaults)
     print(f"\nend: {load_line()}")
     for what, value, ok, unit in checks:
         print(f"target: {what}: {value:.2f} {unit} ({'met' if ok else 'NOT met'})")

@@ -7,7 +7,12 @@ every task thread every 10 ms and a memory check every 100 ms (in its nanny too)
 a worker busy for under a second of CPU; on a shared or loaded machine that background is
 paid for every second of wall time, and it was most of the overhead per task of a cohort
 refit (docs/scale-out.md, "Measured"). The settings here make those timers less frequent or
-stop the profiler, each for a stated price (:data:`SETTINGS`).
+stop the profiler, each for a stated price (:data:`SETTINGS`). One more setting is about
+memory, not timers: Dask's nanny starts each worker with glibc's ``MALLOC_TRIM_THRESHOLD_`` at
+64 kB, which also fixes glibc's mmap threshold at 128 kB, so every array above 128 kB - the
+what-if intervals' and the report's (S, N, 6) arrays - is mapped and unmapped and its pages
+faulted in again on every use; the settings here put both thresholds near glibc's own dynamic
+ceilings (mallopt(3): M_MMAP_THRESHOLD up to 32 MiB on 64-bit, M_TRIM_THRESHOLD twice that).
 
 ``fieldbank cluster certs`` writes them as ``dask.yaml`` into the certificates' directory
 (:func:`dask_yaml`), and the commands it prints start the scheduler and the workers with
@@ -34,20 +39,34 @@ class Setting:
     processes it touches, and what the change costs."""
 
     key: str
-    value: bool | str
-    dask_default: bool | str
+    value: bool | str | int
+    dask_default: bool | str | int | None
     applies_to: str
     cost: str
+
+    @property
+    def _env_parts(self) -> tuple[list[str], list[str]]:
+        """The key's parts an environment variable can name, and the rest: Dask lower-cases
+        a variable's name, so a key with capitals (a variable a nanny sets for its worker) is
+        reached through its parent mapping, whose value the variable gives as a literal."""
+        parts = self.key.split(".")
+        cut = next((i for i, p in enumerate(parts) if p != p.lower()), len(parts))
+        return parts[:cut], parts[cut:]
 
     @property
     def env_name(self) -> str:
         """The environment variable that sets the key alone (``DASK_`` + the key's parts
         joined by ``__``, dashes as underscores), as Dask reads it."""
-        return "DASK_" + "__".join(p.upper().replace("-", "_") for p in self.key.split("."))
+        named, _ = self._env_parts
+        return "DASK_" + "__".join(p.upper().replace("-", "_") for p in named)
 
     @property
     def env_value(self) -> str:
-        return repr(self.value) if isinstance(self.value, bool) else self.value
+        _, rest = self._env_parts
+        value: object = self.value
+        for p in reversed(rest):  # Dask merges the mapping into its own
+            value = {p: value}
+        return value if isinstance(value, str) else repr(value)
 
 
 SETTINGS: tuple[Setting, ...] = (
@@ -69,6 +88,16 @@ SETTINGS: tuple[Setting, ...] = (
             "a worker is paused, spilled or restarted for its memory up to 0.5 s after it "
             "crosses the threshold instead of 0.1 s: a task that allocates faster than that "
             "overshoots by what it allocates in 0.4 s (a fit holds a few MB)"),
+    Setting("distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_", 67108864, 65536,
+            "workers (their nanny sets it when it starts them)",
+            "a worker gives freed memory at the top of its heap back to the system only "
+            "beyond 64 MiB instead of 64 kB: its resident size stays up to 64 MiB above what "
+            "it holds (Dask's memory view counts that as unmanaged memory)"),
+    Setting("distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_", 33554432, None,
+            "workers (their nanny sets it when it starts them)",
+            "arrays up to 32 MiB come from the heap and are reused instead of being mapped "
+            "afresh for each use; memory freed in the middle of the heap is returned only as "
+            "the heap's top is trimmed"),
 )
 
 
@@ -112,6 +141,8 @@ def dask_yaml(settings: tuple[Setting, ...] = SETTINGS) -> str:
 
 
 def _yaml_scalar(value: object) -> str:
+    if value is None:
+        return "not set"
     if isinstance(value, bool):
         return "true" if value else "false"
     return str(value)

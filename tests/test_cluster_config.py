@@ -21,8 +21,10 @@ from fieldbank.clustercerts import CertOptions, write_certs
 from fieldbank.clusterconfig import CONFIG_FILE, SETTINGS, as_nested, dask_yaml
 
 BIN = Path(sys.executable).parent
+# glibc's variables a nanny sets for the worker it starts
+MALLOC = ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")
 # What a fresh process sees for each key, as JSON (Dask parses "500ms" at use, not here).
-READ = ("import json, dask, distributed; print(json.dumps({k: dask.config.get(k) for k in "
+READ = ("import json, dask, distributed; print(json.dumps({k: dask.config.get(k, None) for k in "
         + repr([s.key for s in SETTINGS]) + "}))")
 
 
@@ -101,10 +103,11 @@ def workers(tmp_path: Path) -> Iterator[dict[str, object]]:
             def state(dask_worker: object) -> dict[str, object]:
                 pcs = dask_worker.periodic_callbacks  # type: ignore[attr-defined]
                 return {"name": dask_worker.name,  # type: ignore[attr-defined]
-                        "callbacks": {k: pcs[k].callback_time for k in pcs}}
+                        "callbacks": {k: pcs[k].callback_time for k in pcs},
+                        "environ": {k: os.environ.get(k) for k in MALLOC}}
 
             got = client.run(state)
-        yield {v["name"]: v["callbacks"] for v in got.values()}
+        yield {v["name"]: {**v["callbacks"], **v["environ"]} for v in got.values()}
     finally:
         for p in reversed(procs):
             p.terminate()
@@ -126,3 +129,9 @@ def test_a_worker_started_with_the_file_runs_quieter_and_one_without_is_unchange
     assert "profile" not in quiet and "profile-cycle" not in quiet
     assert quiet["tick"] == 500 and quiet["monitor"] == 2000
     assert quiet["memory_monitor"] == 500
+    # the worker's process started with the memory thresholds of the file, and Dask's own
+    # trim threshold (which fixes glibc's mmap threshold at 128 kB) without it
+    assert quiet["MALLOC_TRIM_THRESHOLD_"] == "67108864"
+    assert quiet["MALLOC_MMAP_THRESHOLD_"] == "33554432"
+    assert default["MALLOC_TRIM_THRESHOLD_"] == "65536"
+    assert default["MALLOC_MMAP_THRESHOLD_"] is None
