@@ -343,7 +343,6 @@ class OpenClassification:
                              "expected": round(self.fit_expected, 3),
                              "p_value": float(f"{self.fit_p_value:.4g}"), "level": FIT_LEVEL},
                 "temperature": round(self.temperature, 4),
-                "unseen_share": {g: round(v, 6) for g, v in self.group_unseen.items()},
                 "calibration": dataclasses.asdict(self.calibration)}
 
 
