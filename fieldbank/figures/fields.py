@@ -26,8 +26,9 @@ The conventions every field figure shares (the report's, ``whatif --plot``'s and
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, TypeVar, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -47,6 +48,8 @@ from fieldbank.figures.style import (
 )
 from fieldbank.maps import FieldMap, ellipse
 from fieldbank.model import Arm, FloatArray
+
+T = TypeVar("T")
 
 #: Fraction of the grid spacing the reference (percentile) arrow spans.
 ARROW_FILL = 0.8
@@ -73,11 +76,32 @@ SMALL_WIDTH_PX = 250.0
 
 
 # --- scales -------------------------------------------------------------------------------
+#: A figure asks for the spacing of one grid many times (each panel, layout and key): the
+#: last grids' spacings, by the grid's bytes, kept for the process.
+_SPACINGS: dict[tuple[str, bytes], Any] = {}
+_SPACINGS_KEPT = 32
+
+
+def _remembered(what: str, grid: FloatArray, compute: Callable[[], T]) -> T:
+    """``compute()`` of ``grid`` the first time, the same value while it is kept."""
+    key = (what, grid.tobytes() + str(grid.shape).encode())
+    found = _SPACINGS.get(key)
+    if found is None:
+        if len(_SPACINGS) >= _SPACINGS_KEPT:
+            del _SPACINGS[next(iter(_SPACINGS))]
+        found = _SPACINGS[key] = compute()
+    return cast(T, found)
+
+
 def grid_spacing(positions_m: ArrayLike) -> float:
     """Median distance from each position to its nearest neighbour, m (0.05 for one point)."""
     pos = np.asarray(positions_m, dtype=float)
     if pos.shape[0] < 2:
         return 0.05
+    return _remembered("spacing", pos, lambda: _grid_spacing(pos))
+
+
+def _grid_spacing(pos: FloatArray) -> float:
     d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))
     d[d == 0] = np.inf
     return float(np.median(d.min(axis=1)))
@@ -112,6 +136,10 @@ def spacing_xy(grid_m: ArrayLike) -> tuple[float, float]:
     """Grid steps in x and y, m (the smallest non-zero difference of the coordinates; the
     median nearest-neighbour distance when the points are scattered)."""
     g = np.asarray(grid_m, dtype=float).reshape(-1, 2)
+    return _remembered("steps", g, lambda: _spacing_xy(g))
+
+
+def _spacing_xy(g: FloatArray) -> tuple[float, float]:
     out = []
     for k in range(2):
         d = np.diff(np.unique(np.round(g[:, k], 9)))
@@ -152,19 +180,22 @@ def arrows(panel: Panel, positions_m: ArrayLike, force_n: ArrayLike, n_per_px: f
         v[cut] *= (max_px / length[cut])[:, None]
         length = np.minimum(length, max_px)
     for sel, w in ((~cut, width), (cut, width * 1.9)):
-        paths = []
-        for (x0, y0), (dx, dy), n in zip(p[sel], v[sel], length[sel], strict=True):
-            if n < 1.5:  # shorter than a line is wide: no direction to read
-                continue
-            tip = np.array([x0 + dx, y0 + dy])
-            paths.append(np.array([[x0, y0], tip]))
-            if n < 4.0:
-                continue
-            head = min(0.38 * n, 6.5)
-            ux, uy = dx / n, dy / n
-            back = tip - head * np.array([ux, uy])
-            side = 0.45 * head * np.array([-uy, ux])
-            paths.append(np.array([back + side, tip, back - side]))
+        # shorter than a line is wide: no direction to read; a head from 4 px on
+        keep = sel & (length >= 1.5)
+        p0, dv, n = p[keep], v[keep], length[keep]
+        tip = p0 + dv
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = dv / n[:, None]
+        head = np.minimum(0.38 * n, 6.5)
+        back = tip - head[:, None] * u
+        side = (0.45 * head)[:, None] * np.stack([-u[:, 1], u[:, 0]], axis=1)
+        shafts = np.stack([p0, tip], axis=1)
+        heads = np.stack([back + side, tip, back - side], axis=1)
+        paths: list[FloatArray] = []
+        for k, with_head in enumerate((n >= 4.0).tolist()):
+            paths.append(shafts[k])
+            if with_head:
+                paths.append(heads[k])
         panel.scene.lines(paths, colour, w, clip=panel.clip, data=data)
     return int(cut.sum())
 

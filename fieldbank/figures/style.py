@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Sequence
@@ -117,6 +118,7 @@ def nice_ticks(lo: float, hi: float, n: int = 5) -> list[float]:
     return [lo, hi]
 
 
+@functools.lru_cache(maxsize=256)
 def _decimals(step: float) -> int:
     """Decimals that write every multiple of ``step`` exactly (0.25 -> 2, 5 -> 0)."""
     for d in range(7):

@@ -6,6 +6,10 @@ neighbours dropped (:func:`thin`: the drawing is unchanged at any zoom a page is
 cells of one colour share a path; a run of texts of one style shares a group. The ``data`` of
 the scene become ``data-*`` attributes of the root element, those of an item attributes of its
 element, so a reader (or a test) finds what a figure shows without decoding its geometry.
+Every polyline of a figure is rounded, thinned and differenced in one numpy pass over all of
+them (a figure's curves are dozens of items of one polyline each; numpy's cost per call, not
+per point, was most of the writing), and the text of each 0.1 px number is made once per
+process; the bytes are those of each polyline written on its own.
 
 Why write SVG directly: a report draws about ten figures per case, and matplotlib spends
 ≈ 190 ms on one three-panel quiver figure (building artists, laying out, rendering), where
@@ -15,10 +19,10 @@ path command, drawsvg, ≈ 10 ms); ``benchmarks/bench_report.py`` measures the p
 
 from __future__ import annotations
 
-import functools
 from html import escape
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fieldbank.figures.scene import Circles, Ellipses, Item, Lines, Rects, Scene, Text
 from fieldbank.figures.style import FONT_FAMILY, TEXT, FloatArray
@@ -46,6 +50,9 @@ def write(scene: Scene, id_prefix: str = "f", standalone: bool = False,
                 for i, (x, y, cw, ch) in enumerate(scene.clips)]
         out.append("</defs>")
     items = scene.items
+    lines = [it for it in items if isinstance(it, Lines)]
+    data = dict(zip(map(id, lines), _path_data([it.paths for it in lines],
+                                               [it.closed for it in lines]), strict=True))
     i = 0
     while i < len(items):
         it = items[i]
@@ -64,7 +71,7 @@ def write(scene: Scene, id_prefix: str = "f", standalone: bool = False,
                 out.append("</g>")
                 i += len(run)
                 continue
-        out.append(_svg_item(it, id_prefix))
+        out.append(_svg_item(it, id_prefix, data.get(id(it))))
         i += 1
     out.append("</svg>")
     return "".join(out)
@@ -78,12 +85,19 @@ def _n(v: float) -> str:
     return "0" if s == "-0" else s
 
 
-@functools.lru_cache(maxsize=65536)
+#: The path text of each integer number of 0.1 px met so far (:func:`_tenths`): a process
+#: writes the same few thousand coordinates in every figure.
+_TENTHS: dict[int, str] = {}
+
+
 def _tenths(k: int) -> str:
     """An integer number of 0.1 px as compact path text: '12', '1.5', '.5', '-.5'."""
-    whole, frac = divmod(abs(k), 10)
-    text = (str(whole) if whole else "") + (f".{frac}" if frac else "")
-    return ("-" if k < 0 else "") + (text or "0")
+    text = _TENTHS.get(k)
+    if text is None:
+        whole, frac = divmod(abs(k), 10)
+        text = (str(whole) if whole else "") + (f".{frac}" if frac else "")
+        text = _TENTHS[k] = ("-" if k < 0 else "") + (text or "0")
+    return text
 
 
 def _c(v: float) -> str:
@@ -100,8 +114,25 @@ THIN_PASSES = 4
 def thin(q: FloatArray) -> FloatArray:
     """Drop repeated points and points on the line of their neighbours (each pass drops no
     two neighbours, so every judgement is against points that stay)."""
+    q = np.asarray(q, dtype=float).reshape(-1, 2)
+    start = np.zeros(len(q), dtype=bool)
+    start[:1] = True
+    return _thin_runs(q, start, np.ones(len(q), dtype=bool))[0]
+
+
+def _thin_runs(q: FloatArray, start: NDArray[np.bool_], thinnable: NDArray[np.bool_]
+               ) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`thin` of every polyline of ``q`` (polylines end to end, each beginning where
+    ``start``; only the points of ``thinnable`` ones may go) in one pass over all of them at a
+    time: a polyline's ends never go, so no judgement reaches across two of them, and a
+    polyline that loses nothing in a pass loses nothing in the next. Returns the points kept
+    and where each polyline now begins."""
     if len(q) > 1:
-        q = q[np.concatenate([[True], np.any(np.diff(q, axis=0) != 0, axis=1)])]
+        keep = start | ~thinnable
+        keep[1:] |= np.any(np.diff(q, axis=0) != 0, axis=1)
+        q, start, thinnable = q[keep], start[keep], thinnable[keep]
+    end = np.append(start[1:], True)
+    inner = (thinnable & ~start & ~end)[1:-1]
     for _ in range(THIN_PASSES):
         if len(q) <= 2:
             break
@@ -110,37 +141,60 @@ def thin(q: FloatArray) -> FloatArray:
                        - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
         length = np.hypot(c[:, 0] - a[:, 0], c[:, 1] - a[:, 1])
         between = np.einsum("ij,ij->i", b - a, c - a) > 0
-        cand = (cross <= THIN_TOLERANCE * np.maximum(length, 1e-9)) & between
+        cand = (cross <= THIN_TOLERANCE * np.maximum(length, 1e-9)) & between & inner
         # every other point of a run of candidates: no two neighbours go in one pass
         k = np.arange(len(cand))
         pos = k - np.maximum.accumulate(np.where(~cand, k, -1)) - 1
         drop = cand & (pos % 2 == 0)
         if not drop.any():
             break
-        q = q[np.concatenate([[True], ~drop, [True]])]
-    return q
+        keep = np.concatenate([[True], ~drop, [True]])
+        q, start = q[keep], start[keep]
+        inner = np.concatenate([[False], inner, [False]])[keep][1:-1]
+    return q, start
 
 
 def _path(p: FloatArray, closed: bool = False) -> str:
-    """One polyline as compact SVG path data: the first point absolute, then relative steps
-    in 0.1 px (rounded on the 0.1 px grid first, so steps add up exactly), thinned by
-    :func:`thin` when longer than three points (the drawing is unchanged at any zoom a page
-    is read at)."""
-    if len(p) <= 3:  # arrows, ticks, markers: plain Python is faster than numpy here
-        q = [(round(x * 10.0), round(y * 10.0)) for x, y in p.tolist()]
-    else:
-        q = thin(np.round(np.asarray(p, dtype=float) * 10.0)).astype(int).tolist()
-    x0, y0 = q[0]
-    out = [f"M{_tenths(x0)} {_tenths(y0)}"]
-    if len(q) > 1:
-        steps = []
-        for x, y in q[1:]:
-            steps.append(f"{_tenths(x - x0)} {_tenths(y - y0)}")
-            x0, y0 = x, y
-        out.append("l" + " ".join(steps))
-    if closed:
-        out.append("Z")
-    return "".join(out)
+    """One polyline as compact SVG path data (:func:`_path_data`)."""
+    return _path_data([[p]], [closed])[0]
+
+
+def _path_data(groups: list[list[FloatArray]], closed: list[bool]) -> list[str]:
+    """The path data of each group of polylines (a :class:`Lines` item's; ``closed``: its
+    polylines are polygons): each polyline its first point absolute, then relative steps in
+    0.1 px (rounded on the 0.1 px grid first, so steps add up exactly), thinned by
+    :func:`thin` when longer than three points (the drawing is unchanged at any zoom a page is
+    read at). Rounded once, thinned and differenced for every polyline of every group at once
+    (a figure's curves are many items of one polyline each)."""
+    paths = [np.asarray(p, dtype=float).reshape(-1, 2) for g in groups for p in g]
+    if not paths:
+        return ["" for _ in groups]
+    lens = np.array([len(p) for p in paths])
+    start = np.zeros(int(lens.sum()), dtype=bool)
+    start[np.cumsum(lens)[:-1]] = True
+    start[0] = True
+    q, start = _thin_runs(np.round(np.concatenate(paths) * 10.0), start,
+                          np.repeat(lens > 3, lens))
+    qi = q.astype(np.int64)
+    steps = qi.copy()
+    steps[1:] -= qi[:-1]
+    firsts = np.flatnonzero(start)
+    steps[firsts] = qi[firsts]  # each polyline starts absolute
+    get = _TENTHS.get
+    text = [get(v) or _tenths(v) for v in steps.ravel().tolist()]
+    bounds = [*firsts.tolist(), len(qi)]
+    out = []
+    k = 0
+    for g, shut in zip(groups, closed, strict=True):
+        tail = "Z" if shut else ""
+        parts = []
+        for lo, hi in zip(bounds[k:k + len(g)], bounds[k + 1:k + len(g) + 1], strict=True):
+            parts.append(f"M{text[2 * lo]} {text[2 * lo + 1]}"
+                         + ("l" + " ".join(text[2 * lo + 2:2 * hi]) if hi - lo > 1 else "")
+                         + tail)
+        out.append("".join(parts))
+        k += len(g)
+    return out
 
 
 def _points(xy: FloatArray) -> str:
@@ -167,9 +221,11 @@ def _common(stroke: str | None, width: float, fill: str | None,
     return "".join(parts)
 
 
-def _svg_item(it: Item, prefix: str) -> str:
+def _svg_item(it: Item, prefix: str, d: str | None = None) -> str:
+    """One item as SVG; ``d``: a :class:`Lines` item's path data, when written already."""
     if isinstance(it, Lines):
-        d = "".join(_path(p, it.closed) for p in it.paths)
+        if d is None:
+            d = _path_data([it.paths], [it.closed])[0]
         join = ' stroke-linejoin="round" stroke-linecap="round"' if it.stroke else ""
         return (f'<path d="{d}"{join}'
                 + _common(it.stroke, it.width, it.fill, it.dash, it.opacity, it.clip, prefix,

@@ -11,6 +11,7 @@ leave this package)::
     db.get_patient(code) / db.list_patients() / db.patient_by_id(id)
     db.ensure_session(patient_code, label, session_date=None) -> SessionInfo
     db.get_session(patient_code, label) -> SessionInfo / db.list_sessions(patient_code=None)
+    db.patients_by_code(codes) -> {code: PatientInfo}   db.sessions_of(codes) -> [SessionInfo]
     # measured maps and source files (written by fieldbank.ingest)              mapstore.py
     db.ingest_files(patient_code, session_label, files, session_date=None,
                     progress: IngestProgress | None = None) -> [IngestOutcome]
@@ -18,6 +19,7 @@ leave this package)::
     db.list_maps(patient_code=None, session_label=None, kind=None, since=None, until=None)
     db.get_map(map_id) -> FieldMap   db.get_maps(map_ids) -> [FieldMap]
     db.get_stored_map(map_id) -> StoredMap
+    db.maps_of(patient_codes) -> [StoredMap]   db.maps_by_id(map_ids) -> {id: FieldMap}
     db.source_file(sha256) -> SourceFileInfo   db.source_bytes(sha256) -> bytes
     # models, fits, plans (fitting and what-if)                                 lineage.py
     db.add_model(params, origin, label, patient_code=None, parent_id=None) -> StoredModel
@@ -25,12 +27,14 @@ leave this package)::
     db.add_fit(patient_code, model_id, algorithm, seed, n_evals, time_s, cost, result, map_ids)
     db.add_fitted_model(params, label, patient_code, algorithm, seed, n_evals, time_s, cost,
                         result, map_ids) -> (StoredModel, FitRecord)   # one transaction
+    db.get_models(ids) -> {id: StoredModel}   # the set-based reads: one query per table
     db.list_fits(patient_code=None) / db.get_fit(id) / db.fit_by_key(key)
+    db.fits_of(patient_codes) -> {code: [FitRecord]}
     db.add_fitted_model_once(..., fit_key=key) -> (StoredModel, FitRecord, stored: bool)
     db.add_plan(base_model_id, result_model_id, spec, label="", patient_code=None)
     db.add_plan_result(after, spec, label, patient_code=None, base_model_id=None, before=None,
                        before_label="") -> (base model id, after StoredModel, PlanRecord)
-    db.list_plans(patient_code=None) / db.get_plan(id)
+    db.list_plans(patient_code=None) / db.get_plan(id) / db.get_plans(ids)
     db.set_plan_given(plan_id, given_on) -> PlanRecord   # the day a stored plan was carried out
     # haptic sessions and traces (arrays go to the HDF5 array store)            traces.py
     db.start_haptic_session(model_a_id, robot_url, model_b_id=None, patient_code=None)
@@ -47,6 +51,7 @@ leave this package)::
     db.list_jobs(run_id, states=None) / db.job_payloads(run_id) / db.clear_payloads(run_id)
     db.finish_run(run_id)
     db.fit_document(fit_id, key) / db.put_fit_document(fit_id, key, model_version, doc, arrays)
+    db.fit_documents([(fit_id, key)]) -> {(fit_id, key): (doc, arrays)}
     # accounts of the workspace (hashes made by fieldbank.web.accounts)           accounts.py
     db.add_user(name, role, password_hash) / db.get_user(name) / db.find_user(name)
     db.list_users() / db.set_user(name, role=, password_hash=, disabled=)

@@ -18,10 +18,10 @@ from __future__ import annotations
 import copy
 import json
 import sqlite3
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import AbstractContextManager, contextmanager
 from datetime import UTC, date, datetime
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 from sqlalchemy import Engine, func, select
 from sqlalchemy import exc as sa_exc
@@ -34,6 +34,8 @@ from fieldbank.storage.arrays import ArrayAccess
 from fieldbank.storage.config import db_failure, is_read_only
 from fieldbank.storage.orm import AuditRow, PatientRow, SessionRow
 from fieldbank.stored.words import no_patient
+
+T = TypeVar("T")
 
 
 def now() -> datetime:
@@ -48,6 +50,17 @@ def to_utc(d: datetime) -> datetime:
 
 def to_utc_opt(d: datetime | None) -> datetime | None:
     return None if d is None else to_utc(d)
+
+
+#: Ids per ``IN (...)`` list of a set-based read (well under SQLite's and PostgreSQL's limits
+#: on the parameters of one statement).
+IN_CHUNK = 1000
+
+
+def chunks(ids: Sequence[T], size: int = IN_CHUNK) -> Iterator[Sequence[T]]:
+    """``ids`` in runs of at most ``size`` (one ``IN`` list each)."""
+    for k in range(0, len(ids), size):
+        yield ids[k:k + size]
 
 
 @contextmanager

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import getpass
 import re
+from collections.abc import Sequence
 from datetime import date
 from pathlib import Path
 
@@ -53,7 +54,7 @@ from fieldbank.storage.config import (
     resolve_url,
     sqlite_path,
 )
-from fieldbank.storage.core import now, to_utc
+from fieldbank.storage.core import chunks, now, to_utc
 from fieldbank.storage.jobs import Jobs
 from fieldbank.storage.lineage import Lineage
 from fieldbank.storage.mapstore import MapStore
@@ -194,6 +195,16 @@ class Database(MapStore, Lineage, Traces, Jobs, RemoteLinks, Accounts, AuditTrai
         with self._read() as s:
             return _patient_info(self._patient_row(s, code))
 
+    def patients_by_code(self, codes: Sequence[str]) -> dict[str, PatientInfo]:
+        """The registered patients among ``codes``, by code (a code not registered is left
+        out), in one query per thousand codes."""
+        out: dict[str, PatientInfo] = {}
+        with self._read() as s:
+            for part in chunks(sorted(set(codes))):
+                out.update((r.code, _patient_info(r)) for r in s.scalars(
+                    select(PatientRow).where(PatientRow.code.in_(part))))
+        return out
+
     def patient_by_id(self, patient_id: int) -> PatientInfo:
         with self._read() as s:
             row = s.get(PatientRow, patient_id)
@@ -225,6 +236,15 @@ class Database(MapStore, Lineage, Traces, Jobs, RemoteLinks, Accounts, AuditTrai
 
     def list_sessions(self, patient_code: str | None = None) -> list[SessionInfo]:
         """Sessions with their number of maps, by patient, date and id."""
+        return self._sessions(None if patient_code is None else [patient_code])
+
+    def sessions_of(self, patient_codes: Sequence[str]) -> list[SessionInfo]:
+        """:meth:`list_sessions` of every patient of ``patient_codes``, in that order (by
+        patient, date and id), in one query per thousand patients."""
+        return [x for part in chunks(sorted(set(patient_codes)))
+                for x in self._sessions(part)]
+
+    def _sessions(self, codes: Sequence[str] | None) -> list[SessionInfo]:
         with self._read() as s:
             n = (select(MapRow.session_id, func.count().label("n"))
                  .group_by(MapRow.session_id).subquery())
@@ -232,8 +252,8 @@ class Database(MapStore, Lineage, Traces, Jobs, RemoteLinks, Accounts, AuditTrai
                  .join(PatientRow, SessionRow.patient_id == PatientRow.id)
                  .outerjoin(n, n.c.session_id == SessionRow.id)
                  .order_by(PatientRow.code, SessionRow.session_date, SessionRow.id))
-            if patient_code is not None:
-                q = q.where(PatientRow.code == patient_code)
+            if codes is not None:
+                q = q.where(PatientRow.code.in_(codes))
             return [SessionInfo(r.id, code, r.label, r.session_date, to_utc(r.created_at),
                                 int(k))
                     for r, code, k in s.execute(q)]

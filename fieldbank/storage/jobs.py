@@ -34,7 +34,7 @@ from sqlalchemy.orm import Session
 
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.storage.config import db_failure
-from fieldbank.storage.core import DatabaseCore, now, to_utc, to_utc_opt
+from fieldbank.storage.core import DatabaseCore, chunks, now, to_utc, to_utc_opt
 from fieldbank.storage.orm import FitIntervalRow, FitRow, JobRow, JobRunRow
 from fieldbank.stored.records import JOB_KINDS, JOB_STATES, JobRecord, JobRunRecord
 from fieldbank.stored.words import no_run
@@ -247,6 +247,21 @@ class Jobs(DatabaseCore):
             if r is None:
                 return None
             return json.loads(r.document_json), None if r.arrays is None else bytes(r.arrays)
+
+    def fit_documents(self, wanted: Sequence[tuple[int, str]]
+                      ) -> dict[tuple[int, str], tuple[dict[str, Any], bytes | None]]:
+        """:meth:`fit_document` of each (fit id, key) of ``wanted`` that is kept, by that
+        pair, in one query per thousand fits."""
+        keys = set(wanted)
+        out: dict[tuple[int, str], tuple[dict[str, Any], bytes | None]] = {}
+        with self._read() as s:
+            for part in chunks(sorted({f for f, _ in keys})):
+                for r in s.scalars(select(FitIntervalRow)
+                                   .where(FitIntervalRow.fit_id.in_(part))):
+                    if (r.fit_id, r.key) in keys:
+                        out[(r.fit_id, r.key)] = (json.loads(r.document_json),
+                                                  None if r.arrays is None else bytes(r.arrays))
+        return out
 
     def put_fit_document(self, fit_id: int, key: str, model_version: int,
                          document: Mapping[str, Any], arrays: bytes | None = None) -> bool:

@@ -24,7 +24,7 @@ from sqlalchemy.orm import Session
 
 from fieldbank.errors import ParameterError, StorageError
 from fieldbank.params import ArmParams
-from fieldbank.storage.core import DatabaseCore, now, to_utc
+from fieldbank.storage.core import DatabaseCore, chunks, now, to_utc
 from fieldbank.storage.orm import (
     FitRow,
     MapRow,
@@ -44,6 +44,11 @@ def _model(r: ModelRow, code: str | None) -> StoredModel:
     return StoredModel(r.id, code, r.parent_id, r.origin, r.label,
                        ArmParams.from_json(r.params_json, where=f"model {r.id}"),
                        to_utc(r.created_at))
+
+
+def _plan_record(r: PlanRow, code: str | None) -> PlanRecord:
+    return PlanRecord(r.id, code, r.base_model_id, r.result_model_id, r.label,
+                      json.loads(r.spec_json), to_utc(r.created_at))
 
 
 class Lineage(DatabaseCore):
@@ -91,6 +96,20 @@ class Lineage(DatabaseCore):
             rows = [_model(r, code) for r, code in s.execute(q)]
             links = _plan_links(s, [m.id for m in rows])
         return [_with_plans(m, links) for m in rows]
+
+    def get_models(self, model_ids: Sequence[int]) -> dict[int, StoredModel]:
+        """The stored models among ``model_ids``, by id (an id not stored is left out): what
+        :meth:`get_model` returns for each, in two queries for them all."""
+        wanted = sorted({int(m) for m in model_ids})
+        if not wanted:
+            return {}
+        q = (select(ModelRow, PatientRow.code)
+             .outerjoin(PatientRow, ModelRow.patient_id == PatientRow.id)
+             .where(ModelRow.id.in_(wanted)))
+        with self._read() as s:
+            rows = [_model(r, code) for r, code in s.execute(q)]
+            links = _plan_links(s, [m.id for m in rows])
+        return {m.id: _with_plans(m, links) for m in rows}
 
     def model_lineage(self, model_id: int) -> list[StoredModel]:
         """The model and its ancestors, newest first."""
@@ -199,13 +218,29 @@ class Lineage(DatabaseCore):
                          to_utc(row.created_at), fit_key, model_version, session_label)
 
     def _fit(self, s: Session, r: FitRow) -> FitRecord:
-        ids = tuple(s.scalars(select(fit_maps.c.map_id).where(fit_maps.c.fit_id == r.id)
-                              .order_by(fit_maps.c.map_id)))
-        label = (None if r.session_id is None else
-                 s.scalar(select(SessionRow.label).where(SessionRow.id == r.session_id)))
-        return FitRecord(r.id, str(self._code_of(s, r.patient_id)), r.model_id, r.algorithm,
-                         r.seed, r.n_evals, r.time_s, r.cost, json.loads(r.result_json), ids,
-                         to_utc(r.created_at), r.fit_key, r.model_version, label)
+        return self._fits(s, [(r, str(self._code_of(s, r.patient_id)))])[0]
+
+    def _fits(self, s: Session, rows: Sequence[tuple[FitRow, str]]) -> list[FitRecord]:
+        """Fit records of (row, patient code) pairs: their maps and session labels read in
+        one query each for all of them."""
+        if not rows:
+            return []
+        ids = [r.id for r, _ in rows]
+        maps: dict[int, list[int]] = {i: [] for i in ids}
+        for part in chunks(ids):
+            for fid, mid in s.execute(select(fit_maps.c.fit_id, fit_maps.c.map_id)
+                                      .where(fit_maps.c.fit_id.in_(part))
+                                      .order_by(fit_maps.c.fit_id, fit_maps.c.map_id)):
+                maps[fid].append(mid)
+        labels: dict[int, str] = {}
+        for part in chunks(sorted({r.session_id for r, _ in rows if r.session_id is not None})):
+            labels.update((i, label) for i, label in s.execute(
+                select(SessionRow.id, SessionRow.label).where(SessionRow.id.in_(part))))
+        return [FitRecord(r.id, code, r.model_id, r.algorithm, r.seed, r.n_evals, r.time_s,
+                          r.cost, json.loads(r.result_json), tuple(maps[r.id]),
+                          to_utc(r.created_at), r.fit_key, r.model_version,
+                          None if r.session_id is None else labels.get(r.session_id))
+                for r, code in rows]
 
     def get_fit(self, fit_id: int) -> FitRecord:
         with self._read() as s:
@@ -215,11 +250,24 @@ class Lineage(DatabaseCore):
             return self._fit(s, r)
 
     def list_fits(self, patient_code: str | None = None) -> list[FitRecord]:
-        q = select(FitRow).join(PatientRow, FitRow.patient_id == PatientRow.id).order_by(FitRow.id)
-        if patient_code is not None:
-            q = q.where(PatientRow.code == patient_code)
+        return self._list_fits(None if patient_code is None else [patient_code])
+
+    def fits_of(self, patient_codes: Sequence[str]) -> dict[str, list[FitRecord]]:
+        """:meth:`list_fits` of each of ``patient_codes`` (each a list, empty for a patient
+        without fits), in three queries per thousand patients."""
+        out: dict[str, list[FitRecord]] = {c: [] for c in patient_codes}
+        for part in chunks(sorted(out)):
+            for f in self._list_fits(part):
+                out[f.patient_code].append(f)
+        return out
+
+    def _list_fits(self, codes: Sequence[str] | None) -> list[FitRecord]:
+        q = (select(FitRow, PatientRow.code).join(PatientRow, FitRow.patient_id == PatientRow.id)
+             .order_by(FitRow.id))
+        if codes is not None:
+            q = q.where(PatientRow.code.in_(codes))
         with self._read() as s:
-            return [self._fit(s, r) for r in s.scalars(q)]
+            return self._fits(s, [(r, code) for r, code in s.execute(q)])
 
     # --- plans ------------------------------------------------------------------------------
     def add_plan(self, base_model_id: int, result_model_id: int, spec: Mapping[str, Any],
@@ -267,9 +315,7 @@ class Lineage(DatabaseCore):
                           json.loads(row.spec_json), to_utc(row.created_at))
 
     def _plan(self, s: Session, r: PlanRow) -> PlanRecord:
-        return PlanRecord(r.id, self._code_of(s, r.patient_id), r.base_model_id,
-                          r.result_model_id, r.label, json.loads(r.spec_json),
-                          to_utc(r.created_at))
+        return _plan_record(r, self._code_of(s, r.patient_id))
 
     def get_plan(self, plan_id: int) -> PlanRecord:
         with self._read() as s:
@@ -277,6 +323,20 @@ class Lineage(DatabaseCore):
             if r is None:
                 raise self._no_row(s, PlanRow, "plan", plan_id)
             return self._plan(s, r)
+
+    def get_plans(self, plan_ids: Sequence[int]) -> list[PlanRecord]:
+        """The plans ``plan_ids`` in that order, in one query (:meth:`get_plan`'s error for
+        the first one not stored)."""
+        ids = [int(i) for i in plan_ids]
+        q = (select(PlanRow, PatientRow.code)
+             .outerjoin(PatientRow, PlanRow.patient_id == PatientRow.id)
+             .where(PlanRow.id.in_(set(ids))))
+        with self._read() as s:
+            found = {r.id: _plan_record(r, code) for r, code in s.execute(q)}
+            for i in ids:
+                if i not in found:
+                    raise self._no_row(s, PlanRow, "plan", i)
+        return [found[i] for i in ids]
 
     def set_plan_given(self, plan_id: int, given_on: date) -> PlanRecord:
         """Record in plan ``plan_id``'s document the day it was carried out (``given_on``),
@@ -297,12 +357,12 @@ class Lineage(DatabaseCore):
             return self._plan(s, r)
 
     def list_plans(self, patient_code: str | None = None) -> list[PlanRecord]:
-        q = (select(PlanRow).outerjoin(PatientRow, PlanRow.patient_id == PatientRow.id)
-             .order_by(PlanRow.id))
+        q = (select(PlanRow, PatientRow.code)
+             .outerjoin(PatientRow, PlanRow.patient_id == PatientRow.id).order_by(PlanRow.id))
         if patient_code is not None:
             q = q.where(PatientRow.code == patient_code)
         with self._read() as s:
-            return [self._plan(s, r) for r in s.scalars(q)]
+            return [_plan_record(r, code) for r, code in s.execute(q)]
 
 
 #: Up to this many models, :func:`_plan_links` asks for their plans by id; beyond, it reads

@@ -31,7 +31,7 @@ from fieldbank.errors import IntegrityError, StorageError
 from fieldbank.maps import VALUE_UNITS, FieldMap
 from fieldbank.storage.arrays import PendingArray
 from fieldbank.storage.config import db_failure
-from fieldbank.storage.core import DatabaseCore, now, to_utc
+from fieldbank.storage.core import DatabaseCore, chunks, now, to_utc
 from fieldbank.storage.orm import MapRow, PatientRow, SessionRow, SourceFileRow
 from fieldbank.storage.records import IncomingFile, IngestOutcome, SourceFileInfo
 from fieldbank.stored.records import StoredMap
@@ -209,6 +209,19 @@ class MapStore(DatabaseCore):
             raise StorageError(db_failure("Database", self.engine.url, exc)) from None
         return [_stored_map(r) for r in rows]
 
+    def maps_of(self, patient_codes: Sequence[str]) -> list[StoredMap]:
+        """The maps of every patient of ``patient_codes``, ordered as :meth:`list_maps`
+        orders them (by patient, session date and id), in one query per thousand patients."""
+        rows: list[Row[*_MapListing]] = []
+        try:
+            with self.engine.connect() as conn:
+                for part in chunks(sorted(set(patient_codes))):
+                    rows += conn.execute(_map_query().where(PatientRow.code.in_(part)).order_by(
+                        PatientRow.code, SessionRow.session_date, MapRow.id)).all()
+        except sa_exc.DBAPIError as exc:
+            raise StorageError(db_failure("Database", self.engine.url, exc)) from None
+        return [_stored_map(r) for r in rows]
+
     def get_stored_map(self, map_id: int) -> StoredMap:
         """What the database holds about a map besides its arrays."""
         with self._read() as s:
@@ -233,6 +246,16 @@ class MapStore(DatabaseCore):
             if missing:
                 raise self._no_row(s, MapRow, "map", ", ".join(map(str, missing)))
         return [_field_map(rows[i]) for i in map_ids]
+
+    def maps_by_id(self, map_ids: Sequence[int]) -> dict[int, FieldMap]:
+        """The stored maps among ``map_ids``, by id (an id not stored is left out), in one
+        query per thousand ids."""
+        out: dict[int, FieldMap] = {}
+        with self._read() as s:
+            for part in chunks(sorted({int(i) for i in map_ids})):
+                out.update((r.id, _field_map(r))
+                           for r in s.scalars(select(MapRow).where(MapRow.id.in_(part))))
+        return out
 
     def source_file(self, sha256: str) -> SourceFileInfo:
         """What is recorded of an ingested file."""

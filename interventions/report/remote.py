@@ -1,6 +1,7 @@
 """A report's cases computed on a Dask cluster (``fieldbank report --scheduler``).
 
-The cases are split into tasks of a few plans each (:data:`CASES_PER_TASK`). A task runs on a
+The cases are split into tasks of a few plans each (:data:`CASES_PER_TASK`, at least
+:data:`MIN_TASKS` tasks while there are cases for them). A task runs on a
 worker (:func:`report_cases`): it selects its plans from the database itself (the same
 :func:`~fieldbank.interventions.report.select.select_cases` the report's own process ran),
 computes each case, keeps newly computed prediction intervals with their fits, and writes the
@@ -29,23 +30,40 @@ from fieldbank.interventions.report.trust import keep_intervals, with_known_inte
 from fieldbank.scheduler import Scheduler
 from fieldbank.storage import Database
 
-#: Plans per task: enough that a task (≈ 0.1 s per case) outweighs its scheduling, few enough
-#: that a cohort spreads over every worker.
-CASES_PER_TASK = 4
+#: Most plans per task: a task's own cost - its job's marks, its selection (a few queries
+#: whatever its number of plans), reading the kept intervals, writing its payload - is paid
+#: once for all its cases (≈ 0.1 s each), and a cohort still spreads over the workers.
+CASES_PER_TASK = 8
+#: A report is cut into at least this many tasks while it has cases for them (a small report
+#: still spreads over several workers; below that, tasks of fewer cases).
+MIN_TASKS = 8
 
 
 def report_tasks(cases: list[CaseSpec], per_task: int = CASES_PER_TASK) -> list[Task]:
     """Tasks of up to ``per_task`` consecutive cases (cases are ordered by patient); fewer per
-    task for a small report, so that its cases still spread over the workers."""
-    per_task = max(1, min(per_task, len(cases) // 16))
+    task for a small report, so that its cases still spread over :data:`MIN_TASKS` tasks."""
+    per_task = max(1, min(per_task, -(-len(cases) // MIN_TASKS)))
     tasks = []
     for k in range(0, len(cases), per_task):
         part = cases[k:k + per_task]
         codes = sorted({c.patient_code or "-" for c in part})
         tasks.append(Task(f"plans {', '.join(str(c.plan_id) for c in part)}",
-                          codes[0] if len(codes) == 1 else ", ".join(codes), None,
-                          {"plan_ids": [c.plan_id for c in part]}))
+                          _whose(codes), None, {"plan_ids": [c.plan_id for c in part]}))
     return tasks
+
+
+#: Longest name of a task's patients (the job record keeps up to 64 characters).
+WHOSE_MAX = 64
+
+
+def _whose(codes: list[str]) -> str:
+    """A task's patients in at most :data:`WHOSE_MAX` characters: their codes, else the first
+    and how many more, else how many (the job's key names its plans)."""
+    for text in (", ".join(codes), f"{codes[0]} and {len(codes) - 1} more",
+                 f"{len(codes)} patients"):
+        if len(text) <= WHOSE_MAX:
+            return text
+    return f"{len(codes)} patients"
 
 
 def report_cases(db: Database, task: Task, options: Mapping[str, Any]) -> Done:

@@ -95,10 +95,11 @@ def interval_key_of(spec: CaseSpec) -> tuple[int, str] | None:
 
 def with_known_intervals(db: Database, cases: list[CaseSpec]) -> list[CaseSpec]:
     """The cases, each with its intervals when its fit keeps them already."""
+    keys = [interval_key_of(c) for c in cases]
+    kept = db.fit_documents([k for k in keys if k is not None])
     out = []
-    for c in cases:
-        at = interval_key_of(c)
-        found = db.fit_document(*at) if at is not None else None
+    for c, at in zip(cases, keys, strict=True):
+        found = kept.get(at) if at is not None else None
         out.append(c if found is None else
                    dataclasses.replace(c, intervals=IntervalSet.from_document(*found)))
     return out
