@@ -145,10 +145,12 @@ def main() -> None:
                     help="leave out the joint-group classifier")
     ap.add_argument("--save", type=Path, help="write the trials' outcomes here (JSON)")
     ap.add_argument("--load", type=Path, help="print the tables of outcomes saved before")
-    ap.add_argument("--calibration", type=float, nargs=5,
-                    metavar=("POWER", "SLOPE", "UNSEEN", "OTHER", "LEVEL"),
+    ap.add_argument("--calibration", type=float, nargs="+",
+                    metavar="NUMBER",
                     help="state with this calibration instead of the classifier's own "
-                         "(power, misfit slope, unseen share, share for none, misfit level)")
+                         "(power, misfit slope, unseen share, share for none, misfit level; "
+                         "then, optionally, the evidence over which the unseen share falls "
+                         "and the reflex score it is read at)")
     args = ap.parse_args()
     baseline = not args.no_baseline
     results: dict[tuple[str, float], list[Outcome]] = {}
@@ -156,7 +158,9 @@ def main() -> None:
         for row in json.loads(args.load.read_text()):
             sd = float(row.pop("noise_n"))
             o = Outcome(**{**row, "labels": tuple(row["labels"]),
-                           "label_probability": tuple(row["label_probability"])})
+                           "label_probability": tuple(row["label_probability"]),
+                           "reflex_evidence": tuple(
+                               tuple(r) for r in row.get("reflex_evidence", ()))})
             results.setdefault((o.family, sd), []).append(o)
         noise = sorted({sd for _f, sd in results})
         baseline = all(o.baseline_answer for v in results.values() for o in v)
@@ -185,14 +189,15 @@ def main() -> None:
               f"noise draws × {len(noise)} noise level(s) = {n_trials} trials; {wall:.0f} s "
               f"wall, {cpu:.0f} s CPU ({cpu / n_trials:.2f} s a trial) on {args.jobs} "
               f"processes; {load_line()}")
+    if args.calibration is not None and len(args.calibration) not in (5, 7):
+        ap.error("--calibration takes five numbers, or seven")
     stated = CALIBRATED if args.calibration is None else Calibration(
-        power=args.calibration[0], misfit_slope=args.calibration[1],
-        unseen=args.calibration[2], other=args.calibration[3],
-        misfit_level=args.calibration[4])
+        *(args.calibration[k] for k in (0, 3, 4, 1, 2)), *args.calibration[5:])
     for sd in noise:
         for what, cal in (("raw: the posterior as the likelihood and prior give it", RAW),
                           (f"stated: calibrated (power {stated.power:g}, misfit slope "
-                           f"{stated.misfit_slope:g}, unseen {stated.unseen:g}, other "
+                           f"{stated.misfit_slope:g}, unseen {stated.unseen:g} over evidence "
+                           f"{stated.unseen_evidence:g} at score {stated.unseen_score:g}, other "
                            f"{stated.other:g}, misfit level {stated.misfit_level:g})",
                            stated)):
             print(f"\n### force noise {sd:g} N per axis (τ 50 ms) - {what}\n")

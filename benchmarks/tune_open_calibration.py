@@ -6,8 +6,10 @@ group compensating, or outside the set, and under-confident on others.
 :func:`fieldbank.evaluate.reliability.fit_calibration` chooses, by a proper score (the mean
 log probability stated for the truth):
 
-* the power of the posterior and how fast it falls with the best arm's misfit, by what is
-  stated per group (each group impaired or not);
+* the power of the posterior, how fast it falls with the best arm's misfit, and each group's
+  share of an impairment the recording does not show - falling with how well the strokes see
+  that group's reflex (trials saved with its evidence) -, by what is stated per group (each
+  group impaired or not);
 * the share set aside for "none of the candidates" and the misfit level, by that statement.
 
 Tuning arms: every family (between severities, two groups, reflex only, contracture only,
@@ -74,7 +76,9 @@ def main() -> None:
         for row in json.loads(args.load.read_text()):
             row.pop("noise_n", None)
             out.append(Outcome(**{**row, "labels": tuple(row["labels"]),
-                                  "label_probability": tuple(row["label_probability"])}))
+                                  "label_probability": tuple(row["label_probability"]),
+                                  "reflex_evidence": tuple(
+                                      tuple(r) for r in row.get("reflex_evidence", ()))}))
         out = [o for o in out if o.family in tuned]
         source = args.load.name
     else:
@@ -87,7 +91,8 @@ def main() -> None:
     print(f"tune_open_calibration: {len(out)} trials ({', '.join(tuned)}; {source}), "
           f"{time.perf_counter() - t0:.0f} s wall; {load_line()}")
     print(f"fitted: power {cal.power:g}, misfit slope {cal.misfit_slope:g}, unseen "
-          f"{cal.unseen:g}, other "
+          f"{cal.unseen:g} falling over an evidence of {cal.unseen_evidence:g} of the reflex "
+          f"at score {cal.unseen_score:g}, other "
           f"{cal.other:g}, misfit level {cal.misfit_level:g}; mean log probability stated "
           f"for a group's truth {score:.4f}")
     for family in tuned:

@@ -262,6 +262,78 @@ def test_the_power_and_the_shares_on_numbers_worked_by_hand() -> None:
         Calibration(unseen=0.5)
 
 
+def test_the_per_group_unseen_share_on_numbers_worked_by_hand() -> None:
+    """unseen 0.2 falling over an evidence of 10, read at score 1: a group whose reflex
+    gives 10 keeps 0.2 e⁻¹ = 0.07358, one giving 0 keeps 0.2, one giving 50 keeps
+    0.2 e⁻⁵ = 0.001348. raw unimpaired 0.9, ef 0.1 (power 1), ef's reflex unseen (0) and
+    sf's seen (50): ef 1 − 0.9 × 0.8 = 0.28, sf 0.001348, ef or sf 1 − 0.9 × 0.8 × 0.998652
+    = 0.28097."""
+    cal = Calibration(unseen=0.2, unseen_evidence=10.0, unseen_score=1.0)
+    assert cal.unseen_share(10.0) == pytest.approx(0.2 * np.exp(-1.0))
+    assert cal.unseen_share(0.0) == pytest.approx(0.2)
+    assert cal.unseen_share(50.0) == pytest.approx(0.2 * np.exp(-5.0))
+    assert cal.unseen_share(float("nan")) == pytest.approx(0.2)  # evidence unknown
+    assert Calibration(unseen=0.2).unseen_share(50.0) == pytest.approx(0.2)  # no fall
+    evidence = np.full((6, 9), 50.0)
+    evidence[GROUPS.index("ef"), :] = [0.0, 0.0, 3.0, 9.0, 20.0, 30.0, 40.0, 60.0, 80.0]
+    c = dataclasses.replace(_stated(("unimpaired", "ef"), (0.9, 0.1), 1.0,
+                                    dataclasses.replace(cal, power=1.0)),
+                            reflex_evidence=evidence)
+    assert c.group_unseen["ef"] == pytest.approx(0.2)
+    assert c.group_unseen["sf"] == pytest.approx(0.2 * np.exp(-5.0))
+    assert c.group_probability["ef"] == pytest.approx(0.28)
+    assert c.group_probability["sf"] == pytest.approx(0.001348, abs=1e-6)
+    assert c.any_impaired(("ef", "sf")) == pytest.approx(0.28097, abs=1e-5)
+    # read at score 2 (evidence 9 for ef): 0.2 e^-0.9 = 0.08131
+    c2 = c.with_calibration(dataclasses.replace(c.calibration, unseen_score=2.0))
+    assert c2.group_unseen["ef"] == pytest.approx(0.2 * np.exp(-0.9))
+    with pytest.raises(ParameterError, match="'unseen_evidence'"):
+        Calibration(unseen_evidence=-1.0)
+    with pytest.raises(ParameterError, match="'unseen_score'"):
+        Calibration(unseen_score=6.0)
+
+
+def test_the_fit_tempers_a_group_the_strokes_cannot_see_and_not_a_seen_one() -> None:
+    """The posterior says "not impaired" (0.999) for every group; ee, whose reflex the
+    strokes do not see (evidence 0.1), is impaired in one arm of five, the others (evidence
+    40-80) never. The fitted share falls with the evidence: ee is stated impaired at about
+    0.2, every seen group at less than 1 %."""
+    evidence = tuple(tuple(0.1 if g == "ee" else 40.0 + 8.0 * i for _s in range(9))
+                     for i, g in enumerate(GROUPS))
+    out = [Outcome("reflex only", f"arm {k}", "ee" if k % 5 == 0 else "unimpaired",
+                   "unimpaired", 0.999, True, 1.0, labels=("unimpaired", "sf"),
+                   label_probability=(0.999, 0.001), reflex_evidence=evidence)
+           for k in range(100)]
+    cal, _score = fit_calibration(out)
+    assert cal.unseen > 0.1 and cal.unseen_evidence > 0.0, cal
+    c = out[0].classification(cal)
+    assert c.group_probability["ee"] == pytest.approx(0.2, abs=0.05), cal
+    assert all(c.group_probability[g] < 0.01 for g in GROUPS if g != "ee"), (
+        cal, c.group_probability)
+
+
+@pytest.mark.slow
+def test_a_reflex_the_strokes_cannot_see_is_tempered_on_a_recording(
+        openset: OpenSet) -> None:
+    """On a recording of the unimpaired arm: the strokes see the bi-articular extensors'
+    reflex (its evidence at score 2 well beyond 10) and hardly the elbow extensors' (below
+    3); a share of 0.2 falling over an evidence of 10 raises ee's stated probability of an
+    impairment by more than 0.1 and be's by less than 0.005."""
+    obs = _trace(BODY, openset)
+    noise = NoiseModel(force_sd_n=2.0)
+    cal = Calibration(power=0.5, unseen=0.2, unseen_evidence=10.0, unseen_score=2.0)
+    c = classify_open([with_force_noise(o, noise, np.random.default_rng(5)) for o in obs],
+                      openset, trace=OpenTrace.of(obs, openset, noise), calibration=cal)
+    ev = c.reflex_evidence[:, 3]  # score 2
+    assert ev[GROUPS.index("be")] > 30.0 and ev[GROUPS.index("ee")] < 3.0, ev
+    assert c.group_unseen["ee"] > 0.15 and c.group_unseen["be"] < 0.01, c.group_unseen
+    c0 = c.with_calibration(dataclasses.replace(cal, unseen=0.0))
+    raised = {g: c.group_probability[g] - c0.group_probability[g] for g in ("ee", "be")}
+    assert raised["ee"] > 0.1 and 0.0 <= raised["be"] < 0.005, raised
+    # the evidence grows with the reflex's score, group by group
+    assert np.all(np.diff(c.reflex_evidence, axis=1) >= 0.0), c.reflex_evidence
+
+
 def test_partner_groups_the_recording_cannot_separate_are_stated_as_a_set() -> None:
     """ef and bf each at 0.45 (the recording fits either), unimpaired at 0.1: neither can be
     stated alone, their union can - "ef or bf" at 0.9 -, every other group not impaired at

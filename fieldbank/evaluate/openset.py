@@ -173,6 +173,13 @@ class Calibration:
     #: recording by tenths of a newton yet is felt on the group's own stretch): "not impaired"
     #: is stated with at most 1 − unseen.
     unseen: float = 0.0
+    #: How the share falls with how well the recording sees the group's reflex: a group's
+    #: share is ``unseen · exp(−E / unseen_evidence)``, E the evidence a reflex of that group
+    #: at the severity score ``unseen_score`` would give on these strokes
+    #: (:attr:`OpenClassification.reflex_evidence`): a group whose reflex the strokes do not
+    #: reach keeps the share, one they see well loses it. 0: the same share for every group.
+    unseen_evidence: float = 0.0
+    unseen_score: float = 1.0
 
     def __post_init__(self) -> None:
         check_fields(self, CALIBRATION_BOUNDS, what="open-set calibration")
@@ -184,6 +191,13 @@ class Calibration:
         misfit = -math.log10(min(max(fit_p_value, MISFIT_FLOOR), 1.0))
         return self.power / (1.0 + self.misfit_slope * misfit)
 
+    def unseen_share(self, evidence: float) -> float:
+        """A group's share of an impairment the recording does not show, the evidence of its
+        reflex at :attr:`unseen_score` being ``evidence`` (unknown: not finite)."""
+        if self.unseen_evidence == 0.0 or not math.isfinite(evidence):
+            return self.unseen
+        return self.unseen * math.exp(-max(evidence, 0.0) / self.unseen_evidence)
+
 
 #: The smallest fit-test p-value the misfit reads (12 decades: beyond it, misfit enough).
 MISFIT_FLOOR = 1e-12
@@ -191,7 +205,9 @@ CALIBRATION_BOUNDS = {"power": Interval(0.0, 4.0, "", low_closed=False),
                       "other": Interval(0.0, 1.0, "", high_closed=False),
                       "misfit_level": Interval(FIT_LEVEL, 0.5, ""),
                       "misfit_slope": Interval(0.0, 10.0, ""),
-                      "unseen": Interval(0.0, 0.5, "", high_closed=False)}
+                      "unseen": Interval(0.0, 0.5, "", high_closed=False),
+                      "unseen_evidence": Interval(0.0, 1e4, ""),
+                      "unseen_score": Interval(SCORES[0], SCORES[-1], "")}
 #: No calibration: the posterior as the likelihood and the prior give it.
 RAW = Calibration()
 #: The calibration the classifier states its answers with: fitted by
@@ -225,6 +241,12 @@ class OpenClassification:
     #: Posterior mass of each group (rows, the model's order) in each of :data:`KINDS`.
     raw_kinds: FloatArray
     calibration: Calibration = RAW
+    #: Per group (rows, the model's order) and reflex state (columns, :data:`SCORES`): the
+    #: evidence a reflex of that group at that score would give against the group unimpaired
+    #: on these strokes at the stated noise - the χ² of the two arms' replayed forces apart,
+    #: over the model-error temperature, twice the expected log likelihood ratio. Empty when
+    #: not known.
+    reflex_evidence: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def explains(self) -> bool:
@@ -261,7 +283,18 @@ class OpenClassification:
         want = set(groups)
         held = float(sum(v for lab, v in zip(self.labels, self.label_share, strict=True)
                          if want & set(lab.split("+"))))
-        return 1.0 - (1.0 - held) * (1.0 - self.calibration.unseen) ** len(want)
+        seen = self.group_unseen
+        return 1.0 - (1.0 - held) * math.prod(1.0 - seen[g] for g in want)
+
+    @property
+    def group_unseen(self) -> dict[str, float]:
+        """Each group's share of an impairment the recording does not show
+        (:meth:`Calibration.unseen_share` of its :attr:`reflex_evidence`)."""
+        cal = self.calibration
+        ev = self.reflex_evidence
+        col = int(np.argmin(np.abs(np.asarray(SCORES) - cal.unseen_score)))
+        return {g: cal.unseen_share(float(ev[i, col]) if ev.size else math.nan)
+                for i, g in enumerate(GROUPS)}
 
     @property
     def group_probability(self) -> dict[str, float]:
@@ -485,7 +518,20 @@ def classify_open(observations: Sequence[Observation], openset: OpenSet,
     best = tuple(openset.states[i].name for i in cb.states_of(int(np.argmax(post)))) or (
         "unimpaired",)
     return OpenClassification(tuple(order), np.array([labels[x] for x in order]), best, q,
-                              expected, p_fit, temperature, kinds, calibration)
+                              expected, p_fit, temperature, kinds, calibration,
+                              reflex_evidence(openset, gram) / temperature)
+
+
+def reflex_evidence(openset: OpenSet, gram: FloatArray) -> FloatArray:
+    """Per group and score of :data:`SCORES`, the χ² a reflex of the group at that score
+    gives against the group unimpaired on the strokes whose weighted Gram matrix of the
+    one-group changes is ``gram`` (:class:`OpenTrace`), (groups, scores)."""
+    out = np.zeros((len(GROUPS), len(SCORES)))
+    diag = np.diag(gram)
+    for k, st in enumerate(openset.states):
+        if st.component == "dynamic":
+            out[GROUPS.index(st.group), SCORES.index(st.score)] = diag[k]
+    return out
 
 
 def classify_on_body(observations: Sequence[Observation], body: ArmParams,
@@ -533,4 +579,5 @@ __all__ = [
     "classify_on_body",
     "classify_open",
     "predict",
+    "reflex_evidence",
 ]

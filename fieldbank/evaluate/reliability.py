@@ -44,6 +44,7 @@ from fieldbank.evaluate.observation import Observation, with_force_noise
 from fieldbank.evaluate.openset import (
     KINDS,
     NONE_OF_THEM,
+    SCORES,
     Calibration,
     OpenClassification,
     OpenSet,
@@ -190,6 +191,9 @@ class Outcome:
     #: answer; kept so that a calibration can be measured on the same trials.
     labels: tuple[str, ...] = ()
     label_probability: tuple[float, ...] = ()
+    #: How well the strokes see each group's reflex
+    #: (:attr:`fieldbank.evaluate.openset.OpenClassification.reflex_evidence`, rows per group).
+    reflex_evidence: tuple[tuple[float, ...], ...] = ()
 
     @property
     def right(self) -> bool:
@@ -206,9 +210,11 @@ class Outcome:
         return dataclasses.replace(self, answer=answer, probability=p)
 
     def classification(self, calibration: Calibration) -> OpenClassification:
+        ev = np.asarray(self.reflex_evidence, dtype=float).reshape(
+            (len(GROUPS), -1) if self.reflex_evidence else (0, 0))
         return OpenClassification(self.labels, np.asarray(self.label_probability), (),
                                   math.nan, math.nan, self.fit_p_value, math.nan,
-                                  np.zeros((len(GROUPS), len(KINDS))), calibration)
+                                  np.zeros((len(GROUPS), len(KINDS))), calibration, ev)
 
     def truth_probability(self, calibration: Calibration) -> float:
         """The probability ``calibration`` states for the truth: its set of groups, and for an
@@ -236,35 +242,54 @@ def truth_groups(truth: str) -> frozenset[str]:
     return frozenset() if truth == "unimpaired" else frozenset(truth.split("+"))
 
 
-UNSEEN = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08)
+UNSEEN = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2, 0.3)
+#: The evidence scales (χ²) over which a group's unseen share falls (0: no fall), and the
+#: reflex scores whose evidence is read (:class:`~fieldbank.evaluate.openset.Calibration`).
+UNSEEN_EVIDENCE = (0.0, 1.0, 3.0, 10.0, 30.0, 100.0)
+UNSEEN_SCORES = (0.5, 1.0, 2.0)
 
 
-def _group_log_score(tables: Sequence[tuple[FloatArray, np.ndarray, np.ndarray, float]],
-                     power: float, slope: float, unseen: float) -> float:
-    """Mean log probability stated for each group's truth (impaired or not), over every group
-    of every outcome (``tables``: :func:`_group_tables`), at the power
-    ``power / (1 + slope · m)`` and the share ``unseen``."""
-    total, n = 0.0, 0
-    cal = Calibration(power, 0.0, FIT_LEVEL, slope)
-    for logp, held, truth, fit_p in tables:
+def _held_probability(tables: Sequence[tuple[FloatArray, np.ndarray, np.ndarray, float,
+                                             FloatArray]],
+                      cal: Calibration) -> FloatArray:
+    """Each group's probability of being impaired from the tempered posterior alone (no
+    unseen share), (outcomes, groups)."""
+    out = np.zeros((len(tables), len(GROUPS)))
+    for k, (logp, held, _truth, fit_p, _ev) in enumerate(tables):
         q = np.exp(cal.power_at(fit_p) * logp)
-        pg = np.clip(q @ held / q.sum(), 0.0, 1.0)
-        pg = 1.0 - (1.0 - pg) * (1.0 - unseen)
-        total += float(np.log(np.maximum(np.where(truth, pg, 1.0 - pg), LOG_FLOOR)).sum())
-        n += len(truth)
-    return total / max(n, 1)
+        out[k] = np.clip(q @ held / q.sum(), 0.0, 1.0)
+    return out
+
+
+def _unseen_shares(tables: Sequence[tuple[FloatArray, np.ndarray, np.ndarray, float,
+                                          FloatArray]],
+                   cal: Calibration) -> FloatArray:
+    """Each group's unseen share under ``cal``, (outcomes, groups)."""
+    col = int(np.argmin(np.abs(np.asarray(SCORES) - cal.unseen_score)))
+    return np.array([[cal.unseen_share(float(ev[i, col]) if ev.size else math.nan)
+                      for i in range(len(GROUPS))] for *_rest, ev in tables])
+
+
+def _group_log_score(held: FloatArray, unseen: FloatArray, truth: np.ndarray) -> float:
+    """Mean log probability stated for each group's truth (impaired or not), over every group
+    of every outcome: ``held`` (:func:`_held_probability`) with the shares ``unseen``
+    (:func:`_unseen_shares`) beside it."""
+    pg = 1.0 - (1.0 - held) * (1.0 - unseen)
+    return float(np.log(np.maximum(np.where(truth, pg, 1.0 - pg), LOG_FLOOR)).mean())
 
 
 def _group_tables(outcomes: Sequence[Outcome]
-                  ) -> list[tuple[FloatArray, np.ndarray, np.ndarray, float]]:
+                  ) -> list[tuple[FloatArray, np.ndarray, np.ndarray, float, FloatArray]]:
     """Per outcome: the log posterior of each label (its most probable at 0), which groups
-    each label holds, which groups the truth holds, the fit test's p-value."""
+    each label holds, which groups the truth holds, the fit test's p-value, the evidence of
+    each group's reflex."""
     out = []
     for o in outcomes:
         logp = np.log(np.maximum(np.asarray(o.label_probability, dtype=float), 1e-300))
         held = np.array([[g in lab.split("+") for g in GROUPS] for lab in o.labels], float)
         truth = np.array([g in truth_groups(o.truth) for g in GROUPS])
-        out.append((logp - logp.max(), held, truth, o.fit_p_value))
+        out.append((logp - logp.max(), held, truth, o.fit_p_value,
+                    o.classification(Calibration()).reflex_evidence))
     return out
 
 
@@ -281,21 +306,30 @@ def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
       :data:`MISFIT_LEVELS`) by the statement that none of the candidates explains the
       recording, right for an arm outside the candidates and wrong for every other."""
     tables = _group_tables(outcomes)
-    power, slope, unseen, score = 1.0, 0.0, 0.0, -math.inf
-    for a, b, u in itertools.product(POWERS, MISFIT_SLOPES, UNSEEN):
-        s = _group_log_score(tables, a, b, u)
-        if s > score:
-            power, slope, unseen, score = a, b, u, s
+    truth = np.array([t[2] for t in tables], dtype=bool).reshape(-1, len(GROUPS))
+    known = all(o.reflex_evidence for o in outcomes)
+    shares = [Calibration(unseen=u, unseen_evidence=e, unseen_score=sc)
+              for u in UNSEEN
+              for e, sc in (itertools.product(UNSEEN_EVIDENCE, UNSEEN_SCORES)
+                            if known and u > 0 else [(0.0, 1.0)])]
+    unseen = [_unseen_shares(tables, c) for c in shares]
+    group, score = Calibration(), -math.inf
+    for a, b in itertools.product(POWERS, MISFIT_SLOPES):
+        held = _held_probability(tables, Calibration(a, misfit_slope=b))
+        for c, u_of in zip(shares, unseen, strict=True):
+            s = _group_log_score(held, u_of, truth)
+            if s > score:
+                group, score = dataclasses.replace(c, power=a, misfit_slope=b), s
     other, level, best = 0.0, FIT_LEVEL, -math.inf
     for o_share, lv in itertools.product(OTHERS, MISFIT_LEVELS):
-        cal = Calibration(power, o_share, lv, slope, unseen)
+        cal = dataclasses.replace(group, other=o_share, misfit_level=lv)
         s = 0.0
         for o in outcomes:
             q = o.classification(cal).other_probability
             s += math.log(max(q if o.family == OUTSIDE else 1.0 - q, LOG_FLOOR))
         if s > best:
             other, level, best = o_share, lv, s
-    return Calibration(power, other, level, slope, unseen), score
+    return dataclasses.replace(group, other=other, misfit_level=level), score
 
 
 def stated_claims(outcomes: Sequence[Outcome], calibration: Calibration
@@ -382,6 +416,8 @@ def run_trials(arms: Sequence[TrialArm], noise: NoiseModel, draws: int = 4, seed
             out.append(Outcome(arm.family, arm.name, arm.truth, answer, stated, c.explains,
                                c.fit_p_value, labels=c.labels,
                                label_probability=tuple(float(v) for v in c.raw_probability),
+                               reflex_evidence=tuple(tuple(float(v) for v in row)
+                                                     for row in c.reflex_evidence),
                                **extra))  # type: ignore[arg-type]
         if progress is not None:
             progress(k + 1, len(arms))
