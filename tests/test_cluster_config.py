@@ -29,8 +29,10 @@ READ = ("import json, dask, distributed; print(json.dumps({k: dask.config.get(k,
 
 
 def _clean_env(**extra: str) -> dict[str, str]:
-    """This process's environment without any DASK_ variable, plus ``extra``."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("DASK_")}
+    """This process's environment without any DASK_ variable and without glibc's MALLOC_
+    ones (a nanny started inside this process by another test leaves Dask's own there, and a
+    variable already in the environment wins over Dask's configuration), plus ``extra``."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("DASK_", *MALLOC))}
     env["HOME"] = os.environ.get("HOME", "/nonexistent")
     env.update(extra)
     return env
