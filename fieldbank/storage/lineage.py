@@ -14,7 +14,7 @@ so a crash never leaves a fitted model without its fit or a plan without its res
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from datetime import date
 from typing import Any
@@ -113,15 +113,7 @@ class Lineage(DatabaseCore):
 
     def model_lineage(self, model_id: int) -> list[StoredModel]:
         """The model and its ancestors, newest first."""
-        out: list[StoredModel] = []
-        seen: set[int] = set()
-        current: int | None = model_id
-        while current is not None and current not in seen:
-            seen.add(current)
-            m = self.get_model(current)
-            out.append(m)
-            current = m.parent_id
-        return out
+        return walk_lineage(model_id, self.get_model)
 
     # --- fits -------------------------------------------------------------------------------
     def add_fit(self, patient_code: str, model_id: int, algorithm: str, seed: int | None,
@@ -390,3 +382,17 @@ def _plan_links(s: Session, model_ids: Sequence[int]) -> dict[int, tuple[int | N
 def _with_plans(m: StoredModel, links: Mapping[int, tuple[int | None, list[int]]]) -> StoredModel:
     made_by, applied = links.get(m.id, (None, []))
     return replace(m, plan_id=made_by, plans_from=tuple(applied))
+
+
+def walk_lineage(model_id: int, get_model: Callable[[int], StoredModel]) -> list[StoredModel]:
+    """The model ``model_id`` and its ancestors, newest first, each read with ``get_model``
+    (the database's, or a reader holding models read ahead); a parent met twice ends the walk."""
+    out: list[StoredModel] = []
+    seen: set[int] = set()
+    current: int | None = model_id
+    while current is not None and current not in seen:
+        seen.add(current)
+        m = get_model(current)
+        out.append(m)
+        current = m.parent_id
+    return out

@@ -34,6 +34,7 @@ from fieldbank.maps import FieldMap
 from fieldbank.modelsource import fit_behind
 from fieldbank.params import ArmParams
 from fieldbank.storage import Database, FitRecord, SessionInfo, StoredModel
+from fieldbank.storage.lineage import walk_lineage
 from fieldbank.stored.records import PatientInfo, PlanRecord, StoredMap
 
 
@@ -210,15 +211,7 @@ class _CohortReads:
 
     def model_lineage(self, model_id: int) -> list[StoredModel]:
         """As :meth:`Database.model_lineage` (the model and its ancestors, newest first)."""
-        out: list[StoredModel] = []
-        seen: set[int] = set()
-        current: int | None = model_id
-        while current is not None and current not in seen:
-            seen.add(current)
-            m = self.get_model(current)
-            out.append(m)
-            current = m.parent_id
-        return out
+        return walk_lineage(model_id, self.get_model)
 
     def list_fits(self, patient_code: str | None = None) -> list[FitRecord]:
         found = self._fits.get(patient_code) if patient_code is not None else None
