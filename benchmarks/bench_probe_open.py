@@ -9,7 +9,7 @@ among every state of the groups of its body (:mod:`fieldbank.evaluate.openset`).
 and noise level: the stated probability of the answer against how often it was right, per bin,
 the expected calibration error (points) and the wrong answers given with p ≥ 0.95 (targets:
 ECE ≤ 5 points, wrong at p ≥ 0.95 ≤ 2 %) - as the posterior gives them (raw) and as the
-classifier states them (:data:`fieldbank.evaluate.openset.CALIBRATED`, fitted on other arms:
+classifier states them (:data:`fieldbank.evaluate.opencalibration.CALIBRATED`, fitted on other arms:
 ``benchmarks/tune_open_calibration.py``); and per group (each group's impaired yes/no at the
 stated probability). Beside it, unless ``--no-baseline``, the joint-group classifier of
 ``fieldbank probe classify`` with the twelve severity candidates and the unimpaired arm on the
@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.timing import load_line
 from fieldbank.evaluate.design import NoiseModel
-from fieldbank.evaluate.openset import CALIBRATED, RAW, Calibration
+from fieldbank.evaluate.opencalibration import CALIBRATED, RAW, Calibration
 from fieldbank.evaluate.reliability import (
     FAMILIES,
     Outcome,
@@ -150,7 +150,11 @@ def main() -> None:
                     help="state with this calibration instead of the classifier's own "
                          "(power, misfit slope, unseen share, share for none, misfit level; "
                          "then, optionally, the evidence over which the unseen share falls "
-                         "and the reflex score it is read at)")
+                         "and the reflex score it is read at; then, optionally, the prior "
+                         "probability of no group and of two groups impaired; then, "
+                         "optionally, the weight of an arm outside the set in what is stated "
+                         "per group, a group's probability of an impairment there, and that "
+                         "of a group the set does not name where the residual is far off)")
     args = ap.parse_args()
     baseline = not args.no_baseline
     results: dict[tuple[str, float], list[Outcome]] = {}
@@ -189,8 +193,8 @@ def main() -> None:
               f"noise draws × {len(noise)} noise level(s) = {n_trials} trials; {wall:.0f} s "
               f"wall, {cpu:.0f} s CPU ({cpu / n_trials:.2f} s a trial) on {args.jobs} "
               f"processes; {load_line()}")
-    if args.calibration is not None and len(args.calibration) not in (5, 7):
-        ap.error("--calibration takes five numbers, or seven")
+    if args.calibration is not None and len(args.calibration) not in (5, 7, 9, 12):
+        ap.error("--calibration takes five numbers, seven, nine or twelve")
     stated = CALIBRATED if args.calibration is None else Calibration(
         *(args.calibration[k] for k in (0, 3, 4, 1, 2)), *args.calibration[5:])
     for sd in noise:
@@ -198,7 +202,12 @@ def main() -> None:
                           (f"stated: calibrated (power {stated.power:g}, misfit slope "
                            f"{stated.misfit_slope:g}, unseen {stated.unseen:g} over evidence "
                            f"{stated.unseen_evidence:g} at score {stated.unseen_score:g}, other "
-                           f"{stated.other:g}, misfit level {stated.misfit_level:g})",
+                           f"{stated.other:g}, misfit level {stated.misfit_level:g}, prior of "
+                           f"no group {stated.prior_none:.3g} and of two {stated.prior_two:.3g}, "
+                           f"outside the set counted per group with weight "
+                           f"{stated.outside_weight:g}, a group then impaired at "
+                           f"{stated.outside_group:g}, far off {stated.outside_far:g} beside "
+                           "what the set says)",
                            stated)):
             print(f"\n### force noise {sd:g} N per axis (τ 50 ms) - {what}\n")
             table(results, sd, cal, baseline)

@@ -283,7 +283,8 @@ def _classification_text(cl: Classification) -> str:
 @click.option("--open", "open_set", is_flag=True,
               help="Among every state of every muscle group of the body (--mass, --height, "
                    "--side): each group unimpaired, or its stiffness, spasticity or both at a "
-                   "half step of the severity scale, or a contracture of 5-20 mm; up to two "
+                   "half step of the severity scale, its reflex raised by α or β alone, or a "
+                   "contracture of 5-20 mm; up to two "
                    "groups at once. Says per group whether it is impaired and how, and when "
                    "none of these explains the recording. Best with the stretch of every group "
                    "(fieldbank.evaluate.design.coverage.stretch_set).")
@@ -360,7 +361,8 @@ def _open_classify(traces: tuple[str, ...], levels: str | None, param_files: tup
 
 def _open_text(cl: OpenClassification) -> str:
     from fieldbank.evaluate.classify import FIT_LEVEL
-    from fieldbank.evaluate.openset import KINDS, NONE_OF_THEM
+    from fieldbank.evaluate.openset import NONE_OF_THEM
+    from fieldbank.evaluate.openstates import KINDS
     from fieldbank.evaluate.statements import state
     from fieldbank.params import GROUP_NAMES
 
@@ -377,10 +379,13 @@ def _open_text(cl: OpenClassification) -> str:
         row = [kinds[KINDS[1]], kinds[KINDS[0]], kinds[KINDS[2]], kinds[KINDS[3]]]
         lines.append(f"  {GROUP_NAMES[g] + ' (' + g + ')':<28} {cl.group_probability[g]:>8.2f}"
                      "   " + "  ".join(f"{v:>10.2f}" for v in row))
+    level = cl.calibration.misfit_level
     lines.append(f"  none of the candidates: p = {cl.other_probability:.2f} (fit of the most "
                  f"probable arm: p = {cl.fit_p_value:.3g} under the noise model; below "
-                 f"{FIT_LEVEL:g} none of them explains it, below "
-                 f"{cl.calibration.misfit_level:g} this rises)")
+                 f"{FIT_LEVEL:g} none of them explains it"
+                 + (f", below {level:g} this rises)" if level > FIT_LEVEL else
+                    f", and below it this rises; at least {cl.calibration.other:.2f}: an arm "
+                    "outside the candidates that fits within the noise)"))
     lines.append(f"  most probable arm: {', '.join(cl.best)}")
     lines.append("  spasticity: velocity-dependent resistance (the stretch reflex); stiffness: "
                  "position-dependent, slack length normal; contracture: the slack length short")

@@ -6,12 +6,18 @@ wrong on an arm that is none of them: an elbow-extensor reflex alone was called 
 p = 1.000, and arms between severities or with two groups impaired were named with p ≥ 0.95 in
 one answer of six. Here the arm is described group by group (:class:`OpenSet`):
 
-* each muscle group is **unimpaired** or in one of :data:`STATES_PER_GROUP` states - its passive
+* each muscle group is **unimpaired** or in one of
+  :data:`~fieldbank.evaluate.openstates.STATES_PER_GROUP` states
+  (:mod:`fieldbank.evaluate.openstates`) - its passive
   stiffness, its reflex or both at a severity score of 0.5, 1, …, 4.5 (half Weber steps, from
   below very mild to the top of severe; :func:`fieldbank.evaluate.severity.synthesize_ratios`),
-  or a contracture (its slack length 5, 10, 15 or 20 mm short: the brief's range);
+  its reflex raised off the scale's path - α alone 5, 10 or 20 fold, or the stretch gain β
+  alone at 0.5, 0.75 or 1 (each graded very mild on the group's own
+  stretch, and each changes a 2 N recording of the clinic's stretches by as little as tenths
+  of a newton: without them, such an arm was called "not impaired" with p ≥ 0.95) -, or a
+  contracture (its slack length 5, 10, 15 or 20 mm short: the brief's range);
 * an arm is **none, one or two** groups in such states; the prior takes each group to be
-  impaired with probability :data:`GROUP_PRIOR` (0.3, independently; three or more groups left
+  impaired with probability 0.3 (independently; three or more groups left
   out: with them an off-grid severity of one group was "explained" by a third group's state,
   with p = 1), and an impaired group equally likely in each of its states;
 * the answer is the set of impaired groups ("ef", "ef+bf", "unimpaired"), its probability the
@@ -20,7 +26,7 @@ one answer of six. Here the arm is described group by group (:class:`OpenSet`):
 Every one-group arm is replayed on the recorded motion through the virtual coupling
 (:func:`fieldbank.evaluate.replay.replay_forces`); an arm of several groups has its force first
 taken as the sum of its groups' changes (the muscles' forces add at the hand; for two severe
-groups the sum is mostly within 0.25 N of the replay, up to 1.6 N), which ranks all ≈ 14,600
+groups the sum is mostly within 0.25 N of the replay, up to 1.6 N), which ranks all ≈ 20,800
 arms at once through the Gram matrix of the one-group changes; the :data:`EXACT_TOP` most
 probable (and the best of each leading answer) are then replayed themselves and their
 likelihood made exact. The likelihood, its model-error temperature and the fit test are the
@@ -30,6 +36,9 @@ classifier's (:mod:`fieldbank.evaluate.classify`).
 below :data:`fieldbank.evaluate.classify.FIT_LEVEL`: three groups at once, a group beyond
 severe, a contracture with a reflex in one group, a rest posture other than assumed), the
 answer is "none of the candidates", with probability 1 − p/level: the residual says how sure.
+
+**Stated.** The posterior is stated through a calibration fitted on arms of their own
+(:mod:`fieldbank.evaluate.opencalibration`).
 """
 
 from __future__ import annotations
@@ -51,26 +60,24 @@ from fieldbank.evaluate.classify import (
 )
 from fieldbank.evaluate.design import NoiseModel, saturate
 from fieldbank.evaluate.observation import Observation
+from fieldbank.evaluate.opencalibration import CALIBRATED, RAW, Calibration
+from fieldbank.evaluate.openstates import (
+    COMPONENTS,
+    CONTRACTURES_M,
+    GROUP_PRIOR,
+    KIND_OF,
+    KINDS,
+    MAX_GROUPS,
+    REFLEX_ALONE,
+    SCORES,
+    GroupState,
+    label_counts,
+)
 from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import ratio_of_score, synthesize_ratios
 from fieldbank.model import Arm, FloatArray
 from fieldbank.params import GROUPS, ArmParams
-from fieldbank.validation import Interval, check_fields
 
-#: Severity scores of a group's passive, reflex or both states (half Weber steps).
-SCORES: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5)
-#: A group's contractures: its slack length this much short, m.
-CONTRACTURES_M: tuple[float, ...] = (0.005, 0.010, 0.015, 0.020)
-COMPONENTS: tuple[str, ...] = ("passive", "dynamic", "both")
-#: The clinic's words for a group's states: passive stiffness (position-dependent, slack
-#: length normal), spasticity (velocity-dependent: the reflex), both, contracture (the slack
-#: length short).
-KINDS: tuple[str, ...] = ("stiffness", "spasticity", "spasticity and stiffness", "contracture")
-STATES_PER_GROUP = len(COMPONENTS) * len(SCORES) + len(CONTRACTURES_M)
-#: Prior probability that a group is impaired (each group independently; assumption).
-GROUP_PRIOR = 0.3
-#: Most impaired groups an arm of the set has.
-MAX_GROUPS = 2
 #: Arms whose likelihood is made exact by their own replay, the most probable first.
 EXACT_TOP = 16
 #: The answer when no arm of the set explains the recording.
@@ -79,23 +86,6 @@ NONE_OF_THEM = "none of the candidates"
 #: at the recording's rate): ten samples per correlation time of the noise, each weighted by
 #: the time it stands for, so the evidence is the same and the sums five times cheaper.
 LIKELIHOOD_STEP_S = 0.005
-
-
-@dataclass(frozen=True)
-class GroupState:
-    """One impaired state of one group: ``component`` 'passive', 'dynamic', 'both' at
-    ``score``, or 'contracture' of ``slack_m`` (m short)."""
-
-    group: str
-    component: str
-    score: float = 0.0
-    slack_m: float = 0.0
-
-    @property
-    def name(self) -> str:
-        if self.component == "contracture":
-            return f"{self.group} contracture {self.slack_m * 1000:g} mm"
-        return f"{self.group} {self.component} {self.score:g}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,6 +119,10 @@ class OpenSet:
                                          beta=dyn[s].group_value("beta", g))
                     states.append(GroupState(g, comp, s))
                     params.append(p)
+            for comp, v in REFLEX_ALONE:
+                states.append(GroupState(g, comp, factor=v))
+                params.append(p0.with_group(g, alpha_n=v * p0.group_value("alpha_n", g))
+                              if comp == "alpha" else p0.with_group(g, beta=v))
             for d in CONTRACTURES_M:
                 states.append(GroupState(g, "contracture", slack_m=d))
                 params.append(p0.with_group(g, slack_offset_m=-d))
@@ -144,79 +138,6 @@ class OpenSet:
             for f in ("km_n_per_m", "alpha_n", "beta", "slack_offset_m"):
                 p = p.with_group(g, **{f: src.group_value(f, g)})
         return p
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """How the posterior over the sets of impaired groups is stated: each set's probability
-    raised to a power and renormalised (below 1: the likelihood tempered for the misfit the
-    grid of states leaves - an arm between the grid's states, a partner group compensating),
-    then a share ``other`` set aside for an arm the set does not hold, which no residual
-    reveals (its force fitted within the noise by some arm of the set). Above 1 the
-    posterior is sharpened: a grid coarser than what the recording tells spreads it.
-
-    The power is ``power / (1 + misfit_slope · m)``, m the misfit of the most probable arm in
-    decades of its fit test's p-value (m = −log10 p; about 0.4 on average for an arm the set
-    holds, 3 at p = 0.001): the worse the best arm fits, the less its likelihood is trusted
-    (outside the set, or between its states, the posterior is over-confident; inside, it is
-    not). Fitted on arms of their own (:func:`fieldbank.evaluate.reliability.fit_calibration`)."""
-
-    power: float = 1.0
-    other: float = 0.0
-    #: Below this p-value of the fit test the share for an arm outside the set is at least
-    #: 1 − p/level (a residual a little beyond the noise: a rest posture other than assumed,
-    #: a partner group compensating), as below the fit test's own level.
-    misfit_level: float = FIT_LEVEL
-    misfit_slope: float = 0.0
-    #: Each group's probability of an impairment the recording does not show, whatever the
-    #: posterior says (a reflex raised by α or β alone, off the scale's path, changes a 2 N
-    #: recording by tenths of a newton yet is felt on the group's own stretch): "not impaired"
-    #: is stated with at most 1 − unseen.
-    unseen: float = 0.0
-    #: How the share falls with how well the recording sees the group's reflex: a group's
-    #: share is ``unseen · exp(−E / unseen_evidence)``, E the evidence a reflex of that group
-    #: at the severity score ``unseen_score`` would give on these strokes
-    #: (:attr:`OpenClassification.reflex_evidence`): a group whose reflex the strokes do not
-    #: reach keeps the share, one they see well loses it. 0: the same share for every group.
-    unseen_evidence: float = 0.0
-    unseen_score: float = 1.0
-
-    def __post_init__(self) -> None:
-        check_fields(self, CALIBRATION_BOUNDS, what="open-set calibration")
-
-    def power_at(self, fit_p_value: float) -> float:
-        """The power applied to a posterior whose best arm's fit test gave ``fit_p_value``."""
-        if not math.isfinite(fit_p_value):
-            return self.power
-        misfit = -math.log10(min(max(fit_p_value, MISFIT_FLOOR), 1.0))
-        return self.power / (1.0 + self.misfit_slope * misfit)
-
-    def unseen_share(self, evidence: float) -> float:
-        """A group's share of an impairment the recording does not show, the evidence of its
-        reflex at :attr:`unseen_score` being ``evidence`` (unknown: not finite)."""
-        if self.unseen_evidence == 0.0 or not math.isfinite(evidence):
-            return self.unseen
-        return self.unseen * math.exp(-max(evidence, 0.0) / self.unseen_evidence)
-
-
-#: The smallest fit-test p-value the misfit reads (12 decades: beyond it, misfit enough).
-MISFIT_FLOOR = 1e-12
-CALIBRATION_BOUNDS = {"power": Interval(0.0, 4.0, "", low_closed=False),
-                      "other": Interval(0.0, 1.0, "", high_closed=False),
-                      "misfit_level": Interval(FIT_LEVEL, 0.5, ""),
-                      "misfit_slope": Interval(0.0, 10.0, ""),
-                      "unseen": Interval(0.0, 0.5, "", high_closed=False),
-                      "unseen_evidence": Interval(0.0, 1e4, ""),
-                      "unseen_score": Interval(SCORES[0], SCORES[-1], "")}
-#: No calibration: the posterior as the likelihood and the prior give it.
-RAW = Calibration()
-#: The calibration the classifier states its answers with: fitted by
-#: ``benchmarks/tune_open_calibration.py`` on 75 trials of every family at seed 7 (the
-#: benchmark's are seed 31; mean log probability stated for a group's truth −0.219): the
-#: posterior tempered to the power 0.5 - no fall with the misfit and no unseen share improved
-#: the score on these trials -, 8 % set aside for an arm outside the set, a fit test below
-#: p = 0.1 read as a residual beyond the model.
-CALIBRATED = Calibration(power=0.5, other=0.08, misfit_level=0.1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -241,7 +162,8 @@ class OpenClassification:
     #: Posterior mass of each group (rows, the model's order) in each of :data:`KINDS`.
     raw_kinds: FloatArray
     calibration: Calibration = RAW
-    #: Per group (rows, the model's order) and reflex state (columns, :data:`SCORES`): the
+    #: Per group (rows, the model's order) and reflex state (columns: :data:`SCORES`, then
+    #: :data:`REFLEX_ALONE`): the
     #: evidence a reflex of that group at that score would give against the group unimpaired
     #: on these strokes at the stated noise - the χ² of the two arms' replayed forces apart,
     #: over the model-error temperature, twice the expected log likelihood ratio. Empty when
@@ -264,8 +186,11 @@ class OpenClassification:
     @property
     def label_share(self) -> FloatArray:
         """The stated probability of each of :attr:`labels` should the arm be one of the set:
-        the posterior tempered (:meth:`Calibration.power_at`) and renormalised."""
-        raw = np.asarray(self.raw_probability, dtype=float)
+        the posterior restated under the calibration's prior on the number of impaired groups
+        (:meth:`Calibration.count_weights`), tempered (:meth:`Calibration.power_at`) and
+        renormalised."""
+        raw = (np.asarray(self.raw_probability, dtype=float)
+               * self.calibration.count_weights()[label_counts(self.labels)])
         q = np.power(raw / raw.max(), self.calibration.power_at(self.fit_p_value))
         return np.asarray(q / q.sum(), dtype=float)
 
@@ -276,15 +201,25 @@ class OpenClassification:
         return np.asarray(self.label_share * (1.0 - self.other_probability), dtype=float)
 
     def any_impaired(self, groups: Sequence[str]) -> float:
-        """The stated probability that at least one of ``groups`` is impaired, should the arm
-        be one of the set: the share of every label holding one of them, and beside it each
-        group's share :attr:`Calibration.unseen` of an impairment the recording does not
-        show."""
+        """The stated probability that at least one of ``groups`` is impaired: should the arm
+        be one of the set, the share of every label holding one of them and beside it each
+        group's share :attr:`Calibration.unseen` of an impairment the recording does not show;
+        should it be none of them (:attr:`other_probability`, weighed by
+        :attr:`Calibration.outside_weight`), each group's
+        :attr:`Calibration.outside_group` - or, as far as the residual is beyond the noise
+        (:meth:`Calibration.far_share`), what the set says with each group's
+        :attr:`Calibration.outside_far` beside it."""
         want = set(groups)
         held = float(sum(v for lab, v in zip(self.labels, self.label_share, strict=True)
                          if want & set(lab.split("+"))))
         seen = self.group_unseen
-        return 1.0 - (1.0 - held) * math.prod(1.0 - seen[g] for g in want)
+        in_set = 1.0 - (1.0 - held) * math.prod(1.0 - seen[g] for g in want)
+        cal = self.calibration
+        o = cal.outside_weight * self.other_probability
+        far = cal.far_share(self.fit_p_value)
+        outside = ((1.0 - far) * (1.0 - (1.0 - cal.outside_group) ** len(want))
+                   + far * (1.0 - (1.0 - in_set) * (1.0 - cal.outside_far) ** len(want)))
+        return (1.0 - o) * in_set + o * outside
 
     @property
     def group_unseen(self) -> dict[str, float]:
@@ -292,14 +227,12 @@ class OpenClassification:
         (:meth:`Calibration.unseen_share` of its :attr:`reflex_evidence`)."""
         cal = self.calibration
         ev = self.reflex_evidence
-        col = int(np.argmin(np.abs(np.asarray(SCORES) - cal.unseen_score)))
-        return {g: cal.unseen_share(float(ev[i, col]) if ev.size else math.nan)
+        return {g: cal.unseen_share(yardstick(ev, i, cal.unseen_score))
                 for i, g in enumerate(GROUPS)}
 
     @property
     def group_probability(self) -> dict[str, float]:
-        """Each group's stated probability of being impaired, should the arm be one of the
-        set (:attr:`other_probability` says how likely it is not)."""
+        """Each group's stated probability of being impaired (:meth:`any_impaired`)."""
         return {g: self.any_impaired((g,)) for g in GROUPS}
 
     @property
@@ -509,8 +442,7 @@ def classify_open(observations: Sequence[Observation], openset: OpenSet,
     labels = {_label(m): float(v) for m, v in enumerate(by_mask) if v > 0.0}
     kinds = np.zeros((len(GROUPS), len(KINDS)))
     g_of = np.array([GROUPS.index(st.group) for st in openset.states])
-    k_of = np.array([len(KINDS) - 1 if st.component == "contracture"
-                     else COMPONENTS.index(st.component) for st in openset.states])
+    k_of = np.array([KIND_OF[st.component] for st in openset.states])
     for col in cb.picks.T:
         held = col >= 0
         np.add.at(kinds, (g_of[col[held]], k_of[col[held]]), post[held])
@@ -523,15 +455,32 @@ def classify_open(observations: Sequence[Observation], openset: OpenSet,
 
 
 def reflex_evidence(openset: OpenSet, gram: FloatArray) -> FloatArray:
-    """Per group and score of :data:`SCORES`, the χ² a reflex of the group at that score
-    gives against the group unimpaired on the strokes whose weighted Gram matrix of the
-    one-group changes is ``gram`` (:class:`OpenTrace`), (groups, scores)."""
-    out = np.zeros((len(GROUPS), len(SCORES)))
+    """Per group, the χ² a reflex of the group gives against the group unimpaired on the
+    strokes whose weighted Gram matrix of the one-group changes is ``gram``
+    (:class:`OpenTrace`): at each score of :data:`SCORES`, then each state of
+    :data:`REFLEX_ALONE`, (groups, scores + reflexes alone)."""
+    out = np.zeros((len(GROUPS), len(SCORES) + len(REFLEX_ALONE)))
     diag = np.diag(gram)
     for k, st in enumerate(openset.states):
-        if st.component == "dynamic":
-            out[GROUPS.index(st.group), SCORES.index(st.score)] = diag[k]
+        col = (SCORES.index(st.score) if st.component == "dynamic"
+               else len(SCORES) + REFLEX_ALONE.index((st.component, st.factor))
+               if st.component in ("alpha", "beta") else None)
+        if col is not None:
+            out[GROUPS.index(st.group), col] = diag[k]
     return out
+
+
+def yardstick(evidence: FloatArray, row: int, score: float) -> float:
+    """The evidence a group's unseen share is read at (:attr:`Calibration.unseen_score`):
+    its reflex at the score of :data:`SCORES` nearest ``score``, or for a score of 0 its
+    least visible reflex raised off the scale's path (:data:`REFLEX_ALONE`); not finite when
+    ``evidence`` (:func:`reflex_evidence`, rows per group) does not hold it."""
+    if evidence.size == 0:
+        return math.nan
+    if score == 0.0:
+        alone = evidence[row, len(SCORES):]
+        return float(alone.min()) if alone.size else math.nan
+    return float(evidence[row, int(np.argmin(np.abs(np.asarray(SCORES) - score)))])
 
 
 def classify_on_body(observations: Sequence[Observation], body: ArmParams,
@@ -558,21 +507,8 @@ def _chi2(obs: Sequence[Observation], arms: Sequence[Arm], noise: NoiseModel) ->
 
 
 __all__ = [
-    "CALIBRATED",
-    "CALIBRATION_BOUNDS",
-    "COMPONENTS",
-    "CONTRACTURES_M",
     "EXACT_TOP",
-    "GROUP_PRIOR",
-    "KINDS",
-    "MAX_GROUPS",
-    "MISFIT_FLOOR",
     "NONE_OF_THEM",
-    "RAW",
-    "SCORES",
-    "STATES_PER_GROUP",
-    "Calibration",
-    "GroupState",
     "OpenClassification",
     "OpenSet",
     "OpenTrace",
@@ -580,4 +516,5 @@ __all__ = [
     "classify_open",
     "predict",
     "reflex_evidence",
+    "yardstick",
 ]

@@ -41,17 +41,17 @@ from fieldbank.evaluate.classify import FIT_LEVEL, classify
 from fieldbank.evaluate.design import NoiseModel, draw_execution, severity_candidates
 from fieldbank.evaluate.design.coverage import stretch_noise, stretch_set
 from fieldbank.evaluate.observation import Observation, with_force_noise
+from fieldbank.evaluate.opencalibration import Calibration
 from fieldbank.evaluate.openset import (
-    KINDS,
     NONE_OF_THEM,
-    SCORES,
-    Calibration,
     OpenClassification,
     OpenSet,
     OpenTrace,
     classify_open,
     predict,
+    yardstick,
 )
+from fieldbank.evaluate.openstates import KINDS, SET_COUNT_PRIOR, label_counts
 from fieldbank.evaluate.replay import replay_forces
 from fieldbank.evaluate.severity import LEVELS, ratio_of_score, synthesize_ratios
 from fieldbank.evaluate.severity import classify as grade
@@ -228,13 +228,19 @@ class Outcome:
 #: The calibrations :func:`fit_calibration` tries: the posterior's power, how fast it falls
 #: with the best arm's misfit, the share for an arm outside the set, the fit test's p-value
 #: below which the residual adds to that share.
-POWERS = tuple(round(0.1 * k, 1) for k in range(1, 31))
-MISFIT_SLOPES = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
+POWERS = tuple(round(0.1 * k, 1) for k in range(2, 21))
+MISFIT_SLOPES = (0.0, 0.25, 1.0, 4.0)
 OTHERS = tuple(round(0.02 * k, 2) for k in range(0, 21))
 MISFIT_LEVELS = (FIT_LEVEL, 0.003, 0.01, 0.03, 0.1)
 #: A stated probability is floored at this in the log score (one confident miss costs
 #: ln 1e-6, not infinity).
 LOG_FLOOR = 1e-6
+#: What the stated probabilities are held to in every family: an expected calibration error
+#: of at most :data:`ECE_TARGET`, and at most :data:`SURE_WRONG_TARGET` of the claims stated
+#: with p ≥ :data:`SURE_LEVEL` wrong.
+ECE_TARGET = 0.05
+SURE_LEVEL = 0.95
+SURE_WRONG_TARGET = 0.02
 
 
 def truth_groups(truth: str) -> frozenset[str]:
@@ -242,69 +248,119 @@ def truth_groups(truth: str) -> frozenset[str]:
     return frozenset() if truth == "unimpaired" else frozenset(truth.split("+"))
 
 
+#: The priors on the number of impaired groups tried (no group, two groups;
+#: :attr:`~fieldbank.evaluate.opencalibration.Calibration.prior_none`): the set's own, and
+#: case mixes from an arm with no group impaired as often as one in six to one in fifty.
+COUNT_PRIORS: tuple[tuple[float, float], ...] = ((SET_COUNT_PRIOR[0], SET_COUNT_PRIOR[2]),
+                                                 *itertools.product(
+                                                     (0.02, 0.05, 0.1, 0.16),
+                                                     (0.1, 0.2, 0.3, 0.4, 0.5)))
+#: How many of the best calibrations of the groups' claims alone are tried with each share for
+#: an arm outside the set, misfit level and :data:`OUTSIDE_MIXES`.
+KEPT = 40
+#: What is stated per group counts the chance that the arm is none of the set with these
+#: weights, a group then impaired with these probabilities
+#: (:attr:`~fieldbank.evaluate.opencalibration.Calibration.outside_weight`).
+OUTSIDE_MIXES: tuple[tuple[float, float, float], ...] = ((0.0, 0.25, 0.0), *itertools.product(
+    (0.25, 0.5, 0.75, 1.0), (0.1, 0.2, 0.3, 0.5), (0.0, 0.2, 0.4, 0.6)))
 UNSEEN = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2, 0.3)
 #: The evidence scales (χ²) over which a group's unseen share falls (0: no fall), and the
-#: reflex scores whose evidence is read (:class:`~fieldbank.evaluate.openset.Calibration`).
+#: reflex scores whose evidence is read (:class:`~fieldbank.evaluate.opencalibration.Calibration`;
+#: 0: the least visible reflex raised off the scale's path).
 UNSEEN_EVIDENCE = (0.0, 1.0, 3.0, 10.0, 30.0, 100.0)
-UNSEEN_SCORES = (0.5, 1.0, 2.0)
+UNSEEN_SCORES = (0.0, 0.5, 1.0, 2.0)
 
 
-def _held_probability(tables: Sequence[tuple[FloatArray, np.ndarray, np.ndarray, float,
-                                             FloatArray]],
-                      cal: Calibration) -> FloatArray:
-    """Each group's probability of being impaired from the tempered posterior alone (no
-    unseen share), (outcomes, groups)."""
+Table = tuple[FloatArray, np.ndarray, np.ndarray, float, FloatArray, np.ndarray]
+
+
+def _held_probability(tables: Sequence[Table], cal: Calibration) -> FloatArray:
+    """Each group's probability of being impaired from the restated and tempered posterior
+    alone (no unseen share), (outcomes, groups)."""
     out = np.zeros((len(tables), len(GROUPS)))
-    for k, (logp, held, _truth, fit_p, _ev) in enumerate(tables):
-        q = np.exp(cal.power_at(fit_p) * logp)
+    log_w = np.log(cal.count_weights())
+    for k, (logp, held, _truth, fit_p, _ev, counts) in enumerate(tables):
+        lq = cal.power_at(fit_p) * (logp + log_w[counts])
+        q = np.exp(lq - lq.max())
         out[k] = np.clip(q @ held / q.sum(), 0.0, 1.0)
     return out
 
 
-def _unseen_shares(tables: Sequence[tuple[FloatArray, np.ndarray, np.ndarray, float,
-                                          FloatArray]],
-                   cal: Calibration) -> FloatArray:
+def _unseen_shares(tables: Sequence[Table], cal: Calibration) -> FloatArray:
     """Each group's unseen share under ``cal``, (outcomes, groups)."""
-    col = int(np.argmin(np.abs(np.asarray(SCORES) - cal.unseen_score)))
-    return np.array([[cal.unseen_share(float(ev[i, col]) if ev.size else math.nan)
-                      for i in range(len(GROUPS))] for *_rest, ev in tables])
+    return np.array([[cal.unseen_share(yardstick(ev, i, cal.unseen_score))
+                      for i in range(len(GROUPS))] for *_rest, ev, _n in tables])
 
 
-def _group_log_score(held: FloatArray, unseen: FloatArray, truth: np.ndarray) -> float:
+def _log_score(pg: FloatArray, truth: np.ndarray) -> FloatArray:
     """Mean log probability stated for each group's truth (impaired or not), over every group
-    of every outcome: ``held`` (:func:`_held_probability`) with the shares ``unseen``
-    (:func:`_unseen_shares`) beside it."""
-    pg = 1.0 - (1.0 - held) * (1.0 - unseen)
-    return float(np.log(np.maximum(np.where(truth, pg, 1.0 - pg), LOG_FLOOR)).mean())
+    of every outcome (the last two axes), each group stated impaired with ``pg``; one score
+    per calibration along the leading axes."""
+    return np.asarray(np.log(np.maximum(np.where(truth, pg, 1.0 - pg), LOG_FLOOR)).mean(
+        axis=(-2, -1)), dtype=float)
 
 
-def _group_tables(outcomes: Sequence[Outcome]
-                  ) -> list[tuple[FloatArray, np.ndarray, np.ndarray, float, FloatArray]]:
+def _group_tables(outcomes: Sequence[Outcome]) -> list[Table]:
     """Per outcome: the log posterior of each label (its most probable at 0), which groups
     each label holds, which groups the truth holds, the fit test's p-value, the evidence of
-    each group's reflex."""
+    each group's reflex, how many groups each label holds."""
     out = []
     for o in outcomes:
         logp = np.log(np.maximum(np.asarray(o.label_probability, dtype=float), 1e-300))
         held = np.array([[g in lab.split("+") for g in GROUPS] for lab in o.labels], float)
         truth = np.array([g in truth_groups(o.truth) for g in GROUPS])
         out.append((logp - logp.max(), held, truth, o.fit_p_value,
-                    o.classification(Calibration()).reflex_evidence))
+                    o.classification(Calibration()).reflex_evidence, label_counts(o.labels)))
     return out
+
+
+def _family_excess(pg: FloatArray, truth: np.ndarray, family: np.ndarray) -> FloatArray:
+    """By how many points the claims per group - each group of each outcome (the last two
+    axes) impaired or not, at the probability ``pg`` of its impairment - miss the targets in
+    the worst of the families (``family``: each outcome's index): the expected calibration
+    error beyond :data:`ECE_TARGET` plus the share wrong at p ≥ :data:`SURE_LEVEL` beyond
+    :data:`SURE_WRONG_TARGET`, binned as :func:`reliability_bins` bins them; one figure per
+    calibration along the leading axes."""
+    lead = pg.shape[:-2]
+    m = int(np.prod(lead))
+    stated = np.maximum(pg, 1.0 - pg).reshape(m, -1)
+    right = ((pg >= 0.5) == truth).reshape(m, -1)
+    nf, nb = int(family.max()) + 1, len(BINS)
+    fam = np.broadcast_to(np.repeat(family, pg.shape[-1]), stated.shape)
+    k = np.clip(np.searchsorted([lo for lo, _hi in BINS], stated, side="right") - 1, 0, nb - 1)
+    cell = (np.arange(m)[:, None] * nf + fam) * nb + k  # (calibration, family, bin)
+    gap = np.abs(np.bincount(cell.ravel(), right.ravel(), m * nf * nb)
+                 - np.bincount(cell.ravel(), stated.ravel(), m * nf * nb))
+    n = np.bincount(np.repeat(family, pg.shape[-1]), minlength=nf)
+    ece = gap.reshape(m, nf, nb).sum(axis=2) / np.maximum(n, 1)
+    sure = stated >= SURE_LEVEL
+    fam_cal = (np.arange(m)[:, None] * nf + fam)
+    wrong = np.bincount(fam_cal[sure], ~right[sure], m * nf).reshape(m, nf) / np.maximum(
+        np.bincount(fam_cal[sure], minlength=m * nf).reshape(m, nf), 1)
+    miss = np.maximum(ece - ECE_TARGET, 0.0) + np.maximum(wrong - SURE_WRONG_TARGET, 0.0)
+    return np.asarray(100.0 * miss[:, n > 0].max(axis=1), dtype=float).reshape(lead)
 
 
 def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
     """The calibration under which the stated probabilities are as often right as they say,
-    by a proper score (the mean log probability stated for the truth, each floored at
-    :data:`LOG_FLOOR`), with that score for the groups:
+    in every family of ``outcomes`` - the targets (:data:`ECE_TARGET`,
+    :data:`SURE_WRONG_TARGET`) met in each, or missed by as little as the grid allows - and
+    among those by a proper score (the mean log probability stated for the truth, each
+    floored at :data:`LOG_FLOOR`), with that score for the groups:
 
-    * the power, its fall with the misfit and each group's share of an impairment the
-      recording does not show (:data:`POWERS` × :data:`MISFIT_SLOPES` × :data:`UNSEEN`) by
+    * the prior on the number of impaired groups, the power, its fall with the misfit and
+      each group's share of an impairment the recording does not show
+      (:data:`COUNT_PRIORS` × :data:`POWERS` × :data:`MISFIT_SLOPES` × :data:`UNSEEN`) by
       what is stated per group - each group impaired or not, over every group of every
-      outcome;
-    * the share for an arm outside the set and the misfit level (:data:`OTHERS` ×
-      :data:`MISFIT_LEVELS`) by the statement that none of the candidates explains the
-      recording, right for an arm outside the candidates and wrong for every other."""
+      outcome (the targets checked on these claims; partner groups stated as a set, a few in
+      a hundred, are checked by the benchmark);
+    * for the :data:`KEPT` best of those, the share for an arm outside the set, the misfit
+      level and how far what is stated per group counts that share (:data:`OTHERS` ×
+      :data:`MISFIT_LEVELS` × :data:`OUTSIDE_MIXES`), by the same targets and then the sum of
+      the groups' score and that of the statement that none of the candidates explains the
+      recording (right for an arm outside the candidates, wrong for every other).
+
+    The score returned is the groups' mean log probability under the calibration chosen."""
     tables = _group_tables(outcomes)
     truth = np.array([t[2] for t in tables], dtype=bool).reshape(-1, len(GROUPS))
     known = all(o.reflex_evidence for o in outcomes)
@@ -312,24 +368,52 @@ def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
               for u in UNSEEN
               for e, sc in (itertools.product(UNSEEN_EVIDENCE, UNSEEN_SCORES)
                             if known and u > 0 else [(0.0, 1.0)])]
-    unseen = [_unseen_shares(tables, c) for c in shares]
-    group, score = Calibration(), -math.inf
-    for a, b in itertools.product(POWERS, MISFIT_SLOPES):
-        held = _held_probability(tables, Calibration(a, misfit_slope=b))
-        for c, u_of in zip(shares, unseen, strict=True):
-            s = _group_log_score(held, u_of, truth)
-            if s > score:
-                group, score = dataclasses.replace(c, power=a, misfit_slope=b), s
-    other, level, best = 0.0, FIT_LEVEL, -math.inf
-    for o_share, lv in itertools.product(OTHERS, MISFIT_LEVELS):
-        cal = dataclasses.replace(group, other=o_share, misfit_level=lv)
-        s = 0.0
-        for o in outcomes:
-            q = o.classification(cal).other_probability
-            s += math.log(max(q if o.family == OUTSIDE else 1.0 - q, LOG_FLOOR))
-        if s > best:
-            other, level, best = o_share, lv, s
-    return dataclasses.replace(group, other=other, misfit_level=level), score
+    unseen = np.array([_unseen_shares(tables, c) for c in shares])  # (shares, outcomes, groups)
+    fams = sorted({o.family for o in outcomes})
+    family = np.array([fams.index(o.family) for o in outcomes])
+    ranked: list[tuple[tuple[float, float], int, Calibration]] = []
+    for (p0, p2), a, b in itertools.product(COUNT_PRIORS, POWERS, MISFIT_SLOPES):
+        held = _held_probability(tables, Calibration(a, misfit_slope=b, prior_none=p0,
+                                                     prior_two=p2))
+        pg = 1.0 - (1.0 - held)[None] * (1.0 - unseen)
+        excess, score = _family_excess(pg, truth, family), _log_score(pg, truth)
+        for c, e, sc in zip(shares, excess, score, strict=True):
+            # rounded: calibrations that state the same are tied, the first kept
+            ranked.append(((round(float(e), 6), round(-float(sc), 12)), len(ranked),
+                           dataclasses.replace(c, power=a, misfit_slope=b, prior_none=p0,
+                                               prior_two=p2)))
+    ranked.sort(key=lambda r: r[:2])
+    outside = np.array([o.family == OUTSIDE for o in outcomes])
+    fit_p = np.array([o.fit_p_value for o in outcomes], dtype=float)
+    far = np.array([Calibration().far_share(p) for p in fit_p])[:, None]
+    mix = np.array(OUTSIDE_MIXES)
+    best, key = Calibration(), (math.inf, math.inf)
+    for _k, _n, group in ranked[:KEPT]:
+        p_set = 1.0 - (1.0 - _held_probability(tables, group)) * (
+            1.0 - _unseen_shares(tables, group))
+        for o_share, lv in itertools.product(OTHERS, MISFIT_LEVELS):
+            other = np.maximum(1.0 - np.nan_to_num(fit_p, nan=1.0) / max(lv, FIT_LEVEL),
+                               o_share)
+            none = float(np.log(np.maximum(np.where(outside, other, 1.0 - other),
+                                           LOG_FLOOR)).mean())
+            o = mix[:, 0, None, None] * other[None, :, None]
+            pg = (1.0 - o) * p_set + o * (
+                (1.0 - far) * mix[:, 1, None, None]
+                + far * (1.0 - (1.0 - p_set) * (1.0 - mix[:, 2, None, None])))
+            excess, score = _family_excess(pg, truth, family), _log_score(pg, truth)
+            for (w, r, r_far), e, sc in zip(OUTSIDE_MIXES, excess, score, strict=True):
+                k = (round(float(e), 6), round(-(float(sc) + none), 12))
+                if k < key:
+                    best, key = dataclasses.replace(
+                        group, other=o_share, misfit_level=lv, outside_weight=w,
+                        outside_group=r, outside_far=r_far), k
+    return best, float(_log_score(_stated_groups(outcomes, best), truth))
+
+
+def _stated_groups(outcomes: Sequence[Outcome], cal: Calibration) -> FloatArray:
+    """Each group's stated probability of being impaired under ``cal``, (outcomes, groups)."""
+    return np.array([[c.group_probability[g] for g in GROUPS]
+                     for c in (o.classification(cal) for o in outcomes)])
 
 
 def stated_claims(outcomes: Sequence[Outcome], calibration: Calibration
@@ -475,13 +559,19 @@ def wrong_when_sure(outcomes: Sequence[Outcome], level: float = 0.95) -> tuple[i
 
 __all__ = [
     "BINS",
+    "COUNT_PRIORS",
+    "ECE_TARGET",
     "FAMILIES",
+    "KEPT",
     "LOG_FLOOR",
     "MISFIT_LEVELS",
     "MISFIT_SLOPES",
     "OTHERS",
     "OUTSIDE",
+    "OUTSIDE_MIXES",
     "POWERS",
+    "SURE_LEVEL",
+    "SURE_WRONG_TARGET",
     "UNSEEN",
     "Outcome",
     "ReliabilityBin",

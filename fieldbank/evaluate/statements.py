@@ -2,7 +2,7 @@
 the recording cannot tell them apart, and whether any candidate explains the recording.
 
 A clinician asks per group: "are the elbow flexors impaired?", "is there a contracture of the
-elbow extensors?". The posterior over about 14,600 arms of up to two groups
+elbow extensors?". The posterior over about 20,800 arms of up to two groups
 (:mod:`fieldbank.evaluate.openset`) answers that directly - the stated probability of every set
 of groups holding a given one - and its joint answer ("ef+bf") is not what a clinician uses.
 Where two groups act in the same stretch (:data:`PARTNERS`: the elbow flexors and the

@@ -109,6 +109,14 @@ STRETCH_LENGTH_M = 0.15
 APPROACH_SPEED_M_PER_S = 0.4
 #: Sample period of a stretch motion, s (the renderer's 1 kHz).
 STRETCH_SAMPLE_S = 1e-3
+#: The two-joint partner of each one-joint group: the group's stretch holds its other joint
+#: where the partner is short, so that the partner's force does not mix in (the clinic tells
+#: brachialis from biceps with the shoulder flexed). Held at the partner's short end of the
+#: range, :data:`STRETCH_END_MARGIN_DEG` inside (the elbow's extended end
+#: :data:`EXTENDED_ELBOW_MARGINS_DEG` inside), or the first of :data:`HOLD_FRACTIONS` of the
+#: way there from the rest posture that keeps every limit.
+SLACKENED_PARTNER: dict[str, str] = {"sf": "bf", "ef": "bf", "se": "be", "ee": "be"}
+HOLD_FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.0)
 
 
 def stretch_noise(noise: NoiseModel | None = None) -> NoiseModel:
@@ -123,8 +131,10 @@ def stretch_noise(noise: NoiseModel | None = None) -> NoiseModel:
 def group_stretch(arm: Arm, group: str, limits: ProbeLimits | None = None,
                   noise: NoiseModel | None = None) -> ProbeMotion | None:
     """The clinic's fast stretch of one group, as a handle motion from where the arm rests:
-    a slow approach to a posture short of the group's longest, then a fast stretch of the
-    joints that lengthen it (the bi-articular groups: both) into the end of their range,
+    a slow approach to a posture short of the group's longest (a one-joint group's other
+    joint moved to where its two-joint partner is short: :data:`SLACKENED_PARTNER`), then a
+    fast stretch of the joints that lengthen it (the bi-articular groups: both) into the end
+    of their range,
     :data:`STRETCH_END_MARGIN_DEG` inside it - where the seed's reflex fires at any gain. Joint
     space, minimum jerk; the fast part's hand path :data:`STRETCH_LENGTH_M` long at a peak
     speed within the limits for every execution of the motion noise. None when no such motion
@@ -138,10 +148,14 @@ def group_stretch(arm: Arm, group: str, limits: ProbeLimits | None = None,
     q_rest = np.asarray(arm.q_rest, dtype=float)
     u = np.sign(grad) * (grad != 0)
     peak = 0.98 * lim.max_speed_m_per_s / (1.0 + nz.speed_sd)
-    for elbow_margin, length in itertools.product(
+    held = _partner_short(arm, group)
+    for frac, elbow_margin, length in itertools.product(
+            HOLD_FRACTIONS if held is not None else (0.0,),
             EXTENDED_ELBOW_MARGINS_DEG if grad[1] < 0 else (0.0,),
             (STRETCH_LENGTH_M, 0.8 * STRETCH_LENGTH_M, 0.6 * STRETCH_LENGTH_M)):
         q_end = q_rest.copy()
+        if held is not None:
+            q_end[held[0]] += frac * (held[1] - q_rest[held[0]])
         for j, (lo, hi) in enumerate((p.shoulder_range_rad, p.elbow_range_rad)):
             if grad[j] > 0:
                 q_end[j] = hi - margin
@@ -157,6 +171,21 @@ def group_stretch(arm: Arm, group: str, limits: ProbeLimits | None = None,
                 e.velocities_m_per_s[None], lim)[0]) for e in executions(motion, nz)):
             return motion
     return None
+
+
+def _partner_short(arm: Arm, group: str) -> tuple[int, float] | None:
+    """For a one-joint group with a two-joint partner (:data:`SLACKENED_PARTNER`): the joint
+    the group does not cross and the angle at which the partner is shortest within the range
+    (module constants' margins); None for the others."""
+    partner = SLACKENED_PARTNER.get(group)
+    if partner is None:
+        return None
+    grad = arm.jl[GROUPS.index(group)]
+    j = 0 if grad[0] == 0 else 1
+    lo, hi = (arm.params.shoulder_range_rad, arm.params.elbow_range_rad)[j]
+    margin = math.radians(EXTENDED_ELBOW_MARGINS_DEG[0] if j == 1 else STRETCH_END_MARGIN_DEG)
+    # the partner shortens toward the end where its length falls
+    return j, (lo + margin if arm.jl[GROUPS.index(partner), j] > 0 else hi - margin)
 
 
 def _joint_motion(arm: Arm, postures: Sequence[FloatArray], peaks: Sequence[float],
