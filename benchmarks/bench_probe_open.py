@@ -16,7 +16,7 @@ stated probability). Beside it, unless ``--no-baseline``, the joint-group classi
 same trials, and the CPU time per trial.
 
 Run: python benchmarks/bench_probe_open.py [--arms 10] [--draws 3] [--noise 2 4] [--jobs 2]
-     [--seed 31] [--no-baseline] [--save outcomes.json | --load outcomes.json]
+     [--seed 31] [--no-baseline] [--save outcomes.json | --load outcomes.json ...]
 """
 
 from __future__ import annotations
@@ -144,7 +144,9 @@ def main() -> None:
     ap.add_argument("--no-baseline", action="store_true",
                     help="leave out the joint-group classifier")
     ap.add_argument("--save", type=Path, help="write the trials' outcomes here (JSON)")
-    ap.add_argument("--load", type=Path, help="print the tables of outcomes saved before")
+    ap.add_argument("--load", type=Path, nargs="+",
+                    help="print the tables of outcomes saved before (several files: their "
+                         "trials together, e.g. the runs of several seeds)")
     ap.add_argument("--calibration", type=float, nargs="+",
                     metavar="NUMBER",
                     help="state with this calibration instead of the classifier's own "
@@ -159,17 +161,18 @@ def main() -> None:
     baseline = not args.no_baseline
     results: dict[tuple[str, float], list[Outcome]] = {}
     if args.load is not None:
-        for row in json.loads(args.load.read_text()):
-            sd = float(row.pop("noise_n"))
-            o = Outcome(**{**row, "labels": tuple(row["labels"]),
-                           "label_probability": tuple(row["label_probability"]),
-                           "reflex_evidence": tuple(
-                               tuple(r) for r in row.get("reflex_evidence", ()))})
-            results.setdefault((o.family, sd), []).append(o)
+        for path in args.load:
+            for row in json.loads(path.read_text()):
+                sd = float(row.pop("noise_n"))
+                o = Outcome(**{**row, "labels": tuple(row["labels"]),
+                               "label_probability": tuple(row["label_probability"]),
+                               "reflex_evidence": tuple(
+                                   tuple(r) for r in row.get("reflex_evidence", ()))})
+                results.setdefault((o.family, sd), []).append(o)
         noise = sorted({sd for _f, sd in results})
         baseline = all(o.baseline_answer for v in results.values() for o in v)
         print(f"bench_probe_open: {sum(len(v) for v in results.values())} trials from "
-              f"{args.load.name}; {load_line()}")
+              f"{', '.join(p.name for p in args.load)}; {load_line()}")
     else:
         noise = args.noise
         # part by part over every family, the outcomes saved as each part ends: a run stopped

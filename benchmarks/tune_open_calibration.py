@@ -21,9 +21,9 @@ outside the candidates) at seeds other than the benchmark's seed 31 - other bodi
 families out of the fit, so that the benchmark measures the calibration on families it never
 saw. ``--load`` fits on trials saved by ``bench_probe_open.py --seed S --save`` (one file or
 several). :data:`fieldbank.evaluate.opencalibration.CALIBRATED` was fitted on
-``--load tune7.json tune8.json tune9.json``: ``bench_probe_open.py --arms 12 --draws 3
---parts 4 --seed 7`` and ``--arms 24 --draws 2 --parts 4`` at seeds 8 and 9, each with
-``--no-baseline --jobs 2 --save``.
+``--load tune7.json tune8.json tune9.json tune10.json tune11.json``: ``bench_probe_open.py
+--arms 12 --draws 3 --parts 4 --seed 7`` and ``--arms 24 --draws 2 --parts 4`` at seeds 8 to
+11, each with ``--no-baseline --jobs 2 --save``.
 
 Run: python benchmarks/tune_open_calibration.py [--arms 10] [--draws 3] [--seed 7] [--jobs 2]
      [--hold-out FAMILY ...] [--load outcomes.json ...]
