@@ -163,12 +163,8 @@ def main() -> None:
     if args.load is not None:
         for path in args.load:
             for row in json.loads(path.read_text()):
-                sd = float(row.pop("noise_n"))
-                o = Outcome(**{**row, "labels": tuple(row["labels"]),
-                               "label_probability": tuple(row["label_probability"]),
-                               "reflex_evidence": tuple(
-                                   tuple(r) for r in row.get("reflex_evidence", ()))})
-                results.setdefault((o.family, sd), []).append(o)
+                o = Outcome.from_record(row)
+                results.setdefault((o.family, float(row["noise_n"])), []).append(o)
         noise = sorted({sd for _f, sd in results})
         baseline = all(o.baseline_answer for v in results.values() for o in v)
         print(f"bench_probe_open: {sum(len(v) for v in results.values())} trials from "

@@ -80,12 +80,7 @@ def main() -> None:
     out: list[Outcome] = []
     if args.load is not None:
         for path in args.load:
-            for row in json.loads(path.read_text()):
-                row.pop("noise_n", None)
-                out.append(Outcome(**{**row, "labels": tuple(row["labels"]),
-                                      "label_probability": tuple(row["label_probability"]),
-                                      "reflex_evidence": tuple(
-                                          tuple(r) for r in row.get("reflex_evidence", ()))}))
+            out.extend(Outcome.from_record(row) for row in json.loads(path.read_text()))
         out = [o for o in out if o.family in tuned]
         source = ", ".join(p.name for p in args.load)
     else:

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fieldbank.errors import ParameterError
 from fieldbank.evaluate.classify import FIT_LEVEL
@@ -116,6 +117,28 @@ class Calibration:
         return self.unseen * math.exp(-max(evidence, 0.0) / self.unseen_evidence)
 
 
+def outside_share(fit_p_value: ArrayLike, misfit_level: float, other: float) -> FloatArray:
+    """The stated probability that no arm of the set made a recording whose best arm's fit
+    test gave ``fit_p_value`` (one or many): 1 − p/level below the misfit level (at least
+    :data:`~fieldbank.evaluate.classify.FIT_LEVEL`), and never below the share ``other``."""
+    return np.maximum(1.0 - np.asarray(fit_p_value, dtype=float) / max(misfit_level, FIT_LEVEL),
+                      other)
+
+
+def counting_outside(in_set: ArrayLike, outside: ArrayLike, far: ArrayLike,
+                     rate: ArrayLike, far_rate: ArrayLike, groups: int = 1) -> FloatArray:
+    """The stated probability that at least one of ``groups`` groups is impaired, counting the
+    chance ``outside`` (weighed) that the arm is none of the set: ``in_set`` as the set says
+    it, and outside the set each group impaired at ``rate`` - or, as far as the residual is
+    beyond the noise (``far``, :meth:`Calibration.far_share`), what the set says with each
+    group's ``far_rate`` beside it (:attr:`Calibration.outside_weight`). Arrays broadcast:
+    one recording's groups, or every calibration of a grid over every outcome."""
+    p, o, f = (np.asarray(v, dtype=float) for v in (in_set, outside, far))
+    r, rf = np.asarray(rate, dtype=float), np.asarray(far_rate, dtype=float)
+    away = (1.0 - f) * (1.0 - (1.0 - r) ** groups) + f * (1.0 - (1.0 - p) * (1.0 - rf) ** groups)
+    return np.asarray((1.0 - o) * p + o * away, dtype=float)
+
+
 #: The smallest fit-test p-value the misfit reads (12 decades: beyond it, misfit enough).
 MISFIT_FLOOR = 1e-12
 CALIBRATION_BOUNDS = {"power": Interval(0.0, 4.0, "", low_closed=False),
@@ -146,3 +169,14 @@ RAW = Calibration()
 CALIBRATED = Calibration(power=1.1, other=0.08, misfit_level=0.001, unseen=0.08,
                          unseen_evidence=1.0, unseen_score=2.0, prior_none=0.02, prior_two=0.1,
                          outside_weight=1.0, outside_group=0.1, outside_far=0.0)
+
+
+__all__ = [
+    "CALIBRATED",
+    "CALIBRATION_BOUNDS",
+    "MISFIT_FLOOR",
+    "RAW",
+    "Calibration",
+    "counting_outside",
+    "outside_share",
+]

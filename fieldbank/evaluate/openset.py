@@ -60,7 +60,13 @@ from fieldbank.evaluate.classify import (
 )
 from fieldbank.evaluate.design import NoiseModel, saturate
 from fieldbank.evaluate.observation import Observation
-from fieldbank.evaluate.opencalibration import CALIBRATED, RAW, Calibration
+from fieldbank.evaluate.opencalibration import (
+    CALIBRATED,
+    RAW,
+    Calibration,
+    counting_outside,
+    outside_share,
+)
 from fieldbank.evaluate.openstates import (
     COMPONENTS,
     CONTRACTURES_M,
@@ -180,8 +186,8 @@ class OpenClassification:
         the residual says so (the fit test below the calibration's misfit level, at least
         :data:`~fieldbank.evaluate.classify.FIT_LEVEL`), and never below the calibration's
         share."""
-        level = max(self.calibration.misfit_level, FIT_LEVEL)
-        return max(1.0 - self.fit_p_value / level, self.calibration.other)
+        cal = self.calibration
+        return float(outside_share(self.fit_p_value, cal.misfit_level, cal.other))
 
     @property
     def label_share(self) -> FloatArray:
@@ -215,11 +221,9 @@ class OpenClassification:
         seen = self.group_unseen
         in_set = 1.0 - (1.0 - held) * math.prod(1.0 - seen[g] for g in want)
         cal = self.calibration
-        o = cal.outside_weight * self.other_probability
-        far = cal.far_share(self.fit_p_value)
-        outside = ((1.0 - far) * (1.0 - (1.0 - cal.outside_group) ** len(want))
-                   + far * (1.0 - (1.0 - in_set) * (1.0 - cal.outside_far) ** len(want)))
-        return (1.0 - o) * in_set + o * outside
+        return float(counting_outside(in_set, cal.outside_weight * self.other_probability,
+                                      cal.far_share(self.fit_p_value), cal.outside_group,
+                                      cal.outside_far, len(want)))
 
     @property
     def group_unseen(self) -> dict[str, float]:

@@ -33,6 +33,7 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +42,7 @@ from fieldbank.evaluate.classify import FIT_LEVEL, classify
 from fieldbank.evaluate.design import NoiseModel, draw_execution, severity_candidates
 from fieldbank.evaluate.design.coverage import stretch_noise, stretch_set
 from fieldbank.evaluate.observation import Observation, with_force_noise
-from fieldbank.evaluate.opencalibration import Calibration
+from fieldbank.evaluate.opencalibration import Calibration, counting_outside, outside_share
 from fieldbank.evaluate.openset import (
     NONE_OF_THEM,
     OpenClassification,
@@ -201,6 +202,17 @@ class Outcome:
         candidates"."""
         return self.answer == self.truth or (self.family == "outside the candidates"
                                              and self.answer == NONE_OF_THEM)
+
+    @classmethod
+    def from_record(cls, row: dict[str, Any]) -> Outcome:
+        """The outcome a saved record holds (:func:`dataclasses.asdict` through JSON); keys
+        that are not the outcome's (a run's noise level) are left to the caller."""
+        fields = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{**{k: v for k, v in row.items() if k in fields},
+                      "labels": tuple(row["labels"]),
+                      "label_probability": tuple(row["label_probability"]),
+                      "reflex_evidence": tuple(tuple(r)
+                                               for r in row.get("reflex_evidence", ()))})
 
     def restated(self, calibration: Calibration) -> Outcome:
         """The same trial, its answer stated with ``calibration`` (from the posterior kept in
@@ -392,14 +404,11 @@ def fit_calibration(outcomes: Sequence[Outcome]) -> tuple[Calibration, float]:
         p_set = 1.0 - (1.0 - _held_probability(tables, group)) * (
             1.0 - _unseen_shares(tables, group))
         for o_share, lv in itertools.product(OTHERS, MISFIT_LEVELS):
-            other = np.maximum(1.0 - np.nan_to_num(fit_p, nan=1.0) / max(lv, FIT_LEVEL),
-                               o_share)
+            other = outside_share(np.nan_to_num(fit_p, nan=1.0), lv, o_share)
             none = float(np.log(np.maximum(np.where(outside, other, 1.0 - other),
                                            LOG_FLOOR)).mean())
-            o = mix[:, 0, None, None] * other[None, :, None]
-            pg = (1.0 - o) * p_set + o * (
-                (1.0 - far) * mix[:, 1, None, None]
-                + far * (1.0 - (1.0 - p_set) * (1.0 - mix[:, 2, None, None])))
+            pg = counting_outside(p_set, mix[:, 0, None, None] * other[None, :, None], far,
+                                  mix[:, 1, None, None], mix[:, 2, None, None])
             excess, score = _family_excess(pg, truth, family), _log_score(pg, truth)
             for (w, r, r_far), e, sc in zip(OUTSIDE_MIXES, excess, score, strict=True):
                 k = (round(float(e), 6), round(-(float(sc) + none), 12))

@@ -112,9 +112,9 @@ STRETCH_SAMPLE_S = 1e-3
 #: The two-joint partner of each one-joint group: the group's stretch holds its other joint
 #: where the partner is short, so that the partner's force does not mix in (the clinic tells
 #: brachialis from biceps with the shoulder flexed). Held at the partner's short end of the
-#: range, :data:`STRETCH_END_MARGIN_DEG` inside (the elbow's extended end
-#: :data:`EXTENDED_ELBOW_MARGINS_DEG` inside), or the first of :data:`HOLD_FRACTIONS` of the
-#: way there from the rest posture that keeps every limit.
+#: range - the shoulder :data:`STRETCH_END_MARGIN_DEG` inside it, the elbow the first of
+#: :data:`EXTENDED_ELBOW_MARGINS_DEG` inside either end -, or the first of
+#: :data:`HOLD_FRACTIONS` of the way there from the rest posture that keeps every limit.
 SLACKENED_PARTNER: dict[str, str] = {"sf": "bf", "ef": "bf", "se": "be", "ee": "be"}
 HOLD_FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.0)
 
